@@ -1,0 +1,428 @@
+"""Case files (TOML) -> frozen ``Case``. Every mistake is a one-line ``CaseError``.
+
+The schema of the core sections (body, material, loads, reference) lives here; the
+sections that later stages own (model, optimizer, score, expect, dynamics, ...) are
+registered in :mod:`harness.case_sections`. ``[quick]`` and ``[full]`` hold partial
+cases merged over the base for ``--quick`` / ``--full`` runs. Schema: cases/README.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from harness import case_sections
+from harness.errors import CaseError, SpringbenchError
+from harness.fibres import NAMED_FIELDS
+from harness.loadsets import AXES, LOAD_SETS, Constraint, LoadCase, Traction
+from harness.parts import part_exists
+from harness.schema import Field, check
+
+MODES = ("quick", "full")
+
+# -- schema ---------------------------------------------------------------------------
+
+BODY = {
+    "shape": Field("str", choices=("rectangle", "box", "polygon", "mesh"),
+                   doc="rectangle (2-D), box (3-D), polygon (2-D) or mesh"),
+    "origin": Field("floats", None, length=(2, 3)),
+    "size": Field("floats", None, length=(2, 3), min=0, min_exclusive=True,
+                  doc="positive extents"),
+    "vertices": Field("matrix", None, doc="polygon vertices [[x, y], ...] in order"),
+    "file": Field("str", None, doc="mesh file, relative to the case file"),
+    "format": Field("str", None, doc="meshio format name or 'bc2000'; guessed if absent"),
+    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}"),
+}
+
+FIBRE = {
+    "E_fibre": Field("float", min=0, min_exclusive=True, doc="Young's modulus along the fibre"),
+    "E_cross": Field("float", min=0, min_exclusive=True, doc="Young's modulus across the fibre"),
+    "nu_fibre": Field("float", None, min=-1, max=0.5, min_exclusive=True,
+                      doc="major Poisson ratio nu_LT (strain across / strain along); default nu"),
+    "nu_cross": Field("float", None, min=-1, max=1, min_exclusive=True, max_exclusive=True,
+                      doc="Poisson ratio in the isotropic cross plane nu_TT; default nu"),
+    "G_fibre": Field("float", None, min=0, min_exclusive=True,
+                     doc="shear modulus G_LT; default E_fibre E_cross / (E_fibre + E_cross (1 + 2 nu_fibre))"),
+    "direction": Field("floats", None, length=(2, 3)),
+    "azimuth_deg": Field("float", None),
+    "elevation_deg": Field("float", None),
+    "field": Field("str", None, choices=NAMED_FIELDS),
+    "seed": Field("int", 0),
+}
+
+REGION = {
+    "box": Field("matrix", doc="[[lo...], [hi...]]"),
+    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
+    "nu": Field("float", None, min=-1, max=0.5, min_exclusive=True, max_exclusive=True),
+    "density": Field("float", None, min=0, min_exclusive=True),
+}
+
+MATERIAL = {
+    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
+    "nu": Field("float", min=-1, max=0.5, min_exclusive=True, max_exclusive=True,
+                doc="Poisson ratio in (-1, 0.5)"),
+    "density": Field("float", 1.0, min=0, min_exclusive=True),
+    "plane": Field("str", "stress", choices=("stress", "strain")),
+    "fibre": Field("table", None, spec=FIBRE),
+    "regions": Field("tables", (), spec=REGION),
+}
+
+COMPONENTS = ("x", "y", "z", "all")
+CONSTRAINT = {
+    "part": Field("str"),
+    "components": Field("strs", ("all",), choices=COMPONENTS),
+}
+TRACTION = {"part": Field("str"), "vector": Field("floats", length=(2, 3))}
+USER_LOAD = {
+    "name": Field("str"),
+    "constraint": Field("tables", (), spec=CONSTRAINT),
+    "traction": Field("tables", (), spec=TRACTION),
+    "gravity": Field("floats", None, length=(2, 3), doc="acceleration, e.g. [0, -9.81]"),
+    "body_force": Field("floats", None, length=(2, 3), doc="force per volume"),
+}
+LOADS = {
+    "set": Field("str", None, choices=tuple(LOAD_SETS)),
+    "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units)"),
+    "case": Field("tables", (), spec=USER_LOAD),
+}
+
+REFERENCE = {
+    "element": Field("str", "P2", choices=("P1", "P2")),
+    "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
+    "divisions": Field("int", None, min=1, doc="initial elements along the shortest side"),
+    "tol": Field("float", 1e-4, min=0, min_exclusive=True),
+    "max_refine": Field("int", 3, min=0),
+    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg")),
+    "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
+}
+
+TOP = {
+    "name": Field("str", doc="a short identifier"),
+    "dim": Field("int", choices=(2, 3), doc="2 or 3"),
+    "description": Field("str", ""),
+    "tags": Field("strs", ()),
+    "body": Field("table", spec=BODY),
+    "material": Field("table", spec=MATERIAL),
+    "loads": Field("table", {}, spec=LOADS),
+    "reference": Field("table", {}, spec=REFERENCE),
+}
+
+
+# -- dataclasses ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Body:
+    shape: str
+    origin: tuple[float, ...] | None = None
+    size: tuple[float, ...] | None = None
+    vertices: tuple[tuple[float, ...], ...] | None = None
+    file: Path | None = None
+    format: str | None = None
+    parts: Mapping[str, tuple] = field(default_factory=dict)
+
+    def bbox(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the body."""
+        if self.shape in ("rectangle", "box"):
+            lo = np.asarray(self.origin, float)
+            return lo, lo + np.asarray(self.size, float)
+        if self.shape == "polygon":
+            v = np.asarray(self.vertices, float)
+            return v.min(0), v.max(0)
+        from harness.meshfile import read_mesh
+        p = read_mesh(self.file, self.format).points
+        return p.min(0), p.max(0)
+
+
+@dataclass(frozen=True)
+class Fibre:
+    E_fibre: float
+    E_cross: float
+    nu_fibre: float
+    nu_cross: float
+    G_fibre: float
+    direction: tuple[float, ...] | None = None
+    azimuth_deg: float | None = None
+    elevation_deg: float | None = None
+    field: str | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Region:
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    E: float
+    nu: float | None = None
+    density: float | None = None
+
+
+@dataclass(frozen=True)
+class Material:
+    E: float
+    nu: float
+    density: float = 1.0
+    plane: str = "stress"
+    fibre: Fibre | None = None
+    regions: tuple[Region, ...] = ()
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    element: str = "P2"
+    cell: str = "tri"
+    divisions: int | None = None
+    tol: float = 1e-4
+    max_refine: int = 3
+    solver: str = "auto"
+    modes: int = 6
+
+
+@dataclass(frozen=True)
+class Case:
+    """A validated case. ``sections`` holds the stage-owned sections (read-only dicts)."""
+    path: Path
+    name: str
+    dim: int
+    body: Body
+    material: Material
+    loads: tuple[LoadCase, ...]
+    reference: ReferenceSpec
+    load_set: str | None = None
+    magnitude: float = 1.0
+    description: str = ""
+    tags: tuple[str, ...] = ()
+    mode: str = "quick"
+    sections: Mapping[str, Mapping] = field(default_factory=dict)
+    digest: str = ""
+
+    def section(self, name: str) -> Mapping | None:
+        return self.sections.get(name)
+
+    @property
+    def suite(self) -> str:
+        """The folder the case lives in, under cases/ (e.g. 'deussen1995')."""
+        return self.path.parent.name
+
+
+# -- loading --------------------------------------------------------------------------
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def load_case(path, mode: str = "quick") -> Case:
+    """Read and validate a case file; ``mode`` merges its ``[quick]``/``[full]`` table."""
+    path = Path(path)
+    file = str(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise CaseError("file not found", file=file, fix="check the path")
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"not valid TOML ({exc})", file=file, fix="fix the syntax at that line")
+    except UnicodeDecodeError:
+        raise CaseError("not a text file", file=file, fix="case files are UTF-8 TOML")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    for m in MODES:
+        if m in raw and not isinstance(raw[m], dict):
+            raise CaseError("expected a table", file=file, field=m)
+    raw = _merge({k: v for k, v in raw.items() if k not in MODES}, raw.get(mode, {}))
+    core = {k: v for k, v in raw.items() if k in TOP}
+    rest = {k: v for k, v in raw.items() if k not in TOP}
+    d = check(core, TOP, file)
+    sections = {}
+    for key, value in rest.items():
+        if key not in case_sections.SECTIONS:
+            known = ", ".join(sorted(set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
+            raise CaseError("unknown section", file=file, field=key, fix=f"known: {known}")
+        sections[key] = MappingProxyType(check(value, case_sections.SECTIONS[key], file, key + "."))
+    dim = d["dim"]
+    body = _body(d["body"], dim, path, file)
+    material = _material(d["material"], dim, file)
+    loads, load_set = _loads(d["loads"], dim, body, file)
+    reference = _reference(d["reference"], dim, body, file)
+    return Case(path=path, name=d["name"], dim=dim, body=body, material=material, loads=loads,
+                reference=reference, load_set=load_set, magnitude=d["loads"]["magnitude"],
+                description=d["description"], tags=d["tags"], mode=mode,
+                sections=MappingProxyType(sections), digest=digest)
+
+
+def _body(b: dict, dim: int, path: Path, file: str) -> Body:
+    def fail(fld, msg, fix=None):
+        raise CaseError(msg, file=file, field="body." + fld, fix=fix)
+
+    shape = b["shape"]
+    if shape in ("rectangle", "box"):
+        want = 2 if shape == "rectangle" else 3
+        if dim != want:
+            fail("shape", f"a {shape} needs dim = {want}", f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}")
+        if b["size"] is None:
+            fail("size", "missing required field", f"give {dim} positive extents")
+        if len(b["size"]) != dim:
+            fail("size", f"expected {dim} entries, got {len(b['size'])}")
+        origin = b["origin"] or (0.0,) * dim
+        if len(origin) != dim:
+            fail("origin", f"expected {dim} entries, got {len(origin)}")
+        body = Body(shape, origin=origin, size=b["size"])
+    elif shape == "polygon":
+        if dim != 2:
+            fail("shape", "a polygon needs dim = 2")
+        v = b["vertices"]
+        if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
+            fail("vertices", "expected at least 3 points [x, y]")
+        area = 0.5 * np.sum(np.cross(np.asarray(v), np.roll(np.asarray(v), -1, axis=0)))
+        if abs(area) <= 1e-14:
+            fail("vertices", "the polygon has zero area", "list the vertices in order around the body")
+        body = Body(shape, vertices=v)
+    else:
+        if not b["file"]:
+            fail("file", "missing required field for shape = 'mesh'", "give the mesh path relative to the case file")
+        mpath = (path.parent / b["file"]).resolve()
+        from harness.meshfile import read_mesh
+        try:
+            mesh = read_mesh(mpath, b["format"])
+        except SpringbenchError as exc:
+            fail("file", exc.message, exc.fix)
+        if mesh.dim != dim:
+            fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}")
+        body = Body(shape, file=mpath, format=b["format"])
+    parts = {}
+    if not isinstance(b["parts"], dict):
+        fail("parts", "expected a table of name = {box = [[lo], [hi]]}")
+    for name, spec in b["parts"].items():
+        if not isinstance(spec, dict) or set(spec) != {"box"}:
+            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]}")
+        box = spec["box"]
+        ok = (isinstance(box, list) and len(box) == 2 and all(
+            isinstance(r, list) and len(r) == dim and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+            for r in box))
+        if not ok:
+            fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
+        if any(lo > hi for lo, hi in zip(*box)):
+            fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
+        parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
+    return Body(body.shape, body.origin, body.size, body.vertices, body.file, body.format,
+                MappingProxyType(parts))
+
+
+def _material(m: dict, dim: int, file: str) -> Material:
+    def fail(fld, msg, fix=None):
+        raise CaseError(msg, file=file, field="material." + fld, fix=fix)
+
+    fibre = None
+    if m["fibre"] is not None:
+        f = m["fibre"]
+        given = [k for k in ("direction", "azimuth_deg", "field") if f[k] is not None]
+        if len(given) > 1:
+            fail("fibre", f"both {given[0]} and {given[1]} given", "give one fibre direction")
+        if not given:
+            fail("fibre.direction", "missing", "give direction, azimuth_deg (+ elevation_deg) or field")
+        if f["direction"] is not None:
+            if len(f["direction"]) != dim:
+                fail("fibre.direction", f"expected {dim} entries")
+            if np.linalg.norm(f["direction"]) == 0:
+                fail("fibre.direction", "zero vector", "give a non-zero direction")
+        if f["field"] is not None and dim != 3:
+            fail("fibre.field", "named fields are 3-D", "use direction or azimuth_deg in 2-D")
+        nu_f = f["nu_fibre"] if f["nu_fibre"] is not None else m["nu"]
+        nu_c = f["nu_cross"] if f["nu_cross"] is not None else m["nu"]
+        G = f["G_fibre"] or f["E_fibre"] * f["E_cross"] / (f["E_fibre"] + f["E_cross"] * (1 + 2 * nu_f))
+        fibre = Fibre(f["E_fibre"], f["E_cross"], nu_f, nu_c, G, f["direction"], f["azimuth_deg"],
+                      f["elevation_deg"], f["field"], f["seed"])
+        from harness.elasticity import transversely_isotropic_compliance
+        S = transversely_isotropic_compliance(fibre.E_fibre, fibre.E_cross, nu_f, nu_c, G)
+        if np.linalg.eigvalsh(S).min() <= 0:
+            fail("fibre", "the compliance is not positive definite",
+                 "need 1 - nu_cross - 2 nu_fibre^2 E_cross/E_fibre > 0")
+    regions = []
+    for i, r in enumerate(m["regions"]):
+        box = r["box"]
+        if len(box) != 2 or any(len(p) != dim for p in box):
+            fail(f"regions[{i}].box", f"expected [[lo], [hi]] with {dim} numbers each")
+        regions.append(Region(box[0], box[1], r["E"], r["nu"], r["density"]))
+    if m["plane"] == "strain" and dim == 3:
+        pass  # irrelevant in 3-D; accepted for symmetry
+    return Material(m["E"], m["nu"], m["density"], m["plane"], fibre, tuple(regions))
+
+
+def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tuple[int, ...]:
+    if "all" in names:
+        return tuple(range(dim))
+    comps = sorted({AXES.index(c) for c in names})
+    if comps and comps[-1] >= dim:
+        raise CaseError(f"component '{AXES[comps[-1]]}' does not exist in {dim}-D", file=file, field=where)
+    return tuple(comps)
+
+
+def _loads(l: dict, dim: int, body: Body, file: str):
+    cases: list[LoadCase] = []
+    if l["set"] is not None:
+        want, make = LOAD_SETS[l["set"]]
+        if want != dim:
+            raise CaseError(f"load set '{l['set']}' is {want}-D but dim = {dim}", file=file,
+                            field="loads.set", fix=f"use basic{dim}d")
+        cases.extend(make(l["magnitude"]))
+    names = {c.name for c in cases}
+    for i, u in enumerate(l["case"]):
+        where = f"loads.case[{i}]"
+        if u["name"] in names:
+            raise CaseError(f"duplicate load case name '{u['name']}'", file=file, field=where + ".name")
+        names.add(u["name"])
+        cons = []
+        for j, c in enumerate(u["constraint"]):
+            _check_part(c["part"], dim, body, file, f"{where}.constraint[{j}].part")
+            cons.append(Constraint(c["part"], _components(c["components"], dim, file,
+                                                          f"{where}.constraint[{j}].components")))
+        tracs = []
+        for j, t in enumerate(u["traction"]):
+            _check_part(t["part"], dim, body, file, f"{where}.traction[{j}].part")
+            if len(t["vector"]) != dim:
+                raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.traction[{j}].vector")
+            tracs.append(Traction(t["part"], t["vector"]))
+        for key in ("gravity", "body_force"):
+            if u[key] is not None and len(u[key]) != dim:
+                raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.{key}")
+        if not cons:
+            raise CaseError("no constraint: the body can move freely", file=file,
+                            field=where + ".constraint", fix="add [[loads.case.constraint]] with a part")
+        cases.append(LoadCase(u["name"], tuple(cons), tuple(tracs), u["gravity"], u["body_force"]))
+    return tuple(cases), l["set"]
+
+
+def _check_part(name: str, dim: int, body: Body, file: str, where: str):
+    if not part_exists(name, dim, body.parts):
+        user = ", ".join(body.parts) or "none defined"
+        raise CaseError(f"boundary part '{name}' does not exist", file=file, field=where,
+                        fix=f"use a face name like x0, x1, x0y0 or a part from [body.parts] ({user})")
+
+
+def _reference(r: dict, dim: int, body: Body, file: str) -> ReferenceSpec:
+    cell = r["cell"] or ("tri" if dim == 2 else "tet")
+    if (cell in ("tri", "quad")) != (dim == 2):
+        raise CaseError(f"cell '{cell}' does not fit dim = {dim}", file=file, field="reference.cell",
+                        fix="tri/quad in 2-D, tet/hex in 3-D")
+    if body.shape == "polygon" and cell == "quad":
+        raise CaseError("a polygon is meshed with triangles", file=file, field="reference.cell", fix="use tri")
+    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], r["max_refine"], r["solver"], r["modes"])
+
+
+def find_cases(paths) -> list[Path]:
+    """Case files named by ``paths`` (files or folders, searched recursively), sorted."""
+    out = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out.extend(sorted(q for q in p.rglob("*.toml") if not q.name.startswith("_")))
+        elif p.exists():
+            out.append(p)
+        else:
+            raise SpringbenchError("no such file or folder", file=str(p), fix="check the path")
+    return out

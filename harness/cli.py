@@ -1,0 +1,59 @@
+"""The ``springbench`` command. Each subcommand is one module in ``harness.commands``
+registered in ``COMMANDS``; it defines ``HELP``, ``add_arguments(parser)`` and
+``main(args) -> int``. Bad input becomes one line on stderr and exit status 2."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from harness.errors import SpringbenchError
+
+COMMANDS = ["run", "validate", "reference", "build", "score", "calibrate", "bench", "report"]
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit 2, no usage dump
+        self.exit(2, f"{self.prog}: {message} (see '{self.prog} --help')\n")
+
+
+def _modules():
+    for name in COMMANDS:
+        try:
+            yield name, importlib.import_module(f"harness.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"harness.commands.{name}":
+                raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from harness import __version__
+    parser = _Parser(prog="springbench", description="Score and calibrate spring/mass models against linear elasticity.")
+    parser.add_argument("--version", action="version", version=f"springbench {__version__}")
+    sub = parser.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
+    for name, mod in _modules():
+        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        p.set_defaults(_main=mod.main)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_main", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args._main(args) or 0)
+    except SpringbenchError as exc:
+        print(f"springbench: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("springbench: interrupted; finished cases are kept", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of ``springbench`` (see harness.cli.COMMANDS)."""

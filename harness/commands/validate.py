@@ -1,0 +1,29 @@
+"""springbench validate FILE...: check case files against the schema."""
+
+from __future__ import annotations
+
+import sys
+
+from harness.cases import MODES, find_cases, load_case
+from harness.errors import SpringbenchError
+
+HELP = "check case files (or folders of them) against the schema; one line per mistake"
+
+
+def add_arguments(p):
+    p.add_argument("paths", nargs="+", metavar="FILE", help="case files or folders")
+
+
+def main(args) -> int:
+    bad = 0
+    files = find_cases(args.paths)
+    for f in files:
+        try:
+            for mode in MODES:
+                load_case(f, mode)
+        except SpringbenchError as exc:
+            bad += 1
+            print(f"springbench: error: {exc}", file=sys.stderr)
+        else:
+            print(f"ok  {f}")
+    return 2 if bad else 0
