@@ -4,12 +4,16 @@ validated by their owner when the stage runs."""
 
 from harness.schema import Field
 
-SECTIONS: dict[str, dict[str, Field]] = {
+# [model] kind = "..." selects the spec of the other keys; each model owner adds its kind.
+MODEL_KINDS: dict[str, dict[str, Field]] = {
+    "sms": {},       # spring/mass systems of Deussen 1995 (harness/models/sms)
+    "bc2000": {},    # the anisotropic element model of Bourguignon & Cani 2000
+}
+
+SECTIONS: dict[str, dict[str, Field] | str] = {
     # [model]: how the spring/mass system or element model is built (harness/models)
-    "model": {
-        "kind": Field("str", "sms", doc="sms | anisotropic | ..."),
-        "options": Field("any", {}),
-    },
+    # keys depend on kind: see MODEL_KINDS
+    "model": "model",
     # [optimizer]: spring-constant calibration (harness/optimize)
     "optimizer": {
         "method": Field("str", "none"),

@@ -244,7 +244,15 @@ def load_case(path, mode: str = "quick") -> Case:
         if key not in case_sections.SECTIONS:
             known = ", ".join(sorted(set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
             raise CaseError("unknown section", file=file, field=key, fix=f"known: {known}")
-        sections[key] = MappingProxyType(check(value, case_sections.SECTIONS[key], file, key + "."))
+        spec = case_sections.SECTIONS[key]
+        if spec == "model":
+            kinds = case_sections.MODEL_KINDS
+            kind = value.get("kind") if isinstance(value, dict) else None
+            if kind not in kinds:
+                raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
+                                fix=f"one of {', '.join(kinds)}")
+            spec = {"kind": Field("str"), **kinds[kind]}
+        sections[key] = MappingProxyType(check(value, spec, file, key + "."))
     dim = d["dim"]
     body = _body(d["body"], dim, path, file)
     material = _material(d["material"], dim, file)

@@ -1,0 +1,12 @@
+"""Benchmarks: name -> module with ``run(quick: bool) -> pandas.DataFrame``.
+
+Each reports speeds as ratios against a baseline measured in the same process; the
+CSV goes to results/bench/<name>.csv. A new benchmark is one module added here.
+"""
+
+BENCHES = {
+    "reference": "harness.bench.reference",
+    "sa": "harness.bench.sa",
+    "fit": "harness.bench.fit",
+    "dynamics": "harness.bench.dynamics",
+}
