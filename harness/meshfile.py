@@ -58,8 +58,16 @@ def looks_like_bc2000(path: Path) -> bool:
 
 
 def read_meshio(path: Path) -> Mesh:
+    import contextlib
+    import io
+
     import meshio
-    m = meshio.read(path)
+    # meshio prints and calls sys.exit on some unreadable files: keep both contained
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        try:
+            m = meshio.read(path)
+        except SystemExit:
+            raise ValueError("meshio could not read it") from None
     pts = np.asarray(m.points, float)
     cells = {}
     for block in m.cells:

@@ -63,7 +63,9 @@ def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
         if key not in data:
             if f.default is REQUIRED:
                 fail(key, f"missing required {f.kind} field", f.doc or None)
-            out[key] = f.default
+            # an absent table with a {} default still gets its own defaults
+            out[key] = (check({}, f.spec, file, path + key + ".")
+                        if f.kind == "table" and f.default == {} else f.default)
             continue
         out[key] = _value(data[key], f, file, path + key)
     return out
@@ -86,6 +88,8 @@ def _value(v, f: Field, file: str, where: str):
     elif k == "int":
         if not isinstance(v, int) or isinstance(v, bool):
             fail(f"expected an integer, got {_describe(v)}")
+        if f.choices and v not in f.choices:
+            fail(f"{v} is not one of {', '.join(map(str, f.choices))}")
         _range(v, f, fail)
     elif k == "bool":
         if not isinstance(v, bool):
