@@ -298,6 +298,8 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         from harness.meshfile import read_mesh
         try:
             mesh = read_mesh(mpath, b["format"])
+            from harness.mesh_checks import check_mesh
+            check_mesh(mesh, str(mpath))
         except SpringbenchError as exc:
             fail("file", exc.message, exc.fix)
         if mesh.dim != dim:
