@@ -1,0 +1,527 @@
+"""Time integration and statics of the nonlinear particle models (mass-spring, the
+Bourguignon-Cani elements), shared by every model with ``forces(x, v)``,
+``node_graph()`` and ``n_nodes``.
+
+- ``verlet``: position (Stoermer) Verlet as the original program, d_{n+1} = d_n + h^2 a_n,
+  x_{n+1} = x_n + d_{n+1}, damping on v = d/h (the program's per-step constants are
+  kd*h physically). For MassSpring / AnisotropicBody a compiled kernel (numba) runs
+  the whole loop with the program's order of force accumulation, so it reproduces the
+  program's particle states to rounding.
+- ``symplectic-euler``: v += h a(x, v); x += h v (numpy, any model).
+- ``backward-euler``: one Newton step per step with the Jacobian of the forces (complex
+  step, coloured, sparse): (M - h D - h^2 K) dv = h (f + h K v).
+- ``stable_step``: 2 / omega_max of the linearised K and M (free dofs).
+- ``solve_static``: Newton with load stepping and a backtracking line search.
+
+A run that blows up raises SimulationError naming the step and the stable-step estimate.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from harness.errors import SimulationError
+
+INTEGRATORS = ("verlet", "symplectic-euler", "backward-euler")
+PROGRAM_DRAG = 5e-3      # the program's drag per step: -5e-3 d (physical 5e-3 h N s/m)
+
+
+@dataclass(frozen=True)
+class Loading:
+    """What acts on the particles: mass (n,) kg, fixed (n,) bool, gravity (3,) m/s^2,
+    push (n, 3) constant forces N, drag (physical N s/m, force -drag v)."""
+    mass: np.ndarray
+    fixed: np.ndarray
+    gravity: np.ndarray
+    push: np.ndarray
+    drag: float = 0.0
+
+    @staticmethod
+    def from_flags(flags, *, mass=0.01, gravity=(0.0, -9.8, 0.0), push=(0.0, -1.0, 0.0),
+                   drag=0.0, observed_fixed: bool = False) -> "Loading":
+        """From the program's node flags: 1 fixed, 2 pushed/pulled (force ``push``),
+        3 observed (free unless ``observed_fixed``, as in the program's non-MEASURE build)."""
+        flags = np.asarray(flags)
+        n = len(flags)
+        fixed = (flags == 1) | ((flags == 3) & observed_fixed)
+        p = np.zeros((n, 3))
+        p[flags == 2] = push
+        return Loading(np.broadcast_to(np.asarray(mass, float), (n,)).copy(), fixed,
+                       np.asarray(gravity, float), p, float(drag))
+
+    def external(self) -> np.ndarray:
+        return self.mass[:, None] * self.gravity[None, :] + self.push
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """t (k,), volume (k,) (sum of unsigned tet volumes, nan if the model has no cells),
+    observed (k, n_obs, 3) positions of the observed nodes, snapshots {step: (x, d)} with
+    d = x_n - x_{n-1}; x, v at the end; energy (k,) (kinetic + gravity + model potential)
+    if asked."""
+    t: np.ndarray
+    volume: np.ndarray
+    observed: np.ndarray
+    snapshots: dict
+    x: np.ndarray
+    v: np.ndarray
+    dt: float
+    energy: np.ndarray | None = None
+
+    def volume_change_percent(self) -> np.ndarray:
+        return 100.0 * (self.volume - self.volume[0]) / self.volume[0]
+
+
+def tet_volume(x, tets) -> float | np.ndarray:
+    """Sum of unsigned tetrahedron volumes; x (n, 3) or (k, n, 3)."""
+    X = x[..., tets, :]
+    a, b, c = X[..., 1, :] - X[..., 0, :], X[..., 2, :] - X[..., 0, :], X[..., 3, :] - X[..., 0, :]
+    det = np.sum(np.cross(a, b) * c, axis=-1)
+    return np.abs(det).sum(axis=-1) / 6.0
+
+
+# -- compiled program-order Verlet -------------------------------------------------------------
+
+_KERNEL = None
+
+
+def _kernel():
+    global _KERNEL
+    if _KERNEL is None:
+        from numba import njit
+
+        @njit(cache=True, fastmath=False)
+        def run(x, d, steps, h, mass, integrate, grav, push, drag_step,
+                sp_p, sp_q, sp_ks, sp_kd, sp_L0,
+                t_cells, t_vi, t_cf, t_ks, t_kd, t_L0, t_cos0, t_kvs, t_D0, t_vol,
+                h_cells, h_vi, h_cf, h_ks, h_kd, h_L0, h_cos0, h_kvs, h_kvd, h_D0, h_vol,
+                vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
+            n = x.shape[0]
+            f = np.zeros((n, 3))
+            sqh = h * h
+            isnap = 0
+            pos = np.zeros((8, 3))
+            vel = np.zeros((8, 3))
+            frc = np.zeros((8, 3))
+            E = np.zeros((6, 3))
+            VE = np.zeros((6, 3))
+            G = np.zeros((6, 3))
+            l = np.empty((3, 3))
+            vl = np.empty((3, 3))
+            Ls = np.empty(3)
+            Li = np.empty(3)
+            nl = np.empty((3, 3))
+            F = np.empty((3, 3))
+            Dd = np.empty((8, 3))
+            Dn = np.empty(8)
+            for step in range(steps + 1):
+                # observers of the current state
+                if vtets.shape[0] > 0:
+                    V = 0.0
+                    for k in range(vtets.shape[0]):
+                        a0 = vtets[k, 0]
+                        ax = x[vtets[k, 1], 0] - x[a0, 0]; ay = x[vtets[k, 1], 1] - x[a0, 1]; az = x[vtets[k, 1], 2] - x[a0, 2]
+                        bx = x[vtets[k, 2], 0] - x[a0, 0]; by = x[vtets[k, 2], 1] - x[a0, 1]; bz = x[vtets[k, 2], 2] - x[a0, 2]
+                        cx = x[vtets[k, 3], 0] - x[a0, 0]; cy = x[vtets[k, 3], 1] - x[a0, 1]; cz = x[vtets[k, 3], 2] - x[a0, 2]
+                        det = (ay * bz - az * by) * cx + (az * bx - ax * bz) * cy + (ax * by - ay * bx) * cz
+                        V += abs(det)
+                    volume[step] = V / 6.0
+                for k in range(obs.shape[0]):
+                    for c in range(3):
+                        observed[step, k, c] = x[obs[k], c]
+                if isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
+                    snaps[isnap] = x
+                    snaps_d[isnap] = d
+                    isnap += 1
+                if step == steps:
+                    return steps
+                # classic springs (Spring::operator())
+                for s in range(sp_p.shape[0]):
+                    i = sp_p[s]; j = sp_q[s]
+                    lx = x[i, 0] - x[j, 0]; ly = x[i, 1] - x[j, 1]; lz = x[i, 2] - x[j, 2]
+                    L = np.sqrt(lx * lx + ly * ly + lz * lz)
+                    inv = 1.0 / L
+                    nx = lx * inv; ny = ly * inv; nz = lz * inv
+                    vx = d[i, 0] - d[j, 0]; vy = d[i, 1] - d[j, 1]; vz = d[i, 2] - d[j, 2]
+                    sc = -(sp_ks[s] * (L - sp_L0[s]) + sp_kd[s] * (vx * nx + vy * ny + vz * nz))
+                    fx = nx * sc; fy = ny * sc; fz = nz * sc
+                    f[i, 0] += fx; f[i, 1] += fy; f[i, 2] += fz
+                    f[j, 0] += -fx; f[j, 1] += -fy; f[j, 2] += -fz
+                # elements (TetraSpring / HexaSpring, ALTERN DAMPED [CONSTVOL])
+                for form in range(2):
+                    cells = t_cells if form == 0 else h_cells
+                    vi = t_vi if form == 0 else h_vi
+                    cf = t_cf if form == 0 else h_cf
+                    ks = t_ks if form == 0 else h_ks
+                    kd = t_kd if form == 0 else h_kd
+                    L0 = t_L0 if form == 0 else h_L0
+                    cos0 = t_cos0 if form == 0 else h_cos0
+                    nv = cells.shape[1]
+                    nw = cf.shape[2]
+                    for e in range(cells.shape[0]):
+                        for a in range(nv):
+                            for c in range(3):
+                                pos[a, c] = x[cells[e, a], c]
+                                vel[a, c] = d[cells[e, a], c]
+                                frc[a, c] = 0.0
+                        for k in range(6):
+                            for c in range(3):
+                                acc = cf[e, k, 0] * pos[vi[e, k, 0], c]
+                                vac = cf[e, k, 0] * vel[vi[e, k, 0], c]
+                                for w in range(1, nw):
+                                    acc = acc + cf[e, k, w] * pos[vi[e, k, w], c]
+                                    vac = vac + cf[e, k, w] * vel[vi[e, k, w], c]
+                                E[k, c] = acc
+                                VE[k, c] = vac
+                        for a in range(3):
+                            for c in range(3):
+                                l[a, c] = E[2 * a, c] - E[2 * a + 1, c]
+                                vl[a, c] = VE[2 * a, c] - VE[2 * a + 1, c]
+                            Ls[a] = np.sqrt(l[a, 0] * l[a, 0] + l[a, 1] * l[a, 1] + l[a, 2] * l[a, 2])
+                            Li[a] = 1.0 / Ls[a]
+                        c12 = (l[0, 0] * l[1, 0] + l[0, 1] * l[1, 1] + l[0, 2] * l[1, 2]) * Li[0] * Li[1]
+                        c13 = (l[0, 0] * l[2, 0] + l[0, 1] * l[2, 1] + l[0, 2] * l[2, 2]) * Li[0] * Li[2]
+                        c23 = (l[1, 0] * l[2, 0] + l[1, 1] * l[2, 1] + l[1, 2] * l[2, 2]) * Li[1] * Li[2]
+                        for a in range(3):
+                            for c in range(3):
+                                nl[a, c] = l[a, c] * Li[a]
+                        for a in range(3):
+                            dv = vl[a, 0] * nl[a, 0] + vl[a, 1] * nl[a, 1] + vl[a, 2] * nl[a, 2]
+                            sc = -(ks[e, a] * (Ls[a] - L0[e, a]) + kd[e, a] * dv)
+                            for c in range(3):
+                                F[a, c] = nl[a, c] * sc
+                        K12 = -(ks[e, 3] * (c12 - cos0[e, 0]))
+                        K13 = -(ks[e, 4] * (c13 - cos0[e, 1]))
+                        K23 = -(ks[e, 5] * (c23 - cos0[e, 2]))
+                        for c in range(3):
+                            G[0, c] = (F[0, c] + K12 * nl[1, c]) + K13 * nl[2, c]
+                            G[1, c] = -G[0, c]
+                            G[2, c] = (F[1, c] + K12 * nl[0, c]) + K23 * nl[2, c]
+                            G[3, c] = -G[2, c]
+                            G[4, c] = (F[2, c] + K13 * nl[0, c]) + K23 * nl[1, c]
+                            G[5, c] = -G[4, c]
+                        for k in range(6):
+                            for w in range(nw):
+                                for c in range(3):
+                                    frc[vi[e, k, w], c] += cf[e, k, w] * G[k, c]
+                        use_vol = t_vol if form == 0 else h_vol
+                        if use_vol:
+                            gx = 0.0; gy = 0.0; gz = 0.0
+                            gvx = 0.0; gvy = 0.0; gvz = 0.0
+                            for a in range(nv):
+                                gx += pos[a, 0]; gy += pos[a, 1]; gz += pos[a, 2]
+                                gvx += vel[a, 0]; gvy += vel[a, 1]; gvz += vel[a, 2]
+                            sc = 0.25 if nv == 4 else 0.125
+                            gx *= sc; gy *= sc; gz *= sc
+                            gvx *= sc; gvy *= sc; gvz *= sc
+                            Dsum = 0.0
+                            for a in range(nv):
+                                Dd[a, 0] = pos[a, 0] - gx; Dd[a, 1] = pos[a, 1] - gy; Dd[a, 2] = pos[a, 2] - gz
+                                Dn[a] = np.sqrt(Dd[a, 0] * Dd[a, 0] + Dd[a, 1] * Dd[a, 1] + Dd[a, 2] * Dd[a, 2])
+                                Dsum += Dn[a]
+                            if form == 0:
+                                K = -(t_kvs[e] * (Dsum - t_D0[e]))
+                                for a in range(nv):
+                                    inv = 1.0 / Dn[a]
+                                    for c in range(3):
+                                        f[cells[e, a], c] += frc[a, c] + K * (Dd[a, c] * inv)
+                            else:
+                                for a in range(nv):
+                                    inv = 1.0 / Dn[a]
+                                    ndx = Dd[a, 0] * inv; ndy = Dd[a, 1] * inv; ndz = Dd[a, 2] * inv
+                                    dv = ((vel[a, 0] - gvx) * ndx + (vel[a, 1] - gvy) * ndy) + (vel[a, 2] - gvz) * ndz
+                                    sc2 = -(h_kvs[e] * (Dn[a] - h_D0[e, a]) + h_kvd[e] * dv)
+                                    f[cells[e, a], 0] += frc[a, 0] + ndx * sc2
+                                    f[cells[e, a], 1] += frc[a, 1] + ndy * sc2
+                                    f[cells[e, a], 2] += frc[a, 2] + ndz * sc2
+                        else:
+                            for a in range(nv):
+                                for c in range(3):
+                                    f[cells[e, a], c] += frc[a, c]
+                # Stoermer_Derivative + Stoermer_Step
+                bad = False
+                for i in range(n):
+                    if integrate[i]:
+                        minv = 1.0 / mass[i]
+                        for c in range(3):
+                            force = ((f[i, c] + (-drag_step) * d[i, c]) + grav[i, c]) + push[i, c]
+                            acc = force * minv
+                            f[i, c] = 0.0
+                            d[i, c] = d[i, c] + sqh * acc
+                            x[i, c] = x[i, c] + d[i, c]
+                            if not (abs(d[i, c]) < limit):
+                                bad = True
+                    else:
+                        for c in range(3):
+                            f[i, c] = 0.0
+                if bad:
+                    return step + 1
+            return steps
+
+        _KERNEL = run
+    return _KERNEL
+
+
+def _kernel_arrays(model, dt):
+    """Model arrays for the compiled loop (damping converted to per-step constants)."""
+    from harness.models.anisotropic import AnisotropicBody
+    from harness.models.massspring import MassSpring
+    e2 = np.zeros((0, 2), np.int64)
+    z1, z2 = np.zeros(0), np.zeros((0, 3))
+
+    def empty_el(nv, nw):
+        return (np.zeros((0, nv), np.int64), np.zeros((0, 6, nw), np.int64), np.zeros((0, 6, nw)),
+                np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
+    springs = (e2[:, 0], e2[:, 1], z1, z1, z1)
+    tet = empty_el(4, 3) + (z1, z1, False)
+    hexa = empty_el(8, 4) + (z1, z1, np.zeros((0, 8)), False)
+    if isinstance(model, MassSpring):
+        springs = (model.springs[:, 0].astype(np.int64), model.springs[:, 1].astype(np.int64),
+                   model.ks, model.kd / dt, model.L0)
+    elif isinstance(model, AnisotropicBody):
+        ax = model.axes
+        # local vertex indices of each end's face vertices
+        local = np.argmax(model.cells[:, None, None, :] == ax.nodes[..., None], axis=-1).astype(np.int64)
+        base = (model.cells.astype(np.int64), local, ax.weights, model.ks, model.kd / dt, model.L0, model.cos0)
+        if model.is_hex:
+            hexa = base + (model.kvs, model.kvd / dt, model.D0, bool(model.volume))
+        else:
+            tet = base + (model.kvs, model.D0, bool(model.volume))
+    else:
+        return None
+    return springs, tet, hexa
+
+
+def _tets_of(model):
+    t = model.tets() if hasattr(model, "tets") else None
+    return np.zeros((0, 4), np.int64) if t is None else np.asarray(t, np.int64)
+
+
+def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str = "verlet",
+             snapshots=(), observe=(), x0=None, engine: str = "auto", energy: bool = False,
+             jacobian_every: int = 1) -> Trajectory:
+    """Run ``steps`` steps of size ``dt`` from rest (x0 default: the rest points).
+
+    ``snapshots``: step numbers whose full state is kept; ``observe``: node ids whose
+    positions are kept every step. ``engine``: "numba" (verlet only), "numpy" or "auto".
+    """
+    if integrator not in INTEGRATORS:
+        raise SimulationError(f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}")
+    if dt <= 0 or steps < 0:
+        raise SimulationError(f"need dt > 0 and steps >= 0 (got dt={dt}, steps={steps})")
+    x = np.array(model.points if x0 is None else x0, float)
+    n = len(x)
+    snap_steps = np.array(sorted({int(s) for s in snapshots if 0 <= int(s) <= steps}), np.int64)
+    obs = np.asarray(observe, np.int64).reshape(-1)
+    tets = _tets_of(model)
+    size = float(np.ptp(model.points, axis=0).max()) or 1.0
+    arrays = _kernel_arrays(model, dt) if integrator == "verlet" and engine in ("auto", "numba") else None
+    if engine == "numba" and arrays is None:
+        raise SimulationError("the compiled engine runs verlet on MassSpring or AnisotropicBody only")
+    volume = np.full(steps + 1, np.nan)
+    observed = np.zeros((steps + 1, len(obs), 3))
+    snaps = np.zeros((len(snap_steps), n, 3))
+    snaps_d = np.zeros((len(snap_steps), n, 3))
+    if arrays is not None:
+        d = np.zeros((n, 3))
+        springs, tet, hexa = arrays
+        run = _kernel()
+        done = run(x, d, int(steps), float(dt), loading.mass.astype(float), ~loading.fixed,
+                   loading.mass[:, None] * loading.gravity[None, :], loading.push.astype(float),
+                   float(loading.drag / dt), *springs, *tet, *hexa, tets, obs, snap_steps, snaps, snaps_d,
+                   volume, observed, 10.0 * size)
+        if done < steps:
+            _blow_up(model, loading, dt, done)
+        v = d / dt
+    else:
+        x, v = _numpy_run(model, loading, x, dt, steps, integrator, tets, obs, snap_steps, snaps, snaps_d,
+                          volume, observed, size, jacobian_every)
+    if len(tets) == 0:
+        volume[:] = np.nan
+    t = dt * np.arange(steps + 1)
+    en = None
+    if energy and len(snap_steps):
+        en = np.array([_energy(model, loading, snaps[k], snaps_d[k] / dt) for k in range(len(snap_steps))])
+    return Trajectory(t, volume, observed, {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
+                      x, v, dt, en)
+
+
+def _energy(model, loading, x, v):
+    kin = 0.5 * np.sum(loading.mass[:, None] * v * v)
+    pot = -np.sum(loading.external() * (x - model.points))
+    return kin + pot + model.energy(x)
+
+
+def _blow_up(model, loading, dt, step):
+    try:
+        est = f"{stable_step(model, loading):.3g} s"
+    except Exception:  # the estimate is advice only
+        est = "unknown"
+    raise SimulationError(f"the simulation blew up at step {step} with dt = {dt:g} s "
+                          f"(stable-step estimate 2/omega_max = {est})", fix="reduce dt or use integrator = 'backward-euler'")
+
+
+def _numpy_run(model, loading, x, dt, steps, integrator, tets, obs, snap_steps, snaps, snaps_d, volume,
+               observed, size, jacobian_every):
+    n = len(x)
+    free = ~loading.fixed
+    minv = np.where(free, 1.0 / loading.mass, 0.0)[:, None]
+    ext = loading.external()
+    v = np.zeros((n, 3))
+    d = np.zeros((n, 3))
+    isnap = 0
+    J = None
+    for step in range(steps + 1):
+        if len(tets):
+            volume[step] = tet_volume(x, tets)
+        if len(obs):
+            observed[step] = x[obs]
+        if isnap < len(snap_steps) and snap_steps[isnap] == step:
+            snaps[isnap], snaps_d[isnap] = x, d
+            isnap += 1
+        if step == steps:
+            break
+        if integrator in ("verlet", "symplectic-euler"):
+            f = model.forces(x, v) - loading.drag * v + ext
+            v_new = v + dt * f * minv
+        else:
+            if J is None or step % jacobian_every == 0:
+                J = _implicit_matrices(model, x, v, free)
+            v_new = _backward_euler_step(model, loading, x, v, dt, free, ext, J)
+        x_new = x + dt * v_new
+        d = x_new - x
+        x, v = x_new, v_new
+        if not np.all(np.abs(d) < 10.0 * size):
+            _blow_up(model, loading, dt, step + 1)
+    return x, v
+
+
+def _implicit_matrices(model, x, v, free):
+    Kx = jacobian(model.forces, x, model.node_graph(), v=v, wrt="x")
+    Kv = jacobian(model.forces, x, model.node_graph(), v=v, wrt="v")
+    return Kx, Kv
+
+
+def _backward_euler_step(model, loading, x, v, dt, free, ext, J):
+    Kx, Kv = J
+    dof = np.repeat(free, 3)
+    M = sp.diags(np.repeat(loading.mass, 3))
+    A = (M - dt * (Kv - loading.drag * sp.eye(Kv.shape[0])) - dt * dt * Kx).tocsr()[dof][:, dof]
+    f = model.forces(x, v) - loading.drag * v + ext
+    b = dt * (f.ravel() + dt * (Kx @ v.ravel()))[dof]
+    dv = np.zeros(3 * len(x))
+    dv[dof] = spla.spsolve(A.tocsc(), b)
+    return v + dv.reshape(-1, 3)
+
+
+# -- Jacobians ----------------------------------------------------------------------------------
+
+def distance2_colouring(graph: sp.spmatrix) -> np.ndarray:
+    """Greedy colouring in which nodes within two edges of each other differ (columns of
+    one colour can be perturbed together without their rows overlapping)."""
+    A = (sp.csr_matrix(graph, dtype=float) + sp.eye(graph.shape[0])).tocsr()
+    A2 = (A @ A).tocsr()
+    colour = np.full(A.shape[0], -1)
+    for i in range(A.shape[0]):
+        used = set(colour[A2.indices[A2.indptr[i]:A2.indptr[i + 1]]].tolist())
+        c = 0
+        while c in used:
+            c += 1
+        colour[i] = c
+    return colour
+
+
+def jacobian(force, x, graph, *, v=None, wrt: str = "x", h: float = 1e-30) -> sp.csr_matrix:
+    """d force / d x (or d v), (3n, 3n) sparse, exact to rounding by the complex step:
+    one complex force evaluation per colour and component."""
+    x = np.asarray(x, float)
+    n = len(x)
+    A = (sp.csr_matrix(graph, dtype=float) + sp.eye(n)).tocoo()
+    colour = distance2_colouring(graph)
+    rows, cols, vals = [], [], []
+    for c in range(colour.max() + 1):
+        nodes = np.flatnonzero(colour == c)
+        sel = np.isin(A.col, nodes)
+        r, j = A.row[sel], A.col[sel]
+        for comp in range(3):
+            if wrt == "x":
+                xp = x.astype(complex)
+                xp[nodes, comp] += 1j * h
+                f = force(xp, v)
+            else:
+                vp = (np.zeros_like(x) if v is None else np.asarray(v, float)).astype(complex)
+                vp[nodes, comp] += 1j * h
+                f = force(x, vp)
+            im = np.imag(f) / h
+            for k in range(3):
+                rows.append(3 * r + k), cols.append(3 * j + comp), vals.append(im[r, k])
+    N = 3 * n
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N))
+
+
+def stiffness(model, x=None) -> sp.csr_matrix:
+    """K = -d f / d x at x (default rest)."""
+    x = model.points if x is None else x
+    return -jacobian(model.forces, x, model.node_graph())
+
+
+def stable_step(model, loading: Loading, x=None) -> float:
+    """2 / omega_max, omega_max^2 the largest eigenvalue of M^-1/2 K_sym M^-1/2 on the
+    free dofs: the explicit (Verlet / symplectic Euler) stability limit without damping."""
+    K = stiffness(model, x)
+    K = 0.5 * (K + K.T)
+    dof = np.repeat(~loading.fixed, 3)
+    s = 1.0 / np.sqrt(np.repeat(loading.mass, 3))[dof]
+    Kf = sp.diags(s) @ K.tocsr()[dof][:, dof] @ sp.diags(s)
+    if Kf.shape[0] <= 200:
+        lam = np.linalg.eigvalsh(Kf.toarray()).max()
+    else:
+        lam = spla.eigsh(Kf, k=1, which="LA", return_eigenvectors=False, tol=1e-6)[0]
+    return float("inf") if lam <= 0 else 2.0 / np.sqrt(lam)
+
+
+# -- statics --------------------------------------------------------------------------------
+
+def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 50,
+                 x0=None) -> np.ndarray:
+    """Equilibrium positions f_int(x) + lambda f_ext = 0 (free dofs), lambda = 1/load_steps .. 1;
+    Newton on K = -df/dx with a backtracking line search on |residual|."""
+    x = np.array(model.points if x0 is None else x0, float)
+    free = np.repeat(~loading.fixed, 3)
+    ext = loading.external()
+    graph = model.node_graph()
+    scale = max(np.abs(ext).max(), 1e-300)
+    for lam in np.linspace(1.0 / load_steps, 1.0, load_steps):
+        def residual(y):
+            return (model.forces(y) + lam * ext).ravel()[free]
+        r = residual(x)
+        for it in range(max_iter):
+            if np.linalg.norm(r, np.inf) <= tol * scale:
+                break
+            K = -jacobian(model.forces, x, graph).tocsr()[free][:, free]
+            try:
+                dx = spla.spsolve(K.tocsc(), r)
+            except RuntimeError as exc:
+                raise SimulationError(f"singular stiffness at load factor {lam:g} ({exc})",
+                                      fix="fix more nodes: the body can move freely")
+            if not np.all(np.isfinite(dx)):
+                raise SimulationError(f"singular stiffness at load factor {lam:g}",
+                                      fix="fix more nodes: the body can move freely")
+            step, r0 = 1.0, np.linalg.norm(r)
+            while True:
+                y = x.copy().ravel()
+                y[free] += step * dx
+                y = y.reshape(-1, 3)
+                ry = residual(y)
+                if np.linalg.norm(ry) < r0 or step < 1e-4:
+                    break
+                step *= 0.5
+            x, r = y, ry
+        else:
+            raise SimulationError(f"Newton did not converge at load factor {lam:g} "
+                                  f"(|r| = {np.linalg.norm(r, np.inf):.3g} N)", fix="use more load_steps")
+    return x
