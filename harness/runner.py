@@ -1,52 +1,672 @@
-"""Run suites of cases: each case through every stage that applies, rows into tables.
+"""Run suites of cases: each (case, seed) through every stage that applies, in parallel,
+resumable, and with the same table bit for bit for the same seed and inputs.
 
-Minimal serial version; the suite runner issue makes it parallel and resumable.
+- A *job* is one (case file, mode, seed). Its input hash covers the case file's bytes,
+  the mode, the seed, the stage list, the mesh file the case references and the code
+  version (the sources of ``harness/`` and ``reference/`` that can change a result:
+  report, figures and CLI code are left out, so re-drawing a figure does not re-run a
+  suite).
+- A job runs in a fresh temporary folder (in a worker process, a Dask worker or, for a
+  single job or ``--jobs 1``, in this process). It returns its rows and the bytes of the
+  data files its stages wrote; the parent writes them under
+  ``results/<suite>/<case>/`` (``seed<N>/`` when the case runs several seeds), each
+  atomically (temp file + ``os.replace``), and last ``result-seed<N>.json`` (manifest +
+  rows): a finished job is exactly a job whose result file exists, so a run killed with
+  SIGKILL loses no finished case, and a re-run skips every finished job whose input hash
+  is unchanged (``force=True`` recomputes).
+- A failing job (``SpringbenchError``) becomes an error row; the suite carries on. Other
+  exceptions become one line plus a log file holding the traceback.
+- Live status: stages call ``ctx.status(msg)``; worker processes send it through a
+  ``multiprocessing.Manager`` queue, Dask workers through ``log_event`` on a topic the
+  client subscribes to; the parent shows it in the suite's tqdm bar.
+
+Heavy imports (numpy, pandas, the stages) happen inside functions so worker processes
+can pin BLAS to one thread before numpy loads.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import re
+import shutil
 import sys
+import tempfile
 import time
+import traceback
+import uuid
+from dataclasses import dataclass, field
 from pathlib import Path
 
-import pandas as pd
+from harness.errors import CaseError, SpringbenchError
 
-from harness.cases import find_cases, load_case
-from harness.stages import StageContext, load_stages
+ROOT = Path(__file__).resolve().parent.parent
+DEFAULT_CASES = ROOT / "cases"
+DEFAULT_RESULTS = ROOT / "results"
+RESULT_PREFIX = "result-seed"
+HASH_VERSION = "springbench-job-1"
+# sources that cannot change a result (drawing, tables, command-line plumbing)
+_NOT_CODE = ("harness/report.py", "harness/figures/", "harness/commands/", "harness/cli.py",
+             "harness/bench/")
+_NAME_OK = re.compile(r"[^A-Za-z0-9._+-]")
 
-DEFAULT_CASES = Path(__file__).resolve().parent.parent / "cases"
-DEFAULT_RESULTS = Path(__file__).resolve().parent.parent / "results"
+
+# -- jobs and their identity ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Job:
+    """One (case file, mode, seed) to run; everything a worker needs, picklable."""
+    case_file: str
+    mode: str
+    seed: int
+    suite: str
+    case: str          # folder name under results/<suite>/
+    n_seeds: int
+    key: str           # input hash
+    stages: tuple[str, ...]
+    rel_file: str = ""  # the case file as shown in tables and messages
+    expect: dict = field(default_factory=dict, hash=False, compare=False)
+
+    @property
+    def label(self) -> str:
+        return self.case if self.n_seeds == 1 else f"{self.case}#{self.seed}"
 
 
-def run_case(path: Path, mode: str, results: Path, status=lambda m: None) -> list[dict]:
-    case = load_case(path, mode)
-    rows = []
-    for stage in load_stages():
-        if stage.applies(case):
+@dataclass
+class JobResult:
+    """What a job produced: rows, data files (relative name -> bytes), error text."""
+    job: Job
+    status: str                      # "ok" | "error" | "skipped" (finished earlier)
+    rows: list[dict]
+    files: dict[str, bytes] = field(default_factory=dict)
+    error: str = ""
+    traceback: str = ""
+    seconds: float = 0.0
+    log: str = ""                    # path of the traceback log, if any
+
+
+def _hash_files(h, files, root: Path):
+    for f in files:
+        h.update(str(f.relative_to(root)).encode() if f.is_relative_to(root) else str(f).encode())
+        h.update(b"\0")
+        h.update(f.read_bytes())
+        h.update(b"\0")
+
+
+_CODE_CACHE: dict[tuple, str] = {}
+
+
+def code_version(stage_modules=()) -> str:
+    """Hash of the sources that can change a result: ``harness/`` and ``reference/``
+    (without report, figures and CLI code) plus stage modules living elsewhere."""
+    import importlib.util
+    files = []
+    for pkg in ("harness", "reference"):
+        for f in sorted((ROOT / pkg).rglob("*.py")):
+            rel = f.relative_to(ROOT).as_posix()
+            if not any(rel.startswith(n) if n.endswith("/") else rel == n for n in _NOT_CODE):
+                files.append(f)
+    for name in stage_modules:
+        try:
+            spec = importlib.util.find_spec(name)
+        except (ImportError, ValueError):
+            spec = None
+        if spec and spec.origin and Path(spec.origin).is_file():
+            p = Path(spec.origin).resolve()
+            if not p.is_relative_to(ROOT / "harness"):
+                files.append(p)
+    stamp = tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size) for f in files)
+    if stamp not in _CODE_CACHE:
+        h = hashlib.sha256()
+        _hash_files(h, files, ROOT)
+        h.update("\0".join(stage_modules).encode())
+        _CODE_CACHE[stamp] = h.hexdigest()
+    return _CODE_CACHE[stamp]
+
+
+def input_hash(case, seed: int, stages, code: str) -> str:
+    """Hash of everything that determines a job's result."""
+    h = hashlib.sha256(HASH_VERSION.encode())
+    for part in (case.mode, str(seed), code, "\0".join(stages)):
+        h.update(part.encode() + b"\0")
+    h.update(Path(case.path).read_bytes())
+    if case.body.shape == "mesh" and case.body.file is not None:
+        h.update(b"\0mesh\0" + Path(case.body.file).read_bytes())
+    return h.hexdigest()
+
+
+def safe_name(name: str, file: str) -> str:
+    """The results folder name of a case: a path-like name (``../x``, ``/x``, ``a/b``) is
+    rejected; other unusual characters (spaces, ...) become ``_``."""
+    if (not name or "/" in name or "\\" in name or name.startswith(".") or Path(name).is_absolute()
+            or "\0" in name or len(name) > 120):
+        raise CaseError(f"'{name}' cannot name a results folder", file=file, field="name",
+                        fix="use letters, digits, '-', '_' and '.', not a path")
+    return _NAME_OK.sub("_", name)
+
+
+def parse_seeds(case, file: str) -> list[int]:
+    """``[run] seeds``: an integer or a list of distinct non-negative integers."""
+    run = case.section("run") or {}
+    seeds = run.get("seeds", [0])
+    if isinstance(seeds, int) and not isinstance(seeds, bool):
+        seeds = [seeds]
+    if (not isinstance(seeds, (list, tuple)) or not seeds
+            or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)):
+        raise CaseError(f"expected a non-negative integer or a non-empty list of them, got {seeds!r}",
+                        file=file, field="run.seeds", fix="e.g. seeds = [0, 1, 2]")
+    if len(set(seeds)) != len(seeds):
+        raise CaseError("repeated seed", file=file, field="run.seeds", fix="list each seed once")
+    return list(seeds)
+
+
+def _jsonable(v):
+    """Row values as plain JSON scalars (numpy scalars unwrapped, sequences joined)."""
+    if hasattr(v, "item") and getattr(v, "ndim", 1) == 0:
+        v = v.item()
+    if v is None or isinstance(v, (bool, int, str)):
+        return v
+    if isinstance(v, float):
+        return v
+    if isinstance(v, Path):
+        return str(v)
+    if isinstance(v, (list, tuple)) or hasattr(v, "tolist"):
+        items = list(v.tolist() if hasattr(v, "tolist") else v)
+        if all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in items):
+            return ":".join(f"{x:g}" for x in items)
+        return json.dumps([_jsonable(x) for x in items])
+    if isinstance(v, dict):
+        return json.dumps({str(k): _jsonable(x) for k, x in v.items()}, sort_keys=True)
+    return str(v)
+
+
+def _plain(obj):
+    """MappingProxy/tuples from a case section -> plain JSON data."""
+    if isinstance(obj, dict) or hasattr(obj, "items"):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    return obj
+
+
+# -- planning ---------------------------------------------------------------------------
+
+def _rel(path: Path) -> str:
+    try:
+        return os.path.relpath(path)
+    except ValueError:
+        return str(path)
+
+
+def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
+    """Case files -> jobs (one per seed); case files that do not load become error results."""
+    from harness import stages as stage_registry
+    from harness.cases import find_cases, load_case
+
+    stage_names = tuple(stage_registry.STAGES if stages is None else stages)
+    code = code_version(stage_names)
+    files, seen = [], set()
+    for f in find_cases(paths or [DEFAULT_CASES]):
+        r = Path(f).resolve()
+        if r not in seen:
+            seen.add(r)
+            files.append(r)
+    jobs, failed = [], []
+    used: dict[tuple[str, str], str] = {}
+    for f in files:
+        suite = _NAME_OK.sub("_", f.parent.name) or "cases"
+        rel = _rel(f)
+        try:
+            case = load_case(f, mode)
+            name = safe_name(case.name, rel)
+            if (suite, name) in used:
+                raise CaseError(f"name '{case.name}' is also used by {used[suite, name]} in suite {suite}",
+                                file=rel, field="name", fix="give each case of a suite its own name")
+            used[suite, name] = rel
+            seeds = parse_seeds(case, rel)
+        except SpringbenchError as exc:
+            job = Job(str(f), mode, 0, suite, safe_stem(f), 1, "", stage_names, rel)
+            failed.append(JobResult(job, "error", [_error_row(job, "case", str(exc))], error=str(exc)))
+            continue
+        expect = _plain((case.section("expect") or {}).get("values", {}))
+        for seed in seeds:
+            jobs.append(Job(str(f), mode, seed, suite, name, len(seeds),
+                            input_hash(case, seed, stage_names, code), stage_names, rel,
+                            expect if isinstance(expect, dict) else {}))
+    return jobs, failed
+
+
+def safe_stem(f: Path) -> str:
+    return _NAME_OK.sub("_", f.stem).lstrip(".") or "case"
+
+
+def _error_row(job: Job, stage: str, message: str) -> dict:
+    return {"case": job.case, "model": "", "stage": stage, "seed": job.seed, "status": "error",
+            "error": message}
+
+
+# -- executing one job (in a worker) ----------------------------------------------------
+
+class _Throttled:
+    """``ctx.status``: forwards at most a few messages per second to ``sink``."""
+
+    def __init__(self, sink, label: str, every: float = 0.2):
+        self.sink, self.label, self.every, self.last = sink, label, every, 0.0
+
+    def __call__(self, msg: str):
+        now = time.monotonic()
+        if self.sink is None or now - self.last < self.every:
+            return
+        self.last = now
+        try:
+            self.sink(self.label, str(msg))
+        except Exception:  # status must never break a job
+            pass
+
+
+class QueueSink:
+    """Status from worker processes through a Manager queue (picklable proxy)."""
+
+    def __init__(self, queue):
+        self.queue = queue
+
+    def __call__(self, label, msg):
+        self.queue.put_nowait((label, msg))
+
+
+class DaskSink:
+    """Status from Dask workers as events on ``topic``."""
+
+    def __init__(self, topic: str):
+        self.topic = topic
+
+    def __call__(self, label, msg):
+        from distributed import get_worker
+        get_worker().log_event(self.topic, {"label": label, "msg": msg})
+
+
+def _seed_everything(seed: int):
+    import random
+    random.seed(seed)
+    try:
+        import numpy as np
+        np.random.seed(seed % 2**32)
+    except ImportError:  # pragma: no cover
+        pass
+
+
+def execute(job: Job, sink=None) -> JobResult:
+    """Run one job in a fresh temporary folder; never raises."""
+    from harness.cases import load_case
+    from harness.stages import StageContext, load_stages
+
+    t_job = time.perf_counter()
+    status = _Throttled(sink, job.label)
+    tmp = Path(tempfile.mkdtemp(prefix="springbench-"))
+    stage_name = "case"
+    try:
+        case = load_case(job.case_file, job.mode)
+        modules = load_stages(list(job.stages))
+        wanted = tuple((case.section("run") or {}).get("stages", ()))
+        names = [m.NAME for m in modules]
+        unknown = [w for w in wanted if w not in names]
+        if unknown:
+            raise CaseError(f"unknown stage '{unknown[0]}'", file=job.rel_file, field="run.stages",
+                            fix=f"available: {', '.join(names) or 'none'}")
+        rows = []
+        for stage in modules:
+            stage_name = stage.NAME
+            if (wanted and stage.NAME not in wanted) or not stage.applies(case):
+                continue
+            _seed_everything(job.seed)
+            ctx = StageContext(out_dir=tmp, mode=job.mode, seed=job.seed, status=status,
+                               n_seeds=job.n_seeds)
+            status(f"{stage.NAME}")
             t0 = time.perf_counter()
-            ctx = StageContext(out_dir=results / case.suite / case.name, mode=mode, status=status)
-            for row in stage.run(case, ctx):
-                row.setdefault("case", case.name)
+            out = stage.run(case, ctx) or []
+            dt = time.perf_counter() - t0
+            for row in out:
+                row = dict(row)
+                row["case"] = job.case
+                row.setdefault("model", "")
                 row.setdefault("stage", stage.NAME)
-                row.setdefault("seconds", time.perf_counter() - t0)
-                rows.append(row)
-    return rows
+                row.setdefault("seed", job.seed)
+                row.setdefault("status", "ok")
+                row.setdefault("seconds", dt)
+                rows.append({str(k): _jsonable(v) for k, v in row.items()})
+        if not rows:
+            rows = [{"case": job.case, "model": "", "stage": "", "seed": job.seed,
+                     "status": "no stage applies"}]
+        files = {}
+        for f in sorted(tmp.rglob("*")):
+            if f.is_file() and not f.is_symlink():
+                files[f.relative_to(tmp).as_posix()] = f.read_bytes()
+        return JobResult(job, "ok", rows, files, seconds=time.perf_counter() - t_job)
+    except SpringbenchError as exc:
+        msg = str(exc)
+        return JobResult(job, "error", [_error_row(job, stage_name, msg)], error=msg,
+                         seconds=time.perf_counter() - t_job)
+    except Exception as exc:  # a bug, not bad input: one line here, the traceback in a log
+        msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+        if len(msg) > 300:
+            msg = msg[:297] + "..."
+        return JobResult(job, "error", [_error_row(job, stage_name, msg)], error=msg,
+                         traceback=traceback.format_exc(), seconds=time.perf_counter() - t_job)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
-def run_paths(paths, mode: str = "quick", results: Path = DEFAULT_RESULTS) -> dict[str, pd.DataFrame]:
-    from tqdm import tqdm
-    files = find_cases(paths or [DEFAULT_CASES])
-    by_suite: dict[str, list[dict]] = {}
-    bar = tqdm(files, desc="suite", unit="case", file=sys.stderr)
-    for f in bar:
-        bar.set_postfix_str(f.stem)
-        rows = run_case(f, mode, results, status=lambda m: bar.set_postfix_str(f"{f.stem}: {m}"))
-        by_suite.setdefault(f.parent.name, []).extend(rows)
-    tables = {}
-    for suite, rows in by_suite.items():
-        df = pd.DataFrame(rows)
-        out = results / suite
-        out.mkdir(parents=True, exist_ok=True)
-        df.to_csv(out / "summary.csv", index=False)
-        tables[suite] = df
-    return tables
+def _init_worker():
+    """Pool initializer: one BLAS thread per worker (the pool is the parallelism)."""
+    for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
+
+
+# -- storing results ---------------------------------------------------------------------
+
+def atomic_write(path: Path, data: bytes):
+    """Write ``data`` to ``path`` so readers see the old file or the new one, never half."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+
+
+def case_dir(results: Path, job: Job) -> Path:
+    return Path(results) / job.suite / job.case
+
+
+def data_dir(results: Path, job: Job) -> Path:
+    d = case_dir(results, job)
+    return d if job.n_seeds == 1 else d / f"seed{job.seed}"
+
+
+def result_path(results: Path, job: Job) -> Path:
+    return case_dir(results, job) / f"{RESULT_PREFIX}{job.seed}.json"
+
+
+def read_result(path: Path) -> dict | None:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def store(results: Path, res: JobResult) -> Path:
+    """Write a job's data files, then its result file (the 'finished' marker)."""
+    job = res.job
+    out = data_dir(results, job)
+    root = out.resolve()
+    old = read_result(result_path(results, job)) or {}
+    for name, data in res.files.items():
+        target = (out / name)
+        if not target.resolve().is_relative_to(root):  # a stage cannot write outside its folder
+            continue
+        atomic_write(target, data)
+    for name in old.get("files", []):  # files the previous run wrote and this one did not
+        if name not in res.files:
+            stale = out / name
+            if stale.resolve().is_relative_to(root) and stale.is_file():
+                stale.unlink()
+    log = ""
+    if res.traceback:
+        logp = case_dir(results, job) / f"error-seed{job.seed}.log"
+        atomic_write(logp, res.traceback.encode())
+        log = str(logp)
+        res.log = log
+    manifest = {
+        "case": job.case, "suite": job.suite, "file": job.rel_file, "mode": job.mode,
+        "seed": job.seed, "n_seeds": job.n_seeds, "input_hash": job.key, "status": res.status,
+        "error": res.error, "log": log, "stages": list(job.stages), "expect": job.expect,
+        "files": sorted(res.files), "data_dir": "." if job.n_seeds == 1 else f"seed{job.seed}",
+        "seconds": res.seconds, "rows": res.rows,
+    }
+    path = result_path(results, job)
+    atomic_write(path, json.dumps(manifest, indent=1, allow_nan=True).encode())
+    return path
+
+
+def _prune_seeds(results: Path, jobs: list[Job]):
+    """Drop stored results of seeds a case no longer asks for."""
+    by_case: dict[Path, set[int]] = {}
+    for j in jobs:
+        by_case.setdefault(case_dir(results, j), set()).add(j.seed)
+    for d, seeds in by_case.items():
+        for f in d.glob(f"{RESULT_PREFIX}*.json"):
+            m = re.fullmatch(rf"{RESULT_PREFIX}(\d+)\.json", f.name)
+            if m and int(m.group(1)) not in seeds:
+                f.unlink()
+
+
+# -- running a suite ---------------------------------------------------------------------
+
+@dataclass
+class RunReport:
+    """What a run did: every job's result (skipped ones included), the suites touched."""
+    results: list[JobResult]
+    suites: list[Path]
+    results_root: Path
+
+    @property
+    def failed(self) -> list[JobResult]:
+        return [r for r in self.results if r.status == "error"]
+
+    @property
+    def skipped(self) -> list[JobResult]:
+        return [r for r in self.results if r.status == "skipped"]
+
+    @property
+    def ran(self) -> list[JobResult]:
+        return [r for r in self.results if r.status == "ok"]
+
+
+class _Progress:
+    """One tqdm bar for the suite; the postfix shows the latest status of running jobs."""
+
+    def __init__(self, total: int, enabled):
+        from tqdm import tqdm
+        self.bar = tqdm(total=total, desc="suite", unit="case", file=sys.stderr,
+                        disable=None if enabled is None else not enabled, dynamic_ncols=True)
+        self.status: dict[str, str] = {}
+
+    def set(self, label: str, msg: str):
+        self.status[label] = msg
+        self._show()
+
+    def done(self, label: str):
+        self.status.pop(label, None)
+        self.bar.update(1)
+        self._show()
+
+    def _show(self):
+        text = "; ".join(f"{k}: {v}" for k, v in list(self.status.items())[-3:])
+        self.bar.set_postfix_str(text[:120], refresh=True)
+
+    def write(self, line: str):
+        self.bar.write(line, file=sys.stderr)
+
+    def close(self):
+        self.bar.close()
+
+
+def _default_jobs() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover
+        return os.cpu_count() or 1
+
+
+def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, jobs: int | None = None,
+              executor: str = "local", scheduler: str | None = None, force: bool = False,
+              figures: bool = True, stages=None, progress=None) -> RunReport:
+    """Run case files / suites; write results, tables, figures and the index.
+
+    ``stages`` overrides ``harness.stages.STAGES`` (module names); ``progress`` None
+    shows the bar only on a terminal."""
+    results = Path(results or DEFAULT_RESULTS)
+    jobs_n = jobs or _default_jobs()
+    if jobs_n < 1:
+        raise SpringbenchError(f"--jobs {jobs_n}: must be at least 1", field="--jobs", fix="e.g. --jobs 2")
+    if executor not in ("local", "dask"):
+        raise SpringbenchError(f"unknown executor '{executor}'", field="--executor", fix="local or dask")
+    if scheduler and executor != "dask":
+        raise SpringbenchError("--scheduler needs --executor dask", field="--scheduler",
+                               fix="add --executor dask")
+    planned, failed = plan(list(paths), mode, stages)
+    _prune_seeds(results, planned)
+    done: list[JobResult] = []
+    pending: list[Job] = []
+    for job in planned:
+        stored = None if force else read_result(result_path(results, job))
+        if stored and stored.get("status") == "ok" and stored.get("input_hash") == job.key:
+            done.append(JobResult(job, "skipped", stored.get("rows", []), seconds=stored.get("seconds", 0.0)))
+        else:
+            pending.append(job)
+    bar = _Progress(len(planned) + len(failed), progress)
+    bar.bar.update(len(done))
+    all_results = list(done)
+
+    def finish(res: JobResult):
+        store(results, res)
+        all_results.append(res)
+        if res.status == "error":
+            extra = f" (traceback in {res.log})" if res.log else ""
+            bar.write(f"springbench: error: {res.job.label}: {res.error}{extra}")
+        bar.done(res.job.label)
+
+    try:
+        for res in failed:
+            finish(res)
+        if pending:
+            if executor == "dask":
+                _run_dask(pending, scheduler, jobs_n, finish, bar)
+            elif jobs_n == 1 or len(pending) == 1:
+                for job in pending:
+                    bar.set(job.label, "starting")
+                    finish(execute(job, bar.set))
+            else:
+                _run_pool(pending, jobs_n, finish, bar)
+    finally:
+        bar.close()
+    suites = sorted({results / r.job.suite for r in all_results})
+    from harness import report
+    for s in suites:
+        report.build_suite(s, figures=figures)
+    if suites:
+        report.build_index(results)
+    order = {j: i for i, j in enumerate([r.job for r in failed] + planned)}
+    all_results.sort(key=lambda r: order.get(r.job, 0))
+    return RunReport(all_results, suites, results)
+
+
+def _run_pool(pending: list[Job], jobs_n: int, finish, bar):
+    """Local process pool (spawned workers, one BLAS thread each)."""
+    import multiprocessing as mp
+    import queue as queue_mod
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = mp.get_context("spawn")
+    with ctx.Manager() as manager:
+        q = manager.Queue()
+        sink = QueueSink(q)
+        ex = ProcessPoolExecutor(max_workers=min(jobs_n, len(pending)), mp_context=ctx,
+                                 initializer=_init_worker)
+        try:
+            futs = {ex.submit(execute, job, sink): job for job in pending}
+            waiting = set(futs)
+            while waiting:
+                finished, waiting = wait(waiting, timeout=0.3, return_when=FIRST_COMPLETED)
+                try:
+                    while True:
+                        label, msg = q.get_nowait()
+                        bar.set(label, msg)
+                except (queue_mod.Empty, EOFError, OSError):
+                    pass
+                for fut in finished:
+                    job = futs[fut]
+                    try:
+                        res = fut.result()
+                    except BrokenProcessPool:
+                        msg = "the worker process died (killed, or out of memory)"
+                        res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg)
+                    except Exception as exc:  # e.g. a result that cannot be pickled
+                        msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+                        res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
+                                        traceback=traceback.format_exc())
+                    finish(res)
+        except BaseException:
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown(wait=True)
+
+
+def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, bar):
+    """The same jobs on a Dask cluster (``scheduler`` address; none: a LocalCluster)."""
+    try:
+        from distributed import Client, LocalCluster, wait
+    except ImportError:
+        raise SpringbenchError("the Dask executor needs dask.distributed", field="--executor",
+                               fix="pip install 'springbench[dask]'")
+    cluster = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="15s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise SpringbenchError(f"cannot connect to the Dask scheduler at {scheduler} ({exc})",
+                                       field="--scheduler",
+                                       fix="start one with 'dask scheduler' or check the address")
+        else:
+            cluster = LocalCluster(n_workers=jobs_n, threads_per_worker=1, processes=True)
+            client = Client(cluster)
+        topic = f"springbench-status-{uuid.uuid4().hex}"
+        latest: dict[str, str] = {}
+
+        def on_event(event):
+            _, msg = event
+            if isinstance(msg, dict):
+                latest[msg.get("label", "?")] = msg.get("msg", "")
+        client.subscribe_topic(topic, on_event)
+        with client:
+            futs = {client.submit(execute, job, DaskSink(topic), pure=False,
+                                  key=f"springbench-{job.label}-{uuid.uuid4().hex[:8]}"): job
+                    for job in pending}
+            waiting = set(futs)
+            while waiting:
+                try:
+                    res_wait = wait(list(waiting), timeout=0.5, return_when="FIRST_COMPLETED")
+                    finished = res_wait.done
+                except TimeoutError:
+                    finished = set()
+                for label, msg in list(latest.items()):
+                    bar.set(label, msg)
+                latest.clear()
+                for fut in finished:
+                    waiting.discard(fut)
+                    job = futs[fut]
+                    try:
+                        res = fut.result()
+                    except Exception as exc:  # worker lost, unpicklable result, ...
+                        msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+                        res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
+                                        traceback=traceback.format_exc())
+                    finish(res)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def run_paths(paths, mode: str = "quick", results: Path = DEFAULT_RESULTS, **kw):
+    """Backward-compatible wrapper: ``{suite: DataFrame}`` of the suites touched."""
+    import pandas as pd
+    rep = run_suite(paths, mode, results, **kw)
+    return {s.name: pd.read_csv(s / "summary.csv") for s in rep.suites if (s / "summary.csv").exists()}

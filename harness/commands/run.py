@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 HELP = "run case files or folders of them (default: every case under cases/) and write tables to results/"
+
+
+def _positive_int(text):
+    import argparse
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number (e.g. --jobs 2)")
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"{n} must be at least 1 (e.g. --jobs 2)")
+    return n
 
 
 def add_arguments(p):
@@ -16,12 +28,37 @@ def add_arguments(p):
                       help="the case's full budget: reproduces the papers")
     p.set_defaults(mode="quick")
     p.add_argument("--results", type=Path, default=None, help="output folder (default: results/)")
+    p.add_argument("--jobs", "-j", type=_positive_int, default=None, metavar="N",
+                   help="parallel cases/seeds (default: the number of cores; 1 runs in this process)")
+    p.add_argument("--executor", choices=("local", "dask"), default="local",
+                   help="local process pool (default) or a Dask cluster")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (with --executor dask; "
+                        "without it a local Dask cluster of --jobs workers is started)")
+    p.add_argument("--force", action="store_true",
+                   help="recompute finished cases even if their inputs are unchanged")
+    p.add_argument("--no-figures", dest="figures", action="store_false", help="tables only")
 
 
 def main(args) -> int:
-    from harness.runner import DEFAULT_RESULTS, run_paths
-    tables = run_paths(args.paths, args.mode, args.results or DEFAULT_RESULTS)
-    for suite, df in tables.items():
-        print(f"\n== {suite} ({len(df)} rows) -> {(args.results or DEFAULT_RESULTS) / suite / 'summary.csv'}")
-        print(df.to_string(index=False, max_colwidth=40))
-    return 0
+    from harness.runner import DEFAULT_RESULTS, run_suite
+    results = args.results or DEFAULT_RESULTS
+    rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
+                    scheduler=args.scheduler, force=args.force, figures=args.figures)
+    import pandas as pd
+    for suite in rep.suites:
+        csv = suite / "summary.csv"
+        df = pd.read_csv(csv)
+        cols = [c for c in ("case", "model", "seed", "status", "n_nodes", "n_springs", "optimizer",
+                            "G_initial", "G_final", "G_norm_final", "paper_G_final", "seconds", "error")
+                if c in df]
+        print(f"\n== {suite.name}: {len(df)} rows -> {csv}")
+        with pd.option_context("display.width", 160, "display.max_columns", 20):
+            print(df[cols].to_string(index=False, max_colwidth=60))
+    n = len(rep.results)
+    print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
+          f"{len(rep.failed)} failed. Index: {Path(results) / 'index.html'}")
+    for r in rep.failed:
+        extra = f" (traceback in {r.log})" if r.log else ""
+        print(f"springbench: error: {r.job.rel_file or r.job.case}: {r.error}{extra}", file=sys.stderr)
+    return 2 if rep.failed else 0

@@ -1,0 +1,68 @@
+"""Figure registry: each figure kind is one module listed in ``FIGURES``.
+
+A figure module has ``NAME``, ``SCOPE`` ("case": drawn per case data folder; "suite":
+drawn once per suite folder from its summary.csv) and ``make(folder) -> list[Path]``,
+which reads stored data files (formats in :mod:`harness.report`), writes PNGs into
+``folder`` and returns their paths; no data file, no figure (an empty list). Figures
+never recompute anything. A figure that fails is reported as one warning line and the
+report carries on.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+FIGURES = [
+    "harness.figures.trace",        # G against SA steps (trace.csv)
+    "harness.figures.lloyd",        # Lloyd statistics against iterations, Deussen Fig. 2 (lloyd.csv)
+    "harness.figures.lloyd_bars",   # G per Lloyd iteration count, Deussen Fig. 12 (summary.csv)
+    "harness.figures.volume",       # volume variation, Bourguignon-Cani Fig. 3 (volume.csv)
+    "harness.figures.spectrum",     # natural frequencies model vs FEM (frequencies.csv)
+    "harness.figures.anisotropy",   # polar plot of effective stiffness (anisotropy.csv)
+    "harness.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
+    "harness.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
+]
+
+
+def figure_modules(scope: str | None = None):
+    mods = [importlib.import_module(n) for n in FIGURES]
+    return [m for m in mods if scope is None or m.SCOPE == scope]
+
+
+def _make(mods, folder: Path) -> list[Path]:
+    out = []
+    for m in mods:
+        try:
+            out += [Path(p) for p in m.make(Path(folder))]
+        except Exception as exc:  # a broken data file must not stop the report
+            print(f"springbench: warning: figure {m.NAME} in {folder}: {type(exc).__name__}: {exc}"
+                  .replace("\n", " "), file=sys.stderr)
+        finally:
+            plt = sys.modules.get("matplotlib.pyplot")
+            if plt is not None:
+                plt.close("all")
+    return out
+
+
+def make_case_figures(folder) -> list[Path]:
+    return _make(figure_modules("case"), folder)
+
+
+def make_suite_figures(suite_dir) -> list[Path]:
+    return _make(figure_modules("suite"), suite_dir)
+
+
+def pyplot():
+    """matplotlib.pyplot on the Agg backend (no display needed)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def save(fig, path: Path) -> Path:
+    fig.tight_layout()
+    fig.savefig(path, dpi=110, metadata={"Software": None})
+    return path

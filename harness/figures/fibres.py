@@ -1,0 +1,33 @@
+"""Fibre field of a body (Bourguignon-Cani Fig. 6): fibre directions at element centres,
+drawn as short segments in 3-D, at the deformed centres if ``u`` is stored."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from harness.figures import pyplot, save
+
+NAME, SCOPE = "fibres", "case"
+
+
+def make(folder: Path) -> list[Path]:
+    src = folder / "fibres.npz"
+    if not src.exists():
+        return []
+    import numpy as np
+    with np.load(src) as z:
+        p = np.asarray(z["points"], float)
+        d = np.asarray(z["directions"], float)
+        u = np.asarray(z["u"], float) if "u" in z.files else np.zeros_like(p)
+    if p.shape[1] == 2:
+        p, d, u = (np.c_[a, np.zeros(len(a))] for a in (p, d, u))
+    c = p + u
+    size = float(np.ptp(p, axis=0).max()) or 1.0
+    L = 0.3 * size / max(len(p), 1) ** (1 / 3)
+    plt = pyplot()
+    fig = plt.figure(figsize=(5, 5))
+    ax = fig.add_subplot(projection="3d")
+    for a, b in zip(c - 0.5 * L * d, c + 0.5 * L * d):
+        ax.plot(*zip(a, b), color="tab:brown", lw=1)
+    ax.set_title(f"{folder.name}: fibre directions", fontsize=9)
+    return [save(fig, folder / "fig-fibres.png")]

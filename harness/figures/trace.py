@@ -1,0 +1,31 @@
+"""G against SA steps (optimiser trace), one line per model; log scale."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from harness.figures import pyplot, save
+
+NAME, SCOPE = "trace", "case"
+
+
+def make(folder: Path) -> list[Path]:
+    src = folder / "trace.csv"
+    if not src.exists():
+        return []
+    import pandas as pd
+    df = pd.read_csv(src)
+    plt = pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4))
+    groups = df.groupby("model", sort=True) if "model" in df else [("", df)]
+    for model, g in groups:
+        ax.plot(g["step"], g["G"], lw=0.8, label=f"{model} G".strip())
+        if "G_best" in g:
+            ax.plot(g["step"], g["G_best"], lw=1.4, label=f"{model} best".strip())
+    if (df["G"] > 0).all():
+        ax.set_yscale("log")
+    ax.set_xlabel("step")
+    ax.set_ylabel("G")
+    ax.set_title(f"{folder.name}: G against optimiser steps")
+    ax.legend(fontsize=7)
+    return [save(fig, folder / "fig-trace.png")]
