@@ -2,11 +2,12 @@
 the stage that reads a section owns its spec here. Free-form keys ("any") are
 validated by their owner when the stage runs."""
 
+from harness.models.sms import MODEL_SPEC as SMS
 from harness.schema import Field
 
 # [model] kind = "..." selects the spec of the other keys; each model owner adds its kind.
 MODEL_KINDS: dict[str, dict[str, Field]] = {
-    "sms": {},       # spring/mass systems of Deussen 1995 (harness/models/sms)
+    "sms": SMS,      # spring/mass systems of Deussen 1995 (harness/models/sms.py)
     "bc2000": {},    # the anisotropic element model of Bourguignon & Cani 2000
 }
 
