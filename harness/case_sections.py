@@ -32,7 +32,20 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
     },
     # [run]: what `springbench run` does with the case and its seeds
     "run": {
-        "seeds": Field("any", [0]),
+        "seeds": Field("any", [0], check=lambda v: _seeds_problem(v),
+                       doc="an integer >= 0 or a list of distinct ones, e.g. seeds = [0, 1, 2]"),
         "stages": Field("strs", ()),
     },
 }
+
+
+def _seeds_problem(v):
+    """[run] seeds (the runner's entry): an integer >= 0 or a non-empty list of distinct ones."""
+    def ok(s):
+        return isinstance(s, int) and not isinstance(s, bool) and s >= 0
+    seeds = [v] if ok(v) else v
+    if not isinstance(seeds, list) or not seeds or not all(ok(s) for s in seeds):
+        return f"expected an integer >= 0 or a non-empty list of them, got {v!r}"
+    if len(set(seeds)) != len(seeds):
+        return "repeated seed"
+    return None
