@@ -49,6 +49,7 @@ HASH_VERSION = "springbench-job-1"
 # sources that cannot change a result (drawing, tables, command-line plumbing)
 _NOT_CODE = ("harness/report.py", "harness/figures/", "harness/commands/", "harness/cli.py",
              "harness/bench/")
+DASK_CONNECT_TIMEOUT = "15s"
 _NAME_OK = re.compile(r"[^A-Za-z0-9._+-]")
 
 
@@ -620,7 +621,7 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
     try:
         if scheduler:
             try:
-                client = Client(scheduler, timeout="15s")
+                client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
             except (OSError, TimeoutError, ValueError) as exc:
                 raise SpringbenchError(f"cannot connect to the Dask scheduler at {scheduler} ({exc})",
                                        field="--scheduler",

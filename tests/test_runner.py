@@ -276,8 +276,10 @@ def test_dask_local_cluster_matches_serial(tmp_path, fake):
     assert (r2 / "demo" / "b" / "deformed.npz").read_bytes() == (r1 / "demo" / "b" / "deformed.npz").read_bytes()
 
 
-def test_unreachable_scheduler_is_one_line(tmp_path, fake, capsys):
+def test_unreachable_scheduler_is_one_line(tmp_path, fake, capsys, monkeypatch):
     pytest.importorskip("distributed")
+    from harness import runner
+    monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT", "1s")
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     code = cli.main(["run", str(suite), "--results", str(tmp_path / "r"), "--executor", "dask",

@@ -38,6 +38,7 @@ def make(folder: Path) -> list[Path]:
                 _lines(ax, p, springs, colors="0.8", linewidths=0.6)
                 if np.isfinite(u).all():
                     _lines(ax, p + scale * u, springs, colors="tab:blue", linewidths=0.9)
+                    ax.plot([], [], color="tab:blue", label="model")
             elif np.isfinite(u).all():
                 ax.plot(*(p + scale * u)[:, :2].T, "o", color="tab:blue", ms=3, label="model")
             ax.plot(*(p + scale * u_ref)[:, :2].T, ".", color="tab:red", ms=4, label="reference (FEM)")
