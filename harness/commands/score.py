@@ -1,0 +1,63 @@
+"""springbench score MODEL.vtu CASE: G criteria of any spring network against the FEM reference."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+HELP = "score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G per load, G_{a:b:c}, normalised G"
+
+
+def add_arguments(p):
+    p.add_argument("model", metavar="MODEL.vtu", help="spring network (e.g. from 'springbench build')")
+    p.add_argument("case", metavar="CASE", help="case file (body, material, loads, [score] weights)")
+    p.add_argument("--out", type=Path, default=None, metavar="CSV", help="also write the table as CSV")
+    p.add_argument("--weights", type=float, nargs=3, default=None, metavar=("A", "B", "C"),
+                   help="G weights inner border corner (default: the case's [score] weights)")
+    p.add_argument("--full", dest="mode", action="store_const", const="full", default="quick",
+                   help="use the case's [full] table")
+
+
+def score_table(net, case, ref, weights=None):
+    """DataFrame: one row per load case and a total row."""
+    import pandas as pd
+
+    from harness import statics
+    from harness.scoring import case_weights, g_arrays, reference_displacements
+    w = case_weights(case, weights)
+    res = statics.solve(net, case)
+    u_ref = reference_displacements(ref, net.points, res.names)
+    sc = g_arrays(u_ref, res.u, net.classes, w, res.names)
+    s1 = g_arrays(u_ref, res.u, net.classes, (1, 1, 1), res.names)
+    label = ":".join(f"{x:g}" for x in w)
+    rows = [{"load": n, "G_s": s1.per_load[n], f"G_{label}": sc.per_load[n], "G_norm": sc.per_load_norm[n]}
+            for n in res.names]
+    rows.append({"load": "total", "G_s": sc.G_s, f"G_{label}": sc.G, "G_norm": sc.G_norm})
+    return pd.DataFrame(rows), sc
+
+
+def main(args) -> int:
+    import reference
+
+    from harness.cases import load_case
+    from harness.errors import ModelError
+    from harness.geometry import body_geometry
+    from harness.io_vtu import read_vtu
+    from harness.models.sms import node_classes
+    case = load_case(args.case, args.mode)
+    net, _ = read_vtu(args.model)
+    if net.dim != case.dim:
+        raise ModelError(f"the network is {net.dim}-D but the case is {case.dim}-D", file=str(args.model),
+                         fix="score it on a case of the same dimension")
+    body = body_geometry(case)
+    if body.kind != "mesh":  # node classes by the case's body, whoever wrote the file
+        import dataclasses
+        net = dataclasses.replace(net, classes=node_classes(net.points, body))
+    ref = reference.solve(case)
+    df, sc = score_table(net, case, ref, args.weights)
+    print(f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights {':'.join(f'{x:g}' for x in sc.weights)}")
+    print(df.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        df.to_csv(args.out, index=False)
+        print(f"-> {args.out}")
+    return 0

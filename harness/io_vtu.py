@@ -1,0 +1,75 @@
+"""Spring networks to and from VTU (meshio), as DESIGN.md states, so ParaView opens them:
+points = rest positions (z = 0 in 2-D), one ``line`` cell block = springs, point data
+``mass``, cell data ``stiffness`` (linear spring k), optional point data ``u_<load>``
+(displacements, padded to 3 components). We also write point data ``class`` (G weight
+class) and cell data ``group``, and field data ``dim``; a file from anyone else needs
+only points, lines and ``stiffness`` (masses default to 1, classes come from the
+bounding box, dim is 2 when every z is 0).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from harness.errors import SpringbenchError
+
+
+def _pad3(a: np.ndarray) -> np.ndarray:
+    a = np.asarray(a, float)
+    return np.hstack([a, np.zeros((len(a), 3 - a.shape[1]))]) if a.shape[1] < 3 else a
+
+
+def write_vtu(path, network, displacements: dict | None = None) -> Path:
+    """Write ``network`` (and {load name: (n, dim)} displacements) to ``path``."""
+    import meshio
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    point_data = {"mass": np.asarray(network.masses, float), "class": np.asarray(network.classes, np.int32)}
+    for name, u in (displacements or {}).items():
+        point_data[f"u_{name}"] = _pad3(u)
+    mesh = meshio.Mesh(_pad3(network.points), [("line", np.asarray(network.springs, np.int64))],
+                       point_data=point_data,
+                       cell_data={"stiffness": [np.asarray(network.k, float)],
+                                  "group": [np.asarray(network.groups, np.int32)]},
+                       field_data={"dim": np.array([network.dim], np.int32)})
+    meshio.write(path, mesh, file_format="vtu")
+    return path
+
+
+def read_vtu(path):
+    """(network, displacements {load: (n, dim)}) from a VTU file."""
+    import contextlib
+    import io
+
+    import meshio
+    from harness.models.sms import make_network
+    path = Path(path)
+    if not path.exists():
+        raise SpringbenchError("file not found", file=str(path), fix="check the path")
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            m = meshio.read(path)
+    except (Exception, SystemExit) as exc:
+        raise SpringbenchError(f"cannot read it as a mesh ({type(exc).__name__})", file=str(path),
+                               fix="give a VTU file written by 'springbench build' or meshio")
+    blocks = [i for i, c in enumerate(m.cells) if c.type == "line"]
+    if not blocks:
+        raise SpringbenchError("no 'line' cells (springs)", file=str(path), fix="springs are a line cell block")
+    springs = np.vstack([m.cells[i].data for i in blocks])
+    if "stiffness" not in m.cell_data:
+        raise SpringbenchError("no cell data 'stiffness'", file=str(path), fix="store the spring constants as cell data 'stiffness'")
+    k = np.concatenate([np.asarray(m.cell_data["stiffness"][i], float).ravel() for i in blocks])
+    groups = (np.concatenate([np.asarray(m.cell_data["group"][i]).ravel() for i in blocks]).astype(int)
+              if "group" in m.cell_data else None)
+    pts = np.asarray(m.points, float)
+    dim = int(np.ravel(m.field_data["dim"])[0]) if "dim" in m.field_data else (2 if np.allclose(pts[:, 2:], 0) else 3)
+    pts = pts[:, :dim]
+    masses = np.asarray(m.point_data["mass"], float).ravel() if "mass" in m.point_data else None
+    classes = np.asarray(m.point_data["class"]).astype(int).ravel() if "class" in m.point_data else None
+    if np.any(~np.isfinite(k)) or np.any(k <= 0):
+        raise SpringbenchError("stiffness must be positive and finite", file=str(path), field="stiffness")
+    net = make_network(pts, springs, k, masses, classes, groups)
+    disp = {name[2:]: np.asarray(v, float)[:, :dim] for name, v in m.point_data.items() if name.startswith("u_")}
+    return net, disp
