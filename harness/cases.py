@@ -303,7 +303,7 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         except SpringbenchError as exc:
             fail("file", exc.message, exc.fix)
         if mesh.dim != dim:
-            fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}")
+            fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}", f"set dim = {mesh.dim}")
         body = Body(shape, file=mpath, format=b["format"])
     parts = {}
     if not isinstance(b["parts"], dict):
@@ -369,7 +369,8 @@ def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tupl
         return tuple(range(dim))
     comps = sorted({AXES.index(c) for c in names})
     if comps and comps[-1] >= dim:
-        raise CaseError(f"component '{AXES[comps[-1]]}' does not exist in {dim}-D", file=file, field=where)
+        raise CaseError(f"component '{AXES[comps[-1]]}' does not exist in {dim}-D", file=file, field=where,
+                        fix=f"use {', '.join(AXES[:dim])} or all")
     return tuple(comps)
 
 
@@ -385,7 +386,8 @@ def _loads(l: dict, dim: int, body: Body, file: str):
     for i, u in enumerate(l["case"]):
         where = f"loads.case[{i}]"
         if u["name"] in names:
-            raise CaseError(f"duplicate load case name '{u['name']}'", file=file, field=where + ".name")
+            raise CaseError(f"duplicate load case name '{u['name']}'", file=file, field=where + ".name",
+                            fix="give each load case its own name (the standard set uses stretch-x, shear-x, ...)")
         names.add(u["name"])
         cons = []
         for j, c in enumerate(u["constraint"]):

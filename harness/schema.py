@@ -62,7 +62,8 @@ def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
     for key, f in spec.items():
         if key not in data:
             if f.default is REQUIRED:
-                fail(key, f"missing required {f.kind} field", f.doc or None)
+                fail(key, f"missing required {f.kind} field",
+                     f.doc or (f"add a [{path}{key}] table" if f.kind == "table" else None))
             # an absent table with a {} default still gets its own defaults
             out[key] = (check({}, f.spec, file, path + key + ".")
                         if f.kind == "table" and f.default == {} else f.default)
@@ -76,7 +77,10 @@ def _value(v, f: Field, file: str, where: str):
         raise CaseError(msg, file=file, field=where, fix=fix or (f.doc or None))
 
     k = f.kind
-    if k == "any":
+    if k == "any":  # free-form, but a Field.check still applies
+        msg = f.check(v) if f.check is not None else None
+        if msg:
+            fail(msg)
         return v
     if k == "float":
         if not _is_number(v):
