@@ -89,6 +89,9 @@ READERS = {"bc2000": read_bc2000, "meshio": read_meshio}
 def read_mesh(path, fmt: str | None = None) -> Mesh:
     """Read a mesh; ``fmt`` None guesses (bc2000 if the first line is two integers)."""
     path = Path(path)
+    if not path.is_file():  # meshio's own error for this is a long ReadError
+        raise SpringbenchError(f"no such mesh file '{path.name}'", file=str(path),
+                               fix="check the path (relative to the case file)")
     if fmt is None:
         fmt = "bc2000" if looks_like_bc2000(path) else "meshio"
     try:

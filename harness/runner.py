@@ -208,18 +208,18 @@ def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
     stage_names = tuple(stage_registry.STAGES if stages is None else stages)
     code = code_version(stage_names)
     files, seen = [], set()
-    for f in find_cases(paths or [DEFAULT_CASES]):
-        r = Path(f).resolve()
+    for given in find_cases(paths or [DEFAULT_CASES]):
+        r = Path(given).resolve()
         if r not in seen:
             seen.add(r)
-            files.append(r)
+            files.append((Path(given), r))
     jobs, failed = [], []
     used: dict[tuple[str, str], str] = {}
-    for f in files:
+    for given, f in files:
         suite = _NAME_OK.sub("_", f.parent.name) or "cases"
-        rel = _rel(f)
+        rel = str(given)
         try:
-            case = load_case(f, mode)
+            case = load_case(given, mode)
             name = safe_name(case.name, rel)
             if (suite, name) in used:
                 raise CaseError(f"name '{case.name}' is also used by {used[suite, name]} in suite {suite}",
@@ -498,6 +498,15 @@ class _Progress:
         self.bar.close()
 
 
+def error_line(res: JobResult) -> str:
+    """The one line that reports a failed job (its file is named once)."""
+    where = "" if res.job.rel_file and res.job.rel_file in res.error else f"{res.job.rel_file or res.job.label}: "
+    if res.job.n_seeds > 1:
+        where += f"seed {res.job.seed}: "
+    extra = f" (traceback in {res.log})" if res.log else ""
+    return f"springbench: error: {where}{res.error}{extra}"
+
+
 def _default_jobs() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))
@@ -521,6 +530,14 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
     if scheduler and executor != "dask":
         raise SpringbenchError("--scheduler needs --executor dask", field="--scheduler",
                                fix="add --executor dask")
+    if results.exists() and not results.is_dir():
+        raise SpringbenchError("exists and is not a folder", file=str(results), field="--results",
+                               fix="give a folder for the results")
+    try:
+        results.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SpringbenchError(f"cannot create the results folder ({exc.strerror})", file=str(results),
+                               field="--results", fix="give a writable folder")
     planned, failed = plan(list(paths), mode, stages)
     _prune_seeds(results, planned)
     done: list[JobResult] = []
@@ -539,8 +556,7 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
         store(results, res)
         all_results.append(res)
         if res.status == "error":
-            extra = f" (traceback in {res.log})" if res.log else ""
-            bar.write(f"springbench: error: {res.job.label}: {res.error}{extra}")
+            bar.write(error_line(res))
         bar.done(res.job.label)
 
     try:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 HELP = "run case files or folders of them (default: every case under cases/) and write tables to results/"
@@ -57,8 +56,6 @@ def main(args) -> int:
             print(df[cols].to_string(index=False, max_colwidth=60))
     n = len(rep.results)
     print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
-          f"{len(rep.failed)} failed. Index: {Path(results) / 'index.html'}")
-    for r in rep.failed:
-        extra = f" (traceback in {r.log})" if r.log else ""
-        print(f"springbench: error: {r.job.rel_file or r.job.case}: {r.error}{extra}", file=sys.stderr)
+          f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "
+          f"Index: {Path(results) / 'index.html'}")
     return 2 if rep.failed else 0
