@@ -104,7 +104,10 @@ STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform")
 MODEL_SPEC = {
     "placement": Field("str", "grid", choices=PLACEMENTS,
                        doc="grid | random | lloyd (random + Lloyd iterations) | mesh (the body mesh's nodes)"),
-    "grid": Field("any", None, doc="nodes per axis [nx, ny(, nz)] for placement = 'grid'"),
+    "grid": Field("any", None, doc="nodes per axis [nx, ny(, nz)] for placement = 'grid'",
+                  check=lambda v: None if (isinstance(v, list) and len(v) in (2, 3) and all(
+                      isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in v))
+                  else "expected 2 or 3 integers >= 2 (nodes per axis)"),
     "structure": Field("str", None, doc="grid structure: structure1, edges+diagonal, edges+diagonals+second, "
                                         "edges (2-D); edges+face+body, edges+face, edges+body (3-D)"),
     "n_points": Field("int", None, min=4, doc="number of points for random / lloyd placement"),

@@ -21,8 +21,9 @@ it is E for isotropic material and follows fibres and regions.
 "lloyd"      Lloyd, Szekely & Harders 2007 (IEEE TVCG 13(5)): spring constants that match
              the FEM element stiffness matrix. Per cell we fit the constants of the cell's
              springs to the linear FEM stiffness (P1 triangles/tetrahedra, Q1 quads/hex,
-             2x2(x2) Gauss) in the least-squares (Frobenius) sense with k >= 0, then sum
-             over the cells sharing a spring. For an equilateral triangle and nu = 1/3 the
+             2x2(x2) Gauss) in the least-squares (Frobenius) sense, sum over the cells
+             sharing a spring, and floor the (rare) non-positive sums at 1% of the median
+             (obtuse triangles have negative best-fit constants). For an equilateral triangle and nu = 1/3 the
              match is exact and gives their closed form k = sqrt(3)/4 E t per triangle
              (derivation: spring energy sum k L^2 (n.eps.n)^2 / 2 over three directions 60
              deg apart is isotropic with lambda = mu = sqrt(3) k / (2 t); plane stress
@@ -189,9 +190,10 @@ def fem_element_stiffness(points: np.ndarray, c: np.ndarray, ctype: str, C: np.n
     return K
 
 
-def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs) -> tuple[np.ndarray, np.ndarray]:
-    """Per element, k >= 0 for the local ``pairs`` minimising ||Ke - sum k b b^T||_F.
-    Returns k (m, len(pairs)) and the relative misfit (m,)."""
+def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs,
+                        nonneg: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """Per element, k for the local ``pairs`` minimising ||Ke - sum k b b^T||_F (k >= 0
+    with ``nonneg``). Returns k (m, len(pairs)) and the relative misfit (m,)."""
     m, k = c.shape
     d = points.shape[1]
     p = points[c]
@@ -205,11 +207,8 @@ def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs
     h = np.einsum("msi,mij,msj->ms", bs, Ke, bs)
     out = np.zeros((m, len(pairs)))
     for e in range(m):
-        try:
-            ke = np.linalg.solve(G[e], h[e])
-        except np.linalg.LinAlgError:
-            ke = -np.ones(len(pairs))
-        if ke.min() < 0:
+        ke = np.linalg.lstsq(G[e], h[e], rcond=None)[0]
+        if nonneg and ke.min() < 0:
             # nnls on the Frobenius problem written as a least-squares system
             A = np.stack([np.outer(b, b).ravel() for b in bs[e]], 1)
             ke = nnls(A, Ke[e].ravel())[0]
@@ -238,7 +237,10 @@ def lloyd(points, springs, cells, material) -> np.ndarray:
                 continue
             kfit, _ = fit_element_springs(Ke[rows], points, c[rows], [pairs[i] for i in cols])
             np.add.at(acc, ids[rows][:, cols].ravel(), kfit.ravel())
-    return acc
+    # obtuse triangles give negative fitted constants (Lloyd et al. note it); the sum over
+    # neighbouring cells usually compensates, the rest is floored at 1% of the median
+    floor = 0.01 * np.median(acc[acc > 0]) if np.any(acc > 0) else 1.0
+    return np.maximum(acc, floor)
 
 
 RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform}

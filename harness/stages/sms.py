@@ -87,7 +87,7 @@ def run(case, ctx) -> list[dict]:
     names = tuple(l.name for l in case.loads)
     u_ref = reference_displacements(ref, base.points, names) if ref is not None else None
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
-              "seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
+              "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
