@@ -5,10 +5,56 @@ validated by their owner when the stage runs."""
 from harness.models.sms import MODEL_SPEC as SMS
 from harness.schema import Field
 
+# [model] kind = "bc2000": Bourguignon & Cani 2000 (harness/models/anisotropic.py,
+# massspring.py). Damping constants are the program's per-step ones unless
+# damping_units = "physical" (kd_physical = kd * dt).
+BC2000 = {
+    "models": Field("strs", ("MS", "MT0", "MT"), choices=("MS", "MT0", "MT"),
+                    doc="MS classic springs on mesh edges, MT0 the element model without and MT with volume forces"),
+    "ks": Field("floats", (2.5,), length=(1, 6), min=0, doc="ks1..ks6 (3 axial, 3 angular) or one value"),
+    "kd": Field("floats", (10.0,), length=(1, 3), min=0, doc="kd1..kd3 axial damping or one value"),
+    "kvs": Field("float", 5.0, min=0, doc="volume stiffness"),
+    "kvd": Field("float", 10.0, min=0, doc="hexa radial-spring damping"),
+    "ms_ks": Field("float", 2.5, min=0, doc="classic spring stiffness"),
+    "ms_kd": Field("float", 10.0, min=0, doc="classic spring damping"),
+    "damping_units": Field("str", "per-step", choices=("per-step", "physical")),
+    "rest_angle": Field("str", "program", choices=("program", "rest"),
+                        doc="angular springs: 90 degrees (program) or the rest shape's angles"),
+    "fibre_field": Field("str", None, choices=("vertical", "horizontal", "diagonal", "hemicircular",
+                                                "helicoidal", "random")),
+    "fibre_fields": Field("strs", (), choices=("vertical", "horizontal", "diagonal", "hemicircular",
+                                               "helicoidal", "random"), doc="one run per field (Fig. 6)"),
+    "fibre_origin": Field("floats", None, length=2, doc="centre of the hemicircular/helicoidal field"),
+    "azimuth_deg": Field("float", None),
+    "elevation_deg": Field("float", None),
+    "direction": Field("floats", None, length=3),
+    "seed": Field("int", 0),
+    "mass": Field("float", 0.01, min=0, min_exclusive=True, doc="kg per node"),
+}
+
+# [dynamics]: time integration of the bc2000 experiments (harness/stages/bc2000.py)
+DYNAMICS = {
+    "experiment": Field("str", "run", choices=("run", "volume", "pull", "cantilever", "fibres", "timing")),
+    "dt": Field("float", 0.01, min=0, min_exclusive=True, doc="time step (s)"),
+    "hexa_model_dt": Field("float", None, min=0, min_exclusive=True,
+                           doc="time step of the element model on hexa meshes (the program's 0.004 s)"),
+    "steps": Field("int", 1000, min=0),
+    "duration": Field("float", None, min=0, doc="simulated time (s); overrides steps (steps = duration / dt)"),
+    "original": Field("str", None, doc="the original program's volume file (relative to the case) to compare with"),
+    "integrator": Field("str", "verlet", choices=("verlet", "symplectic-euler", "backward-euler")),
+    "gravity": Field("floats", (0.0, -9.8, 0.0), length=3),
+    "push": Field("floats", (0.0, -1.0, 0.0), length=3, doc="force (N) on each pulled node (flag 2)"),
+    "drag": Field("float", 5e-3, min=0, doc="drag per step (the program's 5e-3), physical drag * dt"),
+    "meshes": Field("strs", (), doc="more meshes (relative to the case file) run with the same settings"),
+    "snapshots": Field("any", [], doc="step numbers whose particle states are written"),
+    "static": Field("bool", False, doc="also solve the static equilibrium (Newton)"),
+    "repeats": Field("int", 3, min=1, doc="timing repeats (best of)"),
+}
+
 # [model] kind = "..." selects the spec of the other keys; each model owner adds its kind.
 MODEL_KINDS: dict[str, dict[str, Field]] = {
     "sms": SMS,      # spring/mass systems of Deussen 1995 (harness/models/sms.py)
-    "bc2000": {},    # the anisotropic element model of Bourguignon & Cani 2000
+    "bc2000": BC2000,  # the anisotropic element model of Bourguignon & Cani 2000
 }
 
 SECTIONS: dict[str, dict[str, Field] | str] = {
@@ -30,6 +76,8 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
         "source": Field("str", ""),
         "values": Field("any", {}),
     },
+    # [dynamics]: time integration settings of the bc2000 experiments
+    "dynamics": DYNAMICS,
     # [run]: what `springbench run` does with the case and its seeds
     "run": {
         "seeds": Field("any", [0], check=lambda v: _seeds_problem(v),

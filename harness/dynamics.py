@@ -4,9 +4,10 @@ Bourguignon-Cani elements), shared by every model with ``forces(x, v)``,
 
 - ``verlet``: position (Stoermer) Verlet as the original program, d_{n+1} = d_n + h^2 a_n,
   x_{n+1} = x_n + d_{n+1}, damping on v = d/h (the program's per-step constants are
-  kd*h physically). For MassSpring / AnisotropicBody a compiled kernel (numba) runs
-  the whole loop with the program's order of force accumulation, so it reproduces the
-  program's particle states to rounding.
+  kd*h physically). For MassSpring / AnisotropicBody a compiled kernel (numba,
+  harness/models/bc2000/kernels.py) runs the whole loop with the program's order of
+  operations and of force accumulation, so it reproduces the program's particle states
+  bit for bit.
 - ``symplectic-euler``: v += h a(x, v); x += h v (numpy, any model).
 - ``backward-euler``: one Newton step per step with the Jacobian of the forces (complex
   step, coloured, sparse): (M - h D - h^2 K) dv = h (f + h K v).
@@ -86,211 +87,41 @@ def tet_volume(x, tets) -> float | np.ndarray:
 
 # -- compiled program-order Verlet -------------------------------------------------------------
 
-_KERNEL = None
-
-
 def _kernel():
-    global _KERNEL
-    if _KERNEL is None:
-        from numba import njit
-
-        @njit(cache=True, fastmath=False)
-        def run(x, d, steps, h, mass, integrate, grav, push, drag_step,
-                sp_p, sp_q, sp_ks, sp_kd, sp_L0,
-                t_cells, t_vi, t_cf, t_ks, t_kd, t_L0, t_cos0, t_kvs, t_D0, t_vol,
-                h_cells, h_vi, h_cf, h_ks, h_kd, h_L0, h_cos0, h_kvs, h_kvd, h_D0, h_vol,
-                vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
-            n = x.shape[0]
-            f = np.zeros((n, 3))
-            sqh = h * h
-            isnap = 0
-            pos = np.zeros((8, 3))
-            vel = np.zeros((8, 3))
-            frc = np.zeros((8, 3))
-            E = np.zeros((6, 3))
-            VE = np.zeros((6, 3))
-            G = np.zeros((6, 3))
-            l = np.empty((3, 3))
-            vl = np.empty((3, 3))
-            Ls = np.empty(3)
-            Li = np.empty(3)
-            nl = np.empty((3, 3))
-            F = np.empty((3, 3))
-            Dd = np.empty((8, 3))
-            Dn = np.empty(8)
-            for step in range(steps + 1):
-                # observers of the current state
-                if vtets.shape[0] > 0:
-                    V = 0.0
-                    for k in range(vtets.shape[0]):
-                        a0 = vtets[k, 0]
-                        ax = x[vtets[k, 1], 0] - x[a0, 0]; ay = x[vtets[k, 1], 1] - x[a0, 1]; az = x[vtets[k, 1], 2] - x[a0, 2]
-                        bx = x[vtets[k, 2], 0] - x[a0, 0]; by = x[vtets[k, 2], 1] - x[a0, 1]; bz = x[vtets[k, 2], 2] - x[a0, 2]
-                        cx = x[vtets[k, 3], 0] - x[a0, 0]; cy = x[vtets[k, 3], 1] - x[a0, 1]; cz = x[vtets[k, 3], 2] - x[a0, 2]
-                        det = (ay * bz - az * by) * cx + (az * bx - ax * bz) * cy + (ax * by - ay * bx) * cz
-                        V += abs(det)
-                    volume[step] = V / 6.0
-                for k in range(obs.shape[0]):
-                    for c in range(3):
-                        observed[step, k, c] = x[obs[k], c]
-                if isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
-                    snaps[isnap] = x
-                    snaps_d[isnap] = d
-                    isnap += 1
-                if step == steps:
-                    return steps
-                # classic springs (Spring::operator())
-                for s in range(sp_p.shape[0]):
-                    i = sp_p[s]; j = sp_q[s]
-                    lx = x[i, 0] - x[j, 0]; ly = x[i, 1] - x[j, 1]; lz = x[i, 2] - x[j, 2]
-                    L = np.sqrt(lx * lx + ly * ly + lz * lz)
-                    inv = 1.0 / L
-                    nx = lx * inv; ny = ly * inv; nz = lz * inv
-                    vx = d[i, 0] - d[j, 0]; vy = d[i, 1] - d[j, 1]; vz = d[i, 2] - d[j, 2]
-                    sc = -(sp_ks[s] * (L - sp_L0[s]) + sp_kd[s] * (vx * nx + vy * ny + vz * nz))
-                    fx = nx * sc; fy = ny * sc; fz = nz * sc
-                    f[i, 0] += fx; f[i, 1] += fy; f[i, 2] += fz
-                    f[j, 0] += -fx; f[j, 1] += -fy; f[j, 2] += -fz
-                # elements (TetraSpring / HexaSpring, ALTERN DAMPED [CONSTVOL])
-                for form in range(2):
-                    cells = t_cells if form == 0 else h_cells
-                    vi = t_vi if form == 0 else h_vi
-                    cf = t_cf if form == 0 else h_cf
-                    ks = t_ks if form == 0 else h_ks
-                    kd = t_kd if form == 0 else h_kd
-                    L0 = t_L0 if form == 0 else h_L0
-                    cos0 = t_cos0 if form == 0 else h_cos0
-                    nv = cells.shape[1]
-                    nw = cf.shape[2]
-                    for e in range(cells.shape[0]):
-                        for a in range(nv):
-                            for c in range(3):
-                                pos[a, c] = x[cells[e, a], c]
-                                vel[a, c] = d[cells[e, a], c]
-                                frc[a, c] = 0.0
-                        for k in range(6):
-                            for c in range(3):
-                                acc = cf[e, k, 0] * pos[vi[e, k, 0], c]
-                                vac = cf[e, k, 0] * vel[vi[e, k, 0], c]
-                                for w in range(1, nw):
-                                    acc = acc + cf[e, k, w] * pos[vi[e, k, w], c]
-                                    vac = vac + cf[e, k, w] * vel[vi[e, k, w], c]
-                                E[k, c] = acc
-                                VE[k, c] = vac
-                        for a in range(3):
-                            for c in range(3):
-                                l[a, c] = E[2 * a, c] - E[2 * a + 1, c]
-                                vl[a, c] = VE[2 * a, c] - VE[2 * a + 1, c]
-                            Ls[a] = np.sqrt(l[a, 0] * l[a, 0] + l[a, 1] * l[a, 1] + l[a, 2] * l[a, 2])
-                            Li[a] = 1.0 / Ls[a]
-                        c12 = (l[0, 0] * l[1, 0] + l[0, 1] * l[1, 1] + l[0, 2] * l[1, 2]) * Li[0] * Li[1]
-                        c13 = (l[0, 0] * l[2, 0] + l[0, 1] * l[2, 1] + l[0, 2] * l[2, 2]) * Li[0] * Li[2]
-                        c23 = (l[1, 0] * l[2, 0] + l[1, 1] * l[2, 1] + l[1, 2] * l[2, 2]) * Li[1] * Li[2]
-                        for a in range(3):
-                            for c in range(3):
-                                nl[a, c] = l[a, c] * Li[a]
-                        for a in range(3):
-                            dv = vl[a, 0] * nl[a, 0] + vl[a, 1] * nl[a, 1] + vl[a, 2] * nl[a, 2]
-                            sc = -(ks[e, a] * (Ls[a] - L0[e, a]) + kd[e, a] * dv)
-                            for c in range(3):
-                                F[a, c] = nl[a, c] * sc
-                        K12 = -(ks[e, 3] * (c12 - cos0[e, 0]))
-                        K13 = -(ks[e, 4] * (c13 - cos0[e, 1]))
-                        K23 = -(ks[e, 5] * (c23 - cos0[e, 2]))
-                        for c in range(3):
-                            G[0, c] = (F[0, c] + K12 * nl[1, c]) + K13 * nl[2, c]
-                            G[1, c] = -G[0, c]
-                            G[2, c] = (F[1, c] + K12 * nl[0, c]) + K23 * nl[2, c]
-                            G[3, c] = -G[2, c]
-                            G[4, c] = (F[2, c] + K13 * nl[0, c]) + K23 * nl[1, c]
-                            G[5, c] = -G[4, c]
-                        for k in range(6):
-                            for w in range(nw):
-                                for c in range(3):
-                                    frc[vi[e, k, w], c] += cf[e, k, w] * G[k, c]
-                        use_vol = t_vol if form == 0 else h_vol
-                        if use_vol:
-                            gx = 0.0; gy = 0.0; gz = 0.0
-                            gvx = 0.0; gvy = 0.0; gvz = 0.0
-                            for a in range(nv):
-                                gx += pos[a, 0]; gy += pos[a, 1]; gz += pos[a, 2]
-                                gvx += vel[a, 0]; gvy += vel[a, 1]; gvz += vel[a, 2]
-                            sc = 0.25 if nv == 4 else 0.125
-                            gx *= sc; gy *= sc; gz *= sc
-                            gvx *= sc; gvy *= sc; gvz *= sc
-                            Dsum = 0.0
-                            for a in range(nv):
-                                Dd[a, 0] = pos[a, 0] - gx; Dd[a, 1] = pos[a, 1] - gy; Dd[a, 2] = pos[a, 2] - gz
-                                Dn[a] = np.sqrt(Dd[a, 0] * Dd[a, 0] + Dd[a, 1] * Dd[a, 1] + Dd[a, 2] * Dd[a, 2])
-                                Dsum += Dn[a]
-                            if form == 0:
-                                K = -(t_kvs[e] * (Dsum - t_D0[e]))
-                                for a in range(nv):
-                                    inv = 1.0 / Dn[a]
-                                    for c in range(3):
-                                        f[cells[e, a], c] += frc[a, c] + K * (Dd[a, c] * inv)
-                            else:
-                                for a in range(nv):
-                                    inv = 1.0 / Dn[a]
-                                    ndx = Dd[a, 0] * inv; ndy = Dd[a, 1] * inv; ndz = Dd[a, 2] * inv
-                                    dv = ((vel[a, 0] - gvx) * ndx + (vel[a, 1] - gvy) * ndy) + (vel[a, 2] - gvz) * ndz
-                                    sc2 = -(h_kvs[e] * (Dn[a] - h_D0[e, a]) + h_kvd[e] * dv)
-                                    f[cells[e, a], 0] += frc[a, 0] + ndx * sc2
-                                    f[cells[e, a], 1] += frc[a, 1] + ndy * sc2
-                                    f[cells[e, a], 2] += frc[a, 2] + ndz * sc2
-                        else:
-                            for a in range(nv):
-                                for c in range(3):
-                                    f[cells[e, a], c] += frc[a, c]
-                # Stoermer_Derivative + Stoermer_Step
-                bad = False
-                for i in range(n):
-                    if integrate[i]:
-                        minv = 1.0 / mass[i]
-                        for c in range(3):
-                            force = ((f[i, c] + (-drag_step) * d[i, c]) + grav[i, c]) + push[i, c]
-                            acc = force * minv
-                            f[i, c] = 0.0
-                            d[i, c] = d[i, c] + sqh * acc
-                            x[i, c] = x[i, c] + d[i, c]
-                            if not (abs(d[i, c]) < limit):
-                                bad = True
-                    else:
-                        for c in range(3):
-                            f[i, c] = 0.0
-                if bad:
-                    return step + 1
-            return steps
-
-        _KERNEL = run
-    return _KERNEL
+    """The compiled program-order Verlet loop (harness/models/bc2000/kernels.py)."""
+    from harness.models.bc2000.kernels import run
+    return run
 
 
 def _kernel_arrays(model, dt):
-    """Model arrays for the compiled loop (damping converted to per-step constants)."""
+    """Model arrays for the compiled loop (damping converted to per-step constants):
+    (springs, tets, hexes) tuples, empty where the model has none."""
     from harness.models.anisotropic import AnisotropicBody
     from harness.models.massspring import MassSpring
-    e2 = np.zeros((0, 2), np.int64)
-    z1, z2 = np.zeros(0), np.zeros((0, 3))
+    z1 = np.zeros(0)
 
     def empty_el(nv, nw):
         return (np.zeros((0, nv), np.int64), np.zeros((0, 6, nw), np.int64), np.zeros((0, 6, nw)),
-                np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
-    springs = (e2[:, 0], e2[:, 1], z1, z1, z1)
-    tet = empty_el(4, 3) + (z1, z1, False)
-    hexa = empty_el(8, 4) + (z1, z1, np.zeros((0, 8)), False)
+                np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), z1, z1,
+                np.zeros((0, nv)), False, np.zeros((0, 6, nw), np.int64))
+    springs = (np.zeros(0, np.int64), np.zeros(0, np.int64), z1, z1, z1)
+    tet, hexa = empty_el(4, 3), empty_el(8, 4)
     if isinstance(model, MassSpring):
-        springs = (model.springs[:, 0].astype(np.int64), model.springs[:, 1].astype(np.int64),
-                   model.ks, model.kd / dt, model.L0)
+        springs = (np.ascontiguousarray(model.springs[:, 0], np.int64), np.ascontiguousarray(model.springs[:, 1], np.int64),
+                   np.ascontiguousarray(model.ks, float), model.kd / dt, np.ascontiguousarray(model.L0, float))
     elif isinstance(model, AnisotropicBody):
         ax = model.axes
-        # local vertex indices of each end's face vertices
+        # local vertex index (in the element) of each end's face vertices
         local = np.argmax(model.cells[:, None, None, :] == ax.nodes[..., None], axis=-1).astype(np.int64)
-        base = (model.cells.astype(np.int64), local, ax.weights, model.ks, model.kd / dt, model.L0, model.cos0)
+        D0 = model.D0.reshape(len(model.cells), -1)
+        el = tuple(np.ascontiguousarray(a, dtype=t) for a, t in (
+            (model.cells, np.int64), (local, np.int64), (ax.weights, float), (model.ks, float),
+            (model.kd / dt, float), (model.L0, float), (model.cos0, float), (model.kvs, float),
+            (model.kvd / dt, float), (D0, float))) + (bool(model.volume), np.ascontiguousarray(ax.nodes, np.int64))
         if model.is_hex:
-            hexa = base + (model.kvs, model.kvd / dt, model.D0, bool(model.volume))
+            hexa = el
         else:
-            tet = base + (model.kvs, model.D0, bool(model.volume))
+            tet = el
     else:
         return None
     return springs, tet, hexa
@@ -332,7 +163,7 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
         run = _kernel()
         done = run(x, d, int(steps), float(dt), loading.mass.astype(float), ~loading.fixed,
                    loading.mass[:, None] * loading.gravity[None, :], loading.push.astype(float),
-                   float(loading.drag / dt), *springs, *tet, *hexa, tets, obs, snap_steps, snaps, snaps_d,
+                   float(loading.drag / dt), springs, tet, hexa, tets, obs, snap_steps, snaps, snaps_d,
                    volume, observed, 10.0 * size)
         if done < steps:
             _blow_up(model, loading, dt, done)

@@ -167,16 +167,19 @@ def find_axes(points, cells, azimuth, elevation, seed: int = 0) -> Axes:
     wts = np.zeros((m, 6, faces.shape[1]))
     rng = np.random.default_rng(seed)
     prev = np.full((m, 3), np.nan)
+    # a hit within tol of the previous end is "the same point" (the program tests ==; a line
+    # through an edge gives two faces' copies of one point that may differ by rounding)
+    tol = 1e-6 * np.max(_norm(X[:, :, None] - X[:, None, :]).reshape(m, -1), axis=1)
     for i in range(6):
         hit, ip, W = hits_of(X, g, dirs[:, i])
-        ok = hit & ~np.all(ip == prev[:, None, :], axis=-1)
+        ok = hit & ~(_norm(ip - prev[:, None, :]) <= tol[:, None])
         j = np.argmax(ok, axis=1)
         found = ok[np.arange(m), j]
         for el in np.flatnonzero(~found):      # rare: a line through an edge or a vertex
             for _ in range(100):
                 d = dirs[el, i] + 1e-6 * rng.random(3)
                 h1, ip1, W1 = hits_of(X[el:el + 1], g[el:el + 1], d[None])
-                ok1 = h1[0] & ~np.all(ip1[0] == prev[el], axis=-1)
+                ok1 = h1[0] & ~(_norm(ip1[0] - prev[el]) <= tol[el])
                 if ok1.any():
                     jj = int(np.argmax(ok1))
                     face[el, i], pts[el, i], wts[el, i] = jj, ip1[0, jj], W1[0, jj]

@@ -1,0 +1,285 @@
+"""Stage "bc2000": the experiments of Bourguignon & Cani 2000 on the original meshes.
+
+``[dynamics] experiment`` picks one:
+- ``volume`` (Fig. 3): MS, MT0, MT under gravity; writes ``volume.csv`` (t, MS, MT0, MT in
+  percent); rows: peak and final |dV/V|, and the deviation from the original program's
+  curve when ``[dynamics] original`` names its file (relative to the case).
+- ``pull`` (Fig. 1a / 5a): pulled bottom nodes; elongation and lateral drift per mesh/model.
+- ``cantilever`` (Fig. 1c / 5c): tip deflection at the end of the run (and static, Newton).
+- ``fibres`` (Fig. 6): one run per ``[model] fibre_fields``; elongation, thinning, twist,
+  drift; ``fibres-<field>.npz`` (+ ``fibres.npz`` of the first field) for the figure.
+- ``timing`` (Table 1): wall time per simulated second of every mesh x model, the model/MS
+  ratio beside the paper's.
+- ``run``: plain runs with the per-step volume.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from harness.dynamics import Loading, simulate, solve_static
+from harness.errors import CaseError, SpringbenchError
+from harness.fibres import named_field_angles
+from harness.meshfile import read_mesh
+from harness.models.anisotropic import angles_of, build_anisotropic
+from harness.models.massspring import build_massspring
+
+NAME = "bc2000"
+PAPER_RATIO = {"tetra": 14.5, "hexa": 3.6}   # Table 1: model time / MS time
+
+
+def applies(case) -> bool:
+    m = case.section("model")
+    return m is not None and m.get("kind") == "bc2000"
+
+
+def _meshes(case, dyn):
+    out = [(case.body.file, read_mesh(case.body.file, case.body.format))]
+    for rel in dyn["meshes"]:
+        p = (case.path.parent / rel).resolve()
+        try:
+            out.append((p, read_mesh(p)))
+        except SpringbenchError as exc:
+            raise CaseError(exc.message, file=str(case.path), field="dynamics.meshes", fix=exc.fix)
+    return out
+
+
+def _label(path: Path, mesh) -> str:
+    kind = "hexa" if "hexahedron" in mesh.cells else "tetra"
+    return f"{kind}/{path.parent.name}/{path.name}"
+
+
+def _cells(mesh):
+    return mesh.cells.get("tetra", mesh.cells.get("hexahedron"))
+
+
+def fibre_angles(model: dict, points, cells, field: str | None = None):
+    """(azimuth, elevation) per element from the [model] keys (default: vertical)."""
+    X = points[cells]
+    g = X.mean(axis=1)
+    field = field or model.get("fibre_field")
+    if model.get("direction") is not None:
+        a, e = angles_of(np.tile(model["direction"], (len(cells), 1)))
+        return a, e
+    if model.get("azimuth_deg") is not None or model.get("elevation_deg") is not None:
+        return (np.full(len(cells), np.deg2rad(model.get("azimuth_deg") or 0.0)),
+                np.full(len(cells), np.deg2rad(model.get("elevation_deg") or 0.0)))
+    if field is None:
+        field = "vertical" if cells.shape[1] == 4 else None
+    if field is None:           # hexa program: axes along x, y, z
+        return np.zeros(len(cells)), np.zeros(len(cells))
+    return named_field_angles(field, g, model.get("seed", 0), model.get("fibre_origin"))
+
+
+def build(name: str, model: dict, mesh, dt: float, field: str | None = None):
+    """One of MS, MT0, MT on the mesh, damping converted to physical units."""
+    cells = _cells(mesh)
+    scale = dt if model["damping_units"] == "per-step" else 1.0
+    if name == "MS":
+        return build_massspring(mesh.points, cells, ks=model["ms_ks"], kd=model["ms_kd"] * scale)
+    a, e = fibre_angles(model, mesh.points, cells, field)
+    ks = model["ks"] if len(model["ks"]) == 6 else model["ks"] * 6
+    kd = model["kd"] if len(model["kd"]) == 3 else model["kd"] * 3
+    return build_anisotropic(mesh.points, cells, azimuth=a, elevation=e, ks=ks,
+                             kd=np.asarray(kd) * scale, kvs=model["kvs"], kvd=model["kvd"] * scale,
+                             volume=(name == "MT"), rest_angle=model["rest_angle"], seed=model["seed"])
+
+
+def loading(model: dict, dyn: dict, mesh, dt: float) -> Loading:
+    return Loading.from_flags(mesh.flags, mass=model["mass"], gravity=dyn["gravity"], push=dyn["push"],
+                              drag=dyn["drag"] * dt)
+
+
+def _dt(dyn, mesh, name):
+    if name != "MS" and "hexahedron" in mesh.cells and dyn["hexa_model_dt"]:
+        return dyn["hexa_model_dt"]
+    return dyn["dt"]
+
+
+def run(case, ctx) -> list[dict]:
+    model = dict(case.section("model"))
+    dyn = dict(case.section("dynamics") or {})
+    if not dyn:
+        from harness.case_sections import DYNAMICS
+        from harness.schema import check
+        dyn = check({}, DYNAMICS, str(case.path), "dynamics.")
+    exp = dyn["experiment"]
+    return EXPERIMENTS[exp](case, ctx, model, dyn)
+
+
+def _steps(dyn, dt) -> int:
+    return int(round(dyn["duration"] / dt)) if dyn["duration"] is not None else dyn["steps"]
+
+
+def _simulate(case, ctx, model, dyn, mesh, name, field=None, **kw):
+    dt = _dt(dyn, mesh, name)
+    m = build(name, model, mesh, dt, field)
+    ld = loading(model, dyn, mesh, dt)
+    steps = _steps(dyn, dt)
+    ctx.status(f"{name} {steps} steps")
+    t0 = time.perf_counter()
+    tr = simulate(m, ld, dt, steps, integrator=dyn["integrator"], **kw)
+    return m, ld, tr, time.perf_counter() - t0
+
+
+def _volume(case, ctx, model, dyn):
+    rows, curves = [], {}
+    path, mesh = _meshes(case, dyn)[0]
+    ref = None
+    if dyn["original"]:
+        f = (case.path.parent / dyn["original"]).resolve()
+        try:
+            ref = np.loadtxt(f, skiprows=1)
+        except (OSError, ValueError) as exc:
+            raise CaseError(f"cannot read the original curve ({exc})", file=str(case.path),
+                            field="dynamics.original", fix="give a whitespace table with a header line")
+    for i, name in enumerate(model["models"]):
+        m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name)
+        dv = tr.volume_change_percent()
+        curves[name] = dv
+        row = {"model": name, "mesh": _label(path, mesh), "steps": len(dv) - 1,
+               "peak_abs_dV_percent": float(np.abs(dv).max()), "final_dV_percent": float(dv[-1]),
+               "run_seconds": sec}
+        if ref is not None and name in ("MS", "MT0", "MT"):
+            col = ("MS", "MT0", "MT").index(name) + 1 if ref.shape[1] == 4 else 2
+            k = min(len(ref), len(dv) - 1)
+            row["max_dev_vs_original_percent"] = float(np.abs(dv[1:k + 1] - ref[:k, col]).max())
+        rows.append(row)
+    t = dyn["dt"] * np.arange(len(next(iter(curves.values()))))
+    pd.DataFrame({"t": t, **curves}).to_csv(ctx.file("volume.csv"), index=False)
+    return rows
+
+
+def _pulled(mesh):
+    sel = mesh.flags == 2
+    if not sel.any():
+        sel = mesh.points[:, 1] <= mesh.points[:, 1].min() + 1e-9
+    return np.flatnonzero(sel)
+
+
+def _pulled_measures(mesh, tr):
+    """Elongation (mean y displacement of the pulled nodes) and lateral drift (norm of
+    their mean x, z displacement), both averaged over the second half of the run (lateral
+    modes are barely damped and still swing), and drift / |elongation|."""
+    sel = _pulled(mesh)
+    u = (tr.observed - mesh.points[sel]).mean(axis=1)       # (steps + 1, 3)
+    u = u[len(u) // 2:].mean(axis=0)
+    drift = float(np.hypot(u[0], u[2]))
+    return {"elongation": float(u[1]), "lateral_drift": drift,
+            "drift_ratio": drift / max(abs(float(u[1])), 1e-300)}
+
+
+def _pull(case, ctx, model, dyn):
+    rows = []
+    for path, mesh in _meshes(case, dyn):
+        for name in model["models"]:
+            m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name, observe=_pulled(mesh))
+            rows.append({"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
+                         **_pulled_measures(mesh, tr), "run_seconds": sec})
+    return rows
+
+
+def _cantilever(case, ctx, model, dyn):
+    rows = []
+    for path, mesh in _meshes(case, dyn):
+        tip = mesh.points[:, 2] >= mesh.points[:, 2].max() - 1e-9
+        for name in model["models"]:
+            m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name)
+            row = {"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
+                   "tip_deflection": float((tr.x - mesh.points)[tip, 1].mean()), "run_seconds": sec}
+            if dyn["static"]:
+                ctx.status(f"{name} statics")
+                xs = solve_static(m, ld, load_steps=10)
+                row["tip_deflection_static"] = float((xs - mesh.points)[tip, 1].mean())
+            rows.append(row)
+    return rows
+
+
+def _twist_thinning(mesh, x):
+    """Twist (degrees, about y through the pulled nodes' centroid) of the pulled nodes and
+    thinning = mean distance from the vertical centre line at mid height, deformed / rest."""
+    P = mesh.points
+    sel = mesh.flags == 2
+    if not sel.any():
+        sel = P[:, 1] <= P[:, 1].min() + 1e-9
+    c0, c1 = P[sel].mean(axis=0), x[sel].mean(axis=0)
+    r0, r1 = P[sel] - c0, x[sel] - c1
+    ang = np.arctan2(r0[:, 2], r0[:, 0]) - np.arctan2(r1[:, 2], r1[:, 0])
+    ang = (ang + np.pi) % (2 * np.pi) - np.pi
+    ymid = np.median(np.unique(P[:, 1]))
+    mid = np.abs(P[:, 1] - ymid) < 1e-9
+    if not mid.any():
+        mid = np.ones(len(P), bool)
+    w0 = np.hypot(*(P[mid] - P[mid].mean(0))[:, [0, 2]].T).mean()
+    w1 = np.hypot(*(x[mid] - x[mid].mean(0))[:, [0, 2]].T).mean()
+    return float(np.degrees(np.mean(ang))), float(w1 / w0)
+
+
+def _fibres(case, ctx, model, dyn):
+    rows = []
+    path, mesh = _meshes(case, dyn)[0]
+    fields = model["fibre_fields"] or ((model["fibre_field"],) if model["fibre_field"] else ("vertical",))
+    names = [n for n in model["models"] if n != "MS"] or ["MT"]
+    for k, field in enumerate(fields):
+        for name in names:
+            m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name, field=field, observe=_pulled(mesh))
+            twist, thin = _twist_thinning(mesh, tr.x)
+            rows.append({"model": f"{name}-{field}", "mesh": _label(path, mesh), "fibre_field": field,
+                         "steps": len(tr.t) - 1, **_pulled_measures(mesh, tr), "twist_deg": twist,
+                         "thinning": thin, "run_seconds": sec})
+            cells = _cells(mesh)
+            from harness.models.anisotropic import frame
+            a, e = fibre_angles(model, mesh.points, cells, field)
+            data = dict(points=mesh.points[cells].mean(axis=1), directions=frame(a, e)[:, 0],
+                        u=tr.x[cells].mean(axis=1) - mesh.points[cells].mean(axis=1))
+            np.savez(ctx.file(f"fibres-{field}.npz"), **data)
+            if k == 0 and name == names[0]:
+                np.savez(ctx.file("fibres.npz"), **data)
+    return rows
+
+
+def _timing(case, ctx, model, dyn):
+    rows = []
+    for path, mesh in _meshes(case, dyn):
+        kind = "hexa" if "hexahedron" in mesh.cells else "tetra"
+        per = {}
+        for name in model["models"]:
+            dt = _dt(dyn, mesh, name)
+            m = build(name, model, mesh, dt)
+            ld = loading(model, dyn, mesh, dt)
+            steps = int(round(1.0 / dt))
+            simulate(m, ld, dt, 2)           # compile / warm up
+            best = np.inf
+            for _ in range(dyn["repeats"]):
+                t0 = time.perf_counter()
+                simulate(m, ld, dt, steps)
+                best = min(best, time.perf_counter() - t0)
+            per[name] = best
+            n_el = len(_cells(mesh))
+            rows.append({"model": name, "mesh": _label(path, mesh), "n_nodes": len(mesh.points),
+                         "n_elements": n_el, "dt": dt, "per_sim_second_ms": 1e3 * best})
+        if "MS" in per:
+            for r in rows[-len(model["models"]):]:
+                if r["model"] != "MS":
+                    r["model_MS_ratio_per_second"] = per[r["model"]] / per["MS"]
+                    r["paper_model_MS_ratio"] = PAPER_RATIO[kind]
+    return rows
+
+
+def _plain(case, ctx, model, dyn):
+    rows = []
+    for path, mesh in _meshes(case, dyn):
+        for name in model["models"]:
+            m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name)
+            dv = tr.volume_change_percent()
+            rows.append({"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
+                         "final_dV_percent": float(dv[-1]), "run_seconds": sec})
+    return rows
+
+
+EXPERIMENTS = {"volume": _volume, "pull": _pull, "cantilever": _cantilever, "fibres": _fibres,
+               "timing": _timing, "run": _plain}
