@@ -99,7 +99,8 @@ def tributary_measure(points: np.ndarray, on_part) -> np.ndarray:
     cent = q[tri].mean(axis=1)
     tri = tri[on_part(cent.T)]
     a = uv[tri]
-    area = 0.5 * np.abs(np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]))
+    e1, e2 = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
     np.add.at(out, idx[tri.ravel()], np.repeat(area / 3, 3))
     return out
 
