@@ -30,6 +30,12 @@ it is E for isotropic material and follows fibres and regions.
              nu = 1/3 has lambda* = mu = 3E/8). Other nu, tetrahedra (whose six edge
              directions are only cubically symmetric) and quads are best fits, not exact.
              Anisotropic and inhomogeneous materials enter through the element C.
+"cauchy"     ours: per cell, the constants whose Cauchy-Born (homogenised) stiffness
+             (1/|T|) sum k L^2 n n n n best matches the material's C there (least squares,
+             minimum norm; see harness/homogenize.py), summed over the cells sharing a
+             spring. On a grid this is the best periodic lattice, assembled cell-wise (so
+             boundary springs get their cell share): exact for isotropic nu = 1/3 in 2-D
+             plane stress and 1/4 in 3-D, the Cauchy floor otherwise.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from harness.errors import ModelError
 from harness.models.topology import element_pairs
 from harness.springs import spring_directions
 
-RULES = ("deussen", "vangelder", "lloyd", "uniform")
+RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 
 
 def voigt_dyad(n: np.ndarray) -> np.ndarray:
@@ -243,7 +249,36 @@ def lloyd(points, springs, cells, material) -> np.ndarray:
     return np.maximum(acc, floor)
 
 
-RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform}
+def cauchy(points, springs, cells, material) -> np.ndarray:
+    """Per cell, the constants whose Cauchy-Born stiffness (1/|T|) sum k L^2 a a^T best
+    matches the material's Voigt C at the cell centre (least squares, minimum norm, k >= 0
+    by NNLS only where needed), summed over the cells sharing a spring."""
+    if not cells:
+        raise ModelError("the cauchy rule needs cells (a triangulation, a grid or a mesh)", field="model.stiffness")
+    index = _spring_index(springs)
+    acc = np.zeros(len(springs))
+    for ctype, c in cells.items():
+        Cc = element_stiffness(material, points[c].mean(axis=1))
+        vol = _cell_measure(points, c, ctype)
+        pairs = element_pairs(ctype)
+        ids = np.stack([_lookup(index, c[:, i], c[:, j]) for i, j in pairs], 1)
+        for e in range(len(c)):
+            cols = np.flatnonzero(ids[e] >= 0)
+            if len(cols) == 0:
+                continue
+            v = np.array([points[c[e, pairs[q][1]]] - points[c[e, pairs[q][0]]] for q in cols])
+            L = np.linalg.norm(v, axis=1)
+            a = voigt_dyad(v / L[:, None])
+            M = (L[:, None, None] ** 2 * a[:, :, None] * a[:, None, :]).reshape(len(cols), -1).T / vol[e]
+            k = np.linalg.lstsq(M, Cc[e].ravel(), rcond=None)[0]
+            if k.min() < 0:
+                k = nnls(M, Cc[e].ravel())[0]
+            np.add.at(acc, ids[e, cols], k)
+    floor = 0.01 * np.median(acc[acc > 0]) if np.any(acc > 0) else 1.0
+    return np.maximum(acc, floor)
+
+
+RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform, "cauchy": cauchy}
 
 
 def spring_constants(rule: str, points, springs, cells, material) -> np.ndarray:
