@@ -127,6 +127,18 @@ def load_arrays(network, case, load) -> tuple[np.ndarray, np.ndarray]:
     return ~fixed_mask(network.points, case, load).ravel(), force_vector(network, case, load).ravel()
 
 
+def all_load_arrays(network, case) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """(names, free_masks (L, ndof) bool, forces (L, ndof)) of every load case: the
+    arrays ``harness.optimize.problem.FitProblem.from_network`` takes."""
+    names, frees, forces = [], [], []
+    for load in case.loads:
+        free, f = load_arrays(network, case, load)
+        names.append(load.name)
+        frees.append(free)
+        forces.append(f)
+    return names, np.array(frees), np.array(forces)
+
+
 # -- solving -----------------------------------------------------------------------------
 
 def _nodes(dofs, dim) -> list[int]:

@@ -133,7 +133,10 @@ def run(case, ctx) -> list[dict]:
                        note=f"no reference ({why})")
         rows.append(row)
 
-    _frequencies(case, ctx, ref, nets, spec)
+    ratios = _frequencies(case, ctx, ref, nets, spec)
+    for row in rows:
+        if row["stiffness"] in ratios:
+            row["f1_ratio"] = ratios[row["stiffness"]]
 
     opt = case.section("optimizer") or {}
     method = opt.get("method", "none")
@@ -150,9 +153,9 @@ def _optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label
     from harness import statics
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
-    free, forces = zip(*(statics.load_arrays(base, case, l) for l in case.loads))
+    _, free, forces = statics.all_load_arrays(base, case)
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    problem = FitProblem.from_network(base.points, base.springs, base.k, np.array(free), np.array(forces),
+    problem = FitProblem.from_network(base.points, base.springs, base.k, free, forces,
                                       u_ref.reshape(len(names), -1), wdof, list(names),
                                       groups=base.groups if spec["grouped"] else None)
     t0 = time.perf_counter()
@@ -187,10 +190,11 @@ def _optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label
 
 
 def _frequencies(case, ctx, ref, nets, spec):
-    """frequencies.csv: the first few SMS frequencies per rule next to the FEM ones."""
+    """frequencies.csv: the first few SMS frequencies per rule next to the FEM ones;
+    returns {rule: first SMS frequency / first FEM frequency}."""
     n = int(case.reference.modes or 0)
     if n <= 0:
-        return
+        return {}
     from harness.modal_sms import frequencies
     cols = {"mode": np.arange(1, n + 1)}
     if ref is not None:
@@ -207,3 +211,6 @@ def _frequencies(case, ctx, ref, nets, spec):
             continue
     if len(cols) > 1:
         pd.DataFrame(cols).to_csv(ctx.file("frequencies.csv"), index=False)
+    if "fem" not in cols or not cols["fem"][0] > 0:
+        return {}
+    return {r: float(cols[r][0] / cols["fem"][0]) for r in nets if r in cols}
