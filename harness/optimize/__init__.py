@@ -1,0 +1,85 @@
+"""Spring-constant optimisers: a registry name -> function(problem, options, seed, status)
+returning the fields of :class:`FitResult`. A new optimiser is one function added here.
+
+- "sa": simulated annealing as in Deussen 1995 Fig. 6, with incremental (rank-1) G.
+- "sa-refactor": the same chain, every proposal re-factorised (the paper's cost; baseline).
+- "lbfgs": adjoint gradient, L-BFGS-B over log k with bounds (the default for large nets).
+- "nelder-mead": derivative-free, for grouped mode with few parameters.
+- "none": keep k0 (the unoptimised row).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from harness.errors import SpringbenchError
+from harness.optimize.problem import FitProblem, LoadBlock, ModalTerm  # noqa: F401
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """k (e,) the best constants found; G before/after (G_final by a full re-solve);
+    trace (m, 2) of (step, G); wall seconds; proposals/evaluations; accepted steps."""
+    k: np.ndarray
+    G_initial: float
+    G_final: float
+    trace: np.ndarray
+    seconds: float
+    n_steps: int
+    accepted: int
+    info: dict = field(default_factory=dict)
+
+
+def _sa(problem, options, seed, status=None):
+    from harness.optimize.annealing import run_chains
+    return run_chains(problem, options, seed, status)
+
+
+def _sa_refactor(problem, options, seed, status=None):
+    from harness.optimize.annealing import run_chains
+    return run_chains(problem, options, seed, status, refactor=True)
+
+
+def _lbfgs(problem, options, seed, status=None):
+    from harness.optimize.gradient import lbfgs
+    return lbfgs(problem, options, seed, status)
+
+
+def _nelder_mead(problem, options, seed, status=None):
+    from harness.optimize.gradient import nelder_mead
+    return nelder_mead(problem, options, seed, status)
+
+
+def _none(problem, options, seed, status=None):
+    if options:
+        raise SpringbenchError(f"method 'none' takes no options (got {sorted(options)})", field="optimizer.options",
+                               fix="remove [optimizer] options")
+    t0 = time.perf_counter()
+    G = problem.G(problem.k0)
+    return dict(k=problem.k0.copy(), G_initial=G, G_final=G, trace=np.array([(0, G)]),
+                seconds=time.perf_counter() - t0, n_steps=0, accepted=0, info={})
+
+
+OPTIMIZERS = {
+    "sa": _sa,
+    "sa-refactor": _sa_refactor,
+    "lbfgs": _lbfgs,
+    "nelder-mead": _nelder_mead,
+    "none": _none,
+}
+
+
+def optimize(problem: FitProblem, method: str, options: dict | None = None, seed: int = 0,
+             status=None) -> FitResult:
+    """Run optimiser ``method`` on ``problem``; randomness comes only from ``seed``."""
+    if method not in OPTIMIZERS:
+        raise SpringbenchError(f"unknown optimizer method '{method}'", field="optimizer.method",
+                               fix=f"use one of {sorted(OPTIMIZERS)}")
+    from harness.optimize.linalg import single_thread_blas
+    with single_thread_blas():  # threads oversubscribe the 2 shared cores; chains use processes
+        out = OPTIMIZERS[method](problem, dict(options or {}), int(seed), status)
+    info = {**out.pop("info"), "method": method, "seed": int(seed)}
+    return FitResult(info=info, **out)

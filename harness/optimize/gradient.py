@@ -1,0 +1,237 @@
+"""Gradient fits of the spring constants: adjoint gradient + L-BFGS-B, and Nelder-Mead
+for grouped mode.
+
+Adjoint gradient. Per load, G_i^2 = d^T W d + const with d = u_ref - u, K u = f,
+K = sum_e k_e b_e b_e^T. Differentiating K u = f gives K du/dk_e = -b_e (b_e.u), so
+
+    dG^2/dk_e = -2 (W d)^T du/dk_e = 2 (W d)^T K^-1 b_e (b_e.u) = 2 (lambda.b_e)(b_e.u),
+
+with the adjoint K lambda = W d (K symmetric): one factorisation and two solves per load
+set (forward and adjoint), then B^T lambda and B^T u give all e components at once.
+
+Frequency term (optional). For K phi = mu M phi with M-normalised phi,
+dmu/dk_e = (phi.b_e)^2; the natural frequency is f = sqrt(mu) / (2 pi), so
+df/dk_e = (phi.b_e)^2 / (8 pi^2 f). The term is weight * sum_j (f_j / f*_j - 1)^2.
+
+The objective minimised is Phi = G^2 / G(k0)^2 (+ the frequency term), over log factors of
+k0 (per spring, or per group in grouped mode), so it is unit-free and k stays positive.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.optimize as so
+import scipy.sparse.linalg as spla
+
+from harness.errors import SpringbenchError
+from harness.optimize.problem import FitProblem, stiffness
+
+LBFGS_DEFAULTS = dict(
+    maxiter=15000,      # L-BFGS-B iterations
+    maxfun=None,        # function evaluations (None: 1.25 * maxiter)
+    max_seconds=None,   # wall-time budget
+    target=0.0,         # stop when G / G(k0) <= target
+    memory=20,          # L-BFGS history length (scipy's maxcor)
+    gtol=0.0,           # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
+    ftol=0.0,           # relative decrease tolerance of Phi
+)
+
+NM_DEFAULTS = dict(
+    maxiter=None,       # Nelder-Mead iterations (None: 400 * parameters)
+    max_seconds=None,
+    xatol=1e-10,        # simplex size in log k
+    fatol=0.0,          # objective spread (on Phi)
+    target=0.0,
+)
+
+
+def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True):
+    """G^2 and dG^2/dk (e,) by the adjoint method."""
+    k = np.asarray(k, float)
+    G2 = 0.0
+    g = np.zeros(len(k)) if grad else None
+    for s in problem.load_sets():
+        fac = s.factor(k)
+        U = fac.solve(s.F).reshape(s.F.shape)
+        D = s.Uref - U
+        R = s.W * D
+        G2 += float(np.sum(D * R)) + s.const
+        if grad:
+            Lam = fac.solve(R).reshape(R.shape)
+            g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
+    return G2, g
+
+
+def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
+    """The first len(target) natural frequencies (Hz) of the modal term, ascending."""
+    mt = problem.modal
+    K = stiffness(mt.B, np.asarray(k, float))
+    nk = len(mt.target)
+    n = K.shape[0]
+    if n <= 600 or nk >= n - 1:
+        import scipy.linalg as sla
+        minv = 1.0 / np.sqrt(mt.m)
+        A = (K.toarray() * minv[:, None]) * minv[None, :]
+        mu, V = sla.eigh(A, subset_by_index=[0, nk - 1])
+        phi = V * minv[:, None]
+    else:
+        import scipy.sparse as sp
+        mu, phi = spla.eigsh(K, k=nk, M=sp.diags(mt.m), sigma=0.0, which="LM")
+        o = np.argsort(mu)
+        mu, phi = mu[o], phi[:, o]
+        phi = phi / np.sqrt(np.sum(phi * phi * mt.m[:, None], axis=0))[None, :]
+    f = np.sqrt(np.maximum(mu, 0.0)) / (2 * np.pi)
+    return (f, phi) if vectors else f
+
+
+def freq_term_and_grad(problem: FitProblem, k: np.ndarray):
+    """weight * sum (f/f* - 1)^2 and its gradient w.r.t. k."""
+    mt = problem.modal
+    f, phi = frequencies(problem, k, vectors=True)
+    rel = f / mt.target - 1.0
+    val = mt.weight * float(rel @ rel)
+    dfdk = (mt.B.T @ phi) ** 2 / (8 * np.pi ** 2 * np.maximum(f, 1e-300))[None, :]
+    grad = mt.weight * (dfdk @ (2.0 * rel / mt.target))
+    return val, grad
+
+
+class Objective:
+    """Phi(x) = G^2/G0^2 (+ frequency term) over x = log(k/k0) per parameter, with its
+    gradient; remembers the best point and stops at a target or a time budget."""
+
+    def __init__(self, problem: FitProblem, target: float = 0.0, max_seconds=None):
+        self.p = problem
+        self.G0sq, _ = value_and_grad(problem, problem.k0, grad=False)
+        if self.G0sq <= 0:
+            raise SpringbenchError("G(k0) = 0: nothing to fit", field="optimizer", fix="check the reference displacements")
+        self.target, self.max_seconds = target, max_seconds
+        self.t0 = time.perf_counter()
+        self.n_eval = 0
+        self.best = (np.inf, None, np.inf)
+        self.trace = []
+
+    def k(self, x):
+        return self.p.k_of(np.exp(x))
+
+    def __call__(self, x, grad=True):
+        k = self.k(x)
+        G2, g = value_and_grad(self.p, k, grad)
+        phi = G2 / self.G0sq
+        gk = g / self.G0sq if grad else None
+        if self.p.modal is not None and self.p.modal.weight > 0:
+            fv, fg = freq_term_and_grad(self.p, k)
+            phi += fv
+            if grad:
+                gk = gk + fg
+        self.n_eval += 1
+        G = float(np.sqrt(max(G2, 0.0)))
+        self.trace.append((self.n_eval, G))
+        if phi < self.best[0]:
+            self.best = (phi, np.array(x), G)
+        if not grad:
+            return phi
+        gx = gk * k
+        if self.p.groups is not None:
+            gx = np.bincount(self.p.groups, weights=gx, minlength=self.p.n_params)
+        return phi, gx
+
+    def done(self) -> str | None:
+        if self.target > 0 and self.best[2] <= self.target * np.sqrt(self.G0sq):
+            return "target"
+        if self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
+            return "max_seconds"
+        return None
+
+
+def _result(obj: Objective, t0: float, stop: str, nit: int, extra: dict) -> dict:
+    x = obj.best[1]
+    k = obj.k(x)
+    G_final = obj.p.G(k)
+    info = dict(stop=stop, iterations=nit, evaluations=obj.n_eval, **extra)
+    if obj.p.modal is not None:
+        f = frequencies(obj.p, k)
+        info["frequencies"] = f.tolist()
+        info["freq_rel_error"] = (f / obj.p.modal.target - 1).tolist()
+    return dict(k=k, G_initial=float(np.sqrt(obj.G0sq)), G_final=G_final, trace=np.array([(0, np.sqrt(obj.G0sq))] + obj.trace),
+                seconds=time.perf_counter() - t0, n_steps=obj.n_eval, accepted=nit, info=info)
+
+
+class _Stop(Exception):
+    pass
+
+
+def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
+    """L-BFGS-B over log(k/k0) with the problem's bounds; deterministic (seed unused)."""
+    opts = _check(options, LBFGS_DEFAULTS, "lbfgs")
+    t0 = time.perf_counter()
+    obj = Objective(problem, opts["target"], opts["max_seconds"])
+    lo, hi = problem.bounds
+    n = problem.n_params
+    nit = [0]
+
+    def cb(xk):
+        nit[0] += 1
+        if status is not None and nit[0] % 10 == 0:
+            status(f"lbfgs it {nit[0]} G={obj.best[2]:.4g}")
+        if obj.done():
+            raise _Stop
+
+    def fun(x):
+        if obj.done():
+            raise _Stop
+        return obj(x)
+
+    stop = None
+    try:
+        res = so.minimize(fun, np.zeros(n), jac=True, method="L-BFGS-B", callback=cb,
+                          bounds=[(np.log(lo), np.log(hi))] * n,
+                          options=dict(maxiter=int(opts["maxiter"]), maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
+                                       maxcor=int(opts["memory"]), gtol=float(opts["gtol"]), ftol=float(opts["ftol"])))
+        stop = f"scipy: {res.message}"
+    except _Stop:
+        stop = obj.done()
+    return _result(obj, t0, stop, nit[0], {})
+
+
+def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
+    """Nelder-Mead over log group factors (grouped mode, few parameters); derivative-free,
+    so it also serves as an independent check of the gradient fits."""
+    opts = _check(options, NM_DEFAULTS, "nelder-mead")
+    if problem.n_params > 50:
+        raise SpringbenchError(f"nelder-mead with {problem.n_params} parameters is hopeless", field="optimizer.method",
+                               fix="use grouped mode (groups) or method = 'lbfgs'")
+    t0 = time.perf_counter()
+    obj = Objective(problem, opts["target"], opts["max_seconds"])
+    lo, hi = problem.bounds
+    n = problem.n_params
+
+    def fun(x):
+        if obj.done():
+            raise _Stop
+        return obj(x, grad=False)
+
+    nit = [0]
+
+    def cb(xk):
+        nit[0] += 1
+
+    stop = None
+    try:
+        res = so.minimize(fun, np.zeros(n), method="Nelder-Mead", callback=cb,
+                          bounds=[(np.log(lo), np.log(hi))] * n,
+                          options=dict(maxiter=int(opts["maxiter"] or 400 * n), maxfev=int(opts["maxiter"] or 400 * n) * 2,
+                                       xatol=float(opts["xatol"]), fatol=float(opts["fatol"]), adaptive=n > 4))
+        stop = f"scipy: {res.message}"
+    except _Stop:
+        stop = obj.done()
+    return _result(obj, t0, stop, nit[0], {})
+
+
+def _check(options: dict, defaults: dict, method: str) -> dict:
+    unknown = set(options) - set(defaults)
+    if unknown:
+        raise SpringbenchError(f"unknown {method} option(s) {sorted(unknown)}", field="optimizer.options",
+                               fix=f"use some of {sorted(defaults)}")
+    return {**defaults, **options}

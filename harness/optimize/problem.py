@@ -1,0 +1,257 @@
+"""The spring-constant fitting problem as plain arrays.
+
+For load cases i with free dofs F_i, the model displacement is u_i = K_i^-1 f_i with
+K_i = B_i diag(k) B_i^T (B_i: the incidence columns b_e restricted to F_i) and u = 0 on
+the constrained dofs. DESIGN.md's criterion is
+
+    G(k) = sqrt( sum_i sum_dof w (u_ref,i - u_i)^2 ),
+
+split per load into a free-dof part and ``const`` (the constrained dofs, where u = 0).
+Everything an optimiser needs is here; how the network was built is not.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from harness.errors import SpringbenchError
+
+
+@dataclass(frozen=True)
+class LoadBlock:
+    """One load case on its free dofs: B (nfree x e, csc), f, u_ref, w (nfree,), and
+    const = sum of w |u_ref|^2 over the constrained dofs."""
+    name: str
+    B: sp.csc_matrix
+    f: np.ndarray
+    u_ref: np.ndarray
+    w: np.ndarray
+    const: float = 0.0
+
+
+@dataclass(frozen=True)
+class ModalTerm:
+    """Optional frequency objective: the first len(target) natural frequencies of
+    (K - lambda M) on the modal free dofs (B: nfree_m x e, m: diagonal of M there)
+    against ``target``, relative error squared, times ``weight``."""
+    B: sp.csc_matrix
+    m: np.ndarray
+    target: np.ndarray
+    weight: float = 1.0
+
+
+@dataclass(frozen=True)
+class FitProblem:
+    """Blocks + initial constants k0 (e,), optional groups (e,) int (grouped mode: one
+    parameter per group, k = k0 * factor[group]) and bounds (lo, hi) as factors of k0."""
+    blocks: tuple
+    k0: np.ndarray
+    groups: np.ndarray | None = None
+    bounds: tuple = (1e-3, 1e3)
+    modal: ModalTerm | None = None
+    coords: tuple | None = None   # per block (nfree, dim) dof positions: fill-reducing ordering
+
+    def __post_init__(self):
+        k0 = np.asarray(self.k0, float)
+        if k0.ndim != 1 or not np.all(np.isfinite(k0)) or np.any(k0 <= 0):
+            raise SpringbenchError("k0 must be a 1-D array of positive finite spring constants",
+                                   field="optimizer.k0", fix="check the model's stiffness rule")
+        e = len(k0)
+        for b in self.blocks:
+            if b.B.shape[1] != e or b.B.shape[0] != len(b.f) or len(b.u_ref) != len(b.f) or len(b.w) != len(b.f):
+                raise SpringbenchError(f"load '{b.name}': B is {b.B.shape}, f {len(b.f)}, u_ref {len(b.u_ref)}, w {len(b.w)} for {e} springs",
+                                       field="optimizer.blocks", fix="restrict B, f, u_ref, w to the same free dofs")
+        if self.groups is not None:
+            g = np.asarray(self.groups)
+            if g.shape != (e,) or g.min() < 0:
+                raise SpringbenchError(f"groups must be {e} non-negative ints", field="optimizer.groups",
+                                       fix="one group id per spring")
+        lo, hi = self.bounds
+        if not (0 < lo <= 1 <= hi):
+            raise SpringbenchError(f"bounds {self.bounds} must satisfy 0 < lo <= 1 <= hi (factors of k0)",
+                                   field="optimizer.options.bounds", fix="e.g. [1e-3, 1e3]")
+        object.__setattr__(self, "k0", k0)
+
+    # --- construction -------------------------------------------------------------
+    @classmethod
+    def from_network(cls, points, springs, k0, free_masks, forces, u_ref, dof_weights, names,
+                     groups=None, bounds=(1e-3, 1e3), masses=None, freq_target=None,
+                     freq_weight: float = 0.0, modal_free=None) -> "FitProblem":
+        """Build the blocks from a network: free_masks, forces, u_ref are (L, ndof) with
+        dof = dim*node + component; dof_weights (ndof,). The frequency term is used when
+        masses and freq_target are given (modal_free: (ndof,) bool, default the first
+        load's free dofs)."""
+        from harness.springs import incidence
+        points = np.asarray(points, float)
+        B = incidence(points, springs).tocsr()
+        ndof = points.size
+        free_masks = np.asarray(free_masks, bool).reshape(-1, ndof)
+        forces = np.asarray(forces, float).reshape(-1, ndof)
+        u_ref = np.asarray(u_ref, float).reshape(-1, ndof)
+        w = np.asarray(dof_weights, float).reshape(ndof)
+        if not (len(free_masks) == len(forces) == len(u_ref) == len(names)):
+            raise SpringbenchError(f"{len(names)} names, {len(free_masks)} free masks, {len(forces)} forces, {len(u_ref)} references",
+                                   field="optimizer.loads", fix="one row per load case")
+        blocks, coords = [], []
+        cache = {}
+        X = np.repeat(points, points.shape[1], axis=0)
+        for name, free, f, ur in zip(names, free_masks, forces, u_ref):
+            key = free.tobytes()
+            if key not in cache:  # identical free sets share one B (the optimisers group on it)
+                cache[key] = (B[free].tocsc(), X[free])
+            fixed = ~free
+            blocks.append(LoadBlock(str(name), cache[key][0], f[free].copy(), ur[free].copy(), w[free].copy(),
+                                    float(np.sum(w[fixed] * ur[fixed] ** 2))))
+            coords.append(cache[key][1])
+        modal = None
+        if masses is not None and freq_target is not None and len(freq_target) > 0:
+            mfree = free_masks[0] if modal_free is None else np.asarray(modal_free, bool)
+            dim = points.shape[1]
+            mdof = np.repeat(np.asarray(masses, float), dim)
+            modal = ModalTerm(B[mfree].tocsc(), mdof[mfree], np.asarray(freq_target, float), float(freq_weight))
+        return cls(tuple(blocks), np.asarray(k0, float), None if groups is None else np.asarray(groups, int),
+                   tuple(bounds), modal, tuple(coords))
+
+    # --- parameters ------------------------------------------------------------------
+    @property
+    def n_springs(self) -> int:
+        return len(self.k0)
+
+    @property
+    def n_params(self) -> int:
+        return self.n_springs if self.groups is None else int(np.max(self.groups)) + 1
+
+    def k_of(self, factors: np.ndarray) -> np.ndarray:
+        """Spring constants from per-parameter factors of k0 (per spring or per group)."""
+        factors = np.asarray(factors, float)
+        return self.k0 * (factors if self.groups is None else factors[self.groups])
+
+    # --- the reference evaluation ---------------------------------------------------
+    def load_sets(self) -> list["LoadSet"]:
+        """Blocks grouped by identical B (same free dofs): one K, one factorisation.
+        Computed once (with the orderings) and cached on the instance."""
+        cached = self.__dict__.get("_sets")
+        if cached is None:
+            cached = load_sets(self)
+            object.__setattr__(self, "_sets", cached)
+        return cached
+
+    def solve(self, k) -> list[np.ndarray]:
+        """Free-dof displacements per load by a fresh sparse factorisation (shared by
+        loads with identical free dofs)."""
+        k = np.asarray(k, float)
+        out = [None] * len(self.blocks)
+        for s in self.load_sets():
+            U = s.factor(k).solve(s.F)
+            for j, i in enumerate(s.index):
+                out[i] = U[:, j]
+        return out
+
+    def G(self, k) -> float:
+        """DESIGN.md's G by full re-solve (the reference implementation)."""
+        return float(np.sqrt(self.G2(k)))
+
+    def G2(self, k) -> float:
+        total = 0.0
+        for b, u in zip(self.blocks, self.solve(k)):
+            d = b.u_ref - u
+            total += float(d @ (b.w * d)) + b.const
+        return total
+
+    def G_ref_norm(self) -> float:
+        """sqrt(sum w |u_ref|^2): the normaliser of DESIGN.md's normalised G."""
+        return float(np.sqrt(sum(float(b.u_ref @ (b.w * b.u_ref)) + b.const for b in self.blocks)))
+
+
+@dataclass
+class LoadSet:
+    """Loads sharing one free-dof set: B, the block indices, and column-stacked F, Uref,
+    W (nfree, L); ``perm`` is the fill-reducing order (None: SuperLU's own)."""
+    B: sp.csc_matrix
+    index: list
+    F: np.ndarray
+    Uref: np.ndarray
+    W: np.ndarray
+    const: float
+    perm: np.ndarray | None
+    name: str
+
+    def stiffness(self, k) -> sp.csc_matrix:
+        """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
+        if self.__dict__.get("_kmap") is None:
+            self._kpattern, self._kmap = _stiffness_map(self.B)
+        K = self._kpattern.copy()
+        K.data = self._kmap @ np.asarray(k, float)
+        return K
+
+    def factor(self, k):
+        """A solver for K(k): dense Cholesky for small blocks, else sparse LU."""
+        from harness.optimize.linalg import DenseFactor, Factor
+        if self.B.shape[0] <= DENSE_FACTOR_MAX:
+            return DenseFactor(self.stiffness(k).toarray(), self.name)
+        return Factor(self.stiffness(k), self.perm, self.name)
+
+
+DENSE_FACTOR_MAX = 400
+
+
+def _stiffness_map(B: sp.csc_matrix):
+    """Pattern of B B^T (csc) and the sparse matrix P with K.data = P @ k."""
+    B = sp.csc_matrix(B)
+    B.sort_indices()
+    n, e = B.shape
+    pattern = (abs(B) @ abs(B).T).tocsc()
+    pattern.sort_indices()
+    pattern.data[:] = 0.0
+    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices  # col*n + row
+    cnt = np.diff(B.indptr)
+    rows, cols, vals = [], [], []
+    for a in range(cnt.max(initial=0)):
+        for b in range(cnt.max(initial=0)):
+            ok = np.nonzero(cnt > max(a, b))[0]
+            ia, ib = B.indices[B.indptr[ok] + a], B.indices[B.indptr[ok] + b]
+            rows.append(np.searchsorted(keys, ib.astype(np.int64) * n + ia))
+            cols.append(ok)
+            vals.append(B.data[B.indptr[ok] + a] * B.data[B.indptr[ok] + b])
+    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(keys), e))
+    return pattern, P
+
+
+def _key(B: sp.csc_matrix):
+    import hashlib
+    h = hashlib.sha1()
+    for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def load_sets(problem: FitProblem) -> list[LoadSet]:
+    from harness.optimize.linalg import nested_dissection
+    groups: dict = {}
+    for i, b in enumerate(problem.blocks):
+        key = id(b.B)
+        groups.setdefault(key, []).append(i)
+    merged: dict = {}
+    for key, idx in groups.items():  # blocks built separately but equal: merge too
+        merged.setdefault(_key(problem.blocks[idx[0]].B), []).extend(idx)
+    out = []
+    for idx in merged.values():
+        idx = sorted(idx)
+        bl = [problem.blocks[i] for i in idx]
+        B = bl[0].B.tocsc()
+        perm = None
+        if problem.coords is not None and problem.coords[idx[0]] is not None and B.shape[0] > 2000:
+            K = stiffness(B, problem.k0)
+            perm = nested_dissection(K, problem.coords[idx[0]])
+        out.append(LoadSet(B, idx, np.stack([b.f for b in bl], 1), np.stack([b.u_ref for b in bl], 1),
+                           np.stack([b.w for b in bl], 1), float(sum(b.const for b in bl)), perm,
+                           "+".join(b.name for b in bl)))
+    return out
+
+
+def stiffness(B: sp.csc_matrix, k: np.ndarray) -> sp.csc_matrix:
+    """K = B diag(k) B^T on a block's free dofs."""
+    return (B.multiply(k[None, :]) @ B.T).tocsc()
