@@ -315,44 +315,72 @@ def stable_step(model, loading: Loading, x=None) -> float:
     return float("inf") if lam <= 0 else 2.0 / np.sqrt(lam)
 
 
+def _solve_regularised(K, r):
+    """K dx = r; a stiffness with zero modes (a straight chain has no transverse
+    stiffness) is shifted by 1e-10 of its diagonal scale. None if still singular."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", spla.MatrixRankWarning)
+        try:
+            dx = spla.spsolve(K.tocsc(), r)
+        except RuntimeError:
+            dx = np.full(len(r), np.nan)
+        if not np.all(np.isfinite(dx)):
+            shift = 1e-10 * max(np.abs(K.diagonal()).max(), 1e-300)
+            try:
+                dx = spla.spsolve((K + shift * sp.eye(K.shape[0])).tocsc(), r)
+            except RuntimeError:
+                return None
+    return dx if np.all(np.isfinite(dx)) else None
+
+
 # -- statics --------------------------------------------------------------------------------
 
-def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 50,
-                 x0=None) -> np.ndarray:
-    """Equilibrium positions f_int(x) + lambda f_ext = 0 (free dofs), lambda = 1/load_steps .. 1;
-    Newton on K = -df/dx with a backtracking line search on |residual|."""
+def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 30,
+                 x0=None, max_cuts: int = 8) -> np.ndarray:
+    """Equilibrium positions f_int(x) + lambda f_ext = 0 on the free dofs, lambda raised in
+    ``load_steps`` increments to 1 (an increment whose Newton iteration fails is halved, up
+    to ``max_cuts`` times); Newton on K = -df/dx with a backtracking line search on |r|."""
     x = np.array(model.points if x0 is None else x0, float)
     free = np.repeat(~loading.fixed, 3)
     ext = loading.external()
     graph = model.node_graph()
     scale = max(np.abs(ext).max(), 1e-300)
-    for lam in np.linspace(1.0 / load_steps, 1.0, load_steps):
-        def residual(y):
-            return (model.forces(y) + lam * ext).ravel()[free]
-        r = residual(x)
-        for it in range(max_iter):
-            if np.linalg.norm(r, np.inf) <= tol * scale:
-                break
-            K = -jacobian(model.forces, x, graph).tocsr()[free][:, free]
-            try:
-                dx = spla.spsolve(K.tocsc(), r)
-            except RuntimeError as exc:
-                raise SimulationError(f"singular stiffness at load factor {lam:g} ({exc})",
-                                      fix="fix more nodes: the body can move freely")
-            if not np.all(np.isfinite(dx)):
-                raise SimulationError(f"singular stiffness at load factor {lam:g}",
-                                      fix="fix more nodes: the body can move freely")
-            step, r0 = 1.0, np.linalg.norm(r)
-            while True:
-                y = x.copy().ravel()
-                y[free] += step * dx
-                y = y.reshape(-1, 3)
-                ry = residual(y)
-                if np.linalg.norm(ry) < r0 or step < 1e-4:
-                    break
-                step *= 0.5
-            x, r = y, ry
-        else:
-            raise SimulationError(f"Newton did not converge at load factor {lam:g} "
-                                  f"(|r| = {np.linalg.norm(r, np.inf):.3g} N)", fix="use more load_steps")
+    lam, dlam, cuts = 0.0, 1.0 / load_steps, 0
+    while lam < 1.0:
+        target = min(1.0, lam + dlam)
+        y, ok, res = _newton(model, graph, x, free, target * ext, tol * scale, max_iter)
+        if ok:
+            x, lam = y, target
+            continue
+        cuts += 1
+        if cuts > max_cuts:
+            raise SimulationError(f"Newton did not converge at load factor {target:g} (|r| = {res:.3g} N)",
+                                  fix="use more load_steps, or check that the body is held")
+        dlam /= 2
     return x
+
+
+def _newton(model, graph, x, free, ext, tol, max_iter):
+    def residual(y):
+        return (model.forces(y) + ext).ravel()[free]
+    r = residual(x)
+    for _ in range(max_iter):
+        if np.linalg.norm(r, np.inf) <= tol:
+            return x, True, 0.0
+        K = -jacobian(model.forces, x, graph).tocsr()[free][:, free]
+        dx = _solve_regularised(K, r)
+        if dx is None:
+            raise SimulationError("singular stiffness", fix="fix more nodes: the body can move freely")
+        step, r0 = 1.0, np.linalg.norm(r)
+        while True:
+            y = x.copy().ravel()
+            y[free] += step * dx
+            y = y.reshape(-1, 3)
+            ry = residual(y)
+            if np.linalg.norm(ry) < r0 or step < 1e-4:
+                break
+            step *= 0.5
+        x, r = y, ry
+    ok = np.linalg.norm(r, np.inf) <= tol
+    return x, ok, float(np.linalg.norm(r, np.inf))

@@ -1,0 +1,107 @@
+"""`springbench bench dynamics`: speed of the compiled dynamics.
+
+1. Table 1 runs of Bourguignon & Cani on cube_555 (tetra 222 nodes / 804 elements, hexa
+   216 / 125), lying on the table under gravity: wall time per simulated second of MS and
+   the element model (hexa model at dt = 0.004 s), best of several repeats, beside the
+   original C++ program's time on this kind of machine (1.5 / 7.3 / 1.6 / 6.1 ms) and
+   beside our own numpy engine measured in the same run (the baseline).
+2. Classic springs at 1e6 springs (a cubic lattice with face diagonals): spring updates per
+   second of the parallel numba kernel vs the vectorised numpy forces in the same run
+   (target >= 150 M/s on 2 cores; numpy ~30 M/s).
+
+Columns: bench, case, engine, value, unit, baseline, ratio (value / baseline, >1 = faster
+for rates, <1 = faster for times), and for the Table 1 rows cxx_ms and ratio_to_cxx.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+CXX_MS = {("tetra", "MS"): 1.5, ("tetra", "MT"): 7.3, ("hexa", "MS"): 1.6, ("hexa", "MT"): 6.1}
+MESHES = Path(__file__).resolve().parents[3] / "shared" / "reference-data" / "bourguignon2000" / "meshes"
+
+
+def _best(fn, repeats):
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def table1(quick: bool) -> list[dict]:
+    from harness.dynamics import PROGRAM_DRAG, Loading, simulate
+    from harness.meshfile import read_mesh
+    from harness.models.anisotropic import build_anisotropic
+    from harness.models.massspring import build_massspring
+    rows = []
+    repeats = 5 if quick else 20
+    for kind in ("tetra", "hexa"):
+        mesh = read_mesh(MESHES / kind / "cube_555" / "cube.mesh")
+        cells = mesh.cells["tetra" if kind == "tetra" else "hexahedron"]
+        a, e = (np.pi / 2, np.pi / 2) if kind == "tetra" else (0.0, 0.0)
+        for name in ("MS", "MT"):
+            dt = 0.004 if (kind, name) == ("hexa", "MT") else 0.01
+            model = (build_massspring(mesh.points, cells, ks=2.5, kd=10 * dt) if name == "MS" else
+                     build_anisotropic(mesh.points, cells, azimuth=a, elevation=e, ks=2.5, kd=10 * dt,
+                                       kvs=5.0, kvd=10 * dt))
+            ld = Loading.from_flags(mesh.flags, drag=PROGRAM_DRAG * dt)
+            steps = int(round(1.0 / dt))
+            simulate(model, ld, dt, 2)                       # compile / load the cache
+            ours = _best(lambda: simulate(model, ld, dt, steps), repeats)
+            base = _best(lambda: simulate(model, ld, dt, steps, engine="numpy"), 1 if quick else 3)
+            cxx = CXX_MS[(kind, name)]
+            rows.append({"bench": "table1", "case": f"{kind}/cube_555 {name}", "engine": "numba",
+                         "value": 1e3 * ours, "unit": "ms per simulated s", "baseline": 1e3 * base,
+                         "ratio": ours / base, "cxx_ms": cxx, "ratio_to_cxx": 1e3 * ours / cxx})
+    return rows
+
+
+def lattice(n: int):
+    """n^3 nodes, springs along x, y, z and both face diagonals of every square."""
+    g = np.arange(n ** 3).reshape(n, n, n)
+    pts = np.stack(np.meshgrid(*(np.arange(n, dtype=float),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    pairs = [(g[:-1], g[1:]), (g[:, :-1], g[:, 1:]), (g[:, :, :-1], g[:, :, 1:]),
+             (g[:-1, :-1], g[1:, 1:]), (g[1:, :-1], g[:-1, 1:]),
+             (g[:, :-1, :-1], g[:, 1:, 1:]), (g[:, 1:, :-1], g[:, :-1, 1:]),
+             (g[:-1, :, :-1], g[1:, :, 1:]), (g[1:, :, :-1], g[:-1, :, 1:])]
+    springs = np.concatenate([np.stack([a.ravel(), b.ravel()], 1) for a, b in pairs])
+    return pts, springs
+
+
+def springs(quick: bool) -> list[dict]:
+    import numba
+    from harness.models.bc2000.parallel import node_index, spring_forces_parallel
+    from harness.models.massspring import MassSpring
+    n = 48                                                # 961k springs
+    pts, sp = lattice(n)
+    rng = np.random.default_rng(0)
+    L0 = np.linalg.norm(pts[sp[:, 0]] - pts[sp[:, 1]], axis=1)
+    m = MassSpring(pts, sp, L0, np.full(len(sp), 2.5), np.full(len(sp), 0.1))
+    x = pts + 0.01 * rng.standard_normal(pts.shape)
+    v = 0.1 * rng.standard_normal(pts.shape)
+    p, q = sp[:, 0].copy(), sp[:, 1].copy()
+    ptr, idx, sign = node_index(p, q, len(pts))
+    F = np.empty((len(sp), 3))
+    f = np.empty_like(pts)
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    numba.set_num_threads(threads)
+    spring_forces_parallel(x, v, p, q, m.ks, m.kd, m.L0, F, ptr, idx, sign, f)
+    ref = m.forces(x, v)
+    err = float(np.abs(f - ref).max() / np.abs(ref).max())
+    reps = 5 if quick else 20
+    t_nb = _best(lambda: spring_forces_parallel(x, v, p, q, m.ks, m.kd, m.L0, F, ptr, idx, sign, f), reps)
+    t_np = _best(lambda: m.forces(x, v), 3 if quick else 5)
+    s = len(sp)
+    return [{"bench": "springs", "case": f"lattice {n}^3, {s} springs", "engine": f"numba parallel x{threads}",
+             "value": s / t_nb / 1e6, "unit": "M spring updates/s", "baseline": s / t_np / 1e6,
+             "ratio": t_np / t_nb, "max_rel_diff_vs_numpy": err}]
+
+
+def run(quick: bool = True) -> pd.DataFrame:
+    return pd.DataFrame(table1(quick) + springs(quick))
