@@ -1,0 +1,189 @@
+"""Assembly of linear elasticity on one mesh: stiffness with a per-element Voigt matrix,
+consistent mass, body forces, tractions, constraints and the rigid-body modes.
+
+Everything is built on the *scalar* Lagrange basis; the displacement has ``dim``
+components per scalar dof, interleaved: global dof = dim * scalar_dof + component
+(the same order as scikit-fem's ElementVector). The stiffness is the bilinear form
+a(u, v) = sum_e int_e eps(v)^T C_e eps(u) dx with engineering-shear Voigt strains
+(harness.elasticity order), evaluated for all elements of a chunk with one matmul
+instead of scikit-fem's per-basis-pair Python form (the same integral, see the test).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import skfem
+
+from harness.errors import ModelError
+from reference.mesh import SIMPLEX, element
+
+VOIGT = {2: [(0, 0), (1, 1), (0, 1)], 3: [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]}
+CHUNK_ENTRIES = 4_000_000  # local matrix entries per assembly chunk (memory bound)
+
+
+def quadrature_orders(cell: str, order: str) -> tuple[int, int]:
+    """(stiffness, mass/load) integration orders, exact for affine cells and constant
+    material: P-k simplices need 2(k-1) and 2k; Q-k tensor cells 2k for both."""
+    k = 1 if order == "P1" else 2
+    return (2 * (k - 1) if SIMPLEX[cell] else 2 * k), 2 * k
+
+
+@dataclass
+class Discretisation:
+    """One mesh with its scalar element; ``ns`` scalar dofs, ``ndof = dim * ns``."""
+    mesh: skfem.Mesh
+    cell: str
+    order: str
+
+    def __post_init__(self):
+        self.elem = element(self.cell, self.order)
+        self.dim = self.mesh.p.shape[0]
+        self.q_stiff, self.q_mass = quadrature_orders(self.cell, self.order)
+        self.mapping = self.mesh._mapping()
+        self.basis = skfem.CellBasis(self.mesh, self.elem, mapping=self.mapping,
+                                     intorder=self.q_mass)
+        self.dofs = self.basis.dofs
+        self.ns = self.basis.N
+        self.ndof = self.dim * self.ns
+        self.doflocs = self.basis.doflocs  # (dim, ns)
+
+    @property
+    def nelems(self) -> int:
+        return self.mesh.t.shape[1]
+
+    def centroids(self) -> np.ndarray:
+        return self.mesh.p[:, self.mesh.t].mean(axis=1).T
+
+    def vector_dofs(self, element_dofs: np.ndarray) -> np.ndarray:
+        """(nbf, ne) scalar dofs -> (ne, nbf * dim) interleaved vector dofs."""
+        return (self.dim * element_dofs.T[:, :, None] + np.arange(self.dim)).reshape(element_dofs.shape[1], -1)
+
+    def _chunks(self, nloc: int):
+        step = max(1, CHUNK_ENTRIES // (nloc * nloc))
+        for start in range(0, self.nelems, step):
+            yield np.arange(start, min(start + step, self.nelems))
+
+    def _cell_basis(self, elems, intorder):
+        return skfem.CellBasis(self.mesh, self.elem, mapping=self.mapping, intorder=intorder,
+                               elements=elems, dofs=self.dofs)
+
+    def stiffness(self, C: np.ndarray) -> sp.csr_matrix:
+        """K for per-element Voigt stiffness C (ne, nv, nv)."""
+        nbf, dim = len(self.basis.basis), self.dim
+        nl = nbf * dim
+        K = sp.csr_matrix((self.ndof, self.ndof))
+        for elems in self._chunks(nl):
+            b = self._cell_basis(elems, self.q_stiff)
+            grad = np.stack([b.basis[a][0].grad for a in range(nbf)])  # nbf, dim, ne, nq
+            B = strain_matrix(grad)  # ne, nq, nv, nl
+            ne, nq, nv, _ = B.shape
+            CB = C[elems][:, None] @ B
+            Bw = B * b.dx[:, :, None, None]
+            Ke = Bw.reshape(ne, nq * nv, nl).transpose(0, 2, 1) @ CB.reshape(ne, nq * nv, nl)
+            K = K + _scatter(Ke, self.vector_dofs(b.element_dofs), self.ndof)
+        return K
+
+    def scalar_mass(self, rho: np.ndarray) -> sp.csr_matrix:
+        """int rho phi_a phi_b with a constant density rho per element (ne,)."""
+        nbf = len(self.basis.basis)
+        Ms = sp.csr_matrix((self.ns, self.ns))
+        for elems in self._chunks(nbf * self.dim):
+            b = self._cell_basis(elems, self.q_mass)
+            phi = np.stack([b.basis[a][0].value for a in range(nbf)], axis=1)  # ne, nbf, nq
+            w = b.dx * rho[elems][:, None]
+            Me = (phi * w[:, None, :]) @ phi.transpose(0, 2, 1)
+            Ms = Ms + _scatter(Me, b.element_dofs.T, self.ns)
+        return Ms
+
+    def mass(self, rho: np.ndarray) -> sp.csr_matrix:
+        """Consistent mass, rho per element; interleaved like K."""
+        return sp.kron(self.scalar_mass(rho), sp.identity(self.dim), format="csr")
+
+    def body_load(self, f, intorder: int | None = None) -> np.ndarray:
+        """Load vector of a force per volume: ``f`` (ne, dim) constant per element, or a
+        callable x (dim, ne, nq) -> (dim, ne, nq)."""
+        b = self.basis if intorder is None else skfem.CellBasis(
+            self.mesh, self.elem, mapping=self.mapping, intorder=intorder, dofs=self.dofs)
+        if callable(f):
+            fq = np.asarray(f(b.global_coordinates().value))  # dim, ne, nq
+        else:
+            fq = np.broadcast_to(np.asarray(f, float).T[:, :, None], (self.dim,) + b.dx.shape)
+        F = np.zeros((self.ns, self.dim))
+        for a in range(len(b.basis)):
+            val = np.einsum("ceq,eq,eq->ec", fq, b.basis[a][0].value, b.dx)
+            for c in range(self.dim):
+                F[:, c] += np.bincount(b.element_dofs[a], val[:, c], minlength=self.ns)
+        return F.ravel()
+
+    def part_facets(self, predicate) -> np.ndarray:
+        """Boundary facets all of whose vertices satisfy ``predicate``."""
+        bf = self.mesh.boundary_facets()
+        nodes = self.mesh.facets[:, bf]  # nvf, nf
+        ok = predicate(self.mesh.p[:, nodes.ravel()]).reshape(nodes.shape).all(axis=0)
+        return bf[ok]
+
+    def traction_load(self, facets: np.ndarray, vector) -> np.ndarray:
+        """Load vector of a constant traction ``vector`` on ``facets``."""
+        fb = skfem.FacetBasis(self.mesh, self.elem, facets=facets, intorder=self.q_mass, dofs=self.dofs)
+        w = skfem.asm(skfem.LinearForm(lambda v, _: v), fb)  # int phi_a ds, (ns,)
+        return (w[:, None] * np.asarray(vector, float)[None, :]).ravel()
+
+    def part_dofs(self, predicate, components) -> np.ndarray:
+        """Vector dofs of the components at every dof location inside the part.
+
+        For Lagrange elements a dof is the value at its location, so this fixes exactly
+        the points of the part: a face gets its vertex, edge and face dofs, an edge its
+        vertex and mid-edge dofs, a corner only its vertex."""
+        nodes = np.flatnonzero(predicate(self.doflocs))
+        return (self.dim * nodes[:, None] + np.asarray(components, int)[None, :]).ravel()
+
+    def rigid_modes(self) -> np.ndarray:
+        """(ndof, 3 | 6) translations and rotations about the centroid, unit-scaled."""
+        x = self.doflocs - self.doflocs.mean(axis=1, keepdims=True)
+        x = x / max(np.abs(x).max(), 1e-300)
+        ns, dim = self.ns, self.dim
+        modes = []
+        for c in range(dim):
+            m = np.zeros((ns, dim))
+            m[:, c] = 1
+            modes.append(m)
+        for i, j in ([(0, 1)] if dim == 2 else [(0, 1), (1, 2), (0, 2)]):
+            m = np.zeros((ns, dim))
+            m[:, i], m[:, j] = -x[j], x[i]
+            modes.append(m)
+        return np.stack([m.ravel() for m in modes], axis=1)
+
+    def check_rigid(self, fixed: np.ndarray, load_name: str):
+        """ModelError unless the constraints remove every rigid motion: no combination of
+        rigid modes may vanish on all fixed dofs."""
+        R = self.rigid_modes()[fixed]
+        nr = 3 if self.dim == 2 else 6
+        s = np.linalg.svd(R, compute_uv=False) if len(R) else np.zeros(0)
+        if len(s) < nr or s[-1] < 1e-8 * max(s[0], 1e-300):
+            free = nr - int(np.sum(s > 1e-8 * (s[0] if len(s) else 1)))
+            raise ModelError(f"load case '{load_name}': the constraints leave {free} rigid motion(s) free",
+                             fix="constrain more parts or components")
+
+
+def strain_matrix(grad: np.ndarray) -> np.ndarray:
+    """Voigt strain-displacement matrices: grad (nbf, dim, ne, nq) of the scalar basis
+    -> B (ne, nq, nv, nbf * dim) with engineering shears, interleaved local dofs."""
+    nbf, dim, ne, nq = grad.shape
+    pairs = VOIGT[dim]
+    g = grad.transpose(2, 3, 0, 1)
+    B = np.zeros((ne, nq, len(pairs), nbf, dim))
+    for I, (i, j) in enumerate(pairs):
+        B[:, :, I, :, i] += g[..., j]
+        if i != j:
+            B[:, :, I, :, j] += g[..., i]
+    return B.reshape(ne, nq, len(pairs), nbf * dim)
+
+
+def _scatter(Ke: np.ndarray, gdofs: np.ndarray, n: int) -> sp.csr_matrix:
+    nl = gdofs.shape[1]
+    rows = np.repeat(gdofs, nl, axis=1).ravel()
+    cols = np.tile(gdofs, (1, nl)).ravel()
+    return sp.coo_matrix((Ke.ravel(), (rows, cols)), shape=(n, n)).tocsr()
