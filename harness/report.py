@@ -39,9 +39,9 @@ registry in :mod:`harness.figures`; a missing file just means no figure):
   optional scalar ``scale`` (magnification; default: 10 % of the body size for the largest
   displacement): reference vs model deformed shapes, Deussen Fig. 8-11
   (``fig-deformed[<suffix>]-<load>.png``).
-- ``fibres.npz`` — ``points`` (m, 3) element centres, ``directions`` (m, 3) unit fibre
+- ``fibres*.npz`` — ``points`` (m, 3) element centres, ``directions`` (m, 3) unit fibre
   directions (optional ``u`` (m, 3) displacement of the centres): Bourguignon-Cani Fig. 6
-  (``fig-fibres.png``).
+  (``fig-fibres[<suffix>].png``).
 
 CSV files are read with pandas; write them with ``DataFrame.to_csv(path, index=False)``.
 """

@@ -242,9 +242,9 @@ def safe_stem(f: Path) -> str:
     return _NAME_OK.sub("_", f.stem).lstrip(".") or "case"
 
 
-def _error_row(job: Job, stage: str, message: str) -> dict:
+def _error_row(job: Job, stage: str, message: str, seconds: float = 0.0) -> dict:
     return {"case": job.case, "model": "", "stage": stage, "seed": job.seed, "status": "error",
-            "error": message}
+            "seconds": seconds, "error": message}
 
 
 # -- executing one job (in a worker) ----------------------------------------------------
@@ -345,15 +345,16 @@ def execute(job: Job, sink=None) -> JobResult:
                 files[f.relative_to(tmp).as_posix()] = f.read_bytes()
         return JobResult(job, "ok", rows, files, seconds=time.perf_counter() - t_job)
     except SpringbenchError as exc:
-        msg = str(exc)
-        return JobResult(job, "error", [_error_row(job, stage_name, msg)], error=msg,
-                         seconds=time.perf_counter() - t_job)
+        msg = str(exc).replace(job.case_file, job.rel_file or job.case_file)
+        dt = time.perf_counter() - t_job
+        return JobResult(job, "error", [_error_row(job, stage_name, msg, dt)], error=msg, seconds=dt)
     except Exception as exc:  # a bug, not bad input: one line here, the traceback in a log
         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         if len(msg) > 300:
             msg = msg[:297] + "..."
-        return JobResult(job, "error", [_error_row(job, stage_name, msg)], error=msg,
-                         traceback=traceback.format_exc(), seconds=time.perf_counter() - t_job)
+        dt = time.perf_counter() - t_job
+        return JobResult(job, "error", [_error_row(job, stage_name, msg, dt)], error=msg,
+                         traceback=traceback.format_exc(), seconds=dt)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

@@ -11,10 +11,12 @@ NAME, SCOPE = "fibres", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "fibres.npz"
-    if not src.exists():
-        return []
+    return [_one(src, folder) for src in sorted(folder.glob("fibres*.npz"))]
+
+
+def _one(src: Path, folder: Path) -> Path:
     import numpy as np
+    suffix = src.stem[len("fibres"):]
     with np.load(src) as z:
         p = np.asarray(z["points"], float)
         d = np.asarray(z["directions"], float)
@@ -29,5 +31,5 @@ def make(folder: Path) -> list[Path]:
     ax = fig.add_subplot(projection="3d")
     for a, b in zip(c - 0.5 * L * d, c + 0.5 * L * d):
         ax.plot(*zip(a, b), color="tab:brown", lw=1)
-    ax.set_title(f"{folder.name}: fibre directions", fontsize=9)
-    return [save(fig, folder / "fig-fibres.png")]
+    ax.set_title(f"{folder.name}{suffix}: fibre directions", fontsize=9)
+    return save(fig, folder / f"fig-fibres{suffix}.png")
