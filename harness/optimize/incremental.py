@@ -45,23 +45,34 @@ class _Set:
 
     def rebase(self, k, Kinv_update=False):
         ls = self.ls
+        m = len(self.cols)
+        old_cache = getattr(self, "ycache", {})
         if self.dense:
-            m = len(self.cols)
             if Kinv_update and m:
-                Y = self.Z[:, :m] @ np.linalg.inv(self.M[:m, :m])
+                Y = self.Z[:, :m] @ self.Minv
                 self.Kinv -= Y @ self.Z[:, :m].T
             else:
                 self.Kinv = np.linalg.inv(ls.stiffness(k).toarray())
             self.U = self.Kinv @ ls.F
+            old_cache = {}
         else:
             self.fac = ls.factor(k)
             self.U = self.fac.solve(ls.F)
         self.U = self.U.reshape(ls.F.shape)
         self.R = ls.W * (ls.Uref - self.U)
         self.G2 = float(np.sum((ls.Uref - self.U) * self.R)) + ls.const
+        self.ycache: dict[int, np.ndarray] = {}
+        if old_cache and m:  # carry prefetched K0^-1 b over to the new base by Woodbury
+            springs = list(old_cache)
+            Y = np.stack([old_cache[e] for e in springs], 1)
+            ZtB = np.empty((m, len(springs)))
+            for j, e in enumerate(springs):
+                idx, val = self.column(e)
+                ZtB[:, j] = val @ self.Z[idx, :m]
+            Y -= self.Z[:, :m] @ (self.Minv @ ZtB)
+            self.ycache = {e: Y[:, j] for j, e in enumerate(springs)}
         self.cols = []
         self.Minv = np.empty((0, 0))
-        self.ycache: dict[int, np.ndarray] = {}
 
     def prefetch(self, springs):
         """Sparse base: y = K0^-1 b_e for many springs in one multi-RHS solve."""
@@ -80,10 +91,10 @@ class _Set:
     def y(self, e, idx, val, upcoming):
         if self.dense:
             return val @ self.Kinv[idx, :]
-        y = self.ycache.get(e)
+        y = self.ycache.pop(e, None)   # used once: the cache stays at most one batch
         if y is None:
             self.prefetch([e, *upcoming])
-            y = self.ycache[e]
+            y = self.ycache.pop(e)
         return y
 
     def propose(self, e, delta, upcoming):
@@ -125,8 +136,8 @@ class IncrementalG:
     ``mode``: "dense" (maintained inverse), "sparse" (kept factorisation + Woodbury) or
     "auto" (dense when every free block has <= ``dense_max`` dofs)."""
 
-    def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every: int = 48,
-                 batch: int = 64, dense_max: int = 2500):
+    def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every: int = 64,
+                 batch: int = 32, dense_max: int = 2500):
         self.problem = problem
         self.k = np.array(k, float)
         sets = problem.load_sets()
