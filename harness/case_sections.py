@@ -34,7 +34,8 @@ BC2000 = {
 
 # [dynamics]: time integration of the bc2000 experiments (harness/stages/bc2000.py)
 DYNAMICS = {
-    "experiment": Field("str", "run", choices=("run", "volume", "pull", "cantilever", "fibres", "timing")),
+    "experiment": Field("str", "run", choices=("run", "volume", "pull", "cantilever", "fibres", "timing", "fem")),
+    "calibrate": Field("bool", True, doc="fem: fit the model's constants to the FEM reference"),
     "dt": Field("float", 0.01, min=0, min_exclusive=True, doc="time step (s)"),
     "hexa_model_dt": Field("float", None, min=0, min_exclusive=True,
                            doc="time step of the element model on hexa meshes (the program's 0.004 s)"),
@@ -63,8 +64,12 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
     "model": "model",
     # [optimizer]: spring-constant calibration (harness/optimize)
     "optimizer": {
-        "method": Field("str", "none"),
-        "options": Field("any", {}),
+        "method": Field("str", "none", choices=("none", "sa", "sa-refactor", "lbfgs", "gauss-newton", "nelder-mead"),
+                        doc="harness.optimize.OPTIMIZERS: sa = Deussen Fig. 6 annealing (incremental), "
+                            "sa-refactor = same, re-factorising per proposal, lbfgs / gauss-newton = adjoint "
+                            "gradient fits, nelder-mead = grouped mode, none = keep the initial constants"),
+        "options": Field("any", {}, doc="method options, checked by the optimiser (unknown keys are errors); "
+                                        "see harness/optimize/annealing.py DEFAULTS and gradient.py *_DEFAULTS"),
     },
     # [score]: G criteria weights (harness/scoring)
     "score": {
