@@ -168,11 +168,17 @@ def _optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label
     trace = getattr(res, "trace", None)
     if trace is not None and len(trace):
         try:
-            df = trace if isinstance(trace, pd.DataFrame) else pd.DataFrame(trace)
+            if isinstance(trace, pd.DataFrame):
+                df = trace
+            else:
+                arr = np.asarray(trace, float)
+                arr = arr[:, None] if arr.ndim == 1 else arr
+                df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
             if "G" not in df.columns and df.shape[1] == 1:
                 df.columns = ["G"]
             if "step" not in df.columns:
                 df.insert(0, "step", np.arange(len(df)))
+            df["model"] = f"{base.info['stiffness']}+{opt['method']}"
             df.to_csv(ctx.file("trace.csv"), index=False)
         except (ValueError, TypeError):
             pass
@@ -183,7 +189,7 @@ def _optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
            **{f"G_{k}": v for k, v in sc.per_load.items()}}
-    for key in ("steps", "accepted", "evaluations", "stop_reason"):
+    for key in ("n_steps", "accepted"):
         if hasattr(res, key):
             row[f"opt_{key}"] = getattr(res, key)
     return row
