@@ -42,8 +42,11 @@ from pathlib import Path
 from harness.errors import CaseError, SpringbenchError
 
 ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_CASES = ROOT / "cases"
-DEFAULT_RESULTS = ROOT / "results"
+# an editable install / checkout runs its own cases/ into its own results/; an installed
+# package (no cases/ beside it) uses the current folder's
+_HOME = ROOT if (ROOT / "cases").is_dir() else Path.cwd()
+DEFAULT_CASES = _HOME / "cases"
+DEFAULT_RESULTS = _HOME / "results"
 RESULT_PREFIX = "result-seed"
 HASH_VERSION = "springbench-job-1"
 # sources that cannot change a result (drawing, tables, command-line plumbing)
@@ -586,13 +589,22 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
 
 
 def _run_pool(pending: list[Job], jobs_n: int, finish, bar):
-    """Local process pool (spawned workers, one BLAS thread each)."""
+    """Local process pool (spawned workers, one BLAS thread each). If a worker process
+    dies (killed, out of memory), every job lost with the pool is retried alone in a
+    fresh one-worker pool, so one bad job cannot take the others down; a job whose
+    worker dies when alone is recorded as an error."""
+    for job in _pool_round(list(pending), jobs_n, finish, bar, last=False):
+        _pool_round([job], 1, finish, bar, last=True)
+
+
+def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> list[Job]:
     import multiprocessing as mp
     import queue as queue_mod
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
     ctx = mp.get_context("spawn")
+    lost: list[Job] = []
     with ctx.Manager() as manager:
         q = manager.Queue()
         sink = QueueSink(q)
@@ -614,7 +626,10 @@ def _run_pool(pending: list[Job], jobs_n: int, finish, bar):
                     try:
                         res = fut.result()
                     except BrokenProcessPool:
-                        msg = "the worker process died (killed, or out of memory)"
+                        if not last:
+                            lost.append(job)
+                            continue
+                        msg = "its worker process died (killed, or out of memory?)"
                         res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg)
                     except Exception as exc:  # e.g. a result that cannot be pickled
                         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
@@ -625,6 +640,9 @@ def _run_pool(pending: list[Job], jobs_n: int, finish, bar):
             ex.shutdown(wait=False, cancel_futures=True)
             raise
         ex.shutdown(wait=True)
+    if lost:
+        bar.write(f"springbench: warning: a worker process died; retrying {len(lost)} job(s) one at a time")
+    return lost
 
 
 def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, bar):

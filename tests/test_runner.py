@@ -239,6 +239,20 @@ def test_pool_matches_serial(tmp_path, fake):
     assert len(rep.ran) == 4
 
 
+@pytest.mark.slow
+def test_dead_worker_is_an_error_row_and_others_finish(tmp_path, fake, capsys):
+    suite = tmp_path / "cases" / "demo"
+    write_case(suite, "a", "rows=1 sleep=0.5")
+    write_case(suite, "b", "die=1")
+    write_case(suite, "c", "rows=1")
+    write_case(suite, "d", "rows=1")
+    rep = run_suite([suite], results=tmp_path / "r", jobs=2, figures=False, progress=False)
+    assert [r.job.case for r in rep.failed] == ["b"]
+    assert "its worker process died" in rep.failed[0].error
+    assert sorted(r.job.case for r in rep.ran) == ["a", "c", "d"]
+    assert "retrying" in capsys.readouterr().err
+
+
 def test_status_reaches_the_progress_bar(tmp_path, fake):
     from harness import runner
     seen = []

@@ -28,6 +28,12 @@ def run(case, ctx):
         time.sleep(0.1)
     if o.get("fail") == "case":
         raise CaseError("E must be positive", file=str(case.path), field="material.E", fix="give E > 0")
+    if o.get("die") and ctx.seed == 0:
+        import multiprocessing
+        if multiprocessing.parent_process() is not None:  # only ever kill a worker process
+            import os
+            os._exit(3)
+        raise RuntimeError("die=1 outside a worker process")
     if o.get("fail") == "bug":
         return [{"model": "x", "G": 1 / 0}]
     rng = ctx.rng()
