@@ -474,22 +474,33 @@ class RunReport:
 
 
 class _Progress:
-    """One tqdm bar for the suite; the postfix shows the latest status of running jobs."""
+    """One tqdm bar for the suite on a terminal; the postfix shows the latest status of
+    the running jobs. Without a terminal (CI logs, pipes) one line per finished job on
+    stdout instead. ``enabled`` None: decide by the terminal."""
 
     def __init__(self, total: int, enabled):
+        import shutil
         from tqdm import tqdm
-        self.bar = tqdm(total=total, desc="suite", unit="case", file=sys.stderr,
-                        disable=None if enabled is None else not enabled, dynamic_ncols=True)
+        tty = sys.stderr.isatty() if enabled is None else bool(enabled)
+        size = shutil.get_terminal_size((0, 0))  # a pty without a size (0 x 0) hides tqdm bars
+        self.bar = tqdm(total=total, desc="suite", unit="case", file=sys.stderr, disable=not tty,
+                        dynamic_ncols=size.columns > 0, ncols=None if size.columns > 0 else 100,
+                        nrows=None if size.lines > 0 else 24)
+        self.lines = enabled is None and not tty
+        self.total, self.n = total, 0
         self.status: dict[str, str] = {}
 
     def set(self, label: str, msg: str):
         self.status[label] = msg
         self._show()
 
-    def done(self, label: str):
+    def done(self, label: str, what: str = ""):
         self.status.pop(label, None)
+        self.n += 1
         self.bar.update(1)
         self._show()
+        if self.lines and what:
+            print(f"[{self.n}/{self.total}] {label}: {what}", flush=True)
 
     def _show(self):
         text = "; ".join(f"{k}: {v}" for k, v in list(self.status.items())[-3:])
@@ -553,7 +564,8 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
         else:
             pending.append(job)
     bar = _Progress(len(planned) + len(failed), progress)
-    bar.bar.update(len(done))
+    for res in done:
+        bar.done(res.job.label, "unchanged, skipped")
     all_results = list(done)
 
     def finish(res: JobResult):
@@ -561,7 +573,7 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
         all_results.append(res)
         if res.status == "error":
             bar.write(error_line(res))
-        bar.done(res.job.label)
+        bar.done(res.job.label, "error" if res.status == "error" else f"{res.status} ({res.seconds:.1f} s)")
 
     try:
         for res in failed:
