@@ -287,7 +287,8 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         v = b["vertices"]
         if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
             fail("vertices", "expected at least 3 points [x, y]")
-        area = 0.5 * np.sum(np.cross(np.asarray(v), np.roll(np.asarray(v), -1, axis=0)))
+        x, y = np.asarray(v, float).T
+        area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
         if abs(area) <= 1e-14:
             fail("vertices", "the polygon has zero area", "list the vertices in order around the body")
         body = Body(shape, vertices=v)
