@@ -28,7 +28,7 @@ def random_walk(prob, mode, n, check_every, refactor_every=48, seed=0):
     return eng, max(errs)
 
 
-@pytest.mark.parametrize("mode,shape,n", [("dense", (5, 5), 3000), ("sparse", (5, 5), 3000),
+@pytest.mark.parametrize("mode,shape,n", [("dense", (5, 5), 3000), ("sparse", (5, 5), 2000),
                                           ("dense", (3, 3, 3), 2000), ("sparse", (16, 16), 600)])
 def test_incremental_G_matches_full_resolve(mode, shape, n):
     prob, _ = recoverable_problem(shape, seed=1)
@@ -88,3 +88,12 @@ def test_sa_budget_and_paper_defaults():
     assert (res.info["nlimit"], res.info["glimit"], res.info["temperatures"]) == (2 * e, e, 2 * e)
     res = optimize(prob, "sa", {"temperatures": 3, "nlimit": 5, "glimit": 100}, seed=0)
     assert res.n_steps == 3 * 6                   # Fig. 6: repeat ... until k > nlimit
+
+
+def test_two_chains_keep_the_best_and_share_chain_zero():
+    prob, _ = recoverable_problem((3, 3), seed=8)
+    one = optimize(prob, "sa", {"max_steps": 300}, seed=11)
+    two = optimize(prob, "sa", {"max_steps": 300, "chains": 2}, seed=11)
+    assert two.info["chains"] == 2 and two.info["chain_seeds"][0] == 11
+    assert two.info["chain_G_final"][0] == pytest.approx(one.G_final, rel=1e-12)
+    assert two.G_final == min(two.info["chain_G_final"])
