@@ -73,22 +73,49 @@ def test_catalogue_validate(path, capsys):
     assert names_a_fix(line), line
 
 
+@pytest.fixture(scope="module")
+def catalogue_run(tmp_path_factory):
+    """The whole catalogue as one suite through `springbench run` (quick, then the
+    [full]-only file with --full): every file fails on its own, the suite carries on."""
+    import contextlib
+    import io
+    from harness import stages as stage_registry
+    res = tmp_path_factory.mktemp("catalogue") / "results"
+    out = {}
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(stage_registry, "STAGES", ["test_runner_fakestages"])
+        for mode, paths in (("--quick", [HERE / "bad_inputs"]),
+                            ("--full", [p for p in CATALOGUE if header(p, "only") == ["full"]])):
+            err = io.StringIO()
+            with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+                code = cli.main(["run", *map(str, paths), "--results", str(res), "--jobs", "1",
+                                 "--no-figures", mode])
+            out[mode] = (code, [ln for ln in err.getvalue().splitlines() if ln.strip()])
+    return res, out
+
+
 @pytest.mark.parametrize("path", CATALOGUE, ids=lambda p: p.stem)
-def test_catalogue_run(path, tmp_path, fake, capsys):
-    """The same files through `springbench run`: an error row, exit 2, one line each."""
-    res = tmp_path / "results"
-    mode = ["--full"] if header(path, "only") == ["full"] else []
-    code, err, _ = cli_run(["run", path, "--results", res, "--jobs", 1, "--no-figures", *mode], capsys)
+def test_catalogue_run(path, catalogue_run):
+    """The same files through `springbench run`: one error line each, exit 2."""
+    res, out = catalogue_run
+    code, err = out["--full" if header(path, "only") == ["full"] else "--quick"]
     assert code == 2
     assert not any("Traceback" in ln for ln in err)
-    assert len(err) == 1, err
+    mine = [ln for ln in err if f"/{path.name}:" in ln or f" {path.name}:" in ln]
+    assert len(mine) == 1, (path.name, err)
+    assert ERROR.match(mine[0])
     for e in header(path, "expect"):
-        assert e in err[0], (e, err[0])
-    written = [p for p in tmp_path.rglob("*") if p.is_file()]
-    assert all(p.resolve().is_relative_to(res.resolve()) for p in written)
+        assert e in mine[0], (e, mine[0])
+
+
+def test_catalogue_run_writes_only_inside_results(catalogue_run):
     import pandas as pd
+    res, out = catalogue_run
+    root = res.parent
+    assert all(p.resolve().is_relative_to(res.resolve()) for p in root.rglob("*") if p.is_file())
     df = pd.read_csv(res / "bad_inputs" / "summary.csv")
-    assert list(df.status) == ["error"]
+    assert (df.status == "error").all() and len(df) == len(CATALOGUE)
+    assert len(out["--quick"][1]) == len(CATALOGUE) - 1  # one line per failure, nothing else
 
 
 CLI_CASES = [
