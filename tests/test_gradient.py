@@ -72,3 +72,11 @@ def test_lbfgs_with_frequency_term_fits_both():
     res = optimize(prob, "lbfgs", {}, seed=0)
     assert res.G_final / res.G_initial < 1e-6
     assert np.max(np.abs(res.info["freq_rel_error"])) < 1e-6
+
+
+def test_static_only_methods_refuse_the_frequency_term():
+    from harness.errors import SpringbenchError
+    prob, _ = modal_problem(weight=1.0)
+    for method in ("sa", "gauss-newton"):
+        with pytest.raises(SpringbenchError, match="lbfgs"):
+            optimize(prob, method, {"max_steps": 5} if method == "sa" else {}, seed=0)

@@ -61,6 +61,8 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
     """One chain. Returns a dict of FitResult fields (k, G_initial, G_final, trace,
     seconds, n_steps, accepted, info)."""
     opts = check_options(options)
+    from harness.optimize.gradient import _static_only
+    _static_only(problem, "sa")
     t_start = time.perf_counter()
     grouped = problem.groups is not None
     npar = problem.n_params

@@ -229,6 +229,12 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
     return _result(obj, t0, stop, nit[0], {})
 
 
+def _static_only(problem: FitProblem, method: str):
+    if problem.modal is not None and problem.modal.weight > 0:
+        raise SpringbenchError(f"method '{method}' fits static displacements only; the frequency term needs 'lbfgs'",
+                               field="optimizer.method", fix="use method = 'lbfgs' or set the frequency weight to 0")
+
+
 def _check(options: dict, defaults: dict, method: str) -> dict:
     unknown = set(options) - set(defaults)
     if unknown:
@@ -300,6 +306,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     factorisation. Grouped mode sums the Jacobian columns of a group."""
     import scipy.sparse.linalg as spla_
     opts = _check(options, GN_DEFAULTS, "gauss-newton")
+    _static_only(problem, "gauss-newton")
     t0 = time.perf_counter()
     lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
     npar = problem.n_params
