@@ -284,3 +284,19 @@ def test_sms_stage_calls_the_optimiser_contract(tmp_path, monkeypatch):
     assert opt["G_final"] == pytest.approx(opt["G_final_optimizer"], rel=1e-9)
     import pandas as pd
     assert list(pd.read_csv(tmp_path / "out" / "trace.csv").columns[:2]) == ["step", "G"]
+
+
+def test_model_mesh_file_gives_nodes_and_edges(tmp_path):
+    import meshio
+    p = np.array([[0, 0], [1, 0], [2, 0], [0, 1], [1, 1.2], [2, 1], [0, 2], [1, 2], [2, 2.0]])
+    tri = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6], [4, 5, 8], [4, 8, 7]])
+    meshio.write(tmp_path / "net.vtu", meshio.Mesh(np.column_stack([p, np.zeros(9)]), [("triangle", tri)]))
+    f = _case_file(tmp_path, "mesh", 'mesh = "net.vtu"')
+    case = load_case(f)
+    net = build_network(case, stiffness="vangelder")
+    assert net.n_nodes == 9 and net.n_springs == 16
+    assert net.classes[4] == 0 and net.classes[0] == 2 and net.classes[1] == 1
+    res = statics.solve(net, case)
+    assert np.isfinite(res.u).all()
+    with pytest.raises(ModelError, match="model.mesh|placement"):
+        build_network(load_case(_case_file(tmp_path, "mesh", "")))

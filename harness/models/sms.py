@@ -9,6 +9,7 @@ rule. ``spec`` is the case's ``[model]`` table (kind = "sms", keys in MODEL_SPEC
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Mapping
@@ -120,6 +121,9 @@ MODEL_SPEC = {
     "grouped": Field("bool", False, doc="optimise one constant per spring group (Fig. 8: horizontal, "
                                         "vertical, diagonal) instead of one per spring"),
     "min_quality": Field("float", 1e-3, min=0, max=1, doc="Delaunay simplices below this quality are dropped"),
+    "mesh": Field("str", None, doc="placement = 'mesh': a mesh file (relative to the case file) whose nodes and "
+                                   "edges form the network; default: the body's own mesh"),
+    "mesh_format": Field("str", None, doc="meshio format name or 'bc2000' for model.mesh; guessed if absent"),
 }
 
 
@@ -162,7 +166,8 @@ def _mesh_boundary_nodes(body, n) -> np.ndarray:
 
 
 def place_points(case, spec: dict, seed: int, body=None):
-    """Points for the model (and the Lloyd history or None)."""
+    """Points for the model, the Lloyd history (or the cells of a [model] mesh, or None)
+    and the body geometry."""
     from harness.geometry import body_geometry, grid_points, lloyd, random_points
     body = body or body_geometry(case)
     p = spec["placement"]
@@ -183,12 +188,26 @@ def place_points(case, spec: dict, seed: int, body=None):
             res = lloyd(body, pts, spec["lloyd_iterations"], seed=seed)
             return res.points, res, body
         return pts, None, body
+    if spec.get("mesh"):
+        from harness.meshfile import read_mesh
+        path = (case.path.parent if case.path is not None else Path(".")) / spec["mesh"]
+        m = read_mesh(path, spec.get("mesh_format"))
+        if m.dim != case.dim:
+            raise ModelError(f"the mesh is {m.dim}-D but dim = {case.dim}", file=str(path), field="model.mesh")
+        return m.points, _MeshCells(m.cells), body
     if body.kind != "mesh":
-        raise ModelError("placement = 'mesh' needs body.shape = 'mesh'", field="model.placement")
+        raise ModelError("placement = 'mesh' needs body.shape = 'mesh' or a model.mesh file", field="model.placement",
+                         fix="add mesh = 'file.vtu' to [model]")
     return body.mesh_points, None, body
 
 
-def connect(case, spec: dict, points: np.ndarray, body):
+class _MeshCells:
+    """Cells of a [model] mesh handed from placement to topology."""
+    def __init__(self, cells):
+        self.cells = cells
+
+
+def connect(case, spec: dict, points: np.ndarray, body, extra=None):
     from harness.models import topology
     p = spec["placement"]
     if p == "grid":
@@ -197,7 +216,8 @@ def connect(case, spec: dict, points: np.ndarray, body):
         raise ModelError(f"structure '{spec['structure']}' is for grids", field="model.structure",
                          fix="leave it out (Delaunay / mesh edges are used)")
     if p == "mesh":
-        return topology.mesh_edges(body.mesh_cells, len(points))
+        cells = extra.cells if isinstance(extra, _MeshCells) else body.mesh_cells
+        return topology.mesh_edges(cells, len(points))
     return topology.delaunay(points, body, spec["min_quality"])
 
 
@@ -209,7 +229,9 @@ def build_network(case, spec=None, seed: int = 0, stiffness: str | None = None) 
     spec = _spec(spec if spec is not None else case.section("model"))
     s = int(spec["seed"]) + int(seed)
     points, hist, body = place_points(case, spec, s)
-    top = connect(case, spec, points, body)
+    top = connect(case, spec, points, body, hist)
+    if isinstance(hist, _MeshCells):
+        hist = None
     used = np.unique(top.springs)
     if len(used) < len(points):
         lonely = np.setdiff1d(np.arange(len(points)), used)
