@@ -9,10 +9,11 @@ Layout written by :mod:`harness.runner`::
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
 Summary columns: ``case, model, stage, seed, status``, then the sizes and rule columns
-(``n_nodes, n_springs, n_elements, n_dofs, structure, rule, optimizer, weights``), then the
-scores (``G_initial, G_final, G_norm_initial, G_norm_final, G_abc_initial, G_abc_final,
-freq_error``), then every other column a stage wrote, sorted by name, then ``seconds`` and
-``error``. A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
+(``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, grouped,
+weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
+``weights``, ``G_norm_initial, G_norm_final, G_s_initial, G_s_final, G_abc_initial,
+G_abc_final, freq_error, f1_ratio``), then every other column a stage wrote, sorted by
+name, then ``seconds`` and ``error``. A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
 ``ratio_<col>`` = ours / paper right after ``<col>``: ``values = {G_final = 0.55}`` applies
 to every row of the case, ``values = {grouped = {G_final = 0.55}}`` to rows whose
 ``model`` is ``grouped``. Timing columns (:data:`TIMING`: ``seconds``, ``*_seconds``,
@@ -57,8 +58,9 @@ from pathlib import Path
 from harness.errors import SpringbenchError
 
 HEAD = ["case", "model", "stage", "seed", "status", "n_nodes", "n_springs", "n_elements",
-        "n_dofs", "structure", "rule", "optimizer", "weights", "G_initial", "G_final",
-        "G_norm_initial", "G_norm_final", "G_abc_initial", "G_abc_final", "freq_error"]
+        "n_dofs", "structure", "rule", "stiffness", "optimizer", "grouped", "weights", "G_initial",
+        "G_final", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
+        "G_abc_final", "freq_error", "f1_ratio"]
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall)$|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"

@@ -48,7 +48,7 @@ def main(args) -> int:
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)
-        cols = [c for c in ("case", "model", "seed", "status", "n_nodes", "n_springs", "optimizer",
+        cols = [c for c in ("case", "model", "seed", "status", "n_nodes", "n_springs", "stiffness", "optimizer",
                             "G_initial", "G_final", "G_norm_final", "paper_G_final", "seconds", "error")
                 if c in df]
         print(f"\n== {suite.name}: {len(df)} rows -> {csv}")
