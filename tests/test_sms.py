@@ -300,3 +300,17 @@ def test_model_mesh_file_gives_nodes_and_edges(tmp_path):
     assert np.isfinite(res.u).all()
     with pytest.raises(ModelError, match="model.mesh|placement"):
         build_network(load_case(_case_file(tmp_path, "mesh", "")))
+
+
+def test_read_minimal_foreign_vtu(tmp_path):
+    import meshio
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.0]])
+    lines = np.array([[0, 1], [1, 3], [3, 2], [2, 0], [0, 3]])
+    meshio.write(tmp_path / "f.vtu", meshio.Mesh(pts, [("line", lines)], cell_data={"stiffness": [np.arange(1.0, 6)]}))
+    net, disp = read_vtu(tmp_path / "f.vtu")
+    assert net.dim == 2 and np.allclose(net.masses, 1) and disp == {}
+    assert net.classes.tolist() == [2, 2, 2, 2] and np.allclose(net.k, np.arange(1.0, 6))
+    meshio.write(tmp_path / "g.vtu", meshio.Mesh(pts, [("line", lines)]))
+    from harness.errors import SpringbenchError
+    with pytest.raises(SpringbenchError, match="stiffness"):
+        read_vtu(tmp_path / "g.vtu")
