@@ -80,12 +80,16 @@ def catalogue_run(tmp_path_factory):
     import contextlib
     import io
     from harness import stages as stage_registry
-    res = tmp_path_factory.mktemp("catalogue") / "results"
+    import shutil
+    work = tmp_path_factory.mktemp("catalogue")
+    cat = work / "bad_inputs"  # a copy: the fake stage writes calls.log beside the case files
+    shutil.copytree(HERE / "bad_inputs", cat)
+    res = work / "results"
     out = {}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(stage_registry, "STAGES", ["test_runner_fakestages"])
-        for mode, paths in (("--quick", [HERE / "bad_inputs"]),
-                            ("--full", [p for p in CATALOGUE if header(p, "only") == ["full"]])):
+        for mode, paths in (("--quick", [cat]),
+                            ("--full", [cat / p.name for p in CATALOGUE if header(p, "only") == ["full"]])):
             err = io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
                 code = cli.main(["run", *map(str, paths), "--results", str(res), "--jobs", "1",
@@ -112,7 +116,9 @@ def test_catalogue_run_writes_only_inside_results(catalogue_run):
     import pandas as pd
     res, out = catalogue_run
     root = res.parent
-    assert all(p.resolve().is_relative_to(res.resolve()) for p in root.rglob("*") if p.is_file())
+    assert all(p.resolve().is_relative_to(res.resolve()) or p.is_relative_to(root / "bad_inputs")
+               for p in root.rglob("*") if p.is_file())
+    assert not (HERE / "bad_inputs" / "calls.log").exists()
     df = pd.read_csv(res / "bad_inputs" / "summary.csv")
     assert (df.status == "error").all() and len(df) == len(CATALOGUE)
     assert len(out["--quick"][1]) == len(CATALOGUE) - 1  # one line per failure, nothing else
