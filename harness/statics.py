@@ -240,7 +240,17 @@ class StaticsResult:
 
 def solve(network, case, loads=None) -> StaticsResult:
     """Equilibrium displacements of every load case (or the named ones); load cases with
-    the same constraints share one factorisation."""
+    the same constraints share one factorisation. Errors name the case file."""
+    try:
+        return _solve(network, case, loads)
+    except ModelError as exc:
+        if exc.file is None and getattr(case, "path", None) is not None:
+            exc.file = str(case.path)
+            exc.args = (str(exc),)
+        raise
+
+
+def _solve(network, case, loads=None) -> StaticsResult:
     loads = [l for l in case.loads if loads is None or l.name in loads]
     if not loads:
         raise ModelError("no load cases to solve", field="loads", fix="add [loads] set = 'basic2d' or [[loads.case]]")

@@ -223,7 +223,18 @@ def connect(case, spec: dict, points: np.ndarray, body, extra=None):
 
 def build_network(case, spec=None, seed: int = 0, stiffness: str | None = None) -> SpringNetwork:
     """The SMS a case's [model] table describes, with constants by ``stiffness`` (default:
-    the first rule listed). ``seed`` is added to the table's seed."""
+    the first rule listed). ``seed`` is added to the table's seed. Errors name the case file."""
+    from harness.errors import SpringbenchError
+    try:
+        return _build(case, spec, seed, stiffness)
+    except SpringbenchError as exc:
+        if exc.file is None or exc.file == "<model>":
+            exc.file = str(case.path) if case.path is not None else exc.file
+            exc.args = (str(exc),)
+        raise
+
+
+def _build(case, spec, seed, stiffness) -> SpringNetwork:
     from harness.models.masses import compute_masses
     from harness.models.stiffness_rules import spring_constants
     spec = _spec(spec if spec is not None else case.section("model"))
