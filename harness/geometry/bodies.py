@@ -50,16 +50,14 @@ def clip_halfplane(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.nd
         return poly
     if not inside.any():
         return poly[:0]
-    nxt = np.roll(np.arange(len(poly)), -1)
-    out = []
-    for i in range(len(poly)):
-        j = nxt[i]
-        if inside[i]:
-            out.append(poly[i])
-        if inside[i] != inside[j]:
-            t = d[i] / (d[i] - d[j])
-            out.append(poly[i] + t * (poly[j] - poly[i]))
-    return np.asarray(out)
+    nxt = np.roll(poly, -1, axis=0)
+    dn = np.roll(d, -1)
+    cross = inside != np.roll(inside, -1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, d / (d - dn), 0.0)
+    cand = np.stack([poly, poly + t[:, None] * (nxt - poly)], axis=1)      # (n, 2 slots, 2)
+    keep = np.stack([inside, cross], axis=1)
+    return cand[keep]
 
 
 def clip_box(poly: np.ndarray, lo, hi) -> np.ndarray:
