@@ -3,10 +3,15 @@ triangulation of polygons, and mesh files (harness.meshfile) turned into scikit-
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import skfem
 
 from harness.errors import ModelError
+
+# refined meshes are converted to C order silently (scikit-fem logs a warning each time)
+logging.getLogger("skfem.mesh.mesh").setLevel(logging.ERROR)
 
 MESHES = {"tri": skfem.MeshTri, "quad": skfem.MeshQuad, "tet": skfem.MeshTet, "hex": skfem.MeshHex}
 ELEMENTS = {

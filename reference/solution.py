@@ -27,7 +27,8 @@ from reference.fem import Discretisation
 from reference.locate import Locator
 from reference.mesh import MESHES, base_mesh, default_divisions
 
-GRADE_PASSES = 4   # per level: the smallest element near a singular corner/edge shrinks 2**4 more
+GRADE_PASSES = {2: 4, 3: 1}  # per level: the smallest element near a singular corner/edge shrinks this many halvings more
+MAX_DOFS = {2: 400_000, 3: 200_000}  # refinement stops before a level would exceed this
 GRADE_SLOPE = 0.5  # element size / distance to the singular set in the graded zone
 
 
@@ -323,7 +324,10 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
     history = [dict(n_dofs=next(iter(U.values())).size, **est)]
     for level in range(1, case.reference.max_refine + 1):
         h = float(element_size(base).max()) / 2 ** level
-        finer = refine(case, mesh, h, GRADE_PASSES * level if getattr(case.reference, "grade", True) else 0)
+        if next(iter(U.values())).size * 2 ** case.dim > MAX_DOFS[case.dim]:
+            status(f"FEM: next level would exceed {MAX_DOFS[case.dim]} dofs; stopping")
+            break
+        finer = refine(case, mesh, h, GRADE_PASSES[case.dim] * level if getattr(case.reference, "grade", True) else 0)
         if not np.allclose(finer.p[:, :nv0], p0):
             raise RuntimeError("refinement renumbered the vertices")  # scikit-fem contract
         status(f"FEM level {level} ({case.dim * finer.p.shape[1]} vertex dofs)")

@@ -13,7 +13,7 @@ import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
 
-DIRECT_MAX_3D = 30_000  # free dofs above which 'auto' uses pyamg in 3-D
+DIRECT_MAX_3D = 8_000  # free dofs above which 'auto' uses pyamg in 3-D
 RTOL = 1e-11
 
 
@@ -32,8 +32,7 @@ def solve(A: sp.csr_matrix, b: np.ndarray, method: str, near_null: np.ndarray | 
         x = lu.solve(np.ascontiguousarray(b2))
     elif method == "amg":
         import pyamg
-        ml = pyamg.smoothed_aggregation_solver(A, B=near_null, symmetry="hermitian",
-                                               strength="symmetric", max_coarse=500)
+        ml = pyamg.smoothed_aggregation_solver(A, B=near_null, symmetry="hermitian", max_coarse=500)
         x = np.column_stack([_amg_one(ml, A, col) for col in b2.T])
     elif method == "cg":
         d = A.diagonal()
