@@ -32,7 +32,7 @@ def solve(A: sp.csr_matrix, b: np.ndarray, method: str, near_null: np.ndarray | 
         x = lu.solve(np.ascontiguousarray(b2))
     elif method == "amg":
         import pyamg
-        ml = pyamg.smoothed_aggregation_solver(A, B=near_null, symmetry="hermitian", max_coarse=500)
+        ml = pyamg.smoothed_aggregation_solver(A, B=near_null, symmetry="hermitian")
         x = np.column_stack([_amg_one(ml, A, col) for col in b2.T])
     elif method == "cg":
         d = A.diagonal()

@@ -1,0 +1,91 @@
+"""Benchmark of the FEM reference: P2 assembly + solve times in 2-D and 3-D (sparse
+direct vs pyamg smoothed aggregation on the same system), and point evaluation with the
+KD-tree locator for 1e6 points against scikit-fem's own ``Basis.probes`` on a smaller
+count (its points x elements matrix limits it), as a per-point time ratio."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pandas as pd
+import skfem
+
+from harness.elasticity import isotropic_compliance, plane
+from reference import solvers
+from reference.fem import Discretisation
+from reference.locate import Locator
+
+
+def _system(cell: str, n: int):
+    dim = 2 if cell == "tri" else 3
+    M = skfem.MeshTri if dim == 2 else skfem.MeshTet
+    mesh = M.init_tensor(*[np.linspace(0, 1 + i, n * (1 + i) + 1) for i in range(dim)])
+    t0 = time.perf_counter()
+    d = Discretisation(mesh, cell, "P2")
+    C = np.linalg.inv(isotropic_compliance(1000.0, 0.3))
+    C = plane(C, "stress") if dim == 2 else C
+    K = d.stiffness(np.tile(C, (d.nelems, 1, 1)))
+    fixed = d.part_dofs(lambda x: x[0] < 1e-12, range(dim))
+    F = d.traction_load(d.part_facets(lambda x: x[0] > 1 - 1e-12), [0.0] * (dim - 1) + [-1.0])
+    free = np.setdiff1d(np.arange(d.ndof), fixed)
+    A = K[free][:, free].tocsr()
+    return d, A, F[free], d.rigid_modes()[free], time.perf_counter() - t0
+
+
+def _time_solve(A, b, R, method):
+    t0 = time.perf_counter()
+    x = solvers.solve(A, b, method, R)
+    sec = time.perf_counter() - t0
+    return sec, float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
+
+
+def run(quick: bool = False) -> pd.DataFrame:
+    rows = []
+    sizes_2d = [16, 32] if quick else [32, 64, 128]
+    for n in sizes_2d:
+        d, A, b, R, t_asm = _system("tri", n)
+        t_dir, r_dir = _time_solve(A, b, R, "direct")
+        rows.append(dict(task="solve", dim=2, element="P2 tri", n_dofs=d.ndof, solver="direct",
+                         seconds=t_dir, assembly_seconds=t_asm, residual=r_dir, ratio=1.0,
+                         note="baseline: direct"))
+        t_amg, r_amg = _time_solve(A, b, R, "amg")
+        rows.append(dict(task="solve", dim=2, element="P2 tri", n_dofs=d.ndof, solver="amg",
+                         seconds=t_amg, assembly_seconds=t_asm, residual=r_amg, ratio=t_dir / t_amg,
+                         note="ratio = direct / amg time"))
+    sizes_3d = [(4, True), (6, True)] if quick else [(6, True), (10, True), (16, False)]
+    for n, with_direct in sizes_3d:
+        d, A, b, R, t_asm = _system("tet", n)
+        t_amg, r_amg = _time_solve(A, b, R, "amg")
+        t_dir, r_dir = _time_solve(A, b, R, "direct") if with_direct else (np.nan, np.nan)
+        if with_direct:
+            rows.append(dict(task="solve", dim=3, element="P2 tet", n_dofs=d.ndof, solver="direct",
+                             seconds=t_dir, assembly_seconds=t_asm, residual=r_dir, ratio=1.0,
+                             note="baseline: direct"))
+        rows.append(dict(task="solve", dim=3, element="P2 tet", n_dofs=d.ndof, solver="amg",
+                         seconds=t_amg, assembly_seconds=t_asm, residual=r_amg,
+                         ratio=t_dir / t_amg if with_direct else np.nan,
+                         note="ratio = direct / amg time" if with_direct else "direct skipped (too slow)"))
+    # probes: 2-D P2 mesh with ~8k elements
+    mesh = skfem.MeshTri.init_tensor(np.linspace(0, 2, 91), np.linspace(0, 1, 46))
+    basis = skfem.CellBasis(mesh, skfem.ElementTriP2())
+    u = np.sin(basis.doflocs[0]) * basis.doflocs[1]
+    rng = np.random.default_rng(0)
+    n_big, n_small = (100_000, 1_000) if quick else (1_000_000, 2_000)
+    x_big = rng.uniform([0, 0], [2, 1], (n_big, 2))
+    t0 = time.perf_counter()
+    loc = Locator(mesh)
+    v = loc.evaluate(basis, u, x_big)
+    t_loc = time.perf_counter() - t0
+    xs = x_big[:n_small]
+    t0 = time.perf_counter()
+    vs = basis.probes(xs.T) @ u
+    t_sk = time.perf_counter() - t0
+    agree = float(np.abs(vs - v[:n_small]).max())
+    rows.append(dict(task="probe", dim=2, element="P2 tri", n_dofs=basis.N, solver="skfem probes",
+                     seconds=t_sk, points=n_small, ratio=1.0, residual=agree,
+                     note=f"baseline: Basis.probes on {mesh.t.shape[1]} elements"))
+    rows.append(dict(task="probe", dim=2, element="P2 tri", n_dofs=basis.N, solver="kd-tree locator",
+                     seconds=t_loc, points=n_big, ratio=(t_sk / n_small) / (t_loc / n_big), residual=agree,
+                     note="ratio = per-point time of probes / locator; residual = max difference"))
+    return pd.DataFrame(rows)
