@@ -268,3 +268,47 @@ def test_bad_bc2000_keys_are_one_line_errors(tmp_path):
     with pytest.raises(CaseError) as exc:
         load_case(f)
     assert "model.ks" in str(exc.value) and "\n" not in str(exc.value)
+
+
+# -- linear statics, calibration, anisotropy (harness/models/bc2000/linear.py) ------------------
+
+def test_stiffness_is_linear_in_the_constants_and_the_fit_recovers_them():
+    from harness.dynamics import stiffness
+    from harness.models.bc2000 import linear
+    mesh = read_mesh(REF / "meshes/tetra/cube_222/cube.mesh")
+    P, C = mesh.points, mesh.cells["tetra"]
+    true = np.array([3.0, 2.0, 1.5, 1.0, 0.7, 0.4, 2.0])
+    m = build_anisotropic(P, C, azimuth=0.2, elevation=1.1, ks=true[:6], kvs=true[6])
+    Ks = linear.unit_stiffnesses(m)
+    K = stiffness(m)
+    np.testing.assert_allclose(sum(t * Kj for t, Kj in zip(true, Ks)).toarray(), K.toarray(), atol=1e-10)
+    # synthetic loads: bottom held, nodal forces on the top
+    n = len(P)
+    held = np.repeat(P[:, 1] < 1e-9, 3)
+    rng = np.random.default_rng(0)
+    f = np.zeros(3 * n)
+    f[np.repeat(P[:, 1] > P[:, 1].max() - 1e-9, 3)] = rng.standard_normal(3 * int(np.sum(P[:, 1] > P[:, 1].max() - 1e-9)))
+    g = np.roll(f, 3)
+    g[held] = 0
+    loads = linear.Loads(["a", "b"], np.array([~held, ~held]), np.array([f, g]))
+    u_true = linear.solve(K, loads)
+    theta, G0, G1 = linear.fit(Ks, true * np.array([2, 0.5, 1, 3, 1, 0.5, 1.5]), u_true, loads, np.ones(n))
+    assert G0 > 1e-2 and G1 < 1e-8 * G0
+    np.testing.assert_allclose(theta, true, rtol=1e-5)
+
+
+def test_face_pull_anisotropy_hexa_vs_tetra():
+    """A regular hexa grid has the cube's symmetry: the six face pulls agree and nothing
+    drifts; classic springs on a tet mesh of the same cube do not."""
+    from harness.models.bc2000 import linear
+    hexa = read_mesh(REF / "meshes/hexa/cube_333/cube.mesh")
+    H = hexa.cells["hexahedron"]
+    mh = build_massspring(hexa.points, H, ks=1.0)
+    rows = linear.face_pull(hexa.points, lambda d: mh.stiffness_matrix())
+    k = np.array([r["stiffness"] for r in rows])
+    assert np.ptp(k) < 1e-9 * k.mean() and max(r["drift"] for r in rows) < 1e-9
+    tet = read_mesh(REF / "meshes/tetra/cube_333/cube.mesh")
+    mt = build_massspring(tet.points, tet.cells["tetra"], ks=1.0)
+    rows = linear.face_pull(tet.points, lambda d: mt.stiffness_matrix())
+    k = np.array([r["stiffness"] for r in rows])
+    assert np.ptp(k) > 0.01 * k.mean() and max(r["drift"] for r in rows) > 1e-3

@@ -57,10 +57,16 @@ def _cells(mesh):
     return mesh.cells.get("tetra", mesh.cells.get("hexahedron"))
 
 
-def fibre_angles(model: dict, points, cells, field: str | None = None):
-    """(azimuth, elevation) per element from the [model] keys (default: vertical)."""
+def fibre_angles(model: dict, points, cells, field: str | None = None, material=None):
+    """(azimuth, elevation) per element from the [model] keys, else from the case's
+    [material.fibre] (the FEM reference's fibre), else vertical (tetra) / x, y, z (hexa)."""
     X = points[cells]
     g = X.mean(axis=1)
+    fib = getattr(material, "fibre", None)
+    if fib is not None and not any(model.get(k) is not None for k in
+                                   ("direction", "azimuth_deg", "elevation_deg", "fibre_field")) and field is None:
+        model = dict(model, direction=fib.direction, azimuth_deg=fib.azimuth_deg,
+                     elevation_deg=fib.elevation_deg, fibre_field=fib.field, seed=fib.seed)
     field = field or model.get("fibre_field")
     if model.get("direction") is not None:
         a, e = angles_of(np.tile(model["direction"], (len(cells), 1)))
@@ -75,13 +81,13 @@ def fibre_angles(model: dict, points, cells, field: str | None = None):
     return named_field_angles(field, g, model.get("seed", 0), model.get("fibre_origin"))
 
 
-def build(name: str, model: dict, mesh, dt: float, field: str | None = None):
+def build(name: str, model: dict, mesh, dt: float, field: str | None = None, material=None):
     """One of MS, MT0, MT on the mesh, damping converted to physical units."""
     cells = _cells(mesh)
     scale = dt if model["damping_units"] == "per-step" else 1.0
     if name == "MS":
         return build_massspring(mesh.points, cells, ks=model["ms_ks"], kd=model["ms_kd"] * scale)
-    a, e = fibre_angles(model, mesh.points, cells, field)
+    a, e = fibre_angles(model, mesh.points, cells, field, material)
     ks = model["ks"] if len(model["ks"]) == 6 else model["ks"] * 6
     kd = model["kd"] if len(model["kd"]) == 3 else model["kd"] * 3
     return build_anisotropic(mesh.points, cells, azimuth=a, elevation=e, ks=ks,
@@ -290,5 +296,62 @@ def _plain(case, ctx, model, dyn):
     return rows
 
 
+def _fem(case, ctx, model, dyn):
+    """Static G of MS / MT0 / MT against the FEM reference under the case's loads (small:
+    the models are linearised at rest), first with the case's constants scaled by the best
+    single factor, then calibrated (all constants, least squares); also the anisotropy
+    measure. Rows per model: G_initial/G_final (+ normalised), the fitted constants."""
+    from harness.models.bc2000 import linear
+    from harness.parts import classify_nodes
+    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from reference import solve as reference_solve
+    path, mesh = _meshes(case, dyn)[0]
+    P = mesh.points
+    ctx.status("FEM reference")
+    ref = reference_solve(case)
+    loads = linear.case_loads(P, case)
+    classes = classify_nodes(P, case.body.bbox())
+    weights = case_weights(case)
+    u_ref = reference_displacements(ref, P, loads.names)
+    w = np.asarray(weights)[classes]
+    rows, aniso = [], []
+    for name in model["models"]:
+        ctx.status(f"{name}: stiffness")
+        m = build(name, model, mesh, 1.0, material=case.material)
+        Ks = linear.unit_stiffnesses(m)
+        theta = linear.current_parameters(m)
+        u = linear.solve(sum(t * K for t, K in zip(theta, Ks)), loads)
+        c = float(np.einsum("p,lpd,lpd->", w, u_ref, u) / np.einsum("p,lpd,lpd->", w, u, u))
+        theta0 = theta / c                                   # best single scale
+        s0 = g_arrays(u_ref, u * c, classes, weights, loads.names)
+        row = {"model": name, "mesh": _label(path, mesh), "n_nodes": len(P), "n_elements": len(_cells(mesh)),
+               "G_initial": s0.G, "G_norm_initial": s0.G_norm}
+        names = linear.parameter_names(m)
+        row.update({f"scaled_{k}": float(v) for k, v in zip(names, theta0)})
+        if dyn["calibrate"]:
+            ctx.status(f"{name}: calibration")
+            theta1, _, _ = linear.fit(Ks, theta0, u_ref, loads, w)
+            u1 = linear.solve(sum(t * K for t, K in zip(theta1, Ks)), loads)
+            s1 = g_arrays(u_ref, u1, classes, weights, loads.names)
+            row.update({"G_final": s1.G, "G_norm_final": s1.G_norm})
+            row.update({f"fit_{k}": float(v) for k, v in zip(names, theta1)})
+        else:
+            theta1 = theta0
+        # undesired anisotropy: the six face pulls, fibre along the pull for the element model
+        def K_of(d, name=name, theta1=theta1):
+            mm = m if name == "MS" else build(name, dict(model, direction=tuple(d), fibre_field=None), mesh, 1.0)
+            return sum(t * K for t, K in zip(theta1, linear.unit_stiffnesses(mm)))
+        pulls = linear.face_pull(P, K_of)
+        k = np.array([r["stiffness"] for r in pulls])
+        row.update({"stiffness_spread": float((k.max() - k.min()) / k.mean()),
+                    "drift_max": float(max(r["drift"] for r in pulls))})
+        for ang, r in zip((0, 180, None, None, 90, 270), pulls):   # the horizontal pulls for the polar plot
+            if ang is not None:
+                aniso.append({"angle": ang, "model": name, "stiffness": r["stiffness"], "drift": r["drift"]})
+        rows.append(row)
+    pd.DataFrame(aniso).to_csv(ctx.file("anisotropy.csv"), index=False)
+    return rows
+
+
 EXPERIMENTS = {"volume": _volume, "pull": _pull, "cantilever": _cantilever, "fibres": _fibres,
-               "timing": _timing, "run": _plain}
+               "timing": _timing, "run": _plain, "fem": _fem}
