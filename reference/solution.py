@@ -249,7 +249,9 @@ def solve_mesh(case, mesh) -> dict:
 
 def singular_distance(case, x: np.ndarray) -> np.ndarray | None:
     """Distance of points x (n, dim) to where elastic solutions are singular: the
-    corners of a rectangle or polygon, the edges of a box. None for mesh bodies."""
+    corners of a rectangle or polygon (and in 2-D the corners of material regions, which
+    include the points where an interface meets the boundary), the edges of a box.
+    None for mesh bodies."""
     body = case.body
     if body.shape == "polygon":
         v = np.asarray(body.vertices, float)
@@ -259,7 +261,12 @@ def singular_distance(case, x: np.ndarray) -> np.ndarray | None:
     lo, hi = body.bbox()
     d = np.minimum(np.abs(x - lo), np.abs(x - hi))
     if case.dim == 2:
-        return np.linalg.norm(d, axis=1)
+        dist = np.linalg.norm(d, axis=1)
+        for r in case.material.regions:  # where a material interface meets the boundary
+            corners = np.array([[a, b] for a in (r.lo[0], r.hi[0]) for b in (r.lo[1], r.hi[1])])
+            corners = np.clip(corners, lo, hi)
+            dist = np.minimum(dist, np.linalg.norm(x[:, None, :] - corners[None], axis=2).min(axis=1))
+        return dist
     return np.min([np.hypot(d[:, a], d[:, b]) for a, b in ((0, 1), (0, 2), (1, 2))], axis=0)
 
 

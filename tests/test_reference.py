@@ -475,3 +475,22 @@ max_refine = 0
     area = 0.5 * np.abs(np.cross((x[:, 1] - x[:, 0]).T, (x[:, 2] - x[:, 0]).T)).sum()
     assert area == pytest.approx(3.0, rel=1e-12)
     assert len(m.boundary_facets()) == len(np.unique(m.facets[:, m.boundary_facets()])) # one closed loop
+
+
+def test_stage_fibre_closed_form_and_cantilever_columns(tmp_path):
+    from harness.stages import StageContext
+    from harness.stages import reference_check as stage
+    extra = """
+[material.fibre]
+E_fibre = 4000.0
+E_cross = 900.0
+azimuth_deg = 20.0
+elevation_deg = 30.0
+"""
+    case = rect_case(tmp_path, "hex", "P1", dim=3, loads='set = "basic3d"', extra=extra, divisions=1)
+    rows = stage.run(case, StageContext(out_dir=tmp_path))
+    assert rows[0]["closed_form_error"] < 1e-10 and np.isnan(rows[1]["closed_form_error"])
+    case = load_case(ROOT / "cases/verification/cantilever_2d.toml")
+    case = dataclasses.replace(case, reference=dataclasses.replace(case.reference, max_refine=0))
+    rows = stage.run(case, StageContext(out_dir=tmp_path))
+    assert all(abs(r["f1_eb_ratio"] - 1) < 0.02 for r in rows)

@@ -2,8 +2,11 @@
 
 One row per load case: the dofs of the final mesh, the reference's own error estimate,
 the largest displacement and, where a closed form exists (a homogeneous isotropic
-rectangle/box under a standard stretch, plane stress in 2-D), the relative error
-against it at the mesh vertices."""
+rectangle/box under a standard stretch, plane stress in 2-D; or a homogeneous fibre
+material under stretch-x, reference/analytic.py), the relative error
+against it at the mesh vertices. Cases tagged "modal" also get the first natural
+frequency with each load case's constraints (f1_hz), and those tagged "cantilever"
+(a rectangle/box clamped at x0) its ratio to Euler-Bernoulli (f1_eb_ratio)."""
 
 from __future__ import annotations
 
@@ -22,10 +25,18 @@ def closed_form_error(case, sol, load) -> float:
     m = case.material
     standard = case.load_set in ("basic2d", "basic3d") and load.name.startswith("stretch-")
     homogeneous = m.fibre is None and not m.regions and (case.dim == 3 or m.plane == "stress")
-    if not (standard and homogeneous and case.body.shape in ("rectangle", "box")):
-        return float("nan")
     p = sol.mesh.p.T
-    exact = stretch_closed_form(load, p, m.E, m.nu, case.body.origin)
+    if standard and load.name == "stretch-x" and m.fibre is not None and not m.regions \
+            and m.fibre.field is None and case.body.shape in ("rectangle", "box"):
+        # homogeneous anisotropic: uniform stress, strain from the rotated compliance
+        from harness.elasticity import element_stiffness
+        from reference.analytic import uniform_stress_displacement
+        S = np.linalg.inv(element_stiffness(m, p[:1])[0])
+        exact = uniform_stress_displacement(S, load.tractions[0].vector[0], 0, p, case.body.origin)
+    elif standard and homogeneous and case.body.shape in ("rectangle", "box"):
+        exact = stretch_closed_form(load, p, m.E, m.nu, case.body.origin)
+    else:
+        return float("nan")
     u = sol.vertex_displacement(load.name)
     return float(np.linalg.norm(u - exact, axis=1).max() / np.linalg.norm(exact, axis=1).max())
 
@@ -36,8 +47,23 @@ def run(case, ctx) -> list[dict]:
     sol = reference.solve(case, status=ctx.status)
     rows = []
     for load in case.loads:
-        rows.append(dict(case=case.name, model="FEM", load=load.name, n_dofs=sol.n_dofs,
-                         error_estimate=sol.error_estimate[load.name], u_max=sol.u_max(load.name),
-                         closed_form_error=closed_form_error(case, sol, load),
-                         cached=sol.from_cache))
+        row = dict(case=case.name, model="FEM", load=load.name, n_dofs=sol.n_dofs,
+                   error_estimate=sol.error_estimate[load.name], u_max=sol.u_max(load.name),
+                   closed_form_error=closed_form_error(case, sol, load), cached=sol.from_cache)
+        if "modal" in case.tags:
+            ctx.status(f"FEM modes ({load.name})")
+            row["f1_hz"] = float(sol.frequencies(load=load.name)[0])
+            if "cantilever" in case.tags and case.body.shape in ("rectangle", "box"):
+                row["f1_eb_ratio"] = row["f1_hz"] / euler_bernoulli(case)
+        rows.append(row)
     return rows
+
+
+def euler_bernoulli(case) -> float:
+    """First bending frequency of the body as a beam along x clamped at x0 (the
+    smallest cross-section dimension bends; unit thickness in 2-D)."""
+    from reference.analytic import cantilever_frequency
+    L, *cross = case.body.size
+    h = min(cross)
+    width = 1.0 if case.dim == 2 else max(cross)
+    return cantilever_frequency(case.material.E, case.material.density, L, width * h ** 3 / 12, width * h)
