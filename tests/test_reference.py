@@ -494,3 +494,27 @@ elevation_deg = 30.0
     case = dataclasses.replace(case, reference=dataclasses.replace(case.reference, max_refine=0))
     rows = stage.run(case, StageContext(out_dir=tmp_path))
     assert all(abs(r["f1_eb_ratio"] - 1) < 0.02 for r in rows)
+
+
+@pytest.mark.parametrize("method", ["amg", "cg"])
+def test_iterative_solvers_match_direct(tmp_path, method):
+    case = rect_case(tmp_path, "tet", "P2", dim=3, loads='set = "basic3d"', divisions=2)
+    direct = reference.solve(case, cache=False)
+    other = dataclasses.replace(case, reference=dataclasses.replace(case.reference, solver=method))
+    it = reference.solve(other, cache=False)
+    for load in ("shear-xy", "shear-zy"):
+        a, b = direct.nodal(load), it.nodal(load)
+        assert np.abs(a - b).max() <= 1e-8 * np.abs(a).max()
+
+
+def test_mass_matrix_total_mass_with_region_density(tmp_path):
+    from reference.mesh import base_mesh
+    from reference.solution import densities
+    extra = "[[material.regions]]\nbox = [[0.3, -1.2], [1.55, -0.4]]\nE = 200.0\ndensity = 5.0"
+    case = rect_case(tmp_path, "quad", "P2", extra=extra + "\n", divisions=2)
+    d = Discretisation(base_mesh(case), "quad", "P2")
+    rho = densities(case.material, d.centroids())
+    M = d.mass(rho)
+    ones_x = np.zeros(d.ndof); ones_x[0::2] = 1  # a unit translation along x
+    total = ones_x @ M @ ones_x
+    assert total == pytest.approx(5.0 * 1.25 * 0.8 + 1.0 * 1.25 * 0.8, rel=1e-12)
