@@ -38,8 +38,8 @@ registry in :mod:`harness.figures`; a missing file just means no figure):
 - ``deformed*.npz`` — arrays ``points`` (n, dim) rest positions, ``springs`` (e, 2) int
   (optional), ``u_ref_<load>`` and ``u_<load>`` (n, dim) displacements per load case,
   optional scalar ``scale`` (magnification; default: 10 % of the body size for the largest
-  displacement): reference vs model deformed shapes, Deussen Fig. 8-11
-  (``fig-deformed[<suffix>]-<load>.png``).
+  displacement): reference vs model deformed shapes, one panel per load, Deussen
+  Fig. 8-11 (``fig-deformed[<suffix>].png``).
 - ``fibres*.npz`` — ``points`` (m, 3) element centres, ``directions`` (m, 3) unit fibre
   directions (optional ``u`` (m, 3) displacement of the centres): Bourguignon-Cani Fig. 6
   (``fig-fibres[<suffix>].png``).
@@ -205,7 +205,7 @@ def data_folders(suite_dir: Path, manifests: list[dict]) -> list[Path]:
     return out
 
 
-def build_suite(suite_dir, figures: bool = True) -> dict:
+def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     """(Re)write summary.csv, summary.md, seeds.csv and the figures of one suite."""
     suite_dir = Path(suite_dir)
     manifests = load_results(suite_dir)
@@ -236,7 +236,7 @@ def build_suite(suite_dir, figures: bool = True) -> dict:
     if figures:
         from harness import figures as figs
         for d in data_folders(suite_dir, manifests):
-            pngs += figs.make_case_figures(d)
+            pngs += figs.make_case_figures(d, redraw=redraw)
         pngs += figs.make_suite_figures(suite_dir)
     return {"csv": csv_path, "md": md_path, "figures": pngs, "table": df, "sources": sources}
 
@@ -302,7 +302,7 @@ def build_index(results_root) -> Path:
     return out
 
 
-def rebuild(paths=(), results_root=None, figures: bool = True) -> list[dict]:
+def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = False) -> list[dict]:
     """``springbench report``: rebuild the named suite folders (default: all under the
     results root) and the index."""
     from harness.runner import DEFAULT_RESULTS
@@ -325,7 +325,7 @@ def rebuild(paths=(), results_root=None, figures: bool = True) -> list[dict]:
         if not suites:
             raise SpringbenchError("no stored results", file=str(root), fix="run 'springbench run' first")
         roots = {root.resolve()}
-    out = [build_suite(s, figures=figures) for s in suites]
+    out = [build_suite(s, figures=figures, redraw=redraw) for s in suites]
     for r in roots:
         build_index(r)
     return out

@@ -28,7 +28,7 @@ def test_figures_from_stored_data_and_report_rebuild(tmp_path, fake, capsys):
     assert not rep.failed
     a = res / "demo" / "a"
     kinds = ["fig-trace.png", "fig-volume.png", "fig-spectrum.png", "fig-anisotropy.png",
-             "fig-lloyd.png", "fig-deformed-stretch.png", "fig-fibres.png"]
+             "fig-lloyd.png", "fig-deformed.png", "fig-fibres.png"]
     for k in kinds:
         assert (a / k).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", k
     assert (res / "demo" / "fig-lloyd-bars.png").exists()   # suite figure from summary.csv
@@ -92,3 +92,21 @@ def test_expect_ratio_only_for_ok_numeric_rows():
     assert row["paper_G_final"] == 0.5 and row["ratio_G_final"] == 2.0 and "paper_note" not in row
     err = report._with_expect({"model": "", "status": "error"}, {"G_final": 0.5})
     assert "paper_G_final" not in err
+
+
+def test_figures_are_redrawn_only_when_their_data_change(tmp_path):
+    from harness import figures
+    (tmp_path / "volume.csv").write_text("t,MS\n0,0\n1,-1\n")
+    png = figures.make_case_figures(tmp_path)[0]
+    t0 = png.stat().st_mtime_ns
+    assert figures.make_case_figures(tmp_path) == [png] and png.stat().st_mtime_ns == t0
+    import os
+    import time
+    time.sleep(0.01)
+    (tmp_path / "volume.csv").write_text("t,MS\n0,0\n1,-2\n")
+    os.utime(tmp_path / "volume.csv", ns=(t0 + 10**9, t0 + 10**9))
+    figures.make_case_figures(tmp_path)
+    assert png.stat().st_mtime_ns != t0
+    t1 = png.stat().st_mtime_ns
+    figures.make_case_figures(tmp_path, redraw=True)
+    assert png.stat().st_mtime_ns != t1

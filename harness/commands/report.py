@@ -12,10 +12,12 @@ def add_arguments(p):
                    help="results/<suite> folders (default: every suite under --results)")
     p.add_argument("--results", type=Path, default=None, help="results root (default: results/)")
     p.add_argument("--no-figures", dest="figures", action="store_false", help="tables only")
+    p.add_argument("--redraw", action="store_true",
+                   help="redraw every figure (default: only folders whose data or figure code changed)")
 
 
 def main(args) -> int:
     from harness.report import rebuild
-    for out in rebuild(args.paths, args.results, figures=args.figures):
+    for out in rebuild(args.paths, args.results, figures=args.figures, redraw=args.redraw):
         print(f"{out['csv']}  ({len(out['table'])} rows, {len(out['figures'])} figures)")
     return 0

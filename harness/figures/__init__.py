@@ -46,8 +46,41 @@ def _make(mods, folder: Path) -> list[Path]:
     return out
 
 
-def make_case_figures(folder) -> list[Path]:
-    return _make(figure_modules("case"), folder)
+STAMP = ".figures.json"
+
+
+def _stamp(folder: Path, mods) -> str:
+    """What a folder's figures depend on: its data files (name, size, mtime) and the
+    figure code."""
+    import hashlib
+    h = hashlib.sha256()
+    for f in sorted(folder.iterdir()):
+        if f.is_file() and not f.name.startswith((".", "fig-")):
+            st = f.stat()
+            h.update(f"{f.name}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
+    for m in mods + [sys.modules[__name__]]:
+        h.update(Path(m.__file__).read_bytes())
+    return h.hexdigest()
+
+
+def make_case_figures(folder, redraw: bool = False) -> list[Path]:
+    """Figures of one case data folder; skipped (the existing PNGs returned) when its
+    data files and the figure code are unchanged since the last drawing."""
+    import json
+    folder = Path(folder)
+    mods = figure_modules("case")
+    stamp, sfile = _stamp(folder, mods), folder / STAMP
+    if not redraw and sfile.exists():
+        try:
+            old = json.loads(sfile.read_text())
+            pngs = [folder / n for n in old["pngs"]]
+            if old["stamp"] == stamp and all(p.exists() for p in pngs):
+                return pngs
+        except (ValueError, KeyError, TypeError):
+            pass
+    out = _make(mods, folder)
+    sfile.write_text(json.dumps({"stamp": stamp, "pngs": [p.name for p in out if p.parent == folder]}))
+    return out
 
 
 def make_suite_figures(suite_dir) -> list[Path]:
@@ -62,7 +95,9 @@ def pyplot():
     return plt
 
 
-def save(fig, path: Path) -> Path:
-    fig.tight_layout()
-    fig.savefig(path, dpi=110, metadata={"Software": None})
+def save(fig, path: Path, tight: bool = True) -> Path:
+    """Write ``fig`` as PNG (``tight``: tight_layout first, which draws the figure twice)."""
+    if tight:
+        fig.tight_layout()
+    fig.savefig(path, dpi=100, metadata={"Software": None})
     return path
