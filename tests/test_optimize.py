@@ -104,3 +104,18 @@ def test_bad_problem_input_is_one_line_error():
         FitProblem.from_network(pts, spr, -np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names)
     with pytest.raises(SpringbenchError, match="names"):
         FitProblem.from_network(pts, spr, np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names[:2])
+
+
+@pytest.mark.parametrize("shape", [(34, 34), (9, 9, 9)])
+def test_multifrontal_cholesky_matches_direct_solve(shape):
+    import scipy.sparse.linalg as spla
+    from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic
+    prob, _ = recoverable_problem(shape, seed=3)
+    for s in prob.load_sets()[:2]:
+        k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
+        K = s.stiffness(k)
+        F = MultifrontalCholesky(K, Symbolic(K, s.coords, leaf=40))
+        rhs = np.random.default_rng(1).normal(size=(K.shape[0], 3))
+        ref = spla.splu(K.tocsc()).solve(rhs)
+        assert np.allclose(F.solve(rhs), ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+        assert np.allclose(F.solve(rhs[:, 0]), ref[:, 0], rtol=1e-9, atol=1e-12 * np.abs(ref).max())

@@ -56,7 +56,7 @@ class _Set:
             self.U = self.Kinv @ ls.F
             old_cache = {}
         else:
-            self.fac = ls.factor(k)
+            self.fac = ls.factor(k, kind="multifrontal")   # batched solves: multifrontal is faster
             self.U = self.fac.solve(ls.F)
         self.U = self.U.reshape(ls.F.shape)
         self.R = ls.W * (ls.Uref - self.U)

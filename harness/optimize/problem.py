@@ -178,6 +178,7 @@ class LoadSet:
     const: float
     perm: np.ndarray | None
     name: str
+    coords: np.ndarray | None = None
 
     def stiffness(self, k) -> sp.csc_matrix:
         """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
@@ -187,11 +188,22 @@ class LoadSet:
         K.data = self._kmap @ np.asarray(k, float)
         return K
 
-    def factor(self, k):
-        """A solver for K(k): dense Cholesky for small blocks, else sparse LU."""
+    def factor(self, k, kind: str = "auto"):
+        """A solver for K(k): dense Cholesky for small blocks; else "multifrontal"
+        (nested-dissection Cholesky, best in 3-D and for many right-hand sides) or
+        "superlu" (SuperLU in nested-dissection order, best for single solves in 2-D).
+        "auto" picks multifrontal in 3-D, SuperLU in 2-D."""
         from harness.optimize.linalg import DenseFactor, Factor
         if self.B.shape[0] <= DENSE_FACTOR_MAX:
             return DenseFactor(self.stiffness(k).toarray(), self.name)
+        if kind == "auto":
+            kind = "multifrontal" if self.coords is not None and self.coords.shape[1] == 3 else "superlu"
+        if kind == "multifrontal" and self.coords is not None and self.B.shape[0] > 2000:
+            from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic
+            K = self.stiffness(k)
+            if self.__dict__.get("_sym") is None:
+                self._sym = Symbolic(K, self.coords)
+            return MultifrontalCholesky(K, self._sym, self.name)
         return Factor(self.stiffness(k), self.perm, self.name)
 
 
@@ -248,7 +260,8 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
             perm = nested_dissection(K, problem.coords[idx[0]])
         out.append(LoadSet(B, idx, np.stack([b.f for b in bl], 1), np.stack([b.u_ref for b in bl], 1),
                            np.stack([b.w for b in bl], 1), float(sum(b.const for b in bl)), perm,
-                           "+".join(b.name for b in bl)))
+                           "+".join(b.name for b in bl),
+                           None if problem.coords is None else problem.coords[idx[0]]))
     return out
 
 
