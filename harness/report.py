@@ -14,7 +14,9 @@ weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
 ``weights``, ``G_norm_initial, G_norm_final, G_s_initial, G_s_final, G_abc_initial,
 G_abc_final, freq_error, f1_ratio``), then every other column a stage wrote, sorted by
 name, then ``seconds`` and ``error``. A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
-``ratio_<col>`` = ours / paper right after ``<col>``: ``values = {G_final = 0.55}`` applies
+``ratio_<col>`` = ours / paper right after ``<col>`` (only on rows that have ``<col>``);
+rows with ``G_initial`` != ``G_final`` get ``improvement`` = G_initial / G_final and, where
+the paper gives both, ``paper_improvement``. ``values = {G_final = 0.55}`` applies
 to every row of the case, ``values = {grouped = {G_final = 0.55}}`` to rows whose
 ``model`` is ``grouped``. Timing columns (:data:`TIMING`: ``seconds``, ``*_seconds``,
 ``*_ms``, ``*_per_s``, ``*_per_second``) are the only ones allowed to differ between two
@@ -59,7 +61,7 @@ from harness.errors import SpringbenchError
 
 HEAD = ["case", "model", "stage", "seed", "status", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "grouped", "weights", "G_initial",
-        "G_final", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
+        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
         "G_abc_final", "freq_error", "f1_ratio"]
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall)$|_(seconds|ms|per_s|per_second)$")
@@ -101,10 +103,19 @@ def _with_expect(row: dict, expect: dict) -> dict:
     if row.get("status", "ok") != "ok":
         return row
     for col, paper in flat.items():
-        row.setdefault(f"paper_{col}", paper)
         ours = row.get(col)
-        if _num(ours) and _num(row[f"paper_{col}"]) and row[f"paper_{col}"] != 0:
+        if not _num(ours):  # the paper's number only beside a number of ours
+            continue
+        row.setdefault(f"paper_{col}", paper)
+        if _num(row[f"paper_{col}"]) and row[f"paper_{col}"] != 0:
             row.setdefault(f"ratio_{col}", ours / row[f"paper_{col}"])
+    g0, g1 = row.get("G_initial"), row.get("G_final")
+    if _num(g0) and _num(g1) and g1 > 0 and g0 != g1:
+        # the papers' absolute G depends on units they do not state: compare improvements
+        row.setdefault("improvement", g0 / g1)
+        p0, p1 = row.get("paper_G_initial"), row.get("paper_G_final")
+        if _num(p0) and _num(p1) and p1 > 0:
+            row.setdefault("paper_improvement", p0 / p1)
     return row
 
 

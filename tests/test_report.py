@@ -92,6 +92,11 @@ def test_expect_ratio_only_for_ok_numeric_rows():
     assert row["paper_G_final"] == 0.5 and row["ratio_G_final"] == 2.0 and "paper_note" not in row
     err = report._with_expect({"model": "", "status": "error"}, {"G_final": 0.5})
     assert "paper_G_final" not in err
+    fem = report._with_expect({"model": "FEM", "status": "ok", "G_final": float("nan")}, {"G_final": 0.5})
+    assert "paper_G_final" not in fem
+    opt = report._with_expect({"model": "x", "status": "ok", "G_initial": 3.0, "G_final": 1.5},
+                              {"G_initial": 2.8, "G_final": 0.56})
+    assert opt["improvement"] == 2.0 and opt["paper_improvement"] == pytest.approx(5.0)
 
 
 def test_figures_are_redrawn_only_when_their_data_change(tmp_path):
