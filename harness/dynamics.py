@@ -105,7 +105,7 @@ def _kernel_arrays(model, dt):
                 np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), z1, z1,
                 np.zeros((0, nv)), False, np.zeros((0, 6, nw), np.int64))
     springs = (np.zeros(0, np.int64), np.zeros(0, np.int64), z1, z1, z1)
-    tet, hexa = empty_el(4, 3), empty_el(8, 4)
+    tet, hexa = empty_el(4, 3) + (np.zeros((0, 6, 4)),), empty_el(8, 4)
     if isinstance(model, MassSpring):
         springs = (np.ascontiguousarray(model.springs[:, 0], np.int64), np.ascontiguousarray(model.springs[:, 1], np.int64),
                    np.ascontiguousarray(model.ks, float), model.kd / dt, np.ascontiguousarray(model.L0, float))
@@ -120,8 +120,10 @@ def _kernel_arrays(model, dt):
             (model.kvd / dt, float), (D0, float))) + (bool(model.volume), np.ascontiguousarray(ax.nodes, np.int64))
         if model.is_hex:
             hexa = el
-        else:
-            tet = el
+        else:       # dense local weights (m, 6, 4) for the tetra kernel
+            wl = np.zeros((len(model.cells), 6, 4))
+            np.put_along_axis(wl, local, ax.weights, axis=2)
+            tet = el + (wl,)
     else:
         return None
     return springs, tet, hexa

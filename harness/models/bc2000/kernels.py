@@ -10,63 +10,66 @@ from numba import njit
 
 
 @njit(cache=True, error_model="numpy")
-def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx):
-    frc = np.empty((4, 3))
+def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl):
     for e in range(cells.shape[0]):
-        g00 = gidx[e, 0, 0]; c00 = cf[e, 0, 0]
-        g01 = gidx[e, 0, 1]; c01 = cf[e, 0, 1]
-        g02 = gidx[e, 0, 2]; c02 = cf[e, 0, 2]
-        E0x = c00 * x[g00, 0] + c01 * x[g01, 0] + c02 * x[g02, 0]
-        V0x = c00 * d[g00, 0] + c01 * d[g01, 0] + c02 * d[g02, 0]
-        E0y = c00 * x[g00, 1] + c01 * x[g01, 1] + c02 * x[g02, 1]
-        V0y = c00 * d[g00, 1] + c01 * d[g01, 1] + c02 * d[g02, 1]
-        E0z = c00 * x[g00, 2] + c01 * x[g01, 2] + c02 * x[g02, 2]
-        V0z = c00 * d[g00, 2] + c01 * d[g01, 2] + c02 * d[g02, 2]
-        g10 = gidx[e, 1, 0]; c10 = cf[e, 1, 0]
-        g11 = gidx[e, 1, 1]; c11 = cf[e, 1, 1]
-        g12 = gidx[e, 1, 2]; c12 = cf[e, 1, 2]
-        E1x = c10 * x[g10, 0] + c11 * x[g11, 0] + c12 * x[g12, 0]
-        V1x = c10 * d[g10, 0] + c11 * d[g11, 0] + c12 * d[g12, 0]
-        E1y = c10 * x[g10, 1] + c11 * x[g11, 1] + c12 * x[g12, 1]
-        V1y = c10 * d[g10, 1] + c11 * d[g11, 1] + c12 * d[g12, 1]
-        E1z = c10 * x[g10, 2] + c11 * x[g11, 2] + c12 * x[g12, 2]
-        V1z = c10 * d[g10, 2] + c11 * d[g11, 2] + c12 * d[g12, 2]
-        g20 = gidx[e, 2, 0]; c20 = cf[e, 2, 0]
-        g21 = gidx[e, 2, 1]; c21 = cf[e, 2, 1]
-        g22 = gidx[e, 2, 2]; c22 = cf[e, 2, 2]
-        E2x = c20 * x[g20, 0] + c21 * x[g21, 0] + c22 * x[g22, 0]
-        V2x = c20 * d[g20, 0] + c21 * d[g21, 0] + c22 * d[g22, 0]
-        E2y = c20 * x[g20, 1] + c21 * x[g21, 1] + c22 * x[g22, 1]
-        V2y = c20 * d[g20, 1] + c21 * d[g21, 1] + c22 * d[g22, 1]
-        E2z = c20 * x[g20, 2] + c21 * x[g21, 2] + c22 * x[g22, 2]
-        V2z = c20 * d[g20, 2] + c21 * d[g21, 2] + c22 * d[g22, 2]
-        g30 = gidx[e, 3, 0]; c30 = cf[e, 3, 0]
-        g31 = gidx[e, 3, 1]; c31 = cf[e, 3, 1]
-        g32 = gidx[e, 3, 2]; c32 = cf[e, 3, 2]
-        E3x = c30 * x[g30, 0] + c31 * x[g31, 0] + c32 * x[g32, 0]
-        V3x = c30 * d[g30, 0] + c31 * d[g31, 0] + c32 * d[g32, 0]
-        E3y = c30 * x[g30, 1] + c31 * x[g31, 1] + c32 * x[g32, 1]
-        V3y = c30 * d[g30, 1] + c31 * d[g31, 1] + c32 * d[g32, 1]
-        E3z = c30 * x[g30, 2] + c31 * x[g31, 2] + c32 * x[g32, 2]
-        V3z = c30 * d[g30, 2] + c31 * d[g31, 2] + c32 * d[g32, 2]
-        g40 = gidx[e, 4, 0]; c40 = cf[e, 4, 0]
-        g41 = gidx[e, 4, 1]; c41 = cf[e, 4, 1]
-        g42 = gidx[e, 4, 2]; c42 = cf[e, 4, 2]
-        E4x = c40 * x[g40, 0] + c41 * x[g41, 0] + c42 * x[g42, 0]
-        V4x = c40 * d[g40, 0] + c41 * d[g41, 0] + c42 * d[g42, 0]
-        E4y = c40 * x[g40, 1] + c41 * x[g41, 1] + c42 * x[g42, 1]
-        V4y = c40 * d[g40, 1] + c41 * d[g41, 1] + c42 * d[g42, 1]
-        E4z = c40 * x[g40, 2] + c41 * x[g41, 2] + c42 * x[g42, 2]
-        V4z = c40 * d[g40, 2] + c41 * d[g41, 2] + c42 * d[g42, 2]
-        g50 = gidx[e, 5, 0]; c50 = cf[e, 5, 0]
-        g51 = gidx[e, 5, 1]; c51 = cf[e, 5, 1]
-        g52 = gidx[e, 5, 2]; c52 = cf[e, 5, 2]
-        E5x = c50 * x[g50, 0] + c51 * x[g51, 0] + c52 * x[g52, 0]
-        V5x = c50 * d[g50, 0] + c51 * d[g51, 0] + c52 * d[g52, 0]
-        E5y = c50 * x[g50, 1] + c51 * x[g51, 1] + c52 * x[g52, 1]
-        V5y = c50 * d[g50, 1] + c51 * d[g51, 1] + c52 * d[g52, 1]
-        E5z = c50 * x[g50, 2] + c51 * x[g51, 2] + c52 * x[g52, 2]
-        V5z = c50 * d[g50, 2] + c51 * d[g51, 2] + c52 * d[g52, 2]
+        q0 = cells[e, 0]
+        p0x = x[q0, 0]; u0x = d[q0, 0]
+        p0y = x[q0, 1]; u0y = d[q0, 1]
+        p0z = x[q0, 2]; u0z = d[q0, 2]
+        q1 = cells[e, 1]
+        p1x = x[q1, 0]; u1x = d[q1, 0]
+        p1y = x[q1, 1]; u1y = d[q1, 1]
+        p1z = x[q1, 2]; u1z = d[q1, 2]
+        q2 = cells[e, 2]
+        p2x = x[q2, 0]; u2x = d[q2, 0]
+        p2y = x[q2, 1]; u2y = d[q2, 1]
+        p2z = x[q2, 2]; u2z = d[q2, 2]
+        q3 = cells[e, 3]
+        p3x = x[q3, 0]; u3x = d[q3, 0]
+        p3y = x[q3, 1]; u3y = d[q3, 1]
+        p3z = x[q3, 2]; u3z = d[q3, 2]
+        w00 = wl[e, 0, 0]; w01 = wl[e, 0, 1]; w02 = wl[e, 0, 2]; w03 = wl[e, 0, 3]
+        E0x = ((w00 * p0x + w01 * p1x) + w02 * p2x) + w03 * p3x
+        V0x = ((w00 * u0x + w01 * u1x) + w02 * u2x) + w03 * u3x
+        E0y = ((w00 * p0y + w01 * p1y) + w02 * p2y) + w03 * p3y
+        V0y = ((w00 * u0y + w01 * u1y) + w02 * u2y) + w03 * u3y
+        E0z = ((w00 * p0z + w01 * p1z) + w02 * p2z) + w03 * p3z
+        V0z = ((w00 * u0z + w01 * u1z) + w02 * u2z) + w03 * u3z
+        w10 = wl[e, 1, 0]; w11 = wl[e, 1, 1]; w12 = wl[e, 1, 2]; w13 = wl[e, 1, 3]
+        E1x = ((w10 * p0x + w11 * p1x) + w12 * p2x) + w13 * p3x
+        V1x = ((w10 * u0x + w11 * u1x) + w12 * u2x) + w13 * u3x
+        E1y = ((w10 * p0y + w11 * p1y) + w12 * p2y) + w13 * p3y
+        V1y = ((w10 * u0y + w11 * u1y) + w12 * u2y) + w13 * u3y
+        E1z = ((w10 * p0z + w11 * p1z) + w12 * p2z) + w13 * p3z
+        V1z = ((w10 * u0z + w11 * u1z) + w12 * u2z) + w13 * u3z
+        w20 = wl[e, 2, 0]; w21 = wl[e, 2, 1]; w22 = wl[e, 2, 2]; w23 = wl[e, 2, 3]
+        E2x = ((w20 * p0x + w21 * p1x) + w22 * p2x) + w23 * p3x
+        V2x = ((w20 * u0x + w21 * u1x) + w22 * u2x) + w23 * u3x
+        E2y = ((w20 * p0y + w21 * p1y) + w22 * p2y) + w23 * p3y
+        V2y = ((w20 * u0y + w21 * u1y) + w22 * u2y) + w23 * u3y
+        E2z = ((w20 * p0z + w21 * p1z) + w22 * p2z) + w23 * p3z
+        V2z = ((w20 * u0z + w21 * u1z) + w22 * u2z) + w23 * u3z
+        w30 = wl[e, 3, 0]; w31 = wl[e, 3, 1]; w32 = wl[e, 3, 2]; w33 = wl[e, 3, 3]
+        E3x = ((w30 * p0x + w31 * p1x) + w32 * p2x) + w33 * p3x
+        V3x = ((w30 * u0x + w31 * u1x) + w32 * u2x) + w33 * u3x
+        E3y = ((w30 * p0y + w31 * p1y) + w32 * p2y) + w33 * p3y
+        V3y = ((w30 * u0y + w31 * u1y) + w32 * u2y) + w33 * u3y
+        E3z = ((w30 * p0z + w31 * p1z) + w32 * p2z) + w33 * p3z
+        V3z = ((w30 * u0z + w31 * u1z) + w32 * u2z) + w33 * u3z
+        w40 = wl[e, 4, 0]; w41 = wl[e, 4, 1]; w42 = wl[e, 4, 2]; w43 = wl[e, 4, 3]
+        E4x = ((w40 * p0x + w41 * p1x) + w42 * p2x) + w43 * p3x
+        V4x = ((w40 * u0x + w41 * u1x) + w42 * u2x) + w43 * u3x
+        E4y = ((w40 * p0y + w41 * p1y) + w42 * p2y) + w43 * p3y
+        V4y = ((w40 * u0y + w41 * u1y) + w42 * u2y) + w43 * u3y
+        E4z = ((w40 * p0z + w41 * p1z) + w42 * p2z) + w43 * p3z
+        V4z = ((w40 * u0z + w41 * u1z) + w42 * u2z) + w43 * u3z
+        w50 = wl[e, 5, 0]; w51 = wl[e, 5, 1]; w52 = wl[e, 5, 2]; w53 = wl[e, 5, 3]
+        E5x = ((w50 * p0x + w51 * p1x) + w52 * p2x) + w53 * p3x
+        V5x = ((w50 * u0x + w51 * u1x) + w52 * u2x) + w53 * u3x
+        E5y = ((w50 * p0y + w51 * p1y) + w52 * p2y) + w53 * p3y
+        V5y = ((w50 * u0y + w51 * u1y) + w52 * u2y) + w53 * u3y
+        E5z = ((w50 * p0z + w51 * p1z) + w52 * p2z) + w53 * p3z
+        V5z = ((w50 * u0z + w51 * u1z) + w52 * u2z) + w53 * u3z
         l0x = E0x - E1x
         v0x = V0x - V1x
         l0y = E0y - E1y
@@ -112,115 +115,31 @@ def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx
         G0x = (n0x * s0 + K12 * n1x) + K13 * n2x
         G1x = (n1x * s1 + K12 * n0x) + K23 * n2x
         G2x = (n2x * s2 + K13 * n0x) + K23 * n1x
+        H0x = -G0x; H1x = -G1x; H2x = -G2x
         G0y = (n0y * s0 + K12 * n1y) + K13 * n2y
         G1y = (n1y * s1 + K12 * n0y) + K23 * n2y
         G2y = (n2y * s2 + K13 * n0y) + K23 * n1y
+        H0y = -G0y; H1y = -G1y; H2y = -G2y
         G0z = (n0z * s0 + K12 * n1z) + K13 * n2z
         G1z = (n1z * s1 + K12 * n0z) + K23 * n2z
         G2z = (n2z * s2 + K13 * n0z) + K23 * n1z
-        for i in range(4):
-            frc[i, 0] = 0.0; frc[i, 1] = 0.0; frc[i, 2] = 0.0
-        j = vi[e, 0, 0]
-        frc[j, 0] += c00 * (G0x)
-        frc[j, 1] += c00 * (G0y)
-        frc[j, 2] += c00 * (G0z)
-        j = vi[e, 0, 1]
-        frc[j, 0] += c01 * (G0x)
-        frc[j, 1] += c01 * (G0y)
-        frc[j, 2] += c01 * (G0z)
-        j = vi[e, 0, 2]
-        frc[j, 0] += c02 * (G0x)
-        frc[j, 1] += c02 * (G0y)
-        frc[j, 2] += c02 * (G0z)
-        j = vi[e, 1, 0]
-        frc[j, 0] += c10 * (-G0x)
-        frc[j, 1] += c10 * (-G0y)
-        frc[j, 2] += c10 * (-G0z)
-        j = vi[e, 1, 1]
-        frc[j, 0] += c11 * (-G0x)
-        frc[j, 1] += c11 * (-G0y)
-        frc[j, 2] += c11 * (-G0z)
-        j = vi[e, 1, 2]
-        frc[j, 0] += c12 * (-G0x)
-        frc[j, 1] += c12 * (-G0y)
-        frc[j, 2] += c12 * (-G0z)
-        j = vi[e, 2, 0]
-        frc[j, 0] += c20 * (G1x)
-        frc[j, 1] += c20 * (G1y)
-        frc[j, 2] += c20 * (G1z)
-        j = vi[e, 2, 1]
-        frc[j, 0] += c21 * (G1x)
-        frc[j, 1] += c21 * (G1y)
-        frc[j, 2] += c21 * (G1z)
-        j = vi[e, 2, 2]
-        frc[j, 0] += c22 * (G1x)
-        frc[j, 1] += c22 * (G1y)
-        frc[j, 2] += c22 * (G1z)
-        j = vi[e, 3, 0]
-        frc[j, 0] += c30 * (-G1x)
-        frc[j, 1] += c30 * (-G1y)
-        frc[j, 2] += c30 * (-G1z)
-        j = vi[e, 3, 1]
-        frc[j, 0] += c31 * (-G1x)
-        frc[j, 1] += c31 * (-G1y)
-        frc[j, 2] += c31 * (-G1z)
-        j = vi[e, 3, 2]
-        frc[j, 0] += c32 * (-G1x)
-        frc[j, 1] += c32 * (-G1y)
-        frc[j, 2] += c32 * (-G1z)
-        j = vi[e, 4, 0]
-        frc[j, 0] += c40 * (G2x)
-        frc[j, 1] += c40 * (G2y)
-        frc[j, 2] += c40 * (G2z)
-        j = vi[e, 4, 1]
-        frc[j, 0] += c41 * (G2x)
-        frc[j, 1] += c41 * (G2y)
-        frc[j, 2] += c41 * (G2z)
-        j = vi[e, 4, 2]
-        frc[j, 0] += c42 * (G2x)
-        frc[j, 1] += c42 * (G2y)
-        frc[j, 2] += c42 * (G2z)
-        j = vi[e, 5, 0]
-        frc[j, 0] += c50 * (-G2x)
-        frc[j, 1] += c50 * (-G2y)
-        frc[j, 2] += c50 * (-G2z)
-        j = vi[e, 5, 1]
-        frc[j, 0] += c51 * (-G2x)
-        frc[j, 1] += c51 * (-G2y)
-        frc[j, 2] += c51 * (-G2z)
-        j = vi[e, 5, 2]
-        frc[j, 0] += c52 * (-G2x)
-        frc[j, 1] += c52 * (-G2y)
-        frc[j, 2] += c52 * (-G2z)
+        H0z = -G0z; H1z = -G1z; H2z = -G2z
+        r0x = ((((w00 * G0x + w10 * H0x) + w20 * G1x) + w30 * H1x) + w40 * G2x) + w50 * H2x
+        r0y = ((((w00 * G0y + w10 * H0y) + w20 * G1y) + w30 * H1y) + w40 * G2y) + w50 * H2y
+        r0z = ((((w00 * G0z + w10 * H0z) + w20 * G1z) + w30 * H1z) + w40 * G2z) + w50 * H2z
+        r1x = ((((w01 * G0x + w11 * H0x) + w21 * G1x) + w31 * H1x) + w41 * G2x) + w51 * H2x
+        r1y = ((((w01 * G0y + w11 * H0y) + w21 * G1y) + w31 * H1y) + w41 * G2y) + w51 * H2y
+        r1z = ((((w01 * G0z + w11 * H0z) + w21 * G1z) + w31 * H1z) + w41 * G2z) + w51 * H2z
+        r2x = ((((w02 * G0x + w12 * H0x) + w22 * G1x) + w32 * H1x) + w42 * G2x) + w52 * H2x
+        r2y = ((((w02 * G0y + w12 * H0y) + w22 * G1y) + w32 * H1y) + w42 * G2y) + w52 * H2y
+        r2z = ((((w02 * G0z + w12 * H0z) + w22 * G1z) + w32 * H1z) + w42 * G2z) + w52 * H2z
+        r3x = ((((w03 * G0x + w13 * H0x) + w23 * G1x) + w33 * H1x) + w43 * G2x) + w53 * H2x
+        r3y = ((((w03 * G0y + w13 * H0y) + w23 * G1y) + w33 * H1y) + w43 * G2y) + w53 * H2y
+        r3z = ((((w03 * G0z + w13 * H0z) + w23 * G1z) + w33 * H1z) + w43 * G2z) + w53 * H2z
         if vol:
-            q0 = cells[e, 0]
-            p0x = x[q0, 0]; u0x = d[q0, 0]
-            p0y = x[q0, 1]; u0y = d[q0, 1]
-            p0z = x[q0, 2]; u0z = d[q0, 2]
-            q1 = cells[e, 1]
-            p1x = x[q1, 0]; u1x = d[q1, 0]
-            p1y = x[q1, 1]; u1y = d[q1, 1]
-            p1z = x[q1, 2]; u1z = d[q1, 2]
-            q2 = cells[e, 2]
-            p2x = x[q2, 0]; u2x = d[q2, 0]
-            p2y = x[q2, 1]; u2y = d[q2, 1]
-            p2z = x[q2, 2]; u2z = d[q2, 2]
-            q3 = cells[e, 3]
-            p3x = x[q3, 0]; u3x = d[q3, 0]
-            p3y = x[q3, 1]; u3y = d[q3, 1]
-            p3z = x[q3, 2]; u3z = d[q3, 2]
-            gx = ((p0x + p1x) + p2x) + p3x
-            gx = 0.25 * gx
-            gvx = ((u0x + u1x) + u2x) + u3x
-            gvx = 0.25 * gvx
-            gy = ((p0y + p1y) + p2y) + p3y
-            gy = 0.25 * gy
-            gvy = ((u0y + u1y) + u2y) + u3y
-            gvy = 0.25 * gvy
-            gz = ((p0z + p1z) + p2z) + p3z
-            gz = 0.25 * gz
-            gvz = ((u0z + u1z) + u2z) + u3z
-            gvz = 0.25 * gvz
+            gx = 0.25 * (((p0x + p1x) + p2x) + p3x)
+            gy = 0.25 * (((p0y + p1y) + p2y) + p3y)
+            gz = 0.25 * (((p0z + p1z) + p2z) + p3z)
             d0x = p0x - gx
             d0y = p0y - gy
             d0z = p0z - gz
@@ -242,35 +161,31 @@ def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx
             R3 = np.sqrt(d3x * d3x + d3y * d3y + d3z * d3z)
             J3 = 1.0 / R3
             K = -(kvs[e] * ((((R0 + R1) + R2) + R3) - D0[e, 0]))
-            f[q0, 0] += frc[0, 0] + K * (d0x * J0)
-            f[q0, 1] += frc[0, 1] + K * (d0y * J0)
-            f[q0, 2] += frc[0, 2] + K * (d0z * J0)
-            f[q1, 0] += frc[1, 0] + K * (d1x * J1)
-            f[q1, 1] += frc[1, 1] + K * (d1y * J1)
-            f[q1, 2] += frc[1, 2] + K * (d1z * J1)
-            f[q2, 0] += frc[2, 0] + K * (d2x * J2)
-            f[q2, 1] += frc[2, 1] + K * (d2y * J2)
-            f[q2, 2] += frc[2, 2] + K * (d2z * J2)
-            f[q3, 0] += frc[3, 0] + K * (d3x * J3)
-            f[q3, 1] += frc[3, 1] + K * (d3y * J3)
-            f[q3, 2] += frc[3, 2] + K * (d3z * J3)
+            f[q0, 0] += r0x + K * (d0x * J0)
+            f[q0, 1] += r0y + K * (d0y * J0)
+            f[q0, 2] += r0z + K * (d0z * J0)
+            f[q1, 0] += r1x + K * (d1x * J1)
+            f[q1, 1] += r1y + K * (d1y * J1)
+            f[q1, 2] += r1z + K * (d1z * J1)
+            f[q2, 0] += r2x + K * (d2x * J2)
+            f[q2, 1] += r2y + K * (d2y * J2)
+            f[q2, 2] += r2z + K * (d2z * J2)
+            f[q3, 0] += r3x + K * (d3x * J3)
+            f[q3, 1] += r3y + K * (d3y * J3)
+            f[q3, 2] += r3z + K * (d3z * J3)
         else:
-            q0 = cells[e, 0]
-            f[q0, 0] += frc[0, 0]
-            f[q0, 1] += frc[0, 1]
-            f[q0, 2] += frc[0, 2]
-            q1 = cells[e, 1]
-            f[q1, 0] += frc[1, 0]
-            f[q1, 1] += frc[1, 1]
-            f[q1, 2] += frc[1, 2]
-            q2 = cells[e, 2]
-            f[q2, 0] += frc[2, 0]
-            f[q2, 1] += frc[2, 1]
-            f[q2, 2] += frc[2, 2]
-            q3 = cells[e, 3]
-            f[q3, 0] += frc[3, 0]
-            f[q3, 1] += frc[3, 1]
-            f[q3, 2] += frc[3, 2]
+            f[q0, 0] += r0x
+            f[q0, 1] += r0y
+            f[q0, 2] += r0z
+            f[q1, 0] += r1x
+            f[q1, 1] += r1y
+            f[q1, 2] += r1z
+            f[q2, 0] += r2x
+            f[q2, 1] += r2y
+            f[q2, 2] += r2z
+            f[q3, 0] += r3x
+            f[q3, 1] += r3y
+            f[q3, 2] += r3z
 
 @njit(cache=True, error_model="numpy")
 def hex_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx):
