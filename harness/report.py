@@ -153,6 +153,12 @@ def summary_frame(manifests: list[dict]):
     return df[order_columns(df.columns)]
 
 
+def key_columns(cols) -> list[str]:
+    """The columns of summary.md: the stable head, the paper comparisons, the tail."""
+    return [c for c in cols if c in HEAD or c in TAIL or c.startswith(("paper_", "ratio_"))
+            or c == "lloyd_iterations"]
+
+
 def comparable(df):
     """The table without timing columns: what must be bit-identical between two runs."""
     return df[[c for c in df.columns if not TIMING.search(c)]]
@@ -234,10 +240,12 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     elif seeds_path.exists():
         seeds_path.unlink()
     n_err = int((df.get("status") == "error").sum()) if "status" in df else 0
+    key = key_columns(df.columns)
     md = [f"# {suite_dir.name}\n",
-          f"{len(manifests)} results, {len(df)} rows, {n_err} errors. Columns: see harness/report.py. "
-          "The papers' absolute G depends on units they do not state: compare ratios "
-          "(improvement factors) and trends.\n", markdown_table(df)]
+          f"{len(manifests)} results, {len(df)} rows, {n_err} errors. The key columns are shown; "
+          f"all {len(df.columns)} (per-load G, stage details) are in summary.csv; column meanings in "
+          "harness/report.py. The papers' absolute G depends on units they do not state: compare "
+          "`improvement` with `paper_improvement`, and trends.\n", markdown_table(df[key])]
     if not seeds.empty:
         md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
