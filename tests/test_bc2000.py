@@ -312,3 +312,19 @@ def test_face_pull_anisotropy_hexa_vs_tetra():
     rows = linear.face_pull(tet.points, lambda d: mt.stiffness_matrix())
     k = np.array([r["stiffness"] for r in rows])
     assert np.ptp(k) > 0.01 * k.mean() and max(r["drift"] for r in rows) > 1e-3
+
+
+@pytest.mark.slow
+def test_fem_stage_calibration_never_worsens_G(tmp_path):
+    """The FEM-scoring experiment end to end (solves the FEM reference: minutes uncached)."""
+    from harness.cases import load_case
+    from harness.stages import StageContext
+    from harness.stages import bc2000
+    case = load_case(ROOT / "cases/bourguignon2000/fem_cube333_tetra.toml")
+    rows = bc2000.run(case, StageContext(out_dir=tmp_path))
+    assert [r["model"] for r in rows] == ["MS", "MT0", "MT"]
+    for r in rows:
+        assert 0 < r["G_norm_initial"] < 1
+        assert r["G_final"] <= r["G_initial"] * (1 + 1e-9)
+    df = pd.read_csv(tmp_path / "anisotropy.csv")
+    assert set(df.columns) >= {"angle", "model", "stiffness", "drift"}
