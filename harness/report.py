@@ -294,6 +294,7 @@ def build_index(results_root) -> Path:
         if (s / "summary.csv").exists():
             try:
                 df = pd.read_csv(s / "summary.csv")
+                df = df[key_columns(df.columns)]
                 parts.append(df.to_html(index=False, na_rep="", float_format=lambda v: f"{v:.4g}",
                                         border=0, escape=True))
             except (ValueError, pd.errors.EmptyDataError):
