@@ -92,7 +92,7 @@ class Discretisation:
         Ms = sp.csr_matrix((self.ns, self.ns))
         for elems in self._chunks(nbf * self.dim):
             b = self._cell_basis(elems, self.q_mass)
-            phi = np.stack([b.basis[a][0].value for a in range(nbf)], axis=1)  # ne, nbf, nq
+            phi = np.stack([np.asarray(b.basis[a][0]) for a in range(nbf)], axis=1)  # ne, nbf, nq
             w = b.dx * rho[elems][:, None]
             Me = (phi * w[:, None, :]) @ phi.transpose(0, 2, 1)
             Ms = Ms + _scatter(Me, b.element_dofs.T, self.ns)
@@ -108,12 +108,12 @@ class Discretisation:
         b = self.basis if intorder is None else skfem.CellBasis(
             self.mesh, self.elem, mapping=self.mapping, intorder=intorder, dofs=self.dofs)
         if callable(f):
-            fq = np.asarray(f(b.global_coordinates().value))  # dim, ne, nq
+            fq = np.asarray(f(np.asarray(b.global_coordinates())))  # dim, ne, nq
         else:
             fq = np.broadcast_to(np.asarray(f, float).T[:, :, None], (self.dim,) + b.dx.shape)
         F = np.zeros((self.ns, self.dim))
         for a in range(len(b.basis)):
-            val = np.einsum("ceq,eq,eq->ec", fq, b.basis[a][0].value, b.dx)
+            val = np.einsum("ceq,eq,eq->ec", fq, np.asarray(b.basis[a][0]), b.dx)
             for c in range(self.dim):
                 F[:, c] += np.bincount(b.element_dofs[a], val[:, c], minlength=self.ns)
         return F.ravel()

@@ -49,7 +49,7 @@ def polygon_mesh(vertices, divisions: int) -> skfem.MeshTri:
     from matplotlib.path import Path
     from scipy.spatial import Delaunay
     v = np.asarray(vertices, float)
-    if np.sum(np.cross(v, np.roll(v, -1, 0))) < 0:
+    if np.sum(_cross2(v, np.roll(v, -1, 0))) < 0:
         v = v[::-1]
     lo, hi = v.min(0), v.max(0)
     h = float((hi - lo).min()) / divisions
@@ -71,13 +71,17 @@ def polygon_mesh(vertices, divisions: int) -> skfem.MeshTri:
     cent = pts[tri].mean(1)
     keep = path.contains_points(cent)
     a = pts[tri]
-    area = 0.5 * np.abs(np.cross(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]))
+    area = 0.5 * np.abs(_cross2(a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]))
     keep &= area > 1e-10 * h * h
     tri = tri[keep]
     used = np.unique(tri)
     remap = np.full(len(pts), -1)
     remap[used] = np.arange(len(used))
     return skfem.MeshTri(pts[used].T.copy(), remap[tri].T.copy())
+
+
+def _cross2(a, b):
+    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
 def _distance_to_segments(x, v):
