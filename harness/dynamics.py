@@ -136,11 +136,12 @@ def _tets_of(model):
 
 def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str = "verlet",
              snapshots=(), observe=(), x0=None, engine: str = "auto", energy: bool = False,
-             jacobian_every: int = 1) -> Trajectory:
+             jacobian_every: int = 1, volume: bool = True) -> Trajectory:
     """Run ``steps`` steps of size ``dt`` from rest (x0 default: the rest points).
 
     ``snapshots``: step numbers whose full state is kept; ``observe``: node ids whose
     positions are kept every step. ``engine``: "numba" (verlet only), "numpy" or "auto".
+    ``volume``: measure the volume every step (off for timing runs).
     """
     if integrator not in INTEGRATORS:
         raise SimulationError(f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}")
@@ -150,12 +151,12 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     n = len(x)
     snap_steps = np.array(sorted({int(s) for s in snapshots if 0 <= int(s) <= steps}), np.int64)
     obs = np.asarray(observe, np.int64).reshape(-1)
-    tets = _tets_of(model)
+    tets = _tets_of(model) if volume else np.zeros((0, 4), np.int64)
     size = float(np.ptp(model.points, axis=0).max()) or 1.0
     arrays = _kernel_arrays(model, dt) if integrator == "verlet" and engine in ("auto", "numba") else None
     if engine == "numba" and arrays is None:
         raise SimulationError("the compiled engine runs verlet on MassSpring or AnisotropicBody only")
-    volume = np.full(steps + 1, np.nan)
+    vol = np.full(steps + 1, np.nan)
     observed = np.zeros((steps + 1, len(obs), 3))
     snaps = np.zeros((len(snap_steps), n, 3))
     snaps_d = np.zeros((len(snap_steps), n, 3))
@@ -166,20 +167,20 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
         done = run(x, d, int(steps), float(dt), loading.mass.astype(float), ~loading.fixed,
                    loading.mass[:, None] * loading.gravity[None, :], loading.push.astype(float),
                    float(loading.drag / dt), springs, tet, hexa, tets, obs, snap_steps, snaps, snaps_d,
-                   volume, observed, 10.0 * size)
+                   vol, observed, 10.0 * size)
         if done < steps:
             _blow_up(model, loading, dt, done)
         v = d / dt
     else:
         x, v = _numpy_run(model, loading, x, dt, steps, integrator, tets, obs, snap_steps, snaps, snaps_d,
-                          volume, observed, size, jacobian_every)
+                          vol, observed, size, jacobian_every)
     if len(tets) == 0:
-        volume[:] = np.nan
+        vol[:] = np.nan
     t = dt * np.arange(steps + 1)
     en = None
     if energy and len(snap_steps):
         en = np.array([_energy(model, loading, snaps[k], snaps_d[k] / dt) for k in range(len(snap_steps))])
-    return Trajectory(t, volume, observed, {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
+    return Trajectory(t, vol, observed, {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
                       x, v, dt, en)
 
 
