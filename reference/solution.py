@@ -15,7 +15,6 @@ import time
 from functools import cached_property
 
 import numpy as np
-import scipy.sparse as sp
 import skfem
 
 from harness.elasticity import element_stiffness
@@ -25,7 +24,7 @@ from reference import cache as _cache
 from reference import solvers
 from reference.fem import Discretisation
 from reference.locate import Locator
-from reference.mesh import MESHES, base_mesh, default_divisions
+from reference.mesh import MESHES, base_mesh
 
 GRADE_PASSES = {2: 4, 3: 0}  # per level: extra halvings of the smallest element near a singular corner
 # (2-D). In 3-D, grading towards the 12 box edges cost 9x the dofs for a 1.5x smaller
