@@ -8,6 +8,14 @@ import scipy.sparse as sp
 from harness.optimize import FitProblem, optimize
 from harness.optimize.gradient import freq_term_and_grad, frequencies, value_and_grad
 from harness.optimize.synthetic import basic_loads, grid_network, recoverable_problem, solve_network
+from harness.optimize.linalg import single_thread_blas
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    """Dense BLAS threads oversubscribe the shared cores (and optimize() uses one)."""
+    with single_thread_blas():
+        yield
 
 
 def fd(fun, k, idx, h=1e-4):

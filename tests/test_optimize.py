@@ -8,6 +8,14 @@ from harness.errors import SpringbenchError
 from harness.optimize import OPTIMIZERS, FitProblem, optimize
 from harness.optimize.linalg import Factor, nested_dissection
 from harness.optimize.synthetic import basic_loads, grid_network, recoverable_problem
+from harness.optimize.linalg import single_thread_blas
+
+
+@pytest.fixture(autouse=True)
+def _one_blas_thread():
+    """Dense BLAS threads oversubscribe the shared cores (and optimize() uses one)."""
+    with single_thread_blas():
+        yield
 
 
 def dense_G(points, springs, k, frees, forces, u_ref, w):

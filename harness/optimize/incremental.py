@@ -76,7 +76,9 @@ class _Set:
 
     def prefetch(self, springs):
         """Sparse base: y = K0^-1 b_e for many springs in one multi-RHS solve."""
-        springs = [e for e in dict.fromkeys(int(s) for s in springs) if e not in self.ycache]
+        wanted = list(dict.fromkeys(int(s) for s in springs))
+        self.ycache = {e: self.ycache[e] for e in wanted if e in self.ycache}  # stale entries go
+        springs = [e for e in wanted if e not in self.ycache]
         if not springs:
             return
         n = self.B.shape[0]

@@ -131,6 +131,9 @@ def _openblas_setters():
     return found
 
 
+_SETTERS = None
+
+
 @contextmanager
 def single_thread_blas():
     """Run the block with one BLAS thread (threadpoolctl if installed, else OpenBLAS's
@@ -144,7 +147,10 @@ def single_thread_blas():
         with threadpool_limits(1):
             yield
         return
-    setters = _openblas_setters()
+    global _SETTERS
+    if _SETTERS is None:
+        _SETTERS = _openblas_setters()
+    setters = _SETTERS
     old = []
     for fn, get in setters:
         old.append(get() if get is not None else os.cpu_count())

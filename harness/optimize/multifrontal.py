@@ -101,6 +101,11 @@ class MultifrontalCholesky:
     """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m)."""
 
     def __init__(self, K: sp.spmatrix, sym: Symbolic, name: str = ""):
+        from harness.optimize.linalg import single_thread_blas
+        with single_thread_blas():   # many small dense ops: threads only add overhead
+            self._factor(K, sym, name)
+
+    def _factor(self, K, sym, name):
         K = sp.csr_matrix(K)
         K.sort_indices()
         data = K.data
@@ -144,6 +149,11 @@ class MultifrontalCholesky:
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """Forward and back substitution front by front, in elimination order (each
         front's own dofs are a contiguous slice there)."""
+        from harness.optimize.linalg import single_thread_blas
+        with single_thread_blas():
+            return self._solve(rhs)
+
+    def _solve(self, rhs):
         rhs = np.asarray(rhs, float)
         vec = rhs.ndim == 1
         order = self.sym.order
