@@ -2,7 +2,7 @@
 
 One row per load case: the dofs of the final mesh, the reference's own error estimate,
 the largest displacement and, where a closed form exists (a homogeneous isotropic
-rectangle/box under a standard stretch, plane stress in 2-D; or a homogeneous fibre
+rectangle/box under a standard stretch, in plane strain with E/(1-nu^2), nu/(1-nu); or a homogeneous fibre
 material under stretch-x, reference/analytic.py), the relative error
 against it at the mesh vertices. Cases tagged "modal" also get the first natural
 frequency with each load case's constraints (f1_hz), and those tagged "cantilever"
@@ -24,7 +24,7 @@ def closed_form_error(case, sol, load) -> float:
     from harness.loadsets import stretch_closed_form
     m = case.material
     standard = case.load_set in ("basic2d", "basic3d") and load.name.startswith("stretch-")
-    homogeneous = m.fibre is None and not m.regions and (case.dim == 3 or m.plane == "stress")
+    homogeneous = m.fibre is None and not m.regions
     p = sol.mesh.p.T
     if standard and load.name == "stretch-x" and m.fibre is not None and not m.regions \
             and m.fibre.field is None and case.body.shape in ("rectangle", "box"):
@@ -34,7 +34,10 @@ def closed_form_error(case, sol, load) -> float:
         S = np.linalg.inv(element_stiffness(m, p[:1])[0])
         exact = uniform_stress_displacement(S, load.tractions[0].vector[0], 0, p, case.body.origin)
     elif standard and homogeneous and case.body.shape in ("rectangle", "box"):
-        exact = stretch_closed_form(load, p, m.E, m.nu, case.body.origin)
+        E, nu = m.E, m.nu
+        if case.dim == 2 and m.plane == "strain":  # plane strain = plane stress with E', nu'
+            E, nu = E / (1 - nu ** 2), nu / (1 - nu)
+        exact = stretch_closed_form(load, p, E, nu, case.body.origin)
     else:
         return float("nan")
     u = sol.vertex_displacement(load.name)
