@@ -320,12 +320,19 @@ def _fem(case, ctx, model, dyn):
         m = build(name, model, mesh, 1.0, material=case.material)
         Ks = linear.unit_stiffnesses(m)
         theta = linear.current_parameters(m)
-        u = linear.solve(sum(t * K for t, K in zip(theta, Ks)), loads)
+        K0 = sum(t * K for t, K in zip(theta, Ks))
+        zm = linear.zero_modes(K0, loads)
+        if zm > 0:       # a mechanism (hexa MS under rollers, hourglass modes of MT0 on hexes)
+            rows.append({"model": name, "mesh": _label(path, mesh), "n_nodes": len(P),
+                         "n_elements": len(_cells(mesh)), "mechanisms": zm,
+                         "note": f"{zm} zero-energy modes under the case's constraints: no static answer"})
+            continue
+        u = linear.solve(K0, loads)
         c = float(np.einsum("p,lpd,lpd->", w, u_ref, u) / np.einsum("p,lpd,lpd->", w, u, u))
         theta0 = theta / c                                   # best single scale
         s0 = g_arrays(u_ref, u * c, classes, weights, loads.names)
         row = {"model": name, "mesh": _label(path, mesh), "n_nodes": len(P), "n_elements": len(_cells(mesh)),
-               "G_initial": s0.G, "G_norm_initial": s0.G_norm}
+               "mechanisms": zm, "G_initial": s0.G, "G_norm_initial": s0.G_norm}
         names = linear.parameter_names(m)
         row.update({f"scaled_{k}": float(v) for k, v in zip(names, theta0)})
         if dyn["calibrate"]:

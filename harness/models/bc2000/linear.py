@@ -73,6 +73,20 @@ def case_loads(points, case, masses=None) -> Loads:
     return Loads(names, free, forces)
 
 
+def zero_modes(K, loads: Loads, rtol: float = 1e-9, limit: int = 3000) -> int:
+    """Largest number of zero-energy modes (singular values below rtol * the largest) of
+    the constrained stiffness over the load cases; dense SVD, so only for <= limit dofs
+    (-1 if larger)."""
+    worst = 0
+    for i in range(len(loads.names)):
+        fr = loads.free[i]
+        if fr.sum() > limit:
+            return -1
+        sv = np.linalg.svd(K.tocsr()[fr][:, fr].toarray(), compute_uv=False)
+        worst = max(worst, int(np.sum(sv < rtol * sv[0])))
+    return worst
+
+
 def solve(K, loads: Loads) -> np.ndarray:
     """Displacements (L, n, 3) of K u = f on the free dofs of each load."""
     out = np.zeros(loads.forces.shape)
