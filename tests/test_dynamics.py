@@ -186,3 +186,15 @@ def test_parallel_spring_kernel_matches_numpy():
                            ptr, idx, sign, f)
     np.testing.assert_allclose(f, m.forces(x, v), atol=1e-12)
     assert np.abs(f).max() > 0.1
+
+
+@pytest.mark.skipif(not REF.exists(), reason="shared reference data not present")
+def test_two_thread_tetra_kernel_gives_the_same_bits():
+    from harness.meshfile import read_mesh
+    mesh = read_mesh(REF / "meshes/tetra/cube_343/cube.mesh")
+    m = build_anisotropic(mesh.points, mesh.cells["tetra"], azimuth=np.pi / 2, elevation=np.pi / 2,
+                          ks=2.5, kd=0.1, kvs=5.0)
+    ld = Loading.from_flags(mesh.flags, drag=5e-5)
+    a = simulate(m, ld, 0.01, 200)
+    b = simulate(m, ld, 0.01, 200, threads=2)
+    assert np.array_equal(a.x, b.x) and np.abs(a.x - mesh.points).max() > 0.01

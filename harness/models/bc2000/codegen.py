@@ -17,7 +17,7 @@ observer and the position-Verlet loop (Stoermer_Derivative + Stoermer_Step).
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 '''
 
 STATIC = '''
@@ -49,9 +49,10 @@ def volume_of(x, vtets):
 
 @njit(cache=True, error_model="numpy")
 def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
-        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
     n = x.shape[0]
     f = np.zeros((n, 3))
+    buf = np.zeros((tet[0].shape[0] - tet[0].shape[0] // 2, 4, 3))
     sqh = h * h
     isnap = 0
     for step in range(steps + 1):
@@ -69,7 +70,10 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if springs[0].shape[0] > 0:
             spring_forces(x, d, f, *springs)
         if tet[0].shape[0] > 0:
-            tet_forces(x, d, f, *tet)
+            if two_threads:
+                tet_forces_2(x, d, f, *tet, buf)
+            else:
+                tet_forces(x, d, f, *tet)
         if hexa[0].shape[0] > 0:
             hex_forces(x, d, f, *hexa)
         # Stoermer_Derivative + Stoermer_Step
@@ -176,7 +180,7 @@ def element_source(NV, NW, name):
 
 
 
-def dense_tet_source(name):
+def dense_tet_source(name, mode="scatter"):
     """Tetrahedra with dense local weights wl (m, 6, 4) (zero for the vertex off the end's
     face): no indirect indexing inside the element. Bit-identical to the program because a
     tet's faces list their vertices in ascending order, and adding the exact zeros changes
@@ -184,8 +188,13 @@ def dense_tet_source(name):
     L = []
     a = L.append
     a("@njit(cache=True, error_model=\"numpy\")")
-    a(f"def {name}(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl):")
-    a("    for e in range(cells.shape[0]):")
+    if mode == "scatter":
+        a(f"def {name}(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, lo=0, hi=-1):")
+    else:   # the same values stored per element for a later in-order scatter
+        a(f"def {name}(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, lo, hi):")
+    a("    if hi < 0:")
+    a("        hi = cells.shape[0]")
+    a("    for e in range(lo, hi):")
     for i in range(4):
         a(f"        q{i} = cells[e, {i}]")
         for c, cc in enumerate("xyz"):
@@ -234,17 +243,43 @@ def dense_tet_source(name):
     a("            K = -(kvs[e] * ((((R0 + R1) + R2) + R3) - D0[e, 0]))")
     for i in range(4):
         for c, cc in enumerate("xyz"):
-            a(f"            f[q{i}, {c}] += r{i}{cc} + K * (d{i}{cc} * J{i})")
+            if mode == "scatter":
+                a(f"            f[q{i}, {c}] += r{i}{cc} + K * (d{i}{cc} * J{i})")
+            else:
+                a(f"            f[e - lo, {i}, {c}] = r{i}{cc} + K * (d{i}{cc} * J{i})")
     a("        else:")
     for i in range(4):
         for c, cc in enumerate("xyz"):
-            a(f"            f[q{i}, {c}] += r{i}{cc}")
+            if mode == "scatter":
+                a(f"            f[q{i}, {c}] += r{i}{cc}")
+            else:
+                a(f"            f[e - lo, {i}, {c}] = r{i}{cc}")
     return "\n".join(L)
 
 
+PARALLEL = '''@njit(parallel=True, cache=True, error_model="numpy")
+def tet_forces_2(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, buf):
+    """tet_forces on two threads, still in the program's order: thread 0 runs the first
+    half of the elements and adds into f; thread 1 stores the second half's per-element
+    contributions in buf, which are then added in element order."""
+    m = cells.shape[0]
+    half = m // 2
+    for t in prange(2):
+        if t == 0:
+            tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, 0, half)
+        else:
+            tet_local(x, d, buf, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, half, m)
+    for e in range(half, m):
+        for i in range(4):
+            q = cells[e, i]
+            for c in range(3):
+                f[q, c] += buf[e - half, i, c]
+'''
+
+
 def source() -> str:
-    return "\n\n".join([HEADER, dense_tet_source("tet_forces"), element_source(8, 4, "hex_forces"),
-                         STATIC.strip() + "\n"])
+    return "\n\n".join([HEADER, dense_tet_source("tet_forces"), dense_tet_source("tet_local", "local"),
+                         PARALLEL.strip(), element_source(8, 4, "hex_forces"), STATIC.strip() + "\n"])
 
 
 def main():

@@ -6,12 +6,14 @@ observer and the position-Verlet loop (Stoermer_Derivative + Stoermer_Step).
 """
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 
 @njit(cache=True, error_model="numpy")
-def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl):
-    for e in range(cells.shape[0]):
+def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, lo=0, hi=-1):
+    if hi < 0:
+        hi = cells.shape[0]
+    for e in range(lo, hi):
         q0 = cells[e, 0]
         p0x = x[q0, 0]; u0x = d[q0, 0]
         p0y = x[q0, 1]; u0y = d[q0, 1]
@@ -186,6 +188,204 @@ def tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx
             f[q3, 0] += r3x
             f[q3, 1] += r3y
             f[q3, 2] += r3z
+
+@njit(cache=True, error_model="numpy")
+def tet_local(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, lo, hi):
+    if hi < 0:
+        hi = cells.shape[0]
+    for e in range(lo, hi):
+        q0 = cells[e, 0]
+        p0x = x[q0, 0]; u0x = d[q0, 0]
+        p0y = x[q0, 1]; u0y = d[q0, 1]
+        p0z = x[q0, 2]; u0z = d[q0, 2]
+        q1 = cells[e, 1]
+        p1x = x[q1, 0]; u1x = d[q1, 0]
+        p1y = x[q1, 1]; u1y = d[q1, 1]
+        p1z = x[q1, 2]; u1z = d[q1, 2]
+        q2 = cells[e, 2]
+        p2x = x[q2, 0]; u2x = d[q2, 0]
+        p2y = x[q2, 1]; u2y = d[q2, 1]
+        p2z = x[q2, 2]; u2z = d[q2, 2]
+        q3 = cells[e, 3]
+        p3x = x[q3, 0]; u3x = d[q3, 0]
+        p3y = x[q3, 1]; u3y = d[q3, 1]
+        p3z = x[q3, 2]; u3z = d[q3, 2]
+        w00 = wl[e, 0, 0]; w01 = wl[e, 0, 1]; w02 = wl[e, 0, 2]; w03 = wl[e, 0, 3]
+        E0x = ((w00 * p0x + w01 * p1x) + w02 * p2x) + w03 * p3x
+        V0x = ((w00 * u0x + w01 * u1x) + w02 * u2x) + w03 * u3x
+        E0y = ((w00 * p0y + w01 * p1y) + w02 * p2y) + w03 * p3y
+        V0y = ((w00 * u0y + w01 * u1y) + w02 * u2y) + w03 * u3y
+        E0z = ((w00 * p0z + w01 * p1z) + w02 * p2z) + w03 * p3z
+        V0z = ((w00 * u0z + w01 * u1z) + w02 * u2z) + w03 * u3z
+        w10 = wl[e, 1, 0]; w11 = wl[e, 1, 1]; w12 = wl[e, 1, 2]; w13 = wl[e, 1, 3]
+        E1x = ((w10 * p0x + w11 * p1x) + w12 * p2x) + w13 * p3x
+        V1x = ((w10 * u0x + w11 * u1x) + w12 * u2x) + w13 * u3x
+        E1y = ((w10 * p0y + w11 * p1y) + w12 * p2y) + w13 * p3y
+        V1y = ((w10 * u0y + w11 * u1y) + w12 * u2y) + w13 * u3y
+        E1z = ((w10 * p0z + w11 * p1z) + w12 * p2z) + w13 * p3z
+        V1z = ((w10 * u0z + w11 * u1z) + w12 * u2z) + w13 * u3z
+        w20 = wl[e, 2, 0]; w21 = wl[e, 2, 1]; w22 = wl[e, 2, 2]; w23 = wl[e, 2, 3]
+        E2x = ((w20 * p0x + w21 * p1x) + w22 * p2x) + w23 * p3x
+        V2x = ((w20 * u0x + w21 * u1x) + w22 * u2x) + w23 * u3x
+        E2y = ((w20 * p0y + w21 * p1y) + w22 * p2y) + w23 * p3y
+        V2y = ((w20 * u0y + w21 * u1y) + w22 * u2y) + w23 * u3y
+        E2z = ((w20 * p0z + w21 * p1z) + w22 * p2z) + w23 * p3z
+        V2z = ((w20 * u0z + w21 * u1z) + w22 * u2z) + w23 * u3z
+        w30 = wl[e, 3, 0]; w31 = wl[e, 3, 1]; w32 = wl[e, 3, 2]; w33 = wl[e, 3, 3]
+        E3x = ((w30 * p0x + w31 * p1x) + w32 * p2x) + w33 * p3x
+        V3x = ((w30 * u0x + w31 * u1x) + w32 * u2x) + w33 * u3x
+        E3y = ((w30 * p0y + w31 * p1y) + w32 * p2y) + w33 * p3y
+        V3y = ((w30 * u0y + w31 * u1y) + w32 * u2y) + w33 * u3y
+        E3z = ((w30 * p0z + w31 * p1z) + w32 * p2z) + w33 * p3z
+        V3z = ((w30 * u0z + w31 * u1z) + w32 * u2z) + w33 * u3z
+        w40 = wl[e, 4, 0]; w41 = wl[e, 4, 1]; w42 = wl[e, 4, 2]; w43 = wl[e, 4, 3]
+        E4x = ((w40 * p0x + w41 * p1x) + w42 * p2x) + w43 * p3x
+        V4x = ((w40 * u0x + w41 * u1x) + w42 * u2x) + w43 * u3x
+        E4y = ((w40 * p0y + w41 * p1y) + w42 * p2y) + w43 * p3y
+        V4y = ((w40 * u0y + w41 * u1y) + w42 * u2y) + w43 * u3y
+        E4z = ((w40 * p0z + w41 * p1z) + w42 * p2z) + w43 * p3z
+        V4z = ((w40 * u0z + w41 * u1z) + w42 * u2z) + w43 * u3z
+        w50 = wl[e, 5, 0]; w51 = wl[e, 5, 1]; w52 = wl[e, 5, 2]; w53 = wl[e, 5, 3]
+        E5x = ((w50 * p0x + w51 * p1x) + w52 * p2x) + w53 * p3x
+        V5x = ((w50 * u0x + w51 * u1x) + w52 * u2x) + w53 * u3x
+        E5y = ((w50 * p0y + w51 * p1y) + w52 * p2y) + w53 * p3y
+        V5y = ((w50 * u0y + w51 * u1y) + w52 * u2y) + w53 * u3y
+        E5z = ((w50 * p0z + w51 * p1z) + w52 * p2z) + w53 * p3z
+        V5z = ((w50 * u0z + w51 * u1z) + w52 * u2z) + w53 * u3z
+        l0x = E0x - E1x
+        v0x = V0x - V1x
+        l0y = E0y - E1y
+        v0y = V0y - V1y
+        l0z = E0z - E1z
+        v0z = V0z - V1z
+        A0 = np.sqrt(l0x * l0x + l0y * l0y + l0z * l0z)
+        I0 = 1.0 / A0
+        l1x = E2x - E3x
+        v1x = V2x - V3x
+        l1y = E2y - E3y
+        v1y = V2y - V3y
+        l1z = E2z - E3z
+        v1z = V2z - V3z
+        A1 = np.sqrt(l1x * l1x + l1y * l1y + l1z * l1z)
+        I1 = 1.0 / A1
+        l2x = E4x - E5x
+        v2x = V4x - V5x
+        l2y = E4y - E5y
+        v2y = V4y - V5y
+        l2z = E4z - E5z
+        v2z = V4z - V5z
+        A2 = np.sqrt(l2x * l2x + l2y * l2y + l2z * l2z)
+        I2 = 1.0 / A2
+        c01_ = (l0x * l1x + l0y * l1y + l0z * l1z) * I0 * I1
+        c02_ = (l0x * l2x + l0y * l2y + l0z * l2z) * I0 * I2
+        c12_ = (l1x * l2x + l1y * l2y + l1z * l2z) * I1 * I2
+        n0x = l0x * I0
+        n0y = l0y * I0
+        n0z = l0z * I0
+        n1x = l1x * I1
+        n1y = l1y * I1
+        n1z = l1z * I1
+        n2x = l2x * I2
+        n2y = l2y * I2
+        n2z = l2z * I2
+        K12 = -(ks[e, 3] * (c01_ - cos0[e, 0]))
+        K13 = -(ks[e, 4] * (c02_ - cos0[e, 1]))
+        K23 = -(ks[e, 5] * (c12_ - cos0[e, 2]))
+        s0 = -(ks[e, 0] * (A0 - L0[e, 0]) + kd[e, 0] * (v0x * n0x + v0y * n0y + v0z * n0z))
+        s1 = -(ks[e, 1] * (A1 - L0[e, 1]) + kd[e, 1] * (v1x * n1x + v1y * n1y + v1z * n1z))
+        s2 = -(ks[e, 2] * (A2 - L0[e, 2]) + kd[e, 2] * (v2x * n2x + v2y * n2y + v2z * n2z))
+        G0x = (n0x * s0 + K12 * n1x) + K13 * n2x
+        G1x = (n1x * s1 + K12 * n0x) + K23 * n2x
+        G2x = (n2x * s2 + K13 * n0x) + K23 * n1x
+        H0x = -G0x; H1x = -G1x; H2x = -G2x
+        G0y = (n0y * s0 + K12 * n1y) + K13 * n2y
+        G1y = (n1y * s1 + K12 * n0y) + K23 * n2y
+        G2y = (n2y * s2 + K13 * n0y) + K23 * n1y
+        H0y = -G0y; H1y = -G1y; H2y = -G2y
+        G0z = (n0z * s0 + K12 * n1z) + K13 * n2z
+        G1z = (n1z * s1 + K12 * n0z) + K23 * n2z
+        G2z = (n2z * s2 + K13 * n0z) + K23 * n1z
+        H0z = -G0z; H1z = -G1z; H2z = -G2z
+        r0x = ((((w00 * G0x + w10 * H0x) + w20 * G1x) + w30 * H1x) + w40 * G2x) + w50 * H2x
+        r0y = ((((w00 * G0y + w10 * H0y) + w20 * G1y) + w30 * H1y) + w40 * G2y) + w50 * H2y
+        r0z = ((((w00 * G0z + w10 * H0z) + w20 * G1z) + w30 * H1z) + w40 * G2z) + w50 * H2z
+        r1x = ((((w01 * G0x + w11 * H0x) + w21 * G1x) + w31 * H1x) + w41 * G2x) + w51 * H2x
+        r1y = ((((w01 * G0y + w11 * H0y) + w21 * G1y) + w31 * H1y) + w41 * G2y) + w51 * H2y
+        r1z = ((((w01 * G0z + w11 * H0z) + w21 * G1z) + w31 * H1z) + w41 * G2z) + w51 * H2z
+        r2x = ((((w02 * G0x + w12 * H0x) + w22 * G1x) + w32 * H1x) + w42 * G2x) + w52 * H2x
+        r2y = ((((w02 * G0y + w12 * H0y) + w22 * G1y) + w32 * H1y) + w42 * G2y) + w52 * H2y
+        r2z = ((((w02 * G0z + w12 * H0z) + w22 * G1z) + w32 * H1z) + w42 * G2z) + w52 * H2z
+        r3x = ((((w03 * G0x + w13 * H0x) + w23 * G1x) + w33 * H1x) + w43 * G2x) + w53 * H2x
+        r3y = ((((w03 * G0y + w13 * H0y) + w23 * G1y) + w33 * H1y) + w43 * G2y) + w53 * H2y
+        r3z = ((((w03 * G0z + w13 * H0z) + w23 * G1z) + w33 * H1z) + w43 * G2z) + w53 * H2z
+        if vol:
+            gx = 0.25 * (((p0x + p1x) + p2x) + p3x)
+            gy = 0.25 * (((p0y + p1y) + p2y) + p3y)
+            gz = 0.25 * (((p0z + p1z) + p2z) + p3z)
+            d0x = p0x - gx
+            d0y = p0y - gy
+            d0z = p0z - gz
+            R0 = np.sqrt(d0x * d0x + d0y * d0y + d0z * d0z)
+            J0 = 1.0 / R0
+            d1x = p1x - gx
+            d1y = p1y - gy
+            d1z = p1z - gz
+            R1 = np.sqrt(d1x * d1x + d1y * d1y + d1z * d1z)
+            J1 = 1.0 / R1
+            d2x = p2x - gx
+            d2y = p2y - gy
+            d2z = p2z - gz
+            R2 = np.sqrt(d2x * d2x + d2y * d2y + d2z * d2z)
+            J2 = 1.0 / R2
+            d3x = p3x - gx
+            d3y = p3y - gy
+            d3z = p3z - gz
+            R3 = np.sqrt(d3x * d3x + d3y * d3y + d3z * d3z)
+            J3 = 1.0 / R3
+            K = -(kvs[e] * ((((R0 + R1) + R2) + R3) - D0[e, 0]))
+            f[e - lo, 0, 0] = r0x + K * (d0x * J0)
+            f[e - lo, 0, 1] = r0y + K * (d0y * J0)
+            f[e - lo, 0, 2] = r0z + K * (d0z * J0)
+            f[e - lo, 1, 0] = r1x + K * (d1x * J1)
+            f[e - lo, 1, 1] = r1y + K * (d1y * J1)
+            f[e - lo, 1, 2] = r1z + K * (d1z * J1)
+            f[e - lo, 2, 0] = r2x + K * (d2x * J2)
+            f[e - lo, 2, 1] = r2y + K * (d2y * J2)
+            f[e - lo, 2, 2] = r2z + K * (d2z * J2)
+            f[e - lo, 3, 0] = r3x + K * (d3x * J3)
+            f[e - lo, 3, 1] = r3y + K * (d3y * J3)
+            f[e - lo, 3, 2] = r3z + K * (d3z * J3)
+        else:
+            f[e - lo, 0, 0] = r0x
+            f[e - lo, 0, 1] = r0y
+            f[e - lo, 0, 2] = r0z
+            f[e - lo, 1, 0] = r1x
+            f[e - lo, 1, 1] = r1y
+            f[e - lo, 1, 2] = r1z
+            f[e - lo, 2, 0] = r2x
+            f[e - lo, 2, 1] = r2y
+            f[e - lo, 2, 2] = r2z
+            f[e - lo, 3, 0] = r3x
+            f[e - lo, 3, 1] = r3y
+            f[e - lo, 3, 2] = r3z
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def tet_forces_2(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, buf):
+    """tet_forces on two threads, still in the program's order: thread 0 runs the first
+    half of the elements and adds into f; thread 1 stores the second half's per-element
+    contributions in buf, which are then added in element order."""
+    m = cells.shape[0]
+    half = m // 2
+    for t in prange(2):
+        if t == 0:
+            tet_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, 0, half)
+        else:
+            tet_local(x, d, buf, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx, wl, half, m)
+    for e in range(half, m):
+        for i in range(4):
+            q = cells[e, i]
+            for c in range(3):
+                f[q, c] += buf[e - half, i, c]
 
 @njit(cache=True, error_model="numpy")
 def hex_forces(x, d, f, cells, vi, cf, ks, kd, L0, cos0, kvs, kvd, D0, vol, gidx):
@@ -611,9 +811,10 @@ def volume_of(x, vtets):
 
 @njit(cache=True, error_model="numpy")
 def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
-        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
     n = x.shape[0]
     f = np.zeros((n, 3))
+    buf = np.zeros((tet[0].shape[0] - tet[0].shape[0] // 2, 4, 3))
     sqh = h * h
     isnap = 0
     for step in range(steps + 1):
@@ -631,7 +832,10 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if springs[0].shape[0] > 0:
             spring_forces(x, d, f, *springs)
         if tet[0].shape[0] > 0:
-            tet_forces(x, d, f, *tet)
+            if two_threads:
+                tet_forces_2(x, d, f, *tet, buf)
+            else:
+                tet_forces(x, d, f, *tet)
         if hexa[0].shape[0] > 0:
             hex_forces(x, d, f, *hexa)
         # Stoermer_Derivative + Stoermer_Step
