@@ -2,10 +2,13 @@
 resumable, and with the same table bit for bit for the same seed and inputs.
 
 - A *job* is one (case file, mode, seed). Its input hash covers the case file's bytes,
-  the mode, the seed, the stage list, the mesh file the case references and the code
-  version (the sources of ``harness/`` and ``reference/`` that can change a result:
-  report, figures and CLI code are left out, so re-drawing a figure does not re-run a
-  suite).
+  the mode, the seed, the stage list and the mesh file the case references; its code
+  version is the SHA-256 of every source file of ``harness/`` and ``reference/`` (and of
+  stage modules living elsewhere) that was loaded when the job ran, recorded in the
+  manifest. A finished job is skipped while its input hash and each of those files are
+  unchanged: editing the report, the figures, the CLI or a model the case does not use
+  re-runs nothing, editing anything the case ran through re-runs it. (Code is only ever
+  reached through imports, so the files a job loaded are all the code it depends on.)
 - A job runs in a fresh temporary folder (in a worker process, a Dask worker or, for a
   single job or ``--jobs 1``, in this process). It returns its rows and the bytes of the
   data files its stages wrote; the parent writes them under
@@ -49,7 +52,7 @@ DEFAULT_CASES = _HOME / "cases"
 DEFAULT_RESULTS = _HOME / "results"
 RESULT_PREFIX = "result-seed"
 HASH_VERSION = "springbench-job-1"
-# sources that cannot change a result (drawing, tables, command-line plumbing)
+# loaded sources that cannot change a result (drawing, tables, command-line plumbing)
 _NOT_CODE = ("harness/report.py", "harness/figures/", "harness/commands/", "harness/cli.py",
              "harness/bench/")
 DASK_CONNECT_TIMEOUT = "15s"
@@ -88,51 +91,61 @@ class JobResult:
     traceback: str = ""
     seconds: float = 0.0
     log: str = ""                    # path of the traceback log, if any
+    code: dict = field(default_factory=dict)  # {source file: sha256} the job loaded
 
 
-def _hash_files(h, files, root: Path):
-    for f in files:
-        h.update(str(f.relative_to(root)).encode() if f.is_relative_to(root) else str(f).encode())
-        h.update(b"\0")
-        h.update(f.read_bytes())
-        h.update(b"\0")
+_SHA_CACHE: dict[tuple, str] = {}
 
 
-_CODE_CACHE: dict[tuple, str] = {}
+def file_sha(path: Path) -> str | None:
+    """SHA-256 of a file (cached by path, size and mtime); None if it is gone."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    key = (str(path), st.st_size, st.st_mtime_ns)
+    if key not in _SHA_CACHE:
+        _SHA_CACHE[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return _SHA_CACHE[key]
 
 
-def code_version(stage_modules=()) -> str:
-    """Hash of the sources that can change a result: ``harness/`` and ``reference/``
-    (without report, figures and CLI code) plus stage modules living elsewhere."""
-    import importlib.util
-    files = []
-    for pkg in ("harness", "reference"):
-        for f in sorted((ROOT / pkg).rglob("*.py")):
-            rel = f.relative_to(ROOT).as_posix()
-            if not any(rel.startswith(n) if n.endswith("/") else rel == n for n in _NOT_CODE):
-                files.append(f)
-    for name in stage_modules:
-        try:
-            spec = importlib.util.find_spec(name)
-        except (ImportError, ValueError):
-            spec = None
-        if spec and spec.origin and Path(spec.origin).is_file():
-            p = Path(spec.origin).resolve()
-            if not p.is_relative_to(ROOT / "harness"):
-                files.append(p)
-    stamp = tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size) for f in files)
-    if stamp not in _CODE_CACHE:
-        h = hashlib.sha256()
-        _hash_files(h, files, ROOT)
-        h.update("\0".join(stage_modules).encode())
-        _CODE_CACHE[stamp] = h.hexdigest()
-    return _CODE_CACHE[stamp]
+def loaded_sources(stage_modules=()) -> dict[str, str]:
+    """{file: sha256} of the code this process has loaded that a result can depend on:
+    modules under ``harness/`` and ``reference/`` (paths relative to the checkout) and the
+    stage modules (absolute paths when they live elsewhere)."""
+    out = {}
+    roots = (ROOT / "harness", ROOT / "reference")
+    for name, mod in list(sys.modules.items()):
+        f = getattr(mod, "__file__", None)
+        if not f or not f.endswith(".py"):
+            continue
+        p = Path(f).resolve()
+        inside = any(p.is_relative_to(r) for r in roots)
+        if inside or name in stage_modules:
+            key = p.relative_to(ROOT).as_posix() if inside else str(p)
+            if any(key.startswith(n) if n.endswith("/") else key == n for n in _NOT_CODE):
+                continue
+            sha = file_sha(p)
+            if sha:
+                out[key] = sha
+    return dict(sorted(out.items()))
 
 
-def input_hash(case, seed: int, stages, code: str) -> str:
-    """Hash of everything that determines a job's result."""
+def code_unchanged(code: dict) -> bool:
+    """True if every recorded source file still has its recorded hash."""
+    if not isinstance(code, dict) or not code:
+        return False
+    for key, sha in code.items():
+        p = Path(key) if Path(key).is_absolute() else ROOT / key
+        if file_sha(p) != sha:
+            return False
+    return True
+
+
+def input_hash(case, seed: int, stages) -> str:
+    """Hash of everything but the code that determines a job's result."""
     h = hashlib.sha256(HASH_VERSION.encode())
-    for part in (case.mode, str(seed), code, "\0".join(stages)):
+    for part in (case.mode, str(seed), "\0".join(stages)):
         h.update(part.encode() + b"\0")
     h.update(Path(case.path).read_bytes())
     if case.body.shape == "mesh" and case.body.file is not None:
@@ -209,7 +222,6 @@ def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
     from harness.cases import find_cases, load_case
 
     stage_names = tuple(stage_registry.STAGES if stages is None else stages)
-    code = code_version(stage_names)
     files, seen = [], set()
     for given in find_cases(paths or [DEFAULT_CASES]):
         r = Path(given).resolve()
@@ -236,7 +248,7 @@ def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
         expect = _plain((case.section("expect") or {}).get("values", {}))
         for seed in seeds:
             jobs.append(Job(str(f), mode, seed, suite, name, len(seeds),
-                            input_hash(case, seed, stage_names, code), stage_names, rel,
+                            input_hash(case, seed, stage_names), stage_names, rel,
                             expect if isinstance(expect, dict) else {}))
     return jobs, failed
 
@@ -346,7 +358,8 @@ def execute(job: Job, sink=None) -> JobResult:
         for f in sorted(tmp.rglob("*")):
             if f.is_file() and not f.is_symlink():
                 files[f.relative_to(tmp).as_posix()] = f.read_bytes()
-        return JobResult(job, "ok", rows, files, seconds=time.perf_counter() - t_job)
+        return JobResult(job, "ok", rows, files, seconds=time.perf_counter() - t_job,
+                         code=loaded_sources(job.stages))
     except SpringbenchError as exc:
         msg = str(exc).replace(job.case_file, job.rel_file or job.case_file)
         dt = time.perf_counter() - t_job
@@ -432,7 +445,7 @@ def store(results: Path, res: JobResult) -> Path:
         "seed": job.seed, "n_seeds": job.n_seeds, "input_hash": job.key, "status": res.status,
         "error": res.error, "log": log, "stages": list(job.stages), "expect": job.expect,
         "files": sorted(res.files), "data_dir": "." if job.n_seeds == 1 else f"seed{job.seed}",
-        "seconds": res.seconds, "rows": res.rows,
+        "seconds": res.seconds, "code": res.code, "rows": res.rows,
     }
     path = result_path(results, job)
     atomic_write(path, json.dumps(manifest, indent=1, allow_nan=True).encode())
@@ -559,7 +572,8 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
     pending: list[Job] = []
     for job in planned:
         stored = None if force else read_result(result_path(results, job))
-        if stored and stored.get("status") == "ok" and stored.get("input_hash") == job.key:
+        if (stored and stored.get("status") == "ok" and stored.get("input_hash") == job.key
+                and code_unchanged(stored.get("code"))):
             done.append(JobResult(job, "skipped", stored.get("rows", []), seconds=stored.get("seconds", 0.0)))
         else:
             pending.append(job)

@@ -102,13 +102,28 @@ def test_suite_tables_and_resume(tmp_path, fake, capsys):
     assert len(calls(suite)) == 7
 
 
-def test_code_version_change_reruns(tmp_path, fake, monkeypatch):
-    from harness import runner
+def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
+    """The code version of a job is the hash of the sources it loaded: editing a stage
+    module re-runs its cases; editing nothing re-runs nothing."""
+    import shutil
+    import uuid
+    mods = tmp_path / "mods"
+    mods.mkdir()
+    name = f"fake_copy_{uuid.uuid4().hex[:8]}"
+    src = mods / f"{name}.py"
+    shutil.copy(HERE / f"{FAKE}.py", src)
+    monkeypatch.syspath_prepend(str(mods))
+    monkeypatch.setattr(stage_registry, "STAGES", [name])
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     res = tmp_path / "results"
     run_suite([suite], results=res, jobs=1, figures=False, progress=False)
-    monkeypatch.setattr(runner, "code_version", lambda stages=(): "another version")
+    manifest = json.loads((res / "demo" / "a" / "result-seed0.json").read_text())
+    assert str(src.resolve()) in manifest["code"] and "harness/cases.py" in manifest["code"]
+    assert not any(k.startswith(("harness/commands/", "harness/figures/")) for k in manifest["code"])
+    rep = run_suite([suite], results=res, jobs=1, figures=False, progress=False)
+    assert len(rep.skipped) == 1 and len(calls(suite)) == 1
+    src.write_text(src.read_text() + "\n# an edit\n")
     rep = run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     assert len(rep.ran) == 1 and len(calls(suite)) == 2
 
