@@ -118,7 +118,7 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
                 good += 1
             else:
                 take = T > 0 and p < np.exp((Gcur - Gn) / T)
-                uphill += take
+                uphill += int(take)
             if take:
                 eng.accept()
                 x[j] = xn
