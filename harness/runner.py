@@ -375,8 +375,16 @@ def execute(job: Job, sink=None) -> JobResult:
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def _ignore_sigint():
+    """Ctrl-C is the parent's business: it stops the workers itself, without their tracebacks."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _init_worker():
-    """Pool initializer: one BLAS thread per worker (the pool is the parallelism)."""
+    """Pool initializer: one BLAS thread per worker (the pool is the parallelism); Ctrl-C
+    handled by the parent."""
+    _ignore_sigint()
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")
 
@@ -629,9 +637,13 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
 
+    from multiprocessing.managers import SyncManager
+
     ctx = mp.get_context("spawn")
     lost: list[Job] = []
-    with ctx.Manager() as manager:
+    manager = SyncManager(ctx=ctx)
+    manager.start(_ignore_sigint)
+    with manager:
         q = manager.Queue()
         sink = QueueSink(q)
         ex = ProcessPoolExecutor(max_workers=min(jobs_n, len(pending)), mp_context=ctx,
@@ -662,8 +674,11 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
                         res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
                                         traceback=traceback.format_exc())
                     finish(res)
-        except BaseException:
+        except BaseException:  # Ctrl-C or a bug here: stop the workers now, keep what finished
+            procs = list((getattr(ex, "_processes", None) or {}).values())
             ex.shutdown(wait=False, cancel_futures=True)
+            for proc in procs:
+                proc.terminate()
             raise
         ex.shutdown(wait=True)
     if lost:

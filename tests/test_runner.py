@@ -348,3 +348,40 @@ def test_sigkill_loses_no_finished_case(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert calls(suite)[n:] == ["b_slow 0"]   # a_fast was skipped, not recomputed
     assert "1 ran, 1 unchanged" in proc.stdout
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_workers_quietly(tmp_path):
+    """SIGINT to the whole process group (what Ctrl-C does): exit 130, one line, no worker
+    tracebacks, no process left behind, finished cases kept."""
+    suite = tmp_path / "cases" / "demo"
+    write_case(suite, "a_fast", "rows=1")
+    for n in ("b_slow", "c_slow"):
+        write_case(suite, n, "sleep=60")
+    res = tmp_path / "results"
+    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.stages as s; "
+              f"s.STAGES = [{FAKE!r}]; from harness.cli import main\n"
+              f"if __name__ == '__main__':\n"
+              f"    sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '2']))\n")
+    (tmp_path / "go.py").write_text(script)
+    proc = subprocess.Popen([sys.executable, str(tmp_path / "go.py")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    t0 = time.monotonic()
+    while not (len(calls(suite)) >= 3 and (res / "demo" / "a_fast" / "result-seed0.json").exists()):
+        assert proc.poll() is None and time.monotonic() - t0 < 90, "jobs did not start"
+        time.sleep(0.1)
+    time.sleep(0.5)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("springbench: interrupted")
+    deadline = time.monotonic() + 20
+    while True:  # every worker of the group is gone (zombies are reaped within seconds)
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, "processes of the run are still alive"
+        time.sleep(0.2)
+    assert json.loads((res / "demo" / "a_fast" / "result-seed0.json").read_text())["status"] == "ok"
