@@ -268,6 +268,7 @@ def mutate(doc, data):
 
 
 TMP = Path(tempfile.mkdtemp(prefix="springbench-hyp-"))
+__import__("atexit").register(__import__("shutil").rmtree, TMP, True)
 
 
 def parse(text: str):
