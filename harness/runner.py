@@ -6,8 +6,8 @@ resumable, and with the same table bit for bit for the same seed and inputs.
   version is the SHA-256 of every source file of ``harness/`` and ``reference/`` (and of
   stage modules living elsewhere) that was loaded when the job ran, recorded in the
   manifest. A finished job is skipped while its input hash and each of those files are
-  unchanged: editing the report, the figures, the CLI or a model the case does not use
-  re-runs nothing, editing anything the case ran through re-runs it. (Code is only ever
+  unchanged: editing the report, the figures, the CLI or a module the job never imported
+  re-runs nothing, editing anything the job imported re-runs it. (Code is only ever
   reached through imports, so the files a job loaded are all the code it depends on.)
 - A job runs in a fresh temporary folder (in a worker process, a Dask worker or, for a
   single job or ``--jobs 1``, in this process). It returns its rows and the bytes of the
