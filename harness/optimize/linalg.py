@@ -107,26 +107,25 @@ class DenseFactor:
 
 # --- BLAS threads ------------------------------------------------------------------------
 def _openblas_setters():
-    """set_num_threads functions of the OpenBLAS copies loaded in this process."""
+    """(set, get) num_threads functions of the OpenBLAS copies loaded in this process
+    (numpy's and scipy's may be different copies); found through /proc/self/maps."""
     found = []
     try:
         with open("/proc/self/maps") as fh:
-            libs = {line.split()[-1] for line in fh if "openblas" in line.lower() and line.strip().endswith(".so") or ".so." in line and "openblas" in line.lower()}
+            libs = {line.split()[-1] for line in fh
+                    if "openblas" in line.lower() and ".so" in line.split()[-1]}
     except OSError:
         return found
-    for path in libs:
+    for path in sorted(libs):
         try:
             lib = ctypes.CDLL(path)
         except OSError:
             continue
-        for name in ("scipy_openblas_set_num_threads64_", "openblas_set_num_threads64_", "openblas_set_num_threads",
-                     "scipy_openblas_set_num_threads"):
+        for name in ("scipy_openblas_set_num_threads64_", "openblas_set_num_threads64_",
+                     "scipy_openblas_set_num_threads", "openblas_set_num_threads"):
             fn = getattr(lib, name, None)
             if fn is not None:
-                get = None
-                for gname in (name.replace("set_num_threads", "get_num_threads"),):
-                    get = getattr(lib, gname, None)
-                found.append((fn, get))
+                found.append((fn, getattr(lib, name.replace("set_num_threads", "get_num_threads"), None)))
                 break
     return found
 
@@ -149,6 +148,7 @@ def single_thread_blas():
         return
     global _SETTERS
     if _SETTERS is None:
+        import scipy.linalg  # noqa: F401  (load scipy's BLAS before looking for it)
         _SETTERS = _openblas_setters()
     setters = _SETTERS
     old = []
