@@ -47,6 +47,13 @@ def test_incremental_G_matches_full_resolve(mode, shape, n):
     assert err < 1e-9
 
 
+@pytest.mark.parametrize("mode", ["dense", "sparse"])
+def test_incremental_automatic_renewal_stays_exact(mode):
+    prob, _ = recoverable_problem((6, 6), seed=9)
+    eng, err = random_walk(prob, mode, 1500, check_every=250, refactor_every="auto")
+    assert eng.n_rebase >= 1500 // 256 - 1 and err < 1e-9
+
+
 def test_incremental_without_rebase_woodbury_alone():
     """A long Woodbury chain (no renewal within 60 accepts) stays exact too."""
     prob, _ = recoverable_problem((4, 4), seed=2)

@@ -37,7 +37,7 @@ DEFAULTS = dict(
     max_seconds=None,   # budget in wall seconds (None: unlimited)
     chains=1,           # independent chains (seeds) in parallel processes; the best is kept
     engine="auto",      # "auto" | "dense" | "sparse" (incremental) | "refactor"
-    refactor_every=64,  # accepted steps between base renewals (dense product / new factorisation)
+    refactor_every="auto",  # accepts between base renewals; "auto": dense 64, sparse flop balance 64..256
     dense_max=2500,     # largest free block (dofs) for the dense-inverse engine under "auto"
     batch=32,           # proposals whose K0^-1 b_e are solved together (sparse engine)
 )
@@ -77,7 +77,7 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
     if use_refactor:
         eng = RefactorG(problem, problem.k0)
     else:
-        eng = IncrementalG(problem, problem.k0, mode=opts["engine"], refactor_every=int(opts["refactor_every"]),
+        eng = IncrementalG(problem, problem.k0, mode=opts["engine"], refactor_every=opts["refactor_every"],
                            batch=int(opts["batch"]), dense_max=int(opts["dense_max"]))
     t_loop = time.perf_counter()
     x = np.ones(npar)                      # factors of k0 per parameter
@@ -157,7 +157,7 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
                 info=dict(engine=eng.mode, stop=stop, temperatures_done=len(trace) - 1, temperatures=temperatures,
                           nlimit=nlimit, glimit=glimit, T_abs0=opts["T0"] * G0, uphill=uphill_total,
                           acceptance=accepted / max(steps, 1), G_best_tracked=best_G, seed=seed,
-                          rebases=eng.n_rebase, setup_seconds=t_loop - t_start, loop_seconds=loop_seconds,
+                          rebases=eng.n_rebase, refactor_every=getattr(eng, "refactor_every", None), setup_seconds=t_loop - t_start, loop_seconds=loop_seconds,
                           steps_per_s=steps / max(loop_seconds, 1e-12), e_squared_hours=e * e / max(steps / max(loop_seconds, 1e-12), 1e-12) / 3600))
 
 

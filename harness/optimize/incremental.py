@@ -15,7 +15,10 @@ many right-hand sides at once). Accepted changes since the last factorisation ar
 in by Woodbury: K = K0 + U D U^T, so z = y - Z0 M^-1 (Z0^T b) with y = K0^-1 b,
 Z0 = K0^-1 U, M = D^-1 + U^T Z0. After ``refactor_every`` accepts the base is renewed
 (dense: one matrix product Kinv -= Z0 M^-1 Z0^T; sparse: a new factorisation) and u, G
-are recomputed from it, so rounding cannot drift.
+are recomputed from it, so rounding cannot drift. By default the sparse interval balances
+the flops of a renewal against the growing Woodbury correction (auto_interval): 64
+accepts (the issue's 32-64) unless a renewal is expensive, as on large 3-D networks where
+it means six big factorisations.
 """
 
 from __future__ import annotations
@@ -132,13 +135,36 @@ class _Set:
         return m + 1 >= self.cap
 
 
+AUTO_CAP = 256  # most accepted steps held in Woodbury form (memory: nfree x 256 per load set)
+AUTO_MIN = 64
+
+
+def auto_interval(sets) -> int:
+    """Accepts between renewals of a sparse base: with F the flops of the factorisations
+    and 4 n flops per proposal per held column (n = all free dofs), the amortised cost
+    F/m + 2 n m (BLAS-2 correction, ~10x slower per flop than the BLAS-3 factorisation)
+    is least at m = sqrt(F / (20 n)); clipped to [AUTO_MIN, AUTO_CAP]. Deterministic,
+    so a seeded run is reproducible bit for bit."""
+    F = 0.0
+    n = 0
+    for st in sets:
+        n += st.B.shape[0]
+        sym = getattr(getattr(st, "fac", None), "sym", None)
+        if sym is None:
+            return 64
+        F += sum(nd["nv"] ** 3 / 3 + nd["nv"] ** 2 * len(nd["U"]) + nd["nv"] * len(nd["U"]) ** 2 for nd in sym.nodes)
+    return int(np.clip(np.sqrt(F / (20.0 * n)), AUTO_MIN, AUTO_CAP))
+
+
 class IncrementalG:
     """G of the current constants and of one-spring proposals (see module docstring).
 
     ``mode``: "dense" (maintained inverse), "sparse" (kept factorisation + Woodbury) or
-    "auto" (dense when every free block has <= ``dense_max`` dofs)."""
+    "auto" (dense when every free block has <= ``dense_max`` dofs). ``refactor_every``:
+    accepted steps between renewals of the base, or "auto" (dense: 64; sparse:
+    :func:`auto_interval`)."""
 
-    def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every: int = 64,
+    def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every="auto",
                  batch: int = 32, dense_max: int = 2500):
         self.problem = problem
         self.k = np.array(k, float)
@@ -147,7 +173,14 @@ class IncrementalG:
             mode = "dense" if max(ls.B.shape[0] for ls in sets) <= dense_max else "sparse"
         self.mode = mode
         self.batch = batch
-        self.sets = [_Set(ls, self.k, mode == "dense", refactor_every) for ls in sets]
+        if refactor_every == "auto":
+            refactor_every = 64 if mode == "dense" else None
+        self.sets = [_Set(ls, self.k, mode == "dense", int(refactor_every or AUTO_CAP)) for ls in sets]
+        if refactor_every is None:  # balance renewal flops against Woodbury flops (deterministic)
+            refactor_every = auto_interval(self.sets)
+            for st in self.sets:
+                st.cap = refactor_every
+        self.refactor_every = int(refactor_every)
         self.upcoming: np.ndarray = np.empty(0, int)
         self.n_rebase = 0
         self._pending = None
