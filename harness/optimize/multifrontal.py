@@ -18,7 +18,7 @@ import scipy.sparse as sp
 
 from harness.errors import ModelError
 
-LEAF = 64
+LEAF = 256
 
 
 class Symbolic:
