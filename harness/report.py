@@ -59,10 +59,10 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 
-HEAD = ["case", "model", "stage", "seed", "status", "n_nodes", "n_springs", "n_elements",
+HEAD = ["case", "model", "load", "stage", "seed", "status", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "grouped", "weights", "G_initial",
         "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
-        "G_abc_final", "freq_error", "f1_ratio"]
+        "G_abc_final", "freq_error", "f1_ratio", "error_estimate", "closed_form_error"]
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall)$|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
