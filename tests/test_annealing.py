@@ -114,3 +114,21 @@ def test_two_chains_keep_the_best_and_share_chain_zero():
     assert two.info["chains"] == 2 and two.info["chain_seeds"][0] == 11
     assert two.info["chain_G_final"][0] == pytest.approx(one.G_final, rel=1e-12)
     assert two.G_final == min(two.info["chain_G_final"])
+
+
+@pytest.mark.parametrize("mode", ["dense", "sparse"])
+def test_accepting_an_unchanged_constant_keeps_G_exact(mode):
+    """A proposal clipped at a bound does not change k; accepting it is a no-op that
+    leaves the incremental state exact and computes no 1/0 in the Woodbury core."""
+    import warnings
+    prob, _ = recoverable_problem((6, 6), sigma=0.3, seed=3)
+    eng = IncrementalG(prob, prob.k0, mode=mode, refactor_every=48)
+    rng = np.random.default_rng(1)
+    warnings.simplefilter("error", RuntimeWarning)
+    for it in range(120):
+        e = int(rng.integers(prob.n_springs))
+        kn = eng.k[e] if it % 7 == 0 else eng.k[e] * np.exp(0.3 * rng.uniform(-1, 1))
+        eng.propose(e, kn)
+        eng.accept()
+    assert np.isfinite(eng.G())
+    assert abs(eng.G() / prob.G(eng.k) - 1) < 1e-9

@@ -194,6 +194,9 @@ class IncrementalG:
 
     def propose(self, e: int, k_new: float) -> float:
         delta = k_new - self.k[e]
+        if delta == 0.0:  # clipped at a bound: a no-op, and 1/delta would poison the Woodbury core
+            self._pending = (e, k_new, [(0.0, None)] * len(self.sets))
+            return self.G()
         up = self.upcoming[: self.batch - 1]
         parts = [s.propose(e, delta, up) for s in self.sets]
         d2 = sum(p[0] for p in parts)
