@@ -8,8 +8,6 @@ graph alone (level-set bisection between two far-apart vertices) cuts that to ~2
 
 from __future__ import annotations
 
-import ctypes
-import os
 from contextlib import contextmanager
 
 import numpy as np
@@ -106,57 +104,10 @@ class DenseFactor:
 
 
 # --- BLAS threads ------------------------------------------------------------------------
-def _openblas_setters():
-    """(set, get) num_threads functions of the OpenBLAS copies loaded in this process
-    (numpy's and scipy's may be different copies); found through /proc/self/maps."""
-    found = []
-    try:
-        with open("/proc/self/maps") as fh:
-            libs = {line.split()[-1] for line in fh
-                    if "openblas" in line.lower() and ".so" in line.split()[-1]}
-    except OSError:
-        return found
-    for path in sorted(libs):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in ("scipy_openblas_set_num_threads64_", "openblas_set_num_threads64_",
-                     "scipy_openblas_set_num_threads", "openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                found.append((fn, getattr(lib, name.replace("set_num_threads", "get_num_threads"), None)))
-                break
-    return found
-
-
-_SETTERS = None
-
-
 @contextmanager
 def single_thread_blas():
-    """Run the block with one BLAS thread (threadpoolctl if installed, else OpenBLAS's
-    own setter through ctypes): a chain's small dense products do not profit from
-    threads, and the other core runs another chain."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        threadpool_limits = None
-    if threadpool_limits is not None:
-        with threadpool_limits(1):
-            yield
-        return
-    global _SETTERS
-    if _SETTERS is None:
-        import scipy.linalg  # noqa: F401  (load scipy's BLAS before looking for it)
-        _SETTERS = _openblas_setters()
-    setters = _SETTERS
-    old = []
-    for fn, get in setters:
-        old.append(get() if get is not None else os.cpu_count())
-        fn(1)
-    try:
+    """Run the block with one BLAS thread: a chain's small dense products do not profit
+    from threads, and the other core runs another chain."""
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(1):
         yield
-    finally:
-        for (fn, _), n in zip(setters, old):
-            fn(int(n))
