@@ -106,8 +106,8 @@ class DenseFactor:
 # --- BLAS threads ------------------------------------------------------------------------
 @contextmanager
 def single_thread_blas():
-    """Run the block with one BLAS thread: a chain's small dense products do not profit
-    from threads, and the other core runs another chain."""
+    """Run the block with one BLAS thread: threads do not speed up a chain's small dense
+    products, and the other core runs another chain."""
     from threadpoolctl import threadpool_limits
     with threadpool_limits(1):
         yield
