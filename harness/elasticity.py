@@ -82,6 +82,22 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
 
 
+def in_region(region, points: np.ndarray) -> np.ndarray:
+    """Mask of the points (n, dim) inside a ``harness.cases.Region`` box."""
+    return np.all((points >= np.asarray(region.lo) - 1e-12) & (points <= np.asarray(region.hi) + 1e-12), axis=1)
+
+
+def densities(material, points: np.ndarray) -> np.ndarray:
+    """Density at points (n, dim), e.g. element centroids; a region with its own density
+    overrides the material's."""
+    points = np.asarray(points, float)
+    rho = np.full(len(points), float(material.density))
+    for r in material.regions:
+        if r.density is not None:
+            rho[in_region(r, points)] = r.density
+    return rho
+
+
 def element_stiffness(material, centroids: np.ndarray) -> np.ndarray:
     """Voigt stiffness per element (n, 3, 3) in 2-D or (n, 6, 6) in 3-D for a
     ``harness.cases.Material`` (isotropic, fibre, regions) at element centroids (n, dim).
@@ -95,7 +111,7 @@ def element_stiffness(material, centroids: np.ndarray) -> np.ndarray:
     scale = np.ones(n)
     nu = np.full(n, material.nu)
     for r in material.regions:
-        inside = np.all((centroids >= np.asarray(r.lo) - 1e-12) & (centroids <= np.asarray(r.hi) + 1e-12), axis=1)
+        inside = in_region(r, centroids)
         scale[inside] = r.E / material.E
         if r.nu is not None:
             nu[inside] = r.nu

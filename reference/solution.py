@@ -17,7 +17,7 @@ from functools import cached_property
 import numpy as np
 import skfem
 
-from harness.elasticity import element_stiffness
+from harness.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from harness.parts import part_predicate
 from reference import cache as _cache
@@ -34,16 +34,6 @@ GRADE_SLOPE = 0.5  # element size / distance to the singular set in the graded z
 
 
 # -- materials and loads -------------------------------------------------------------
-
-def densities(material, centroids: np.ndarray) -> np.ndarray:
-    """Density per element; a region with its own density overrides the material's."""
-    rho = np.full(len(centroids), float(material.density))
-    for r in material.regions:
-        if r.density is not None:
-            inside = np.all((centroids >= np.asarray(r.lo) - 1e-12) & (centroids <= np.asarray(r.hi) + 1e-12), axis=1)
-            rho[inside] = r.density
-    return rho
-
 
 def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
     if case.body.shape == "mesh":

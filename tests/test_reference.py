@@ -510,7 +510,7 @@ def test_iterative_solvers_match_direct(tmp_path, method):
 
 def test_mass_matrix_total_mass_with_region_density(tmp_path):
     from reference.mesh import base_mesh
-    from reference.solution import densities
+    from harness.elasticity import densities
     extra = "[[material.regions]]\nbox = [[0.3, -1.2], [1.55, -0.4]]\nE = 200.0\ndensity = 5.0"
     case = rect_case(tmp_path, "quad", "P2", extra=extra + "\n", divisions=2)
     d = Discretisation(base_mesh(case), "quad", "P2")

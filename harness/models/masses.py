@@ -98,14 +98,8 @@ def mesh_moments(points: np.ndarray, cells, density=None) -> np.ndarray:
 
 def density_function(material, dim: int):
     """rho(points) for a ``harness.cases.Material`` (regions may override the density)."""
-    def rho(x):
-        out = np.full(len(x), float(material.density))
-        for r in material.regions:
-            if r.density is not None:
-                inside = np.all((x >= np.asarray(r.lo) - 1e-12) & (x <= np.asarray(r.hi) + 1e-12), axis=1)
-                out[inside] = r.density
-        return out
-    return rho
+    from harness.elasticity import densities
+    return lambda x: densities(material, x)
 
 
 def body_moments(body: BodyGeom, material=None) -> np.ndarray:
