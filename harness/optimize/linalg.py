@@ -19,37 +19,41 @@ from harness.errors import ModelError
 LEAF = 96
 
 
-def nested_dissection(A: sp.spmatrix, coords: np.ndarray) -> np.ndarray:
-    """A fill-reducing permutation of symmetric A with vertex coordinates (n, dim):
-    recursive bisection at the median of the widest coordinate; the separator is the
-    layer of left vertices that touch the right side. Separators are numbered last."""
+def dissection_tree(A: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF) -> list:
+    """Nested-dissection tree of symmetric A with vertex coordinates (n, dim): recursive
+    bisection at the median of the widest coordinate; the separator is the layer of left
+    vertices that touch the right side. Returns [(vertices, child node ids)] in postorder
+    (children before their separator), so concatenating the vertices gives the order."""
     A = sp.csr_matrix(A)
     A = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
     coords = np.asarray(coords, float)
-    out: list[np.ndarray] = []
+    nodes: list = []
 
-    def rec(idx: np.ndarray):
-        if len(idx) <= LEAF:
-            out.append(idx)
-            return
-        X = coords[idx]
-        axis = int(np.argmax(X.max(0) - X.min(0)))
-        c = X[:, axis]
-        m = np.median(c)
-        left = c < m
-        if left.all() or not left.any():
-            left = c <= m
-            if left.all():
-                out.append(idx)
-                return
-        S = A[idx][:, idx]
-        sep = left & ((S @ (~left).astype(float)) > 0)
-        rec(idx[left & ~sep])
-        rec(idx[~left])
-        out.append(idx[sep])
+    def rec(idx: np.ndarray) -> int:
+        left = None
+        if len(idx) > leaf:
+            c = coords[idx][:, int(np.argmax(np.ptp(coords[idx], axis=0)))]
+            m = np.median(c)
+            left = c < m
+            if left.all() or not left.any():
+                left = c <= m
+                if left.all():
+                    left = None
+        if left is None:
+            nodes.append((idx, []))
+            return len(nodes) - 1
+        sep = left & ((A[idx][:, idx] @ (~left).astype(float)) > 0)
+        kids = [rec(part) for part in (idx[left & ~sep], idx[~left]) if len(part)]
+        nodes.append((idx[sep], kids))
+        return len(nodes) - 1
 
     rec(np.arange(A.shape[0]))
-    return np.concatenate(out)
+    return nodes
+
+
+def nested_dissection(A: sp.spmatrix, coords: np.ndarray) -> np.ndarray:
+    """A fill-reducing permutation of symmetric A (separators numbered last)."""
+    return np.concatenate([V for V, _ in dissection_tree(A, coords)])
 
 
 class Factor:

@@ -17,6 +17,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from harness.errors import ModelError
+from harness.optimize.linalg import dissection_tree
 
 LEAF = 256
 
@@ -30,30 +31,7 @@ class Symbolic:
         n = A.shape[0]
         self.n = n
         coords = np.asarray(coords, float)
-        Ab = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
-        nodes = []  # (V, children) in postorder
-
-        def rec(idx):
-            if len(idx) <= leaf:
-                nodes.append((idx, []))
-                return len(nodes) - 1
-            X = coords[idx]
-            axis = int(np.argmax(X.max(0) - X.min(0)))
-            c = X[:, axis]
-            m = np.median(c)
-            left = c < m
-            if left.all() or not left.any():
-                left = c <= m
-                if left.all():
-                    nodes.append((idx, []))
-                    return len(nodes) - 1
-            S = Ab[idx][:, idx]
-            sep = left & ((S @ (~left).astype(float)) > 0)
-            kids = [rec(part) for part in (idx[left & ~sep], idx[~left]) if len(part)]
-            nodes.append((idx[sep], kids))
-            return len(nodes) - 1
-
-        rec(np.arange(n))
+        nodes = dissection_tree(A, coords, leaf)  # (V, children) in postorder
         # elimination order: postorder of the tree, each node's V contiguous
         order = np.concatenate([V for V, _ in nodes])
         rank = np.empty(n, np.int64)
