@@ -8,7 +8,7 @@ Layout written by :mod:`harness.runner`::
     results/<suite>/<case>/result-seed<N>.json   manifest (input hash, status, files) + rows
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
-Summary columns: ``case, model, stage, seed, status``, then the sizes and rule columns
+Summary columns: ``case, model, stage, seed, status, mode`` (quick or full), then the sizes and rule columns
 (``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, grouped,
 weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
 ``weights``, ``G_norm_initial, G_norm_final, G_s_initial, G_s_final, G_abc_initial,
@@ -59,7 +59,7 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 
-HEAD = ["case", "model", "load", "stage", "seed", "status", "n_nodes", "n_springs", "n_elements",
+HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "grouped", "weights", "G_initial",
         "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
         "G_abc_final", "freq_error", "f1_ratio", "error_estimate", "closed_form_error"]
@@ -146,7 +146,9 @@ def summary_frame(manifests: list[dict]):
     for m in manifests:
         expect = m.get("expect") if isinstance(m.get("expect"), dict) else {}
         for r in m["rows"]:
-            rows.append(_with_expect(r, expect))
+            r = _with_expect(r, expect)
+            r.setdefault("mode", m.get("mode", ""))  # quick or full: which budgets made the row
+            rows.append(r)
     df = pd.DataFrame(rows)
     if df.empty:
         return pd.DataFrame(columns=["case", "model", "stage", "seed", "status"])

@@ -687,7 +687,10 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
 
 
 def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, bar):
-    """The same jobs on a Dask cluster (``scheduler`` address; none: a LocalCluster)."""
+    """The same jobs on a Dask cluster (``scheduler`` address; none: a LocalCluster).
+    A worker that dies is the scheduler's business: it re-runs the lost job on another
+    worker up to ``distributed.scheduler.allowed-failures`` times (default 3) and then
+    gives up with KilledWorker, which becomes this job's error row; other jobs go on."""
     try:
         from distributed import Client, LocalCluster, wait
     except ImportError:
@@ -734,6 +737,9 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
                         res = fut.result()
                     except Exception as exc:  # worker lost, unpicklable result, ...
                         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+                        if type(exc).__name__ == "KilledWorker":
+                            msg = ("its Dask worker died each time it ran this job (killed, or out "
+                                   "of memory?); the other jobs went on")
                         res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
                                         traceback=traceback.format_exc())
                     finish(res)

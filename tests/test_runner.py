@@ -79,7 +79,8 @@ def test_suite_tables_and_resume(tmp_path, fake, capsys):
     assert run(suite, "--results", res, "--jobs", 1, "--no-figures") == 0
     df = __import__("pandas").read_csv(res / "demo" / "summary.csv")
     assert list(df["case"]) == ["a", "a", "b"] and list(df["model"]) == ["m0", "m1", "m0"]
-    assert list(df.columns[:5]) == ["case", "model", "stage", "seed", "status"]
+    assert list(df.columns[:6]) == ["case", "model", "stage", "seed", "status", "mode"]
+    assert (df["mode"] == "quick").all()
     assert df.columns[-1] == "seconds" and (df["status"] == "ok").all()
     assert df["weights"].iloc[0] == "1:3:15"
     assert (res / "demo" / "summary.md").read_text().count("\n| a |") == 2
@@ -303,6 +304,25 @@ def test_dask_local_cluster_matches_serial(tmp_path, fake):
     assert strip_timing((r1 / "demo" / "summary.csv").read_text()) == \
         strip_timing((r2 / "demo" / "summary.csv").read_text())
     assert (r2 / "demo" / "b" / "deformed.npz").read_bytes() == (r1 / "demo" / "b" / "deformed.npz").read_bytes()
+
+
+@pytest.mark.slow
+def test_dask_dead_worker_is_an_error_row(tmp_path, fake):
+    """A job that kills its Dask worker each time becomes an error row; the others finish."""
+    distributed = pytest.importorskip("distributed")
+    import dask
+    suite = tmp_path / "cases" / "demo"
+    write_case(suite, "a", "rows=1")
+    write_case(suite, "b", "die=1")
+    with dask.config.set({"distributed.scheduler.allowed-failures": 1}), \
+            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                     dashboard_address=None) as cluster:
+        rep = run_suite([suite], results=tmp_path / "r", executor="dask",
+                        scheduler=cluster.scheduler_address, figures=False, progress=False)
+    assert [r.job.case for r in rep.failed] == ["b"]
+    assert "Dask worker died" in rep.failed[0].error
+    df = __import__("pandas").read_csv(tmp_path / "r" / "demo" / "summary.csv")
+    assert set(df[df.status == "ok"]["case"]) == {"a"}
 
 
 def test_unreachable_scheduler_is_one_line(tmp_path, fake, capsys, monkeypatch):
