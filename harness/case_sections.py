@@ -3,7 +3,12 @@ the stage that reads a section owns its spec here. Free-form keys ("any") are
 validated by their owner when the stage runs."""
 
 from harness.models.sms import MODEL_SPEC as SMS
+from harness.optimize import OPTIMIZERS
 from harness.schema import Field
+
+# [optimizer] method / compare: the registry's names (a new optimiser needs no edit here)
+_METHODS = tuple(OPTIMIZERS)
+_COMPARE = tuple(m for m in OPTIMIZERS if m != "none")
 
 # [model] kind = "bc2000": Bourguignon & Cani 2000 (harness/models/anisotropic.py,
 # massspring.py). Damping constants are the program's per-step ones unless
@@ -64,12 +69,24 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
     "model": "model",
     # [optimizer]: spring-constant calibration (harness/optimize)
     "optimizer": {
-        "method": Field("str", "none", choices=("none", "sa", "sa-refactor", "lbfgs", "gauss-newton", "nelder-mead"),
+        "method": Field("str", "none", choices=_METHODS,
                         doc="harness.optimize.OPTIMIZERS: sa = Deussen Fig. 6 annealing (incremental), "
                             "sa-refactor = same, re-factorising per proposal, lbfgs / gauss-newton = adjoint "
                             "gradient fits, nelder-mead = grouped mode, none = keep the initial constants"),
         "options": Field("any", {}, doc="method options, checked by the optimiser (unknown keys are errors); "
                                         "see harness/optimize/annealing.py DEFAULTS and gradient.py *_DEFAULTS"),
+        "compare": Field("strs", (), choices=_COMPARE,
+                         doc="e.g. compare = [\"lbfgs\", \"gauss-newton\"]: more optimisers on the same initial model, "
+                             "reference and weights, one row each"),
+        "compare_options": Field("any", {}, check=lambda v: _compare_options_problem(v),
+                                 doc="options per compared method, e.g. compare_options = { lbfgs = { maxiter = 500 } }"),
+        "frequency": Field("table", None, spec={
+            "modes": Field("int", 4, min=1, doc="the first k natural frequencies in the objective (<= [reference] modes)"),
+            "weight": Field("float", 1.0, min=0, min_exclusive=True,
+                            doc="weight of sum_j (f_j / f_FEM_j - 1)^2 beside G^2 / G(k0)^2"),
+            "method": Field("str", "lbfgs", choices=("lbfgs",), doc="the optimiser that takes the frequency term"),
+            "options": Field("any", {}, doc="options of that optimiser"),
+        }, doc="an extra row fitting G and the first modes' frequencies to the FEM ones"),
     },
     # [score]: G criteria weights (harness/scoring)
     "score": {
@@ -101,4 +118,16 @@ def _seeds_problem(v):
         return f"expected an integer >= 0 or a non-empty list of them, got {v!r}"
     if len(set(seeds)) != len(seeds):
         return "repeated seed"
+    return None
+
+
+def _compare_options_problem(v):
+    """[optimizer] compare_options: a table of option tables keyed by optimiser name."""
+    if not isinstance(v, dict):
+        return "expected a table { method = { option = value } }"
+    for m, o in v.items():
+        if m not in _COMPARE:
+            return f"'{m}' is not one of {', '.join(_COMPARE)}"
+        if not isinstance(o, dict):
+            return f"options of '{m}' must be a table"
     return None

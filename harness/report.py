@@ -177,7 +177,8 @@ def seeds_frame(df):
     multi = ok[ok["case"].isin(n_seeds[n_seeds > 1].index)]
     if multi.empty:
         return pd.DataFrame()
-    keys = [c for c in ("case", "model", "stage") if c in multi]
+    # an optimised row shares its model with the unoptimised one: tell them apart
+    keys = [c for c in ("case", "model", "stage", "optimizer", "objective") if c in multi]
     num = [c for c in multi.columns if c not in keys and c != "seed"
            and pd.api.types.is_numeric_dtype(multi[c]) and not c.startswith(("paper_", "ratio_"))]
     g = multi.groupby(keys, sort=True, dropna=False)
@@ -185,6 +186,43 @@ def seeds_frame(df):
     out.columns = [f"{c}_{s}" for c, s in out.columns]
     out.insert(0, "n_seeds", g["seed"].nunique())
     return out.reset_index()
+
+
+OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_params", "budget", "G_initial",
+                     "G_final", "G_final_vs_sa", "seconds", "opt_evaluations", "opt_iterations", "opt_stop",
+                     "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k", "f1_ratio", "freq_error_initial",
+                     "freq_error_final"]
+
+
+def optimizer_frame(df):
+    """The optimised rows side by side (issue 4: SA vs L-BFGS-B on the same cases): one
+    line per case, model, optimizer and objective, numbers averaged over seeds (spread in
+    seeds.csv); ``G_final_vs_sa`` = G_final / G_final of the case's SA row, same seed."""
+    import pandas as pd
+    if df.empty or "optimizer" not in df:
+        return pd.DataFrame()
+    opt = df[df["optimizer"].notna() & (df["optimizer"] != "none")]
+    if "status" in opt:
+        opt = opt[opt["status"] == "ok"]
+    if opt.empty or opt.groupby("case")["optimizer"].nunique().max() < 2:
+        return pd.DataFrame()
+    opt = opt.copy()
+    if "objective" not in opt:
+        opt["objective"] = "G"
+    opt["objective"] = opt["objective"].fillna("G")
+    sa = opt[(opt["optimizer"] == "sa") & (opt["objective"] == "G")].set_index(["case", "seed"])["G_final"]
+    sa = sa[~sa.index.duplicated()]
+    opt["G_final_vs_sa"] = [g / sa.get((c, s), math.nan) for c, s, g in zip(opt["case"], opt["seed"], opt["G_final"])]
+    keys = ["case", "model", "optimizer", "objective"]
+    num = [c for c in OPTIMIZER_COLUMNS if c in opt and c not in keys and pd.api.types.is_numeric_dtype(opt[c])]
+    text = [c for c in ("budget", "opt_stop") if c in opt]
+    g = opt.groupby(keys, sort=False, dropna=False)
+    out = g[num].mean()
+    for c in text:
+        out[c] = g[c].first()
+    out.insert(0, "n_seeds", g["seed"].nunique())
+    out = out.reset_index()
+    return out[[c for c in OPTIMIZER_COLUMNS if c in out]]
 
 
 # -- markdown and html ---------------------------------------------------------------------
@@ -250,6 +288,14 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
           "`improvement` with `paper_improvement`, and trends.\n", markdown_table(df[key])]
     if not seeds.empty:
         md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
+    opts = optimizer_frame(df)
+    if not opts.empty:
+        md += ["\n## Optimisers compared\n",
+               "Same initial model, reference and weights per case; means over seeds. `G_final_vs_sa` = "
+               "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals); "
+               "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
+               "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS relative error "
+               "of the first natural frequencies against the FEM.\n", markdown_table(opts)]
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
     atomic_write(md_path, "\n".join(md).encode())

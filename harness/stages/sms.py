@@ -16,7 +16,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from harness.errors import ModelError, SpringbenchError
+from harness.errors import CaseError, ModelError, SpringbenchError
 
 NAME = "sms"
 
@@ -133,90 +133,241 @@ def run(case, ctx) -> list[dict]:
                        note=f"no reference ({why})")
         rows.append(row)
 
-    ratios = _frequencies(case, ctx, ref, nets, spec)
-    for row in rows:
-        if row["stiffness"] in ratios:
-            row["f1_ratio"] = ratios[row["stiffness"]]
-
     opt = case.section("optimizer") or {}
-    method = opt.get("method", "none")
+    runs = optimiser_runs(case, opt)
     optimize = _optimizer()
-    if method != "none" and optimize is not None and u_ref is not None:
-        rows.append(_optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label, common,
-                              rows[0], evaluate, write))
-    elif method != "none":
+    n_modes = _check_modes(case, opt)
+    fem_f = _fem_frequencies(ref, n_modes)
+    opt_nets, traces = {}, []
+    if runs and optimize is not None and u_ref is not None:
+        for run_ in runs:
+            row, net, trace = _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, label, common,
+                                        rows[0], evaluate, write, fem_f)
+            rows.append(row)
+            opt_nets[row["_tag"]] = net
+            if trace is not None:
+                traces.append(trace)
+        if traces:
+            pd.concat(traces, ignore_index=True).to_csv(ctx.file("trace.csv"), index=False)
+    elif runs:
         rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
+
+    freqs = _frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
+    m = _error_modes(opt, n_modes)
+    first = base.info["stiffness"]
+    for row in rows:
+        tag = row.pop("_tag", row["stiffness"])
+        if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
+            row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
+            row["freq_error_final"] = _freq_error(freqs[tag], freqs["fem"], m)
+            start = first if row["optimizer"] != "none" else tag
+            row["freq_error_initial"] = _freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
     return rows
 
 
-def _optimise(case, ctx, optimize, opt, base, u_ref, names, weights, spec, label, common, first, evaluate, write):
+# -- optimisers -------------------------------------------------------------------------
+
+BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", "target", "tol", "ftol", "gtol",
+               "xatol", "fatol", "cg_maxiter", "chains")
+
+
+def optimiser_runs(case, opt) -> list[dict]:
+    """The optimiser runs of a case, in table order: [optimizer] method, then each name
+    in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
+    Each is {method, options, objective[, modes, weight]}."""
+    method = opt.get("method", "none")
+    file = str(case.path) if case.path is not None else None
+    compare = list(opt.get("compare") or ())
+    extra = dict(opt.get("compare_options") or {})
+    if method in compare or len(set(compare)) != len(compare):
+        raise CaseError(f"compare repeats '{method if method in compare else compare[0]}'", file=file,
+                        field="optimizer.compare", fix="name each optimiser once (method is run already)")
+    stray = sorted(set(extra) - set(compare))
+    if stray:
+        raise CaseError(f"options for '{stray[0]}', which compare does not list", file=file,
+                        field="optimizer.compare_options", fix=f"add '{stray[0]}' to compare or remove its options")
+    runs = [] if method == "none" else [dict(method=method, options=dict(opt.get("options") or {}), objective="G")]
+    runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G") for m in compare]
+    fq = opt.get("frequency")
+    if fq:
+        runs.append(dict(method=fq["method"], options=dict(fq.get("options") or {}), objective="G+freq",
+                         modes=int(fq["modes"]), weight=float(fq["weight"])))
+    return runs
+
+
+def _check_modes(case, opt) -> int:
+    n = int(case.reference.modes or 0)
+    fq = opt.get("frequency")
+    if fq and fq["modes"] > n:
+        raise CaseError(f"frequency modes = {fq['modes']} but the reference computes {n}",
+                        file=str(case.path) if case.path is not None else None, field="optimizer.frequency.modes",
+                        fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes")
+    return n
+
+
+def _error_modes(opt, n_modes) -> int:
+    """Modes in freq_error_*: the frequency term's count, else all computed ones."""
+    fq = opt.get("frequency")
+    return int(fq["modes"]) if fq else n_modes
+
+
+def _freq_error(f, f_fem, m) -> float:
+    """RMS relative error of the first m natural frequencies against the FEM ones."""
+    rel = np.asarray(f[:m], float) / np.asarray(f_fem[:m], float) - 1.0
+    return float(np.sqrt(np.mean(rel ** 2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
+
+
+def budget_label(options: dict) -> str:
+    """The options that bound an optimiser's effort, as 'key=value, ...' ('default' if none)."""
+    parts = [f"{k}={options[k]}" for k in BUDGET_KEYS if options.get(k) is not None]
+    return ", ".join(parts) or "default"
+
+
+def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, label, common, first, evaluate, write,
+              fem_f):
     from harness import statics
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
+    method, objective = run_["method"], run_["objective"]
+    stiff = base.info["stiffness"]
+    tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
     _, free, forces = statics.all_load_arrays(base, case)
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
+    freq_kw = {}
+    if objective != "G":
+        if fem_f is None or len(fem_f) < run_["modes"]:
+            raise SpringbenchError("the frequency term needs the reference's natural frequencies",
+                                   field="optimizer.frequency", fix="use a reference with modes, or remove [optimizer.frequency]")
+        if np.any(base.masses <= 0):
+            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies",
+                             field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
+        modal_free = ~statics.fixed_mask(base.points, case, case.loads[0]).ravel()
+        freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
+                       freq_weight=run_["weight"], modal_free=modal_free)
     problem = FitProblem.from_network(base.points, base.springs, base.k, free, forces,
                                       u_ref.reshape(len(names), -1), wdof, list(names),
-                                      groups=base.groups if spec["grouped"] else None)
+                                      groups=base.groups if spec["grouped"] else None, **freq_kw)
     t0 = time.perf_counter()
-    ctx.status(f"optimising ({opt['method']})")
-    res = optimize(problem, opt["method"], dict(opt.get("options") or {}), int(base.info["seed"]), status=ctx.status)
+    ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
+    res = optimize(problem, method, dict(run_["options"]), int(base.info["seed"]), status=ctx.status)
     seconds = time.perf_counter() - t0
-    net = base.with_k(res.k, stiffness=f"{base.info['stiffness']}+{opt['method']}")
+    name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
+    net = base.with_k(res.k, stiffness=name)
     sres, sc = evaluate(net)
-    write(net, sres, f"{base.info['stiffness']}-{opt['method']}")
-    trace = getattr(res, "trace", None)
-    if trace is not None and len(trace):
-        try:
-            if isinstance(trace, pd.DataFrame):
-                df = trace
-            else:
-                arr = np.asarray(trace, float)
-                arr = arr[:, None] if arr.ndim == 1 else arr
-                df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
-            if "G" not in df.columns and df.shape[1] == 1:
-                df.columns = ["G"]
-            if "step" not in df.columns:
-                df.insert(0, "step", np.arange(len(df)))
-            df["model"] = f"{base.info['stiffness']}+{opt['method']}"
-            df.to_csv(ctx.file("trace.csv"), index=False)
-        except (ValueError, TypeError):
-            pass
-    row = {**common, "model": f"{label}[{base.info['stiffness']}]", "stiffness": base.info["stiffness"],
-           "optimizer": opt["method"], "grouped": bool(spec["grouped"]), "seconds": seconds,
+    write(net, sres, tag)
+    info = dict(getattr(res, "info", {}) or {})
+    row = {**common, "model": f"{label}[{stiff}]", "stiffness": stiff,
+           "optimizer": method, "grouped": bool(spec["grouped"]), "seconds": seconds,
            "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
            "G_s_initial": first.get("G_s_initial", math.nan),
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **{f"G_{k}": v for k, v in sc.per_load.items()}}
+           **{f"G_{k}": v for k, v in sc.per_load.items()},
+           "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
+           "_tag": tag}
+    if freq_kw:
+        row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
     for key in ("n_steps", "accepted"):
         if hasattr(res, key):
             row[f"opt_{key}"] = getattr(res, key)
-    return row
+    if "stop" in info:
+        row["opt_stop"] = str(info["stop"])
+    row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
+    if "iterations" in info:
+        row["opt_iterations"] = int(info["iterations"])
+    row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
+    return row, net, _trace_frame(getattr(res, "trace", None), name)
 
 
-def _frequencies(case, ctx, ref, nets, spec):
-    """frequencies.csv: the first few SMS frequencies per rule next to the FEM ones;
-    returns {rule: first SMS frequency / first FEM frequency}."""
-    n = int(case.reference.modes or 0)
+def _trace_frame(trace, name):
+    if trace is None or not len(trace):
+        return None
+    try:
+        if isinstance(trace, pd.DataFrame):
+            df = trace.copy()
+        else:
+            arr = np.asarray(trace, float)
+            arr = arr[:, None] if arr.ndim == 1 else arr
+            df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
+        if "G" not in df.columns and df.shape[1] == 1:
+            df.columns = ["G"]
+        if "step" not in df.columns:
+            df.insert(0, "step", np.arange(len(df)))
+        df["model"] = name
+        return df
+    except (ValueError, TypeError):
+        return None
+
+
+JACOBIAN_MAX = 2e7   # entries of the dense Jacobian the diagnostics may form
+
+
+def fit_diagnostics(problem, k) -> dict:
+    """Why optimisers differ, measured at the constants k they return:
+
+    - ``opt_at_bounds``: parameters at their bounds (L-BFGS-B stops there);
+    - ``jac_rank``: identifiable directions, singular values of the weighted residual's
+      Jacobian d(sqrt(w)(u_ref - u))/d log(parameter) above 1e-8 of the largest;
+    - ``jac_cond_logk`` / ``jac_cond_k``: largest / smallest of those singular values,
+      over log k (what lbfgs and gauss-newton use) and over k itself (plain gradient
+      descent on k, as the paper tried); the Gauss-Newton Hessian's condition is the square.
+
+    Dense numpy solves, independent of the optimisers' own code."""
+    lo, hi = problem.bounds
+    k = np.asarray(k, float)
+    groups = problem.groups
+    f = k / problem.k0
+    kp = k
+    if groups is not None:  # one factor (and one representative k) per group
+        f = np.array([np.median(f[groups == g]) for g in range(problem.n_params)])
+        kp = np.array([np.median(k[groups == g]) for g in range(problem.n_params)])
+    out = {"opt_at_bounds": int(np.sum((f <= lo * (1 + 1e-6)) | (f >= hi * (1 - 1e-6))))}
+    if sum(b.B.shape[0] for b in problem.blocks) * problem.n_springs > JACOBIAN_MAX:
+        return out
+    parts = []
+    for b in problem.blocks:
+        Bd = b.B.toarray()
+        K = (Bd * k) @ Bd.T
+        u = np.linalg.solve(K, b.f)
+        X = np.linalg.solve(K, Bd * (k * (Bd.T @ u)))      # -d u / d log k_e, column e
+        parts.append(np.sqrt(b.w)[:, None] * X)
+    J = np.vstack(parts)
+    if groups is not None:
+        J = J @ np.eye(problem.n_params)[groups]
+    for name, A in (("logk", J), ("k", J / kp[None, :])):
+        s = np.linalg.svd(A, compute_uv=False)
+        keep = s > 1e-8 * s[0] if len(s) and s[0] > 0 else np.zeros(len(s), bool)
+        if name == "logk":
+            out["jac_rank"] = int(keep.sum())
+        out[f"jac_cond_{name}"] = float(s[0] / s[keep][-1]) if keep.any() else math.nan
+    return out
+
+
+def _fem_frequencies(ref, n):
+    if ref is None or n <= 0:
+        return None
+    try:
+        f = np.asarray(ref.frequencies(n), float)
+    except Exception:  # noqa: BLE001 - the reference's modal solve is optional here
+        return None
+    return f if len(f) else None
+
+
+def _frequencies(case, ctx, fem_f, nets, n):
+    """frequencies.csv: the first n SMS frequencies per model next to the FEM ones;
+    returns {column: frequencies}: 'fem' and one per rule or optimised model."""
     if n <= 0:
         return {}
     from harness.modal_sms import frequencies
     cols = {"mode": np.arange(1, n + 1)}
-    if ref is not None:
-        try:
-            f = np.asarray(ref.frequencies(n), float)
-            cols["fem"] = np.pad(f, (0, n - len(f)), constant_values=np.nan)[:n]
-        except Exception:  # noqa: BLE001 - the reference's modal solve is optional here
-            pass
-    for rule, net in nets.items():
+    if fem_f is not None:
+        cols["fem"] = np.pad(fem_f, (0, max(n - len(fem_f), 0)), constant_values=np.nan)[:n]
+    for tag, net in nets.items():
         try:
             f = frequencies(net, case, n)
-            cols[rule] = np.pad(f, (0, n - len(f)), constant_values=np.nan)[:n]
+            cols[tag] = np.pad(f, (0, n - len(f)), constant_values=np.nan)[:n]
         except ModelError:
             continue
     if len(cols) > 1:
         pd.DataFrame(cols).to_csv(ctx.file("frequencies.csv"), index=False)
-    if "fem" not in cols or not cols["fem"][0] > 0:
-        return {}
-    return {r: float(cols[r][0] / cols["fem"][0]) for r in nets if r in cols}
+    return cols
