@@ -430,3 +430,25 @@ def test_frequency_term_reduces_the_frequency_error(tmp_path, monkeypatch):
     assert err1 < 0.2 * err0 and freq["f1_ratio"] == pytest.approx(f1[0] / ref.target[0], rel=1e-6)
     assert static["freq_error_final"] > 2 * err1
     assert freq["G_final"] <= freq["G_initial"]
+
+
+def test_seed_means_and_optimiser_table_keep_optimisers_apart():
+    """An optimised row shares ``model`` with its unoptimised row: seeds.csv and the
+    optimisers table must not average them together (hand-computed means)."""
+    import pandas as pd
+
+    from harness.report import optimizer_frame, seeds_frame
+    rows = []
+    for seed, (g0, gsa, glb) in enumerate([(1.0, 0.2, 0.1), (3.0, 0.4, 0.1)]):
+        common = dict(case="c", model="m[deussen]", stage="sms", seed=seed, status="ok", G_initial=g0)
+        rows += [dict(common, optimizer="none", G_final=g0),
+                 dict(common, optimizer="sa", objective="G", G_final=gsa, budget="temperatures=2"),
+                 dict(common, optimizer="lbfgs", objective="G", G_final=glb, budget="default")]
+    df = pd.DataFrame(rows)
+    s = seeds_frame(df).set_index("optimizer")
+    assert s.loc["none", "G_final_mean"] == pytest.approx(2.0)
+    assert s.loc["sa", "G_final_mean"] == pytest.approx(0.3) and s.loc["lbfgs", "G_final_std"] == 0.0
+    o = optimizer_frame(df).set_index("optimizer")
+    assert list(o.index) == ["sa", "lbfgs"] and (o["n_seeds"] == 2).all()
+    assert o.loc["lbfgs", "G_final_vs_sa"] == pytest.approx((0.1 / 0.2 + 0.1 / 0.4) / 2)
+    assert o.loc["sa", "budget"] == "temperatures=2"
