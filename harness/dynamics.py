@@ -5,14 +5,17 @@ Bourguignon-Cani elements), shared by every model with ``forces(x, v)``,
 - ``verlet``: position (Stoermer) Verlet as the original program, d_{n+1} = d_n + h^2 a_n,
   x_{n+1} = x_n + d_{n+1}, damping on v = d/h (the program's per-step constants are
   kd*h physically). For MassSpring / AnisotropicBody a compiled kernel (numba,
-  harness/models/bc2000/kernels.py) runs the whole loop with the program's order of
-  operations and of force accumulation, so it reproduces the program's particle states
-  bit for bit.
+  harness/models/bc2000/kernels.py, vectorised over blocks of elements) runs the whole
+  loop; it reproduces the program's particle states to rounding (tests/test_bc2000.py).
 - ``symplectic-euler``: v += h a(x, v); x += h v (numpy, any model).
 - ``backward-euler``: one Newton step per step with the Jacobian of the forces (complex
   step, coloured, sparse): (M - h D - h^2 K) dv = h (f + h K v).
 - ``stable_step``: 2 / omega_max of the linearised K and M (free dofs).
 - ``solve_static``: Newton with load stepping and a backtracking line search.
+- ``solve_static_path``: the same, then pseudo-arclength continuation where load stepping
+  stalls: it follows the equilibrium path through a limit point (the tangent stiffness
+  turns singular and the load factor has to decrease: a snap-through of the model, not a
+  solver failure) and reports it in a one-line status.
 
 A run that blows up raises SimulationError naming the step and the stable-step estimate.
 """
@@ -93,40 +96,11 @@ def _kernel():
     return run
 
 
-def _kernel_arrays(model, dt):
-    """Model arrays for the compiled loop (damping converted to per-step constants):
-    (springs, tets, hexes) tuples, empty where the model has none."""
-    from harness.models.anisotropic import AnisotropicBody
-    from harness.models.massspring import MassSpring
-    z1 = np.zeros(0)
-
-    def empty_el(nv, nw):
-        return (np.zeros((0, nv), np.int64), np.zeros((0, 6, nw), np.int64), np.zeros((0, 6, nw)),
-                np.zeros((0, 6)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), z1, z1,
-                np.zeros((0, nv)), False, np.zeros((0, 6, nw), np.int64))
-    springs = (np.zeros(0, np.int64), np.zeros(0, np.int64), z1, z1, z1)
-    tet, hexa = empty_el(4, 3) + (np.zeros((0, 6, 4)),), empty_el(8, 4)
-    if isinstance(model, MassSpring):
-        springs = (np.ascontiguousarray(model.springs[:, 0], np.int64), np.ascontiguousarray(model.springs[:, 1], np.int64),
-                   np.ascontiguousarray(model.ks, float), model.kd / dt, np.ascontiguousarray(model.L0, float))
-    elif isinstance(model, AnisotropicBody):
-        ax = model.axes
-        # local vertex index (in the element) of each end's face vertices
-        local = np.argmax(model.cells[:, None, None, :] == ax.nodes[..., None], axis=-1).astype(np.int64)
-        D0 = model.D0.reshape(len(model.cells), -1)
-        el = tuple(np.ascontiguousarray(a, dtype=t) for a, t in (
-            (model.cells, np.int64), (local, np.int64), (ax.weights, float), (model.ks, float),
-            (model.kd / dt, float), (model.L0, float), (model.cos0, float), (model.kvs, float),
-            (model.kvd / dt, float), (D0, float))) + (bool(model.volume), np.ascontiguousarray(ax.nodes, np.int64))
-        if model.is_hex:
-            hexa = el
-        else:       # dense local weights (m, 6, 4) for the tetra kernel
-            wl = np.zeros((len(model.cells), 6, 4))
-            np.put_along_axis(wl, local, ax.weights, axis=2)
-            tet = el + (wl,)
-    else:
-        return None
-    return springs, tet, hexa
+def _kernel_arrays(model, dt, threads=1):
+    """Model arrays for the compiled loop (harness/models/bc2000/pack.py): (springs, tets,
+    hexes) argument tuples, empty where the model has none; None for other models."""
+    from harness.models.bc2000.pack import kernel_arrays
+    return kernel_arrays(model, dt, threads)
 
 
 def _tets_of(model):
@@ -142,7 +116,7 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     ``snapshots``: step numbers whose full state is kept; ``observe``: node ids whose
     positions are kept every step. ``engine``: "numba" (verlet only), "numpy" or "auto".
     ``volume``: measure the volume every step (off for timing runs). ``threads``: 2 runs
-    the tetra elements on two threads (same result bit for bit; pays off on free cores).
+    the elements on two threads (same result bit for bit; pays off on free cores).
     """
     if integrator not in INTEGRATORS:
         raise SimulationError(f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}")
@@ -153,8 +127,8 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     snap_steps = np.array(sorted({int(s) for s in snapshots if 0 <= int(s) <= steps}), np.int64)
     obs = np.asarray(observe, np.int64).reshape(-1)
     tets = _tets_of(model) if volume else np.zeros((0, 4), np.int64)
-    size = float(np.ptp(model.points, axis=0).max()) or 1.0
-    arrays = _kernel_arrays(model, dt) if integrator == "verlet" and engine in ("auto", "numba") else None
+    size = float((model.points.max(axis=0) - model.points.min(axis=0)).max()) or 1.0
+    arrays = _kernel_arrays(model, dt, threads) if integrator == "verlet" and engine in ("auto", "numba") else None
     if engine == "numba" and arrays is None:
         raise SimulationError("the compiled engine runs verlet on MassSpring or AnisotropicBody only")
     vol = np.full(steps + 1, np.nan)
@@ -363,6 +337,133 @@ def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1
                                   fix="use more load_steps, or check that the body is held")
         dlam /= 2
     return x
+
+
+@dataclass(frozen=True)
+class StaticPath:
+    """Result of :func:`solve_static_path`: ``x`` the equilibrium at the full load (None if
+    not reached), ``load_factor`` the highest load factor reached, ``folds`` the load
+    factors at which the path turned back (limit points), ``status`` one line."""
+    x: np.ndarray | None
+    load_factor: float
+    folds: tuple
+    status: str
+
+
+def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 30,
+                      max_cuts: int = 2, arc_steps: int = 150) -> StaticPath:
+    """Static equilibrium at the full load: load stepping as :func:`solve_static`; where an
+    increment cannot converge even when cut ``max_cuts`` times, pseudo-arclength
+    continuation (:func:`arclength`) from the last equilibrium for up to ``arc_steps``
+    steps. Never raises for a stalled path: the status says what happened."""
+    x = np.array(model.points, float)
+    free = np.repeat(~loading.fixed, 3)
+    ext = loading.external()
+    graph = model.node_graph()
+    scale = max(np.abs(ext).max(), 1e-300)
+    lam, dlam, cuts = 0.0, 1.0 / load_steps, 0
+    while lam < 1.0 and cuts <= max_cuts:
+        target = min(1.0, lam + dlam)
+        y, ok, _ = _newton(model, graph, x, free, target * ext, tol * scale, max_iter)
+        if ok:
+            x, lam = y, target
+        else:
+            cuts += 1
+            dlam /= 2
+    if lam >= 1.0:
+        return StaticPath(x, 1.0, (), "converged (load stepping)")
+    path = arclength(model, graph, x, lam, free, ext, tol * scale, max_iter=12, steps=arc_steps)
+    folds = tuple(path["folds"])
+    where = ", ".join(f"{f:.4g}" for f in folds)
+    if path["x"] is not None:
+        status = (f"converged past limit point(s) at load factor {where} (snap-through of the model)"
+                  if folds else "converged (continuation)")
+        return StaticPath(path["x"], 1.0, folds, status)
+    if folds:
+        status = (f"limit point at load factor {folds[0]:.4g}: the tangent stiffness turns singular and the "
+                  f"equilibrium path turns back (a snap-through instability of the model, not a solver failure); "
+                  f"full load not regained in {arc_steps} continuation steps (load factor now {path['lam']:.3g})")
+    else:
+        status = (f"stalled at load factor {path['lam_max']:.4g} (no limit point found: "
+                  f"{path['why']})")
+    return StaticPath(None, float(path["lam_max"]), folds, status)
+
+
+def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps: int = 150,
+              ds: float = 0.02, ds_min: float = 1e-7, ds_max: float = 0.2) -> dict:
+    """Pseudo-arclength continuation of f_int(x) + lambda f_ext = 0 from the equilibrium
+    (x, lam) towards lambda = 1, in the scaled coordinates (u / c, lambda) with c the
+    displacement per unit load factor at the start. Each step: predictor along the unit
+    tangent t (from K du = f_ext dlambda, oriented along the previous one), Newton
+    corrector on the equilibrium plus t . (z - z_prev) = ds (bordered solve with the
+    sparse LU of K); a sign change of the tangent's lambda component marks a limit point.
+    Returns dict(x at lambda = 1 or None, lam, lam_max, folds, why)."""
+    f = ext.ravel()[free]
+
+    def residual(y, l):
+        return (model.forces(y) + l * ext).ravel()[free]
+
+    def factor(y):
+        K = -jacobian(model.forces, y, graph).tocsr()[free][:, free]
+        return spla.splu(K.tocsc())
+
+    def moved(y, du):
+        z = y.copy().ravel()
+        z[free] += du
+        return z.reshape(-1, 3)
+
+    lu = factor(x)
+    b = lu.solve(f)
+    c = max(np.linalg.norm(b), 1e-300)
+
+    def tangent(b, prev=None):
+        t = np.append(b / c, 1.0)
+        t /= np.linalg.norm(t)
+        if prev is not None and t @ prev < 0:
+            t = -t
+        return t
+    t = tangent(b)
+    folds, lam_max, why = [], lam, "step size below the minimum"
+    for _ in range(steps):
+        ok = False
+        while ds >= ds_min:
+            y, l = moved(x, ds * c * t[:-1]), lam + ds * t[-1]
+            luy = lu
+            for it in range(max_iter):
+                r = residual(y, l)
+                g = t[:-1] @ ((y - x).ravel()[free] / c) + t[-1] * (l - lam) - ds
+                if np.linalg.norm(r, np.inf) <= tol and abs(g) <= 1e-10 and it > 0:
+                    ok = True
+                    break
+                try:
+                    luy = factor(y)
+                except RuntimeError:
+                    break
+                a, bb = luy.solve(r), luy.solve(f)
+                dl = (-g - t[:-1] @ a / c) / (t[:-1] @ bb / c + t[-1])
+                du = a + bb * dl
+                if not np.all(np.isfinite(du)):
+                    break
+                y, l = moved(y, du), l + dl
+            if ok:
+                break
+            ds /= 2
+        if not ok:
+            return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=why)
+        tn = tangent(luy.solve(f), t)      # K of the last corrector iterate: the tangent to O(|du|)
+        if tn[-1] * t[-1] < 0:
+            folds.append(float(l))
+        if l >= 1.0:            # passed the full load: settle on it with load control
+            xs, done, _ = _newton(model, graph, y if l - 1.0 < 1.0 - lam else x, free, ext, tol, 30)
+            if done:
+                return dict(x=xs, lam=1.0, lam_max=1.0, folds=folds, why="")
+            why = "Newton at the full load failed after the path crossed it"
+            return dict(x=None, lam=l, lam_max=max(lam_max, l), folds=folds, why=why)
+        x, lam, t = y, l, tn
+        lam_max = max(lam_max, lam)
+        if it <= 4:
+            ds = min(1.5 * ds, ds_max)
+    return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=f"{steps} steps used")
 
 
 def _newton(model, graph, x, free, ext, tol, max_iter):
