@@ -7,6 +7,8 @@ returning the fields of :class:`FitResult`. A new optimiser is one function adde
 - "nelder-mead": derivative-free, for grouped mode with few parameters.
 - "gauss-newton": Levenberg-Marquardt with CG on the normal equations (adjoint products);
   far faster than L-BFGS-B on large networks (see bench fit).
+- "equilibrium-gap": the equation-error estimate (one sparse linear least squares, see
+  equilibrium.py); also the ``init = "equilibrium-gap"`` start of lbfgs / gauss-newton.
 - "none": keep k0 (the unoptimised row).
 """
 
@@ -60,6 +62,11 @@ def _gauss_newton(problem, options, seed, status=None):
     return gauss_newton(problem, options, seed, status)
 
 
+def _equilibrium_gap(problem, options, seed, status=None):
+    from harness.optimize.equilibrium import equilibrium_gap
+    return equilibrium_gap(problem, options, seed, status)
+
+
 def _none(problem, options, seed, status=None):
     if options:
         raise SpringbenchError(f"method 'none' takes no options (got {sorted(options)})", field="optimizer.options",
@@ -76,6 +83,7 @@ OPTIMIZERS = {
     "lbfgs": _lbfgs,
     "nelder-mead": _nelder_mead,
     "gauss-newton": _gauss_newton,
+    "equilibrium-gap": _equilibrium_gap,
     "none": _none,
 }
 

@@ -36,6 +36,7 @@ LBFGS_DEFAULTS = dict(
     memory=20,          # L-BFGS history length (scipy's maxcor)
     gtol=0.0,           # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
     ftol=0.0,           # relative decrease tolerance of Phi
+    init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
 )
 
 NM_DEFAULTS = dict(
@@ -110,6 +111,8 @@ class Objective:
         self.t0 = time.perf_counter()
         self.n_eval = 0
         self.best = (np.inf, None, np.inf)
+        if problem.modal is None:         # k0 itself is a point seen (a start elsewhere may be worse)
+            self.best = (1.0, np.zeros(problem.n_params), float(np.sqrt(self.G0sq)))
         self.trace = []
 
     def k(self, x):
@@ -167,6 +170,8 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
     opts = _check(options, LBFGS_DEFAULTS, "lbfgs")
     t0 = time.perf_counter()
     obj = Objective(problem, opts["target"], opts["max_seconds"])
+    obj.t0 = t0
+    x0, init_info = start_point(problem, opts["init"])
     lo, hi = problem.bounds
     n = problem.n_params
     nit = [0]
@@ -181,18 +186,21 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
     def fun(x):
         if obj.done():
             raise _Stop
-        return obj(x)
+        out = obj(x)
+        if obj.done() == "target":      # no need to wait for the next call
+            raise _Stop
+        return out
 
     stop = None
     try:
-        res = so.minimize(fun, np.zeros(n), jac=True, method="L-BFGS-B", callback=cb,
+        res = so.minimize(fun, x0, jac=True, method="L-BFGS-B", callback=cb,
                           bounds=[(np.log(lo), np.log(hi))] * n,
                           options=dict(maxiter=int(opts["maxiter"]), maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
                                        maxcor=int(opts["memory"]), gtol=float(opts["gtol"]), ftol=float(opts["ftol"])))
         stop = f"scipy: {res.message}"
     except _Stop:
         stop = obj.done()
-    return _result(obj, t0, stop, nit[0], {})
+    return _result(obj, t0, stop, nit[0], {"init": opts["init"], **init_info})
 
 
 def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
@@ -235,6 +243,20 @@ def _static_only(problem: FitProblem, method: str):
                                field="optimizer.method", fix="use method = 'lbfgs' or set the frequency weight to 0")
 
 
+INITS = ("none", "equilibrium-gap")
+
+
+def start_point(problem: FitProblem, init: str):
+    """x0 = log(k/k0) per parameter for option ``init``, and info about how it was found."""
+    if init not in INITS:
+        raise SpringbenchError(f"unknown init '{init}'", field="optimizer.options.init", fix=f"use one of {list(INITS)}")
+    if init == "none":
+        return np.zeros(problem.n_params), {}
+    from harness.optimize.equilibrium import equilibrium_gap_factors
+    x, info = equilibrium_gap_factors(problem)
+    return np.log(x), info
+
+
 def _check(options: dict, defaults: dict, method: str) -> dict:
     unknown = set(options) - set(defaults)
     if unknown:
@@ -252,6 +274,7 @@ GN_DEFAULTS = dict(
                         # (it did not help on grid networks, hence off)
     max_seconds=None,
     target=0.0,         # stop when G / G(k0) <= target
+    init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
 )
 
 
@@ -318,14 +341,17 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     def reduce(g):
         return g if groups is None else np.bincount(groups, weights=g, minlength=npar)
 
-    x = np.zeros(npar)
+    x, init_info = start_point(problem, opts["init"])
     t_fac = time.perf_counter()
     Jc = _Jacobian(problem, problem.k_of(np.exp(x)))
     t_fac = time.perf_counter() - t_fac     # one factorisation round: reserved at the deadline
-    G0sq = Jc.G2
-    trace = [(0, np.sqrt(G0sq))]
+    G0sq = Jc.G2 if opts["init"] == "none" else value_and_grad(problem, problem.k0, grad=False)[0]
+    trace = [(0, np.sqrt(G0sq))] + ([] if opts["init"] == "none" else [(0, np.sqrt(Jc.G2))])
+    if Jc.G2 > G0sq:                        # a start worse than k0: fall back to k0
+        x, Jc = np.zeros(npar), _Jacobian(problem, problem.k0)
+        init_info["init_rejected"] = True
     mu = None
-    stop, nit, n_solves = "maxiter", 0, 0
+    stop, nit, n_solves, done_its = "maxiter", 0, 0, 0
     deadline = None if opts["max_seconds"] is None else t0 + opts["max_seconds"]
 
     class _Out(Exception):
@@ -385,6 +411,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         else:
             mu *= 16.0
         trace.append((nit, np.sqrt(Jc.G2)))
+        done_its = nit
         if status is not None:
             status(f"gauss-newton it {nit} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}")
         if stop == "max_seconds":
@@ -392,4 +419,5 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     k = problem.k_of(np.exp(x))
     G_final = float(np.sqrt(Jc.G2))          # from a fresh factorisation at k (no incremental state)
     return dict(k=k, G_initial=float(np.sqrt(G0sq)), G_final=G_final, trace=np.array(trace), seconds=time.perf_counter() - t0,
-                n_steps=nit, accepted=nit, info=dict(stop=stop, iterations=nit, solves=n_solves + Jc.n_solves, mu=mu))
+                n_steps=done_its, accepted=done_its, info=dict(stop=stop, iterations=done_its, solves=n_solves + Jc.n_solves, mu=mu,
+                                                     init=opts["init"], **init_info))

@@ -12,6 +12,8 @@ Everything an optimiser needs is here; how the network was built is not.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,6 +116,34 @@ class FitProblem:
             modal = ModalTerm(B[mfree].tocsc(), mdof[mfree], np.asarray(freq_target, float), float(freq_weight))
         return cls(tuple(blocks), np.asarray(k0, float), None if groups is None else np.asarray(groups, int),
                    tuple(bounds), modal, tuple(coords))
+
+    def with_reference(self, u_ref, const=None) -> "FitProblem":
+        """The same network, loads and weights with another reference: ``u_ref`` is one
+        free-dof array per block (``const`` per block, default 0: the reference is zero on
+        the constrained dofs). Shares B and the load sets' cached orderings and symbolic
+        factorisations, so a second reference on one network costs no new setup."""
+        const = [0.0] * len(self.blocks) if const is None else list(const)
+        if len(u_ref) != len(self.blocks) or len(const) != len(self.blocks):
+            raise SpringbenchError(f"{len(u_ref)} references for {len(self.blocks)} load blocks", field="optimizer.u_ref",
+                                   fix="one free-dof array per load block")
+        blocks = []
+        for b, u, c in zip(self.blocks, u_ref, const):
+            u = np.asarray(u, float)
+            if u.shape != b.f.shape:
+                raise SpringbenchError(f"load '{b.name}': reference has shape {u.shape}, free dofs {b.f.shape}",
+                                       field="optimizer.u_ref", fix="restrict the reference to the block's free dofs")
+            blocks.append(dataclasses.replace(b, u_ref=u.copy(), const=float(c)))
+        new = dataclasses.replace(self, blocks=tuple(blocks))
+        sets = self.__dict__.get("_sets")
+        if sets is not None:
+            moved = []
+            for s in sets:
+                s = copy.copy(s)   # keeps the cached stiffness map and symbolic factorisation
+                s.Uref = np.stack([blocks[i].u_ref for i in s.index], 1)
+                s.const = float(sum(blocks[i].const for i in s.index))
+                moved.append(s)
+            object.__setattr__(new, "_sets", moved)
+        return new
 
     # --- parameters ------------------------------------------------------------------
     @property
