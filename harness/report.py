@@ -189,9 +189,9 @@ def seeds_frame(df):
 
 
 OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_params", "budget", "G_initial",
-                     "G_final", "G_final_vs_sa", "seconds", "opt_evaluations", "opt_iterations", "opt_stop",
-                     "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k", "f1_ratio", "freq_error_initial",
-                     "freq_error_final"]
+                     "G_final", "G_final_vs_sa", "seconds", "seconds_to_sa_G", "opt_evaluations", "evals_to_sa_G",
+                     "opt_iterations", "opt_stop", "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k",
+                     "f1_ratio", "freq_error_initial", "freq_error_final"]
 
 
 def optimizer_frame(df):
@@ -292,7 +292,8 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     if not opts.empty:
         md += ["\n## Optimisers compared\n",
                "Same initial model, reference and weights per case; means over seeds. `G_final_vs_sa` = "
-               "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals); "
+               "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals; "
+               "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches SA's G_final; "
                "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
                "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS relative error "
                "of the first natural frequencies against the FEM.\n", markdown_table(opts)]

@@ -371,8 +371,11 @@ def test_compare_runs_each_optimiser_on_the_same_model(tmp_path, monkeypatch):
         # the stage's own re-solve agrees with the optimiser's G
         assert r["G_final"] == pytest.approx(r["G_final_optimizer"], rel=1e-9)
         assert r["opt_at_bounds"] >= 0 and 1 <= r["jac_rank"] <= r["n_params"] == r["n_springs"]
-    # the gradient fits reach a stationary point that 3 SA temperatures do not
+    # the gradient fits reach a stationary point that 3 SA temperatures do not, and the
+    # trace says when lbfgs first got below SA's G
     assert opt[1]["G_final"] < opt[0]["G_final"]
+    assert 1 <= opt[1]["evals_to_sa_G"] <= opt[1]["opt_evaluations"]
+    assert 0 < opt[1]["seconds_to_sa_G"] <= opt[1]["seconds"]
     import pandas as pd
     models = set(pd.read_csv(tmp_path / "out" / "trace.csv")["model"])
     assert models == {"deussen+sa", "deussen+lbfgs", "deussen+gauss-newton"}

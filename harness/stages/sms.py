@@ -149,6 +149,7 @@ def run(case, ctx) -> list[dict]:
                 traces.append(trace)
         if traces:
             pd.concat(traces, ignore_index=True).to_csv(ctx.file("trace.csv"), index=False)
+        _time_to_reach(rows, traces)
     elif runs:
         rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
 
@@ -277,6 +278,26 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
         row["opt_iterations"] = int(info["iterations"])
     row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
     return row, net, _trace_frame(getattr(res, "trace", None), name)
+
+
+def _time_to_reach(rows, traces):
+    """``evals_to_sa_G`` / ``seconds_to_sa_G``: when each other optimiser's trace first
+    reaches the G_final of the case's SA row (seconds pro rata of its evaluations);
+    NaN if it never does."""
+    sa = next((r for r in rows if r["optimizer"] == "sa" and r.get("objective") == "G"), None)
+    if sa is None:
+        return
+    by_model = {t["model"].iloc[0]: t for t in traces}
+    for r in rows:
+        if r["optimizer"] in ("none", "sa") or r.get("objective") != "G":
+            continue
+        t = by_model.get(f"{r['stiffness']}+{r['optimizer']}")
+        if t is None:
+            continue
+        hit = np.flatnonzero(t["G"].to_numpy() <= sa["G_final"] * (1 + 1e-9))
+        steps = float(t["step"].iloc[-1])
+        r["evals_to_sa_G"] = float(t["step"].iloc[hit[0]]) if len(hit) else math.nan
+        r["seconds_to_sa_G"] = r["seconds"] * r["evals_to_sa_G"] / steps if len(hit) and steps > 0 else math.nan
 
 
 def _trace_frame(trace, name):
