@@ -24,7 +24,13 @@ def make(folder: Path) -> list[Path]:
             ax.plot(g["step"], g["G_best"], lw=1.4, label=f"{model} best".strip())
     if (df["G"] > 0).all():
         ax.set_yscale("log")
-    ax.set_xlabel("step")
+    if "model" in df and df["model"].nunique() > 1 and df["step"].max() > 10:
+        # SA takes thousands of proposals, a gradient fit tens of evaluations: log steps
+        ax.set_xscale("symlog", linthresh=1)
+        ax.set_xlim(left=0)
+        ax.set_xlabel("step (SA proposals, lbfgs / NM evaluations, GN iterations)")
+    else:
+        ax.set_xlabel("step")
     ax.set_ylabel("G")
     ax.set_title(f"{folder.name}: G against optimiser steps")
     ax.legend(fontsize=7)
