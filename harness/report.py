@@ -9,10 +9,10 @@ Layout written by :mod:`harness.runner`::
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
 Summary columns: ``case, model, stage, seed, status, mode`` (quick or full), then the sizes and rule columns
-(``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, grouped,
-weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
+(``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, objective,
+grouped, weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
 ``weights``, ``G_norm_initial, G_norm_final, G_s_initial, G_s_final, G_abc_initial,
-G_abc_final, freq_error, f1_ratio``), then every other column a stage wrote, sorted by
+G_abc_final, freq_error, f1_ratio, freq_error_initial, freq_error_final``), then every other column a stage wrote, sorted by
 name, then ``seconds`` and ``error``. A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
 ``ratio_<col>`` = ours / paper right after ``<col>`` (only on rows that have ``<col>``);
 rows with ``G_initial`` != ``G_final`` get ``improvement`` = G_initial / G_final and, where
@@ -60,9 +60,10 @@ from pathlib import Path
 from harness.errors import SpringbenchError
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
-        "n_dofs", "structure", "rule", "stiffness", "optimizer", "grouped", "weights", "G_initial",
+        "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
         "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
-        "G_abc_final", "freq_error", "f1_ratio", "error_estimate", "closed_form_error"]
+        "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final", "error_estimate",
+        "closed_form_error"]
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall)$|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
