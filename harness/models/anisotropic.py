@@ -142,8 +142,10 @@ class Axes:
     points: np.ndarray
 
 
-def find_axes(points, cells, azimuth, elevation, seed: int = 0) -> Axes:
+def find_axes(points, cells, azimuth, elevation, seed: int = 0, frames=None) -> Axes:
     """Axes of interest of every element, exactly as the original program finds them.
+    ``frames`` (m, 3, 3) (rows f1, f2, f3) replaces the frame built from azimuth and
+    elevation (e.g. a frame turned rigidly about an axis, which :func:`frame` cannot give).
 
     For each of the six directions (f1, -f1, f2, -f2, f3, -f3) the faces are tried in the
     program's order and the first one the line through g crosses is taken, skipping a hit
@@ -160,7 +162,8 @@ def find_axes(points, cells, azimuth, elevation, seed: int = 0) -> Axes:
         0.125 * (((((((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) + X[:, 4]) + X[:, 5]) + X[:, 6]) + X[:, 7])
     hits_of = _tet_face_hits if nv == 4 else _hex_face_hits
     faces = TET_FACES if nv == 4 else HEX_FACES
-    F = frame(np.broadcast_to(azimuth, (m,)), np.broadcast_to(elevation, (m,)))
+    F = frame(np.broadcast_to(azimuth, (m,)), np.broadcast_to(elevation, (m,))) if frames is None \
+        else np.broadcast_to(np.asarray(frames, float), (m, 3, 3))
     dirs = np.stack([F[:, 0], -F[:, 0], F[:, 1], -F[:, 1], F[:, 2], -F[:, 2]], axis=1)
     face = np.full((m, 6), -1)
     pts = np.zeros((m, 6, 3))
@@ -340,17 +343,18 @@ def _graph(cells, n) -> sp.csr_matrix:
 
 def build_anisotropic(points, cells, *, azimuth=0.0, elevation=np.pi / 2, ks=2.5, kd=0.0,
                       kvs=0.0, kvd=0.0, volume: bool = True, rest_angle: str = "program",
-                      seed: int = 0) -> AnisotropicBody:
+                      seed: int = 0, frames=None) -> AnisotropicBody:
     """Build the model. ``ks`` one number, six (ks1..ks6) or (m, 6); ``kd`` (physical
     N s/m) one number, three or (m, 3); ``kvs``/``kvd`` one number or (m,); azimuth and
     elevation (radians) one value or one per element. ``rest_angle``: "program" (90
-    degrees) or "rest" (the rest shape's angles, for non-orthogonal frames)."""
+    degrees) or "rest" (the rest shape's angles, for non-orthogonal frames). ``frames``
+    (m, 3, 3) or (3, 3): explicit element frames instead of azimuth/elevation."""
     points = np.asarray(points, float)
     cells = np.asarray(cells, dtype=np.int64)
     m = len(cells)
     if rest_angle not in ("program", "rest"):
         raise ModelError(f"rest_angle '{rest_angle}': use 'program' or 'rest'")
-    axes = find_axes(points, cells, azimuth, elevation, seed)
+    axes = find_axes(points, cells, azimuth, elevation, seed, frames)
     l = axes.points[:, 0::2] - axes.points[:, 1::2]
     L0 = _norm(l)
     if np.any(L0 <= 0):

@@ -189,11 +189,116 @@ def _pull(case, ctx, model, dyn):
     return rows
 
 
+def lumped_masses(points, cells, density: float) -> np.ndarray:
+    """Node masses (n,) of a constant density: each element's volume times ``density``
+    shared equally by its vertices (for a constant body force this is the consistent
+    P1 / Q1 load of a tetrahedron / parallelepiped, i.e. the FEM's linear load)."""
+    from harness.models.anisotropic import hex_to_tets
+    cells = np.asarray(cells)
+    tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
+    X = np.asarray(points, float)[tets]
+    vol = np.abs(np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])) / 6
+    per_cell = vol.reshape(len(cells), -1).sum(axis=1)
+    m = np.zeros(len(points))
+    np.add.at(m, cells.ravel(), np.repeat(density * per_cell / cells.shape[1], cells.shape[1]))
+    return m
+
+
+def _load_direction(load) -> np.ndarray:
+    v = load.gravity if load.gravity is not None else (load.tractions[0].vector if load.tractions else load.body_force)
+    v = np.asarray(v, float)
+    return v / np.linalg.norm(v)
+
+
+COMPARISON = ("linear (small strain): the model linearised at rest vs linear FEM, same clamp, "
+              "gravity, density (consistent nodal masses), E, nu")
+
+
+def _fem_comparison(case, ref, mesh, m, tip) -> dict:
+    """Columns comparing the linearised model with the FEM reference under the case's
+    loads: per load the mean tip displacement along the load (model, FEM, ratio); the
+    gravity load is ``tip_deflection_linear / _fem / tip_ratio``; ``flexion_ratio`` =
+    tip_ratio / stretch ratio (1: the model bends as stiffly as its stretching implies;
+    > 1: too soft in bending); G of the gravity field, raw and after the best single
+    scale (the shape error alone)."""
+    from harness.dynamics import stiffness
+    from harness.models.bc2000 import linear
+    from harness.parts import classify_nodes
+    from harness.scoring import case_weights, g_arrays, reference_displacements
+    P = mesh.points
+    masses = lumped_masses(P, _cells(mesh), case.material.density)
+    loads = linear.case_loads(P, case, masses)
+    u = linear.solve(stiffness(m), loads)
+    u_ref = reference_displacements(ref, P, loads.names)
+    out = {"comparison": COMPARISON, "ref_error_estimate": float(max(ref.error_estimate.values())),
+           "ref_n_dofs": int(ref.n_dofs)}
+    ratios = {}
+    for i, load in enumerate(case.loads):
+        d = _load_direction(load)
+        um, uf = float((u[i][tip] @ d).mean()), float((u_ref[i][tip] @ d).mean())
+        ratios[load.name] = um / uf
+        if load.gravity is not None and "tip_ratio" not in out:
+            out.update({"tip_deflection_linear": float(u[i][tip, 1].mean()),
+                        "tip_deflection_fem": float(u_ref[i][tip, 1].mean()), "tip_ratio": um / uf,
+                        "E_bending": case.material.E / (um / uf)})
+            classes = classify_nodes(P, case.body.bbox())
+            w = np.asarray(case_weights(case))[classes]
+            c = float(np.einsum("p,pd,pd->", w, u_ref[i], u[i]) / np.einsum("p,pd,pd->", w, u[i], u[i]))
+            s_raw = g_arrays(u_ref[i:i + 1], u[i:i + 1], classes, case_weights(case))
+            s_fit = g_arrays(u_ref[i:i + 1], c * u[i:i + 1], classes, case_weights(case))
+            out.update({"G_norm_gravity": s_raw.G_norm, "G_norm_gravity_scaled": s_fit.G_norm})
+        else:
+            out[f"tip_{load.name}_ratio"] = um / uf
+    if "tip_ratio" in out and "stretch" in ratios:
+        out["E_stretch"] = case.material.E / ratios["stretch"]
+        out["flexion_ratio"] = out["tip_ratio"] / ratios["stretch"]
+    return out
+
+
+def inverted_elements(model, x) -> int:
+    """Elements with a sub-tetrahedron of negative signed volume at x (turned inside out)."""
+    cells = np.asarray(model.cells)
+    from harness.models.anisotropic import hex_to_tets
+    tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
+
+    def vol(X):
+        X = X[tets]
+        return np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])
+    flipped = (np.sign(vol(x)) != np.sign(vol(model.points))).reshape(len(cells), -1).any(axis=1)
+    return int(flipped.sum())
+
+
+def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
+    """The nonlinear static equilibrium under the program's load (Newton, load stepping,
+    continuation past limit points) beside the linearised response to the same load."""
+    from harness.dynamics import solve_static_path, stiffness
+    import scipy.sparse.linalg as spla
+    free = np.repeat(~ld.fixed, 3)
+    K = stiffness(m).tocsr()[free][:, free]
+    u = np.zeros(3 * len(points))
+    u[free] = spla.spsolve(K.tocsc(), ld.external().ravel()[free])
+    lin = float(u.reshape(-1, 3)[tip, 1].mean())
+    res = solve_static_path(m, ld, load_steps=10, arc_steps=arc_steps)
+    row = {"tip_deflection_linear_program_load": lin, "static_status": res.status,
+           "static_load_factor": res.load_factor}
+    if res.x is not None:
+        st = float((res.x - points)[tip, 1].mean())
+        row.update({"tip_deflection_static": st, "static_nonlinearity": st / lin,
+                    "static_inverted_elements": inverted_elements(m, res.x)})
+    return row
+
+
 def _cantilever(case, ctx, model, dyn):
     """Tip deflection (mean y displacement of the nodes at the far end z = max), averaged
-    over the second half of the run, its swing there, and the static equilibrium."""
-    from harness.errors import SimulationError
+    over the second half of the run, its swing there, and the static equilibrium; with
+    [loads] in the case, the linearised model against the FEM reference
+    (:func:`_fem_comparison`)."""
     rows = []
+    ref = None
+    if case.loads:
+        from reference import solve as reference_solve
+        ctx.status("FEM reference")
+        ref = reference_solve(case)
     for path, mesh in _meshes(case, dyn):
         tip = np.flatnonzero(mesh.points[:, 2] >= mesh.points[:, 2].max() - 1e-9)
         for name in model["models"]:
@@ -205,11 +310,10 @@ def _cantilever(case, ctx, model, dyn):
                    "tip_deflection_max": float(u.min()), "run_seconds": sec}
             if dyn["static"]:
                 ctx.status(f"{name} statics")
-                try:
-                    xs = solve_static(m, ld, load_steps=10)
-                    row["tip_deflection_static"] = float((xs - mesh.points)[tip, 1].mean())
-                except SimulationError as exc:
-                    row["static_note"] = exc.message
+                row.update(_static_columns(m, ld, tip, mesh.points, 150 if case.mode == "full" else 30))
+            if ref is not None:
+                ctx.status(f"{name} vs FEM")
+                row.update(_fem_comparison(case, ref, mesh, m, tip))
             rows.append(row)
     return rows
 
