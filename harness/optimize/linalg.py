@@ -108,10 +108,26 @@ class DenseFactor:
 
 
 # --- BLAS threads ------------------------------------------------------------------------
+_ONE_THREAD = 0   # depth of nested single_thread_blas blocks
+
+
 @contextmanager
 def single_thread_blas():
     """Run the block with one BLAS thread: threads do not speed up a chain's small dense
-    products, and the other core runs another chain."""
+    products, and the other core runs another chain. Nested blocks cost nothing (the
+    outer one already holds the limit; asking threadpoolctl costs ~2 ms a time)."""
+    global _ONE_THREAD
+    if _ONE_THREAD:
+        _ONE_THREAD += 1
+        try:
+            yield
+        finally:
+            _ONE_THREAD -= 1
+        return
     from threadpoolctl import threadpool_limits
     with threadpool_limits(1):
-        yield
+        _ONE_THREAD += 1
+        try:
+            yield
+        finally:
+            _ONE_THREAD -= 1
