@@ -88,3 +88,27 @@ def test_static_only_methods_refuse_the_frequency_term():
     for method in ("sa", "gauss-newton"):
         with pytest.raises(SpringbenchError, match="lbfgs"):
             optimize(prob, method, {"max_steps": 5} if method == "sa" else {}, seed=0)
+
+
+def test_spring_tensions_match_dense_solve():
+    """The lbfgs scaling's squared tensions sum_l (k_e b_e.u_l)^2, against a dense solve."""
+    prob, _ = recoverable_problem((4, 3), seed=2)
+    pts, spr, _ = grid_network((4, 3))
+    names, frees, forces = basic_loads(pts, s=float(np.prod((4, 3))) ** 0.5)
+    t2 = np.zeros(prob.n_springs)
+    value_and_grad(prob, prob.k0, grad=False, tension2=t2)
+    U = solve_network(pts, spr, prob.k0, frees, forces)
+    d = pts[spr[:, 1]] - pts[spr[:, 0]]
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    ref = np.zeros(len(spr))
+    for u in U.reshape(len(U), -1, 2):
+        ref += (prob.k0 * np.sum(d * (u[spr[:, 1]] - u[spr[:, 0]]), axis=1)) ** 2
+    assert np.allclose(t2, ref, rtol=1e-9, atol=1e-12 * ref.max())
+
+
+@pytest.mark.parametrize("scale", [0.0, 0.5])
+def test_lbfgs_recovers_with_and_without_scaling(scale):
+    prob, k_true = recoverable_problem((6, 5), sigma=0.3, seed=8)
+    res = optimize(prob, "lbfgs", {"scale": scale}, seed=0)
+    assert res.G_final / res.G_initial <= 1e-8
+    assert np.max(np.abs(res.k / k_true - 1)) < 1e-5

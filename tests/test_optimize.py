@@ -127,3 +127,109 @@ def test_multifrontal_cholesky_matches_direct_solve(shape):
         ref = spla.splu(K.tocsc()).solve(rhs)
         assert np.allclose(F.solve(rhs), ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
         assert np.allclose(F.solve(rhs[:, 0]), ref[:, 0], rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+
+
+# --- equilibrium gap (equation error) ------------------------------------------------------
+def dense_equation_error(points, springs, k0, frees, forces, u_ref, w):
+    """Independent A, b of the equilibrium gap: for each load, the free rows of
+    sum_e x_e k0_e b_e (b_e . u*) - f, built spring by spring in dense arrays, each load's
+    rows weighted by sqrt(w) / rms(f) (the documented weighting)."""
+    n, dim = points.shape
+    cols = []
+    for (i, j), ke in zip(springs, k0):
+        d = points[j] - points[i]
+        d = d / np.linalg.norm(d)
+        b = np.zeros(n * dim)
+        b[j * dim:(j + 1) * dim] = d
+        b[i * dim:(i + 1) * dim] = -d
+        cols.append(ke * b)
+    Acol = np.array(cols).T                                    # (ndof, e): k0_e b_e
+    rows, rhs = [], []
+    for free, f, u in zip(frees, forces, u_ref):
+        u0 = np.where(free, u, 0.0)                            # the model's u is 0 on constrained dofs
+        Bu = np.array([c @ u0 / ke for c, ke in zip(Acol.T, k0)])
+        sw = np.sqrt(w[free]) / np.sqrt(np.mean(f[free] ** 2))
+        rows.append(sw[:, None] * (Acol[free] * Bu[None, :]))
+        rhs.append(sw * f[free])
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+@pytest.mark.parametrize("shape", [(4, 3), (3, 3, 2)])
+def test_equilibrium_gap_matches_dense_lstsq(shape):
+    from harness.optimize.equilibrium import equilibrium_gap_factors
+    pts, spr, _ = grid_network(shape)
+    names, frees, forces = basic_loads(pts)
+    rng = np.random.default_rng(7)
+    k0 = rng.uniform(0.5, 2.0, len(spr))
+    k_true = k0 * rng.uniform(0.7, 1.4, len(spr))
+    from harness.optimize.synthetic import solve_network
+    u_ref = solve_network(pts, spr, k_true, frees, forces)
+    u_ref = u_ref * (1 + 0.02 * rng.standard_normal(u_ref.shape))  # not representable: a real least squares
+    w = rng.uniform(1, 3, pts.size)
+    prob = FitProblem.from_network(pts, spr, k0, frees, forces, u_ref, w, names, bounds=(1e-6, 1e6))
+    A, b = dense_equation_error(pts, spr, k0, frees, forces, u_ref, w)
+    seen = np.linalg.norm(A, axis=0) > 0
+    ref = np.ones(len(k0))
+    ref[seen] = np.linalg.lstsq(A[:, seen], b, rcond=None)[0]
+    assert np.linalg.matrix_rank(A[:, seen]) == seen.sum()       # identifiable: a unique answer
+    x, info = equilibrium_gap_factors(prob, {"reg": 1e-14, "rtol": 1e-13})
+    assert info["eg_clipped"] == 0 and np.all(ref > 0)
+    assert np.allclose(x, ref, rtol=1e-6, atol=1e-8)
+
+
+@pytest.mark.parametrize("shape,grouped", [((12, 10), False), ((4, 4, 3), False), ((6, 6), True)])
+def test_equilibrium_gap_recovers_identifiable_constants(shape, grouped):
+    prob, k_true = recoverable_problem(shape, sigma=0.3, seed=11, grouped=grouped, diagonals="face")
+    res = optimize(prob, "equilibrium-gap", {}, seed=0)
+    assert res.G_final / res.G_initial <= 1e-7
+    assert res.G_final == pytest.approx(prob.G(res.k), rel=1e-9, abs=1e-12 * res.G_initial)
+    from harness.optimize.equilibrium import equation_error_system
+    A, _ = equation_error_system(prob)
+    seen = np.asarray(abs(A).sum(0)).ravel() > 0                 # springs some load stretches
+    x = res.k / prob.k0
+    xt = k_true / prob.k0
+    if grouped:
+        x, xt = np.bincount(prob.groups, x) / np.bincount(prob.groups), np.bincount(prob.groups, xt) / np.bincount(prob.groups)
+    assert np.max(np.abs(x[seen] / xt[seen] - 1)) < 1e-6
+    assert np.allclose(x[~seen], 1.0)                            # unseen: left at k0
+
+
+def test_init_equilibrium_gap_then_output_error_refines_a_noisy_reference():
+    """With a reference the network cannot reproduce, the equation-error estimate is not
+    the minimum of G: gauss-newton and lbfgs started from it must lower G further, and never
+    end above it or above the pure runs' starting G."""
+    prob, k_true = recoverable_problem((6, 6), sigma=0.3, seed=3)
+    rng = np.random.default_rng(5)
+    noisy = prob.with_reference([b.u_ref * (1 + 0.003 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
+    eg = optimize(noisy, "equilibrium-gap", {}, seed=0)
+    assert eg.G_final < eg.G_initial
+    for method in ("gauss-newton", "lbfgs"):
+        res = optimize(noisy, method, {"init": "equilibrium-gap", "maxiter": 60}, seed=0)
+        assert res.info["init"] == "equilibrium-gap"
+        assert res.G_initial == pytest.approx(eg.G_initial)       # G0 stays G(k0)
+        assert res.G_final < 0.99 * eg.G_final
+        assert res.G_final == pytest.approx(noisy.G(res.k), rel=1e-9)
+    with pytest.raises(SpringbenchError, match="init"):
+        optimize(noisy, "lbfgs", {"init": "sa"}, seed=0)
+    with pytest.raises(SpringbenchError, match="unknown equilibrium-gap option"):
+        optimize(noisy, "equilibrium-gap", {"target": 1e-3}, seed=0)
+
+
+def test_with_reference_equals_a_fresh_problem():
+    pts, spr, _ = grid_network((5, 4))
+    names, frees, forces = basic_loads(pts)
+    rng = np.random.default_rng(2)
+    k0 = rng.uniform(0.5, 2.0, len(spr))
+    u1, u2 = rng.normal(size=forces.shape), rng.normal(size=forces.shape)
+    u2 = np.where(frees, u2, 0.0)
+    w = np.ones(pts.size)
+    p1 = FitProblem.from_network(pts, spr, k0, frees, forces, u1, w, names)
+    p1.load_sets()
+    p2 = p1.with_reference([u[f] for u, f in zip(u2, frees)])
+    fresh = FitProblem.from_network(pts, spr, k0, frees, forces, u2, w, names)
+    k = rng.uniform(0.5, 2.0, len(spr))
+    assert p2.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u2, w), rel=1e-10)
+    assert p2.G(k) == pytest.approx(fresh.G(k), rel=1e-12)
+    assert p1.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u1, w), rel=1e-10)   # p1 untouched
+    with pytest.raises(SpringbenchError, match="references"):
+        p1.with_reference([u2[0][frees[0]]])

@@ -37,6 +37,7 @@ LBFGS_DEFAULTS = dict(
     gtol=0.0,           # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
     ftol=0.0,           # relative decrease tolerance of Phi
     init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
+    scale=0.5,          # diagonal scaling of log k by (spring tension^2 at k0)^-scale; 0: none
 )
 
 NM_DEFAULTS = dict(
@@ -48,8 +49,10 @@ NM_DEFAULTS = dict(
 )
 
 
-def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True):
-    """G^2 and dG^2/dk (e,) by the adjoint method."""
+def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None):
+    """G^2 and dG^2/dk (e,) by the adjoint method. If ``tension2`` (e,) is given, the
+    squared spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2,
+    are added to it."""
     k = np.asarray(k, float)
     G2 = 0.0
     g = np.zeros(len(k)) if grad else None
@@ -62,7 +65,22 @@ def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True):
         if grad:
             Lam = fac.solve(R).reshape(R.shape)
             g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
+        if tension2 is not None:
+            tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
     return G2, g
+
+
+def tension_scaling(problem: FitProblem, tension2: np.ndarray, power: float) -> np.ndarray:
+    """Diagonal scaling d of the parameters (x = d y) from the squared spring tensions t_e^2
+    at k0: d = (mean / t^2)^power per parameter, clipped to [1/20, 20]. Since
+    du/dlog k_e = -K^-1 b_e t_e, the curvature of G^2 along log k_e is t_e^2 |K^-1 b_e|^2:
+    with the second factor taken as constant, power 1/2 is a Jacobi scaling, so weakly
+    loaded springs get longer steps."""
+    e = tension2 if problem.groups is None else np.bincount(problem.groups, weights=tension2, minlength=problem.n_params)
+    m = float(np.mean(e))
+    if power == 0 or m <= 0:
+        return np.ones(problem.n_params)
+    return np.clip((m / np.maximum(e, 1e-12 * m)) ** power, 1 / 20, 20.0)
 
 
 def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
@@ -104,7 +122,8 @@ class Objective:
 
     def __init__(self, problem: FitProblem, target: float = 0.0, max_seconds=None):
         self.p = problem
-        self.G0sq, _ = value_and_grad(problem, problem.k0, grad=False)
+        self.tension2 = np.zeros(problem.n_springs)     # squared spring tensions at k0 (for scalings)
+        self.G0sq, _ = value_and_grad(problem, problem.k0, grad=False, tension2=self.tension2)
         if self.G0sq <= 0:
             raise SpringbenchError("G(k0) = 0: nothing to fit", field="optimizer", fix="check the reference displacements")
         self.target, self.max_seconds = target, max_seconds
@@ -166,7 +185,8 @@ class _Stop(Exception):
 
 
 def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
-    """L-BFGS-B over log(k/k0) with the problem's bounds; deterministic (seed unused)."""
+    """L-BFGS-B over log(k/k0) with the problem's bounds, in variables y = x / d scaled by the
+    spring tensions at k0 (option ``scale``, see tension_scaling); deterministic (seed unused)."""
     opts = _check(options, LBFGS_DEFAULTS, "lbfgs")
     t0 = time.perf_counter()
     obj = Objective(problem, opts["target"], opts["max_seconds"])
@@ -183,18 +203,20 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
         if obj.done():
             raise _Stop
 
-    def fun(x):
+    d = tension_scaling(problem, obj.tension2, float(opts["scale"]))   # x = d y
+
+    def fun(y):
         if obj.done():
             raise _Stop
-        out = obj(x)
+        phi, gx = obj(d * y)
         if obj.done() == "target":      # no need to wait for the next call
             raise _Stop
-        return out
+        return phi, d * gx
 
     stop = None
     try:
-        res = so.minimize(fun, x0, jac=True, method="L-BFGS-B", callback=cb,
-                          bounds=[(np.log(lo), np.log(hi))] * n,
+        res = so.minimize(fun, x0 / d, jac=True, method="L-BFGS-B", callback=cb,
+                          bounds=list(zip(np.log(lo) / d, np.log(hi) / d)),
                           options=dict(maxiter=int(opts["maxiter"]), maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
                                        maxcor=int(opts["memory"]), gtol=float(opts["gtol"]), ftol=float(opts["ftol"])))
         stop = f"scipy: {res.message}"
@@ -271,7 +293,8 @@ GN_DEFAULTS = dict(
     cg_rtol=0.01,       # inner relative residual of CG
     mu=1e-4,            # initial damping, relative to the mean diagonal of J^T J
     probes=0,           # random probes for a Jacobi preconditioner diag(J^T J) ~ E[(J^T z)^2]; 0: none
-                        # (it did not help on grid networks, hence off)
+                        # (it did not help on grid networks, hence off; nor did the spring-tension
+                        # Jacobi estimate that helps lbfgs: fewer solves, same G per solve)
     max_seconds=None,
     target=0.0,         # stop when G / G(k0) <= target
     init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
@@ -399,6 +422,9 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(expand(p)) ** 2)))  # model decrease of G^2/2
         n_solves += Jc.n_solves
         for t in ((1.0,) if stop == "max_seconds" else (1.0, 0.25, 1 / 16)):  # backtrack before giving up
+            if t < 1 and deadline is not None and time.perf_counter() >= deadline - t_fac:
+                stop = "max_seconds"
+                break
             xn = np.clip(x + t * p, lo, hi)
             Jn = _Jacobian(problem, problem.k_of(np.exp(xn)))
             if Jn.G2 < Jc.G2:
