@@ -360,7 +360,10 @@ def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: floa
     free = np.repeat(~loading.fixed, 3)
     ext = loading.external()
     graph = model.node_graph()
-    scale = max(np.abs(ext).max(), 1e-300)
+    # |r| <= tol |f_ext|, but not below the rounding of the internal forces (~ eps k L)
+    k_max = float(np.abs(stiffness(model).diagonal()).max())
+    size = float(np.ptp(model.points, axis=0).max())
+    scale = max(np.abs(ext).max(), 1e3 * np.finfo(float).eps * k_max * size / tol, 1e-300)
     lam, dlam, cuts = 0.0, 1.0 / load_steps, 0
     while lam < 1.0 and cuts <= max_cuts:
         target = min(1.0, lam + dlam)

@@ -1,5 +1,8 @@
 """Polar plot of the effective stiffness against pull direction, one curve per model:
-a perfectly isotropic model is a circle (undesired anisotropy, Bourguignon-Cani Fig. 1a/5a)."""
+a perfectly isotropic model is a circle (undesired anisotropy, Bourguignon-Cani Fig. 1a/5a).
+anisotropy.csv rows: angle (degrees in the x-y plane), model, stiffness, drift; a uniaxial
+pull along d and along -d is the same load, so angles below 180 are drawn mirrored. The
+FEM reference (model "FEM") is drawn dashed: the material's own anisotropy."""
 
 from __future__ import annotations
 
@@ -17,15 +20,20 @@ def make(folder: Path) -> list[Path]:
     import numpy as np
     import pandas as pd
     df = pd.read_csv(src)
+    if df.empty:
+        return []
     plt = pyplot()
     fig = plt.figure(figsize=(5, 5))
     ax = fig.add_subplot(projection="polar")
     groups = df.groupby("model", sort=True) if "model" in df else [("model", df)]
     for model, g in groups:
         g = g.sort_values("angle")
-        th = np.deg2rad(g["angle"].to_numpy())
-        k = g["stiffness"].to_numpy()
-        ax.plot(np.append(th, th[:1]), np.append(k, k[:1]), "o-", ms=3, label=str(model))
+        a, k = g["angle"].to_numpy(float), g["stiffness"].to_numpy(float)
+        if a.max() < 180:                      # the same pull at angle + 180
+            a, k = np.append(a, a + 180), np.append(k, k)
+        th = np.deg2rad(a)
+        style = "k--" if str(model) == "FEM" else "o-"
+        ax.plot(np.append(th, th[:1]), np.append(k, k[:1]), style, ms=3, label=str(model))
     ax.set_title(f"{folder.name}: effective stiffness vs direction", fontsize=9)
     ax.legend(fontsize=8, loc="lower right")
     return [save(fig, folder / "fig-anisotropy.png")]

@@ -419,6 +419,16 @@ def _fem(case, ctx, model, dyn):
     u_ref = reference_displacements(ref, P, loads.names)
     w = np.asarray(weights)[classes]
     rows, aniso = [], []
+    ctx.status("FEM direction pulls")
+    bbox = (P.min(axis=0), P.max(axis=0))
+    pull_loads, fem_dir, fem_dir_err = _fem_directions(case, reference_solve, P)
+    from harness import anisotropy as an
+    kf = [r["stiffness"] for r in fem_dir]
+    for a, r in zip(ANGLES, fem_dir):
+        aniso.append({"angle": a, "model": "FEM", "stiffness": r["stiffness"], "drift": r["drift"],
+                      "stiffness_fem": r["stiffness"]})
+    fem_cols = {"pull_stiffness_spread_fem": an.spread(kf)[0], "pull_drift_max_fem": max(r["drift"] for r in fem_dir),
+                "pull_ref_error_estimate": fem_dir_err, "ref_error_estimate": float(max(ref.error_estimate.values()))}
     for name in model["models"]:
         ctx.status(f"{name}: stiffness")
         m = build(name, model, mesh, 1.0, material=case.material)
@@ -436,7 +446,7 @@ def _fem(case, ctx, model, dyn):
         theta0 = theta / c                                   # best single scale
         s0 = g_arrays(u_ref, u * c, classes, weights, loads.names)
         row = {"model": name, "mesh": _label(path, mesh), "n_nodes": len(P), "n_elements": len(_cells(mesh)),
-               "mechanisms": zm, "G_initial": s0.G, "G_norm_initial": s0.G_norm}
+               "mechanisms": zm, "G_initial": s0.G, "G_norm_initial": s0.G_norm, **fem_cols}
         names = linear.parameter_names(m)
         row.update({f"scaled_{k}": float(v) for k, v in zip(names, theta0)})
         if dyn["calibrate"]:
@@ -448,7 +458,7 @@ def _fem(case, ctx, model, dyn):
             row.update({f"fit_{k}": float(v) for k, v in zip(names, theta1)})
         else:
             theta1 = theta0
-        # undesired anisotropy: the six face pulls, fibre along the pull for the element model
+        # undesired anisotropy (1): the six clamped face pulls, fibre along the pull
         def K_of(d, name=name, theta1=theta1):
             mm = m if name == "MS" else build(name, dict(model, direction=tuple(d), fibre_field=None), mesh, 1.0)
             return sum(t * K for t, K in zip(theta1, linear.unit_stiffnesses(mm)))
@@ -456,12 +466,63 @@ def _fem(case, ctx, model, dyn):
         k = np.array([r["stiffness"] for r in pulls])
         row.update({"stiffness_spread": float((k.max() - k.min()) / k.mean()),
                     "drift_max": float(max(r["drift"] for r in pulls))})
-        for ang, r in zip((0, 180, None, None, 90, 270), pulls):   # the horizontal pulls for the polar plot
-            if ang is not None:
-                aniso.append({"angle": ang, "model": name, "stiffness": r["stiffness"], "drift": r["drift"]})
+        # (2): uniaxial stress along directions in the x-y plane (harness.anisotropy)
+        K1 = sum(t * K for t, K in zip(theta1, Ks))
+        row.update(_direction_columns(name, K1, P, bbox, pull_loads, fem_dir, aniso, ""))
+        if name != "MS" and case.material.fibre is None:   # frame turned with the pull: the mesh's share
+            Kr = [sum(t * K for t, K in zip(theta1, linear.unit_stiffnesses(_turned(m, name, model, mesh, ang))))
+                  for ang in ANGLES]
+            row.update(_direction_columns(name, Kr, P, bbox, pull_loads, fem_dir, aniso, "_mesh"))
         rows.append(row)
     pd.DataFrame(aniso).to_csv(ctx.file("anisotropy.csv"), index=False)
     return rows
+
+
+ANGLES = tuple(range(0, 180, 15))   # pull directions in the x-y plane (degrees from +x)
+
+
+def _turned(m, name, model, mesh, angle_deg):
+    """The element model with every element frame (x, y, z) turned by ``angle_deg`` about z:
+    its fibre along the pull direction at that angle, whatever the mesh."""
+    from harness.models.anisotropic import build_anisotropic
+    c, s = np.cos(np.deg2rad(angle_deg)), np.sin(np.deg2rad(angle_deg))
+    F = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return build_anisotropic(m.points, m.cells, frames=F, ks=m.ks, kvs=m.kvs, volume=(name == "MT"),
+                             rest_angle=model["rest_angle"], seed=model["seed"])
+
+
+def _direction_columns(name, K, P, bbox, loads, fem_dir, aniso, suffix) -> dict:
+    """Columns of the direction pulls of one model (K one matrix, or one per direction):
+    spread (max/min), coefficient of variation, largest drift, and the largest deviation
+    from the FEM's stiffness per direction; rows of anisotropy.csv."""
+    from harness import anisotropy as an
+    Ks = K if isinstance(K, list) else [K] * len(loads)
+    res = []
+    for ang, load, Kd in zip(ANGLES, loads, Ks):
+        u = an.solve_model(Kd, P, bbox, [load])[0]
+        res.append(an.measures(P, u, an.directions_xy([ang])[0]))
+    k = np.array([r["stiffness"] for r in res])
+    kf = np.array([r["stiffness"] for r in fem_dir])
+    label = name + ("-turned" if suffix else "")
+    for ang, r, f in zip(ANGLES, res, kf):
+        aniso.append({"angle": ang, "model": label, "stiffness": r["stiffness"], "drift": r["drift"],
+                      "stiffness_fem": f})
+    mx, cv = an.spread(k)
+    return {f"pull_stiffness_spread{suffix}": mx, f"pull_stiffness_cv{suffix}": cv,
+            f"pull_drift_max{suffix}": float(max(r["drift"] for r in res)),
+            f"pull_stiffness_err_max{suffix}": float(np.abs(k / kf - 1).max())}
+
+
+def _fem_directions(case, ref_solve, P):
+    """The FEM reference under the direction pulls (one reference solve of a copy of the
+    case whose loads are the pulls), measured at the model's nodes."""
+    import dataclasses
+    from harness import anisotropy as an
+    loads = tuple(an.pull_load(d, name=f"pull-{a}") for a, d in zip(ANGLES, an.directions_xy(ANGLES)))
+    sub = dataclasses.replace(case, loads=loads)
+    ref = ref_solve(sub)
+    out = [an.measures(P, ref.displacement(P, l.name), d) for l, d in zip(loads, an.directions_xy(ANGLES))]
+    return loads, out, float(max(ref.error_estimate.values()))
 
 
 EXPERIMENTS = {"volume": _volume, "pull": _pull, "cantilever": _cantilever, "fibres": _fibres,
