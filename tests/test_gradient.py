@@ -112,3 +112,14 @@ def test_lbfgs_recovers_with_and_without_scaling(scale):
     res = optimize(prob, "lbfgs", {"scale": scale}, seed=0)
     assert res.G_final / res.G_initial <= 1e-8
     assert np.max(np.abs(res.k / k_true - 1)) < 1e-5
+
+
+def test_lbfgs_with_frequency_term_from_the_equilibrium_gap_start():
+    prob, k_true = modal_problem(weight=1.0)
+    res = optimize(prob, "lbfgs", {"init": "equilibrium-gap"}, seed=0)
+    assert res.info["init"] == "equilibrium-gap"
+    assert res.G_final / res.G_initial < 1e-6
+    assert np.max(np.abs(res.info["freq_rel_error"])) < 1e-6
+    from harness.errors import SpringbenchError
+    with pytest.raises(SpringbenchError, match="lbfgs"):
+        optimize(prob, "equilibrium-gap", {}, seed=0)       # static only: says which method can

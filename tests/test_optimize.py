@@ -233,3 +233,18 @@ def test_with_reference_equals_a_fresh_problem():
     assert p1.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u1, w), rel=1e-10)   # p1 untouched
     with pytest.raises(SpringbenchError, match="references"):
         p1.with_reference([u2[0][frees[0]]])
+
+
+def test_a_start_worse_than_k0_is_rejected():
+    """Equation error amplifies displacement noise (it differences neighbouring nodes): with
+    5 % noise the equilibrium-gap estimate is worse than k0, so the optimisers it starts
+    must fall back to k0 and still end below G(k0)."""
+    prob, _ = recoverable_problem((6, 6), sigma=0.3, seed=3)
+    rng = np.random.default_rng(5)
+    noisy = prob.with_reference([b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
+    eg = optimize(noisy, "equilibrium-gap", {}, seed=0)
+    assert eg.info["stop"] == "worse than k0" and np.array_equal(eg.k, noisy.k0)
+    for method in ("gauss-newton", "lbfgs"):
+        res = optimize(noisy, method, {"init": "equilibrium-gap", "maxiter": 30}, seed=0)
+        assert res.info.get("init_rejected") is True
+        assert res.G_final < 0.9 * res.G_initial

@@ -204,11 +204,22 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
             raise _Stop
 
     d = tension_scaling(problem, obj.tension2, float(opts["scale"]))   # x = d y
+    first = None
+    if opts["init"] != "none" and problem.modal is None:
+        first = (x0 / d, *obj(x0))
+        if first[1] > 1.0:              # the start is worse than k0: start from k0 instead
+            x0, first = np.zeros(n), None
+            init_info["init_rejected"] = True
 
     def fun(y):
-        if obj.done():
-            raise _Stop
-        phi, gx = obj(d * y)
+        nonlocal first
+        if first is not None and np.array_equal(y, first[0]):   # scipy's first call: known
+            phi, gx = first[1:]
+            first = None
+        else:
+            if obj.done():
+                raise _Stop
+            phi, gx = obj(d * y)
         if obj.done() == "target":      # no need to wait for the next call
             raise _Stop
         return phi, d * gx
