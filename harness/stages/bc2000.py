@@ -5,11 +5,15 @@
   percent); rows: peak and final |dV/V|, and the deviation from the original program's
   curve when ``[dynamics] original`` names its file (relative to the case).
 - ``pull`` (Fig. 1a / 5a): pulled bottom nodes; elongation and lateral drift per mesh/model.
-- ``cantilever`` (Fig. 1c / 5c): tip deflection at the end of the run (and static, Newton).
+- ``cantilever`` (Fig. 1c / 5c): tip deflection at the end of the run, the static
+  equilibrium (Newton, continuation past limit points, one-line status) and, with [loads],
+  the linearised model against the FEM reference (small strain).
 - ``fibres`` (Fig. 6): one run per ``[model] fibre_fields``; elongation, thinning, twist,
   drift; ``fibres-<field>.npz`` (+ ``fibres.npz`` of the first field) for the figure.
 - ``timing`` (Table 1): wall time per simulated second of every mesh x model, the model/MS
   ratio beside the paper's.
+- ``fem``: static G of MS / MT0 / MT against the FEM reference (isotropic or with the
+  material's fibre), calibration, and the undesired anisotropy of direction pulls.
 - ``run``: plain runs with the per-step volume.
 """
 
@@ -404,7 +408,9 @@ def _fem(case, ctx, model, dyn):
     """Static G of MS / MT0 / MT against the FEM reference under the case's loads (small:
     the models are linearised at rest), first with the case's constants scaled by the best
     single factor, then calibrated (all constants, least squares); also the anisotropy
-    measure. Rows per model: G_initial/G_final (+ normalised), the fitted constants."""
+    measures: the six clamped face pulls and the direction pulls (harness.anisotropy) of
+    the calibrated model beside the FEM's. Rows per model: G_initial/G_final (+
+    normalised), the fitted constants, the pull columns; anisotropy.csv per direction."""
     from harness.models.bc2000 import linear
     from harness.parts import classify_nodes
     from harness.scoring import case_weights, g_arrays, reference_displacements
