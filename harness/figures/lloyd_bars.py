@@ -1,6 +1,6 @@
 """G per Lloyd iteration count (Deussen Fig. 12) from the suite's summary.csv rows that
-carry ``lloyd_iterations`` (the optimised rows if any): left, our G before and after
-(mean and std over seeds); right, the trend G_final / G_final(fewest iterations), ours
+carry ``lloyd_iterations`` (the optimised rows if any, one bar per optimiser): left, our
+G before and after (mean and std over seeds); right, the trend G_final / G_final(fewest iterations), ours
 beside the paper's (absolute G values are not comparable: the paper does not state units)."""
 
 from __future__ import annotations
@@ -25,21 +25,29 @@ def make(folder: Path) -> list[Path]:
     if "optimizer" in df:  # optimised rows (G before -> after) if there are any
         opt = df[df["optimizer"].fillna("none") != "none"]
         df = opt if not opt.empty else df
+    if "objective" in df:  # the G-only fits (a frequency-term row answers another question)
+        df = df[df["objective"].fillna("G") == "G"]
     if df.empty:
         return []
-    cols = [c for c in ("G_initial", "G_final") if c in df]
-    g = df.groupby("lloyd_iterations")[cols + [c for c in ("paper_G_final",) if c in df]].agg(["mean", "std"])
+    # one bar per optimiser ([optimizer] compare runs several on the same models)
+    methods = list(dict.fromkeys(df["optimizer"].fillna("none"))) if "optimizer" in df else ["none"]
+    key = df["optimizer"].fillna("none") if "optimizer" in df else pd.Series("none", index=df.index)
+    first = df[key == methods[0]]
+    g = first.groupby("lloyd_iterations")[[c for c in ("G_initial", "G_final", "paper_G_final") if c in df]].agg(["mean", "std"])
     its = g.index.to_numpy()
+    label = {m: "" if len(methods) == 1 else f" {m}" for m in methods}
+    bars = {"G_initial": g["G_initial"]} if "G_initial" in g else {}
+    for m in methods:
+        bars[f"G_final{label[m]}"] = df[key == m].groupby("lloyd_iterations")["G_final"].agg(["mean", "std"]).reindex(its)
     x = np.arange(len(its))
     plt = pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 4))
-    w = 0.8 / len(cols)
-    for i, c in enumerate(cols):
-        ax.bar(x + (i - (len(cols) - 1) / 2) * w, g[(c, "mean")], w, yerr=g[(c, "std")].fillna(0),
-               label=c, capsize=2)
+    w = 0.8 / len(bars)
+    for i, (c, v) in enumerate(bars.items()):
+        ax.bar(x + (i - (len(bars) - 1) / 2) * w, v["mean"], w, yerr=v["std"].fillna(0), label=c, capsize=2)
     ax.set_title("ours: G before / after optimisation (mean, std over seeds)", fontsize=9)
     ax.set_ylabel("G")
-    series = {"ours": g[("G_final", "mean")].to_numpy()}
+    series = {f"ours{label[m]}": bars[f"G_final{label[m]}"]["mean"].to_numpy() for m in methods}
     if ("paper_G_final", "mean") in g:
         series["paper"] = g[("paper_G_final", "mean")].to_numpy()
     w2 = 0.8 / len(series)
