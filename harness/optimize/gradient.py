@@ -15,6 +15,13 @@ df/dk_e = (phi.b_e)^2 / (8 pi^2 f). The term is weight * sum_j (f_j / f*_j - 1)^
 
 The objective minimised is Phi = G^2 / G(k0)^2 (+ the frequency term), over log factors of
 k0 (per spring, or per group in grouped mode), so it is unit-free and k stays positive.
+
+Conditioning. A change of k with wavelength lambda changes the nodal forces like
+1/lambda (a divergence) and the displacements like lambda (K^-1 smooths twice), so the
+Gauss-Newton matrix J^T J acts like an inverse Laplacian on k: its condition number grows
+like (network size / spacing)^2 and L-BFGS-B / CG need many solves to fix short-wavelength
+constants, to which G is nearly blind. The equation error (equilibrium.py) sees them
+directly; ``init = "equilibrium-gap"`` starts lbfgs / gauss-newton from its estimate.
 """
 
 from __future__ import annotations
