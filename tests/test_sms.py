@@ -413,7 +413,8 @@ def test_frequency_term_reduces_the_frequency_error(tmp_path, monkeypatch):
     from harness.io_vtu import read_vtu
     from harness.stages import StageContext
     from harness.stages import sms as stage
-    f = _optimiser_case(tmp_path, 'method = "lbfgs"\n[optimizer.frequency]\nmodes = 3\nweight = 1.0', modes=4)
+    f = _optimiser_case(tmp_path, 'method = "lbfgs"\noptions = { maxiter = 200 }\n'
+                                  '[optimizer.frequency]\nmodes = 3\nweight = 1.0\noptions = { maxiter = 200 }', modes=4)
     case = load_case(f)
     net0 = build_network(case)
     free = ~statics.fixed_mask(net0.points, case, case.loads[0]).ravel()

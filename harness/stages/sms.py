@@ -276,6 +276,8 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
     row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:
         row["opt_iterations"] = int(info["iterations"])
+    if "solves" in info:  # gauss-newton: linear solves (one evaluation of G is one per load set)
+        row["opt_solves"] = int(info["solves"])
     row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
     return row, net, _trace_frame(getattr(res, "trace", None), name)
 
