@@ -343,11 +343,13 @@ def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1
 class StaticPath:
     """Result of :func:`solve_static_path`: ``x`` the equilibrium at the full load (None if
     not reached), ``load_factor`` the highest load factor reached, ``folds`` the load
-    factors at which the path turned back (limit points), ``status`` one line."""
+    factors at which the path turned back (limit points), ``status`` one line, ``x_limit``
+    the equilibrium nearest the first limit point (None without one)."""
     x: np.ndarray | None
     load_factor: float
     folds: tuple
     status: str
+    x_limit: np.ndarray | None = None
 
 
 def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 12,
@@ -381,7 +383,7 @@ def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: floa
     if path["x"] is not None:
         status = (f"converged past limit point(s) at load factor {where} (snap-through of the model)"
                   if folds else "converged (continuation)")
-        return StaticPath(path["x"], 1.0, folds, status)
+        return StaticPath(path["x"], 1.0, folds, status, path["x_limit"])
     if folds:
         status = (f"limit point at load factor {folds[0]:.4g}: the tangent stiffness turns singular and the "
                   f"equilibrium path turns back (a snap-through instability of the model, not a solver failure); "
@@ -389,7 +391,7 @@ def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: floa
     else:
         status = (f"stalled at load factor {path['lam_max']:.4g} (no limit point found: "
                   f"{path['why']})")
-    return StaticPath(None, float(path["lam_max"]), folds, status)
+    return StaticPath(None, float(path["lam_max"]), folds, status, path["x_limit"])
 
 
 def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps: int = 150,
@@ -400,7 +402,8 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
     tangent t (from K du = f_ext dlambda, oriented along the previous one), Newton
     corrector on the equilibrium plus t . (z - z_prev) = ds (bordered solve with the
     sparse LU of K); a sign change of the tangent's lambda component marks a limit point.
-    Returns dict(x at lambda = 1 or None, lam, lam_max, folds, why)."""
+    Returns dict(x at lambda = 1 or None, lam, lam_max, folds, why, x_limit: the equilibrium
+    next to the first limit point)."""
     f = ext.ravel()[free]
 
     def residual(y, l):
@@ -426,7 +429,7 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
             t = -t
         return t
     t = tangent(b)
-    folds, lam_max, why = [], lam, "step size below the minimum"
+    folds, lam_max, why, x_limit = [], lam, "step size below the minimum", None
     for _ in range(steps):
         ok = False
         while ds >= ds_min:
@@ -451,21 +454,23 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
                 break
             ds /= 2
         if not ok:
-            return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=why)
+            return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=why, x_limit=x_limit)
         tn = tangent(lu.solve(f), t)         # K of the last iterate: the tangent to O(|du|)
         if tn[-1] * t[-1] < 0:             # the fold lies between the two points
             folds.append(float(max(l, lam) if t[-1] > 0 else min(l, lam)))
+            if x_limit is None:
+                x_limit = y if (l > lam) == (t[-1] > 0) else x
         if l >= 1.0:            # passed the full load: settle on it with load control
             xs, done, _ = _newton(model, graph, y if l - 1.0 < 1.0 - lam else x, free, ext, tol, 30)
             if done:
-                return dict(x=xs, lam=1.0, lam_max=1.0, folds=folds, why="")
+                return dict(x=xs, lam=1.0, lam_max=1.0, folds=folds, why="", x_limit=x_limit)
             why = "Newton at the full load failed after the path crossed it"
-            return dict(x=None, lam=l, lam_max=max(lam_max, l), folds=folds, why=why)
+            return dict(x=None, lam=l, lam_max=max(lam_max, l), folds=folds, why=why, x_limit=x_limit)
         x, lam, t = y, l, tn
         lam_max = max(lam_max, lam)
         if it <= 4:
             ds = min(1.5 * ds, ds_max)
-    return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=f"{steps} steps used")
+    return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=f"{steps} steps used", x_limit=x_limit)
 
 
 def _newton(model, graph, x, free, ext, tol, max_iter):

@@ -123,6 +123,7 @@ def test_continuation_passes_the_limit_point_of_a_tripod():
     res = solve_static_path(model, ld, load_steps=4)
     assert res.folds and res.folds[0] == pytest.approx(P_limit / P, rel=2e-3)
     assert res.x is not None and "limit point" in res.status
+    assert tripod_force(0.3 - res.x_limit[3, 1]) == pytest.approx(P_limit, rel=1e-2)
     w_end = 0.3 - res.x[3, 1]
     assert tripod_force(w_end) == pytest.approx(P, rel=1e-8) and w_end > 0.6   # the far branch
     np.testing.assert_allclose(res.x[3, [0, 2]], 0.0, atol=1e-9)

@@ -289,6 +289,12 @@ def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
         st = float((res.x - points)[tip, 1].mean())
         row.update({"tip_deflection_static": st, "static_nonlinearity": st / lin,
                     "static_inverted_elements": inverted_elements(m, res.x)})
+    if res.x_limit is not None:     # what the model looks like where it loses stability
+        row.update({"limit_load_factor": res.folds[0],
+                    "limit_tip_deflection": float((res.x_limit - points)[tip, 1].mean()),
+                    "limit_inverted_elements": inverted_elements(m, res.x_limit)})
+        if row["limit_inverted_elements"]:
+            row["static_status"] += f"; {row['limit_inverted_elements']} elements inside out at the limit point"
     return row
 
 
