@@ -58,6 +58,8 @@ import numpy as np
 from numba import njit, prange
 
 BLOCK = {BLOCK}
+ONE = np.uint32(1)
+TWO = np.uint32(2)
 '''
 
 FAST = 'fastmath={"contract"}'
@@ -165,86 +167,74 @@ def element_source(kind):
     return "\n".join(L)
 
 
-STATIC = '''
-@njit(cache=True, error_model="numpy")
-def gather(x, d, cells, k, P):
-    """Block k's vertex positions and displacements into the SoA buffer P."""
-    nv = cells.shape[1]
-    for b in range(BLOCK):
-        e = k * BLOCK + b
-        for i in range(nv):
-            q = cells[e, i]
-            for c in range(3):
-                P[(3 * i + c) * BLOCK + b] = x[q, c]
-                P[(3 * nv + 3 * i + c) * BLOCK + b] = d[q, c]
+def gather_scatter_source(kind):
+    """Block k's vertex positions / displacements into the SoA buffer P, and its nodal
+    forces R added to f in element order. x, d, f are flat (3n,); ``idx`` (blocks, nv
+    BLOCK) holds 3 * node as uint32, [b * nv + i]: no negative-index wraparound code."""
+    nv = 2 if kind == "spring" else NV[kind]
+    L = ["@njit(cache=True, error_model=\"numpy\")",
+         f"def {kind}_gather(x, d, idx, P):",
+         "    for b in range(BLOCK):"]
+    a = L.append
+    for i in range(nv):
+        a(f"        q{i} = idx[{nv} * b + {i}]")
+    off = ("", " + ONE", " + TWO")
+    for c in range(3):
+        if kind == "spring":     # the spring vector and the difference of the displacements
+            a(f"        P[{c} * BLOCK + b] = x[q0{off[c]}] - x[q1{off[c]}]")
+            a(f"        P[{3 + c} * BLOCK + b] = d[q0{off[c]}] - d[q1{off[c]}]")
+        else:
+            for i in range(nv):
+                a(f"        P[{3 * i + c} * BLOCK + b] = x[q{i}{off[c]}]")
+                a(f"        P[{3 * nv + 3 * i + c} * BLOCK + b] = d[q{i}{off[c]}]")
+    a("")
+    a("")
+    a("@njit(cache=True, error_model=\"numpy\")")
+    a(f"def {kind}_scatter(f, idx, R, nb):")
+    a("    for b in range(nb):")
+    for i in range(nv):
+        a(f"        q{i} = idx[{nv} * b + {i}]")
+    for c in range(3):
+        if kind == "spring":
+            a(f"        f[q0{off[c]}] += R[{c} * BLOCK + b]")
+            a(f"        f[q1{off[c]}] -= R[{c} * BLOCK + b]")
+        else:
+            for i in range(nv):
+                a(f"        f[q{i}{off[c]}] += R[{3 * i + c} * BLOCK + b]")
+    a("")
+    a("")
+    a("@njit(cache=True, error_model=\"numpy\")")
+    a(f"def {kind}_forces(x, d, f, idx, S, P, R, m, vol):")
+    a("    for k in range(S.shape[0]):")
+    a(f"        {kind}_gather(x, d, idx[k], P[0])")
+    a(f"        {kind}_block(S[k], P[0], R[0]{'' if kind == 'spring' else ', vol'})")
+    a(f"        {kind}_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))")
+    return "\n".join(L)
 
 
-@njit(cache=True, error_model="numpy")
-def scatter(f, cells, k, R, m):
-    """Add block k's nodal forces to f in element order (padding elements skipped)."""
-    nv = cells.shape[1]
-    for b in range(min(BLOCK, m - k * BLOCK)):
-        e = k * BLOCK + b
-        for i in range(nv):
-            q = cells[e, i]
-            for c in range(3):
-                f[q, c] += R[(3 * i + c) * BLOCK + b]
-
-
-@njit(cache=True, error_model="numpy")
-def spring_forces(x, d, f, pq, S, P, R, m, vol):
-    for k in range(S.shape[0]):
-        Pk = P[0]
-        for b in range(BLOCK):
-            i = pq[k * BLOCK + b, 0]
-            j = pq[k * BLOCK + b, 1]
-            for c in range(3):
-                Pk[c * BLOCK + b] = x[i, c] - x[j, c]
-                Pk[(3 + c) * BLOCK + b] = d[i, c] - d[j, c]
-        Rk = R[0]
-        spring_block(S[k], Pk, Rk)
-        for b in range(min(BLOCK, m - k * BLOCK)):
-            i = pq[k * BLOCK + b, 0]
-            j = pq[k * BLOCK + b, 1]
-            for c in range(3):
-                f[i, c] += Rk[c * BLOCK + b]
-                f[j, c] -= Rk[c * BLOCK + b]
-
-
-@njit(cache=True, error_model="numpy")
-def tet_forces(x, d, f, cells, S, P, R, m, vol):
-    for k in range(S.shape[0]):
-        gather(x, d, cells, k, P[0])
-        tet_block(S[k], P[0], R[0], vol)
-        scatter(f, cells, k, R[0], m)
-
-
-@njit(cache=True, error_model="numpy")
-def hex_forces(x, d, f, cells, S, P, R, m, vol):
-    for k in range(S.shape[0]):
-        gather(x, d, cells, k, P[0])
-        hex_block(S[k], P[0], R[0], vol)
-        scatter(f, cells, k, R[0], m)
-
-
+STATIC = """
 @njit(parallel=True, cache=True, error_model="numpy")
-def element_forces_2(x, d, f, cells, S, P, R, m, vol, hexa):
-    """The element forces on two threads, same bits as one: each thread computes half of
+def element_forces_2(x, d, f, idx, S, P, R, m, vol, hexa):
+    \"\"\"The element forces on two threads, same bits as one: each thread computes half of
     the blocks into its own rows of P and R; the nodal forces are then added in element
-    order."""
+    order.\"\"\"
     nb = S.shape[0]
     half = (nb + 1) // 2
     for t in prange(2):
         lo = 0 if t == 0 else half
         hi = half if t == 0 else nb
         for k in range(lo, hi):
-            gather(x, d, cells, k, P[k])
             if hexa:
+                hex_gather(x, d, idx[k], P[k])
                 hex_block(S[k], P[k], R[k], vol)
             else:
+                tet_gather(x, d, idx[k], P[k])
                 tet_block(S[k], P[k], R[k], vol)
     for k in range(nb):
-        scatter(f, cells, k, R[k], m)
+        if hexa:
+            hex_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
+        else:
+            tet_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
 
 
 @njit(cache=True, error_model="numpy")
@@ -263,21 +253,29 @@ def volume_of(x, vtets):
 @njit(cache=True, error_model="numpy")
 def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
         vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
-    """Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
+    \"\"\"Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
     a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
-    ``tet``, ``hexa``: (cells, S, P, R, m, vol) from pack.kernel_arrays. Returns the
-    number of steps done (fewer if a displacement reached ``limit``: blow-up)."""
+    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. Returns the
+    number of steps done (fewer if a displacement reached ``limit``: blow-up).\"\"\"
     n = x.shape[0]
-    f = np.zeros((n, 3))
-    minv = 1.0 / mass
+    x1 = x.reshape(-1)
+    d1 = d.reshape(-1)
+    f = np.zeros(3 * n)
+    c = np.zeros(3 * n)             # constant part of the force: m g + push
+    minv = np.zeros(3 * n)          # 1 / m on integrated particles, 0 on fixed ones
+    for i in range(n):
+        for k in range(3):
+            c[3 * i + k] = grav[i, k] + push[i, k]
+            if integrate[i]:
+                minv[3 * i + k] = 1.0 / mass[i]
     sqh = h * h
     isnap = 0
     for step in range(steps + 1):
         if vtets.shape[0] > 0:
             volume[step] = volume_of(x, vtets)
         for k in range(obs.shape[0]):
-            for c in range(3):
-                observed[step, k, c] = x[obs[k], c]
+            for j in range(3):
+                observed[step, k, j] = x[obs[k], j]
         if isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
             snaps[isnap] = x
             snaps_d[isnap] = d
@@ -285,38 +283,35 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if step == steps:
             return steps
         if springs[4] > 0:
-            spring_forces(x, d, f, *springs)
+            spring_forces(x1, d1, f, *springs)
         if tet[4] > 0:
             if two_threads:
-                element_forces_2(x, d, f, *tet, False)
+                element_forces_2(x1, d1, f, *tet, False)
             else:
-                tet_forces(x, d, f, *tet)
+                tet_forces(x1, d1, f, *tet)
         if hexa[4] > 0:
             if two_threads:
-                element_forces_2(x, d, f, *hexa, True)
+                element_forces_2(x1, d1, f, *hexa, True)
             else:
-                hex_forces(x, d, f, *hexa)
+                hex_forces(x1, d1, f, *hexa)
         bad = False
-        for i in range(n):
-            if integrate[i]:
-                for c in range(3):
-                    force = ((f[i, c] + (-drag_step) * d[i, c]) + grav[i, c]) + push[i, c]
-                    d[i, c] = d[i, c] + sqh * (force * minv[i])
-                    x[i, c] = x[i, c] + d[i, c]
-                    if not (abs(d[i, c]) < limit):
-                        bad = True
-            f[i, 0] = 0.0
-            f[i, 1] = 0.0
-            f[i, 2] = 0.0
+        for i in range(3 * n):
+            dd = d1[i] + sqh * (((f[i] - drag_step * d1[i]) + c[i]) * minv[i])
+            d1[i] = dd
+            x1[i] += dd
+            f[i] = 0.0
+            if not (abs(dd) < limit):
+                bad = True
         if bad:
             return step + 1
     return steps
-'''
+"""
 
 
 def source() -> str:
-    return "\n\n".join([HEADER, spring_source(), element_source("tet"), element_source("hex"),
-                        STATIC.strip() + "\n"])
+    parts = [HEADER, spring_source(), element_source("tet"), element_source("hex")]
+    parts += [gather_scatter_source(kind) for kind in ("spring", "tet", "hex")]
+    return "\n\n".join(parts + [STATIC.strip() + "\n"])
 
 
 def main():

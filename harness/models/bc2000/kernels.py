@@ -9,6 +9,8 @@ import numpy as np
 from numba import njit, prange
 
 BLOCK = 32
+ONE = np.uint32(1)
+TWO = np.uint32(2)
 
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
@@ -564,68 +566,206 @@ def hex_block(S, P, R, vol):
             R[23 * BLOCK + b] = r7z
 
 @njit(cache=True, error_model="numpy")
-def gather(x, d, cells, k, P):
-    """Block k's vertex positions and displacements into the SoA buffer P."""
-    nv = cells.shape[1]
+def spring_gather(x, d, idx, P):
     for b in range(BLOCK):
-        e = k * BLOCK + b
-        for i in range(nv):
-            q = cells[e, i]
-            for c in range(3):
-                P[(3 * i + c) * BLOCK + b] = x[q, c]
-                P[(3 * nv + 3 * i + c) * BLOCK + b] = d[q, c]
+        q0 = idx[2 * b + 0]
+        q1 = idx[2 * b + 1]
+        P[0 * BLOCK + b] = x[q0] - x[q1]
+        P[3 * BLOCK + b] = d[q0] - d[q1]
+        P[1 * BLOCK + b] = x[q0 + ONE] - x[q1 + ONE]
+        P[4 * BLOCK + b] = d[q0 + ONE] - d[q1 + ONE]
+        P[2 * BLOCK + b] = x[q0 + TWO] - x[q1 + TWO]
+        P[5 * BLOCK + b] = d[q0 + TWO] - d[q1 + TWO]
 
 
 @njit(cache=True, error_model="numpy")
-def scatter(f, cells, k, R, m):
-    """Add block k's nodal forces to f in element order (padding elements skipped)."""
-    nv = cells.shape[1]
-    for b in range(min(BLOCK, m - k * BLOCK)):
-        e = k * BLOCK + b
-        for i in range(nv):
-            q = cells[e, i]
-            for c in range(3):
-                f[q, c] += R[(3 * i + c) * BLOCK + b]
+def spring_scatter(f, idx, R, nb):
+    for b in range(nb):
+        q0 = idx[2 * b + 0]
+        q1 = idx[2 * b + 1]
+        f[q0] += R[0 * BLOCK + b]
+        f[q1] -= R[0 * BLOCK + b]
+        f[q0 + ONE] += R[1 * BLOCK + b]
+        f[q1 + ONE] -= R[1 * BLOCK + b]
+        f[q0 + TWO] += R[2 * BLOCK + b]
+        f[q1 + TWO] -= R[2 * BLOCK + b]
 
 
 @njit(cache=True, error_model="numpy")
-def spring_forces(x, d, f, pq, S, P, R, m, vol):
+def spring_forces(x, d, f, idx, S, P, R, m, vol):
     for k in range(S.shape[0]):
-        Pk = P[0]
-        for b in range(BLOCK):
-            i = pq[k * BLOCK + b, 0]
-            j = pq[k * BLOCK + b, 1]
-            for c in range(3):
-                Pk[c * BLOCK + b] = x[i, c] - x[j, c]
-                Pk[(3 + c) * BLOCK + b] = d[i, c] - d[j, c]
-        Rk = R[0]
-        spring_block(S[k], Pk, Rk)
-        for b in range(min(BLOCK, m - k * BLOCK)):
-            i = pq[k * BLOCK + b, 0]
-            j = pq[k * BLOCK + b, 1]
-            for c in range(3):
-                f[i, c] += Rk[c * BLOCK + b]
-                f[j, c] -= Rk[c * BLOCK + b]
+        spring_gather(x, d, idx[k], P[0])
+        spring_block(S[k], P[0], R[0])
+        spring_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
+
+@njit(cache=True, error_model="numpy")
+def tet_gather(x, d, idx, P):
+    for b in range(BLOCK):
+        q0 = idx[4 * b + 0]
+        q1 = idx[4 * b + 1]
+        q2 = idx[4 * b + 2]
+        q3 = idx[4 * b + 3]
+        P[0 * BLOCK + b] = x[q0]
+        P[12 * BLOCK + b] = d[q0]
+        P[3 * BLOCK + b] = x[q1]
+        P[15 * BLOCK + b] = d[q1]
+        P[6 * BLOCK + b] = x[q2]
+        P[18 * BLOCK + b] = d[q2]
+        P[9 * BLOCK + b] = x[q3]
+        P[21 * BLOCK + b] = d[q3]
+        P[1 * BLOCK + b] = x[q0 + ONE]
+        P[13 * BLOCK + b] = d[q0 + ONE]
+        P[4 * BLOCK + b] = x[q1 + ONE]
+        P[16 * BLOCK + b] = d[q1 + ONE]
+        P[7 * BLOCK + b] = x[q2 + ONE]
+        P[19 * BLOCK + b] = d[q2 + ONE]
+        P[10 * BLOCK + b] = x[q3 + ONE]
+        P[22 * BLOCK + b] = d[q3 + ONE]
+        P[2 * BLOCK + b] = x[q0 + TWO]
+        P[14 * BLOCK + b] = d[q0 + TWO]
+        P[5 * BLOCK + b] = x[q1 + TWO]
+        P[17 * BLOCK + b] = d[q1 + TWO]
+        P[8 * BLOCK + b] = x[q2 + TWO]
+        P[20 * BLOCK + b] = d[q2 + TWO]
+        P[11 * BLOCK + b] = x[q3 + TWO]
+        P[23 * BLOCK + b] = d[q3 + TWO]
 
 
 @njit(cache=True, error_model="numpy")
-def tet_forces(x, d, f, cells, S, P, R, m, vol):
+def tet_scatter(f, idx, R, nb):
+    for b in range(nb):
+        q0 = idx[4 * b + 0]
+        q1 = idx[4 * b + 1]
+        q2 = idx[4 * b + 2]
+        q3 = idx[4 * b + 3]
+        f[q0] += R[0 * BLOCK + b]
+        f[q1] += R[3 * BLOCK + b]
+        f[q2] += R[6 * BLOCK + b]
+        f[q3] += R[9 * BLOCK + b]
+        f[q0 + ONE] += R[1 * BLOCK + b]
+        f[q1 + ONE] += R[4 * BLOCK + b]
+        f[q2 + ONE] += R[7 * BLOCK + b]
+        f[q3 + ONE] += R[10 * BLOCK + b]
+        f[q0 + TWO] += R[2 * BLOCK + b]
+        f[q1 + TWO] += R[5 * BLOCK + b]
+        f[q2 + TWO] += R[8 * BLOCK + b]
+        f[q3 + TWO] += R[11 * BLOCK + b]
+
+
+@njit(cache=True, error_model="numpy")
+def tet_forces(x, d, f, idx, S, P, R, m, vol):
     for k in range(S.shape[0]):
-        gather(x, d, cells, k, P[0])
+        tet_gather(x, d, idx[k], P[0])
         tet_block(S[k], P[0], R[0], vol)
-        scatter(f, cells, k, R[0], m)
+        tet_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
+
+@njit(cache=True, error_model="numpy")
+def hex_gather(x, d, idx, P):
+    for b in range(BLOCK):
+        q0 = idx[8 * b + 0]
+        q1 = idx[8 * b + 1]
+        q2 = idx[8 * b + 2]
+        q3 = idx[8 * b + 3]
+        q4 = idx[8 * b + 4]
+        q5 = idx[8 * b + 5]
+        q6 = idx[8 * b + 6]
+        q7 = idx[8 * b + 7]
+        P[0 * BLOCK + b] = x[q0]
+        P[24 * BLOCK + b] = d[q0]
+        P[3 * BLOCK + b] = x[q1]
+        P[27 * BLOCK + b] = d[q1]
+        P[6 * BLOCK + b] = x[q2]
+        P[30 * BLOCK + b] = d[q2]
+        P[9 * BLOCK + b] = x[q3]
+        P[33 * BLOCK + b] = d[q3]
+        P[12 * BLOCK + b] = x[q4]
+        P[36 * BLOCK + b] = d[q4]
+        P[15 * BLOCK + b] = x[q5]
+        P[39 * BLOCK + b] = d[q5]
+        P[18 * BLOCK + b] = x[q6]
+        P[42 * BLOCK + b] = d[q6]
+        P[21 * BLOCK + b] = x[q7]
+        P[45 * BLOCK + b] = d[q7]
+        P[1 * BLOCK + b] = x[q0 + ONE]
+        P[25 * BLOCK + b] = d[q0 + ONE]
+        P[4 * BLOCK + b] = x[q1 + ONE]
+        P[28 * BLOCK + b] = d[q1 + ONE]
+        P[7 * BLOCK + b] = x[q2 + ONE]
+        P[31 * BLOCK + b] = d[q2 + ONE]
+        P[10 * BLOCK + b] = x[q3 + ONE]
+        P[34 * BLOCK + b] = d[q3 + ONE]
+        P[13 * BLOCK + b] = x[q4 + ONE]
+        P[37 * BLOCK + b] = d[q4 + ONE]
+        P[16 * BLOCK + b] = x[q5 + ONE]
+        P[40 * BLOCK + b] = d[q5 + ONE]
+        P[19 * BLOCK + b] = x[q6 + ONE]
+        P[43 * BLOCK + b] = d[q6 + ONE]
+        P[22 * BLOCK + b] = x[q7 + ONE]
+        P[46 * BLOCK + b] = d[q7 + ONE]
+        P[2 * BLOCK + b] = x[q0 + TWO]
+        P[26 * BLOCK + b] = d[q0 + TWO]
+        P[5 * BLOCK + b] = x[q1 + TWO]
+        P[29 * BLOCK + b] = d[q1 + TWO]
+        P[8 * BLOCK + b] = x[q2 + TWO]
+        P[32 * BLOCK + b] = d[q2 + TWO]
+        P[11 * BLOCK + b] = x[q3 + TWO]
+        P[35 * BLOCK + b] = d[q3 + TWO]
+        P[14 * BLOCK + b] = x[q4 + TWO]
+        P[38 * BLOCK + b] = d[q4 + TWO]
+        P[17 * BLOCK + b] = x[q5 + TWO]
+        P[41 * BLOCK + b] = d[q5 + TWO]
+        P[20 * BLOCK + b] = x[q6 + TWO]
+        P[44 * BLOCK + b] = d[q6 + TWO]
+        P[23 * BLOCK + b] = x[q7 + TWO]
+        P[47 * BLOCK + b] = d[q7 + TWO]
 
 
 @njit(cache=True, error_model="numpy")
-def hex_forces(x, d, f, cells, S, P, R, m, vol):
-    for k in range(S.shape[0]):
-        gather(x, d, cells, k, P[0])
-        hex_block(S[k], P[0], R[0], vol)
-        scatter(f, cells, k, R[0], m)
+def hex_scatter(f, idx, R, nb):
+    for b in range(nb):
+        q0 = idx[8 * b + 0]
+        q1 = idx[8 * b + 1]
+        q2 = idx[8 * b + 2]
+        q3 = idx[8 * b + 3]
+        q4 = idx[8 * b + 4]
+        q5 = idx[8 * b + 5]
+        q6 = idx[8 * b + 6]
+        q7 = idx[8 * b + 7]
+        f[q0] += R[0 * BLOCK + b]
+        f[q1] += R[3 * BLOCK + b]
+        f[q2] += R[6 * BLOCK + b]
+        f[q3] += R[9 * BLOCK + b]
+        f[q4] += R[12 * BLOCK + b]
+        f[q5] += R[15 * BLOCK + b]
+        f[q6] += R[18 * BLOCK + b]
+        f[q7] += R[21 * BLOCK + b]
+        f[q0 + ONE] += R[1 * BLOCK + b]
+        f[q1 + ONE] += R[4 * BLOCK + b]
+        f[q2 + ONE] += R[7 * BLOCK + b]
+        f[q3 + ONE] += R[10 * BLOCK + b]
+        f[q4 + ONE] += R[13 * BLOCK + b]
+        f[q5 + ONE] += R[16 * BLOCK + b]
+        f[q6 + ONE] += R[19 * BLOCK + b]
+        f[q7 + ONE] += R[22 * BLOCK + b]
+        f[q0 + TWO] += R[2 * BLOCK + b]
+        f[q1 + TWO] += R[5 * BLOCK + b]
+        f[q2 + TWO] += R[8 * BLOCK + b]
+        f[q3 + TWO] += R[11 * BLOCK + b]
+        f[q4 + TWO] += R[14 * BLOCK + b]
+        f[q5 + TWO] += R[17 * BLOCK + b]
+        f[q6 + TWO] += R[20 * BLOCK + b]
+        f[q7 + TWO] += R[23 * BLOCK + b]
 
+
+@njit(cache=True, error_model="numpy")
+def hex_forces(x, d, f, idx, S, P, R, m, vol):
+    for k in range(S.shape[0]):
+        hex_gather(x, d, idx[k], P[0])
+        hex_block(S[k], P[0], R[0], vol)
+        hex_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def element_forces_2(x, d, f, cells, S, P, R, m, vol, hexa):
+def element_forces_2(x, d, f, idx, S, P, R, m, vol, hexa):
     """The element forces on two threads, same bits as one: each thread computes half of
     the blocks into its own rows of P and R; the nodal forces are then added in element
     order."""
@@ -635,13 +775,17 @@ def element_forces_2(x, d, f, cells, S, P, R, m, vol, hexa):
         lo = 0 if t == 0 else half
         hi = half if t == 0 else nb
         for k in range(lo, hi):
-            gather(x, d, cells, k, P[k])
             if hexa:
+                hex_gather(x, d, idx[k], P[k])
                 hex_block(S[k], P[k], R[k], vol)
             else:
+                tet_gather(x, d, idx[k], P[k])
                 tet_block(S[k], P[k], R[k], vol)
     for k in range(nb):
-        scatter(f, cells, k, R[k], m)
+        if hexa:
+            hex_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
+        else:
+            tet_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
 
 
 @njit(cache=True, error_model="numpy")
@@ -662,19 +806,27 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
     """Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
     a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
-    ``tet``, ``hexa``: (cells, S, P, R, m, vol) from pack.kernel_arrays. Returns the
+    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. Returns the
     number of steps done (fewer if a displacement reached ``limit``: blow-up)."""
     n = x.shape[0]
-    f = np.zeros((n, 3))
-    minv = 1.0 / mass
+    x1 = x.reshape(-1)
+    d1 = d.reshape(-1)
+    f = np.zeros(3 * n)
+    c = np.zeros(3 * n)             # constant part of the force: m g + push
+    minv = np.zeros(3 * n)          # 1 / m on integrated particles, 0 on fixed ones
+    for i in range(n):
+        for k in range(3):
+            c[3 * i + k] = grav[i, k] + push[i, k]
+            if integrate[i]:
+                minv[3 * i + k] = 1.0 / mass[i]
     sqh = h * h
     isnap = 0
     for step in range(steps + 1):
         if vtets.shape[0] > 0:
             volume[step] = volume_of(x, vtets)
         for k in range(obs.shape[0]):
-            for c in range(3):
-                observed[step, k, c] = x[obs[k], c]
+            for j in range(3):
+                observed[step, k, j] = x[obs[k], j]
         if isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
             snaps[isnap] = x
             snaps_d[isnap] = d
@@ -682,29 +834,25 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if step == steps:
             return steps
         if springs[4] > 0:
-            spring_forces(x, d, f, *springs)
+            spring_forces(x1, d1, f, *springs)
         if tet[4] > 0:
             if two_threads:
-                element_forces_2(x, d, f, *tet, False)
+                element_forces_2(x1, d1, f, *tet, False)
             else:
-                tet_forces(x, d, f, *tet)
+                tet_forces(x1, d1, f, *tet)
         if hexa[4] > 0:
             if two_threads:
-                element_forces_2(x, d, f, *hexa, True)
+                element_forces_2(x1, d1, f, *hexa, True)
             else:
-                hex_forces(x, d, f, *hexa)
+                hex_forces(x1, d1, f, *hexa)
         bad = False
-        for i in range(n):
-            if integrate[i]:
-                for c in range(3):
-                    force = ((f[i, c] + (-drag_step) * d[i, c]) + grav[i, c]) + push[i, c]
-                    d[i, c] = d[i, c] + sqh * (force * minv[i])
-                    x[i, c] = x[i, c] + d[i, c]
-                    if not (abs(d[i, c]) < limit):
-                        bad = True
-            f[i, 0] = 0.0
-            f[i, 1] = 0.0
-            f[i, 2] = 0.0
+        for i in range(3 * n):
+            dd = d1[i] + sqh * (((f[i] - drag_step * d1[i]) + c[i]) * minv[i])
+            d1[i] = dd
+            x1[i] += dd
+            f[i] = 0.0
+            if not (abs(dd) < limit):
+                bad = True
         if bad:
             return step + 1
     return steps

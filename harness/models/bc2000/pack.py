@@ -26,13 +26,17 @@ def _blocks(columns: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(pad.reshape(nb, BLOCK, r).transpose(0, 2, 1)).reshape(nb, r * BLOCK)
 
 
-def _pad_index(idx: np.ndarray) -> np.ndarray:
-    m = len(idx)
+def _block_index(idx: np.ndarray) -> np.ndarray:
+    """(m, nv) node ids -> (blocks, nv * BLOCK) uint32 of 3 * node (flat x), element b of
+    block k at [k, b * nv + i]; padded with copies of element 0."""
+    m, nv = idx.shape
+    if 3 * (int(idx.max(initial=0)) + 1) >= 2 ** 32:
+        raise ValueError("more than 1.4e9 nodes: the kernels index with uint32")
     nb = -(-m // BLOCK)
-    out = np.empty((nb * BLOCK, idx.shape[1]), np.int64)
-    out[:m] = idx
-    out[m:] = idx[:1]
-    return out
+    out = np.empty((nb * BLOCK, nv), np.uint32)
+    out[:m] = 3 * idx
+    out[m:] = 3 * idx[:1]
+    return out.reshape(nb, nv * BLOCK)
 
 
 def dense_axis_weights(cells, nodes, weights) -> np.ndarray:
@@ -66,7 +70,7 @@ def _static(kind, model):
                             for name, _ in LAYOUT[kind]], axis=1)
         assert C.shape[1] == n_rows(kind)
         index = model.springs if kind == "spring" else model.cells
-        cache = (_pad_index(np.asarray(index, np.int64)), _blocks(C), len(C),
+        cache = (_block_index(np.asarray(index, np.int64)), _blocks(C), len(C),
                  bool(getattr(model, "volume", False)))
         object.__setattr__(model, "_kernel_blocks", cache)
     return cache
@@ -81,13 +85,14 @@ def empty(kind: str):
     """Arguments of a model part that is absent (no blocks)."""
     p, r = _scratch_rows(kind)
     width = 2 if kind == "spring" else NV[kind]
-    return (np.zeros((0, width), np.int64), np.zeros((0, n_rows(kind) * BLOCK)), np.zeros((1, p * BLOCK)),
+    return (np.zeros((0, width * BLOCK), np.uint32), np.zeros((0, n_rows(kind) * BLOCK)), np.zeros((1, p * BLOCK)),
             np.zeros((1, r * BLOCK)), 0, False)
 
 
 def block_arrays(kind: str, model, dt: float, threads: int = 1):
-    """(index, S, P, R, m, vol) for kernels.run: S the element columns with damping per
-    step (kd / dt), P and R scratch (one block, or one per block for two threads)."""
+    """(idx, S, P, R, m, vol) for kernels.run: idx the blocks' node indices, S the element
+    columns with damping per step (kd / dt), P and R scratch (one block, or one per block
+    for two threads)."""
     index, S, m, vol = _static(kind, model)
     S = S.copy()
     r = rows(kind)
