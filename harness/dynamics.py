@@ -273,8 +273,13 @@ def jacobian(force, x, graph, *, v=None, wrt: str = "x", h: float = 1e-30) -> sp
 
 
 def stiffness(model, x=None) -> sp.csr_matrix:
-    """K = -d f / d x at x (default rest)."""
+    """K = -d f / d x at x (default rest): the model's own ``tangent_stiffness`` (element by
+    element) or ``stiffness_matrix`` (analytic) where it has one, else the coloured complex
+    step of :func:`jacobian` (all three agree to rounding; tests)."""
     x = model.points if x is None else x
+    for name in ("tangent_stiffness", "stiffness_matrix"):
+        if hasattr(model, name):
+            return getattr(model, name)(x).tocsr()
     return -jacobian(model.forces, x, model.node_graph())
 
 
@@ -410,7 +415,7 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
         return (model.forces(y) + l * ext).ravel()[free]
 
     def factor(y):
-        K = -jacobian(model.forces, y, graph).tocsr()[free][:, free]
+        K = stiffness(model, y)[free][:, free]
         return spla.splu(K.tocsc())
 
     def moved(y, du):
@@ -480,7 +485,7 @@ def _newton(model, graph, x, free, ext, tol, max_iter):
     for _ in range(max_iter):
         if np.linalg.norm(r, np.inf) <= tol:
             return x, True, 0.0
-        K = -jacobian(model.forces, x, graph).tocsr()[free][:, free]
+        K = stiffness(model, x)[free][:, free]
         dx = _solve_regularised(K, r)
         if dx is None:
             raise SimulationError("singular stiffness", fix="fix more nodes: the body can move freely")

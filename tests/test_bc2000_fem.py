@@ -202,3 +202,19 @@ def test_linearised_model_is_the_small_load_limit_of_the_statics():
     lin = bc2000._static_columns(m, Loading(ld.mass * 1e-4, ld.fixed, ld.gravity, ld.push * 1e-4), tip,
                                  mesh.points, arc_steps=0)
     assert lin["tip_deflection_static"] == pytest.approx(lin["tip_deflection_linear_program_load"], rel=1e-3)
+
+
+@pytest.mark.parametrize("kind,cell", [("tetra", "tetra"), ("hexa", "hexahedron")])
+def test_element_tangent_equals_the_coloured_complex_step(kind, cell):
+    """tangent_stiffness (element by element) = -jacobian (whole mesh, coloured) far from
+    rest, and the assembled element forces are the model's forces."""
+    mesh = read_mesh(REF / f"meshes/{kind}/cube_333/cube.mesh")
+    m = build_anisotropic(mesh.points, mesh.cells[cell], azimuth=0.3, elevation=0.7, ks=[3, 2, 1, 2, 1, 0.5],
+                          kvs=2.0, rest_angle="rest")
+    x = mesh.points + 0.2 * np.random.default_rng(5).standard_normal(mesh.points.shape)
+    A = -jacobian(m.forces, x, m.node_graph()).toarray()
+    B = m.tangent_stiffness(x).toarray()
+    np.testing.assert_allclose(B, A, atol=1e-12 * np.abs(A).max())
+    f = np.zeros_like(x)
+    np.add.at(f, m.cells.ravel(), m.element_forces(x[m.cells]).reshape(-1, 3))
+    np.testing.assert_allclose(f, m.forces(x), atol=1e-12 * np.abs(f).max())
