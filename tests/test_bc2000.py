@@ -116,13 +116,43 @@ def test_numpy_and_compiled_engines_agree(kind):
     ld = Loading.from_flags(mesh.flags, drag=PROGRAM_DRAG * dt)
     models = [build_massspring(mesh.points, cells, ks=2.5, kd=10 * dt),
               build_anisotropic(mesh.points, cells, azimuth=0.3, elevation=0.7, ks=[3, 2, 1, 2.5, 1.5, 0.5],
-                                kd=[0.04, 0.02, 0.01], kvs=5.0, kvd=0.04, volume=True)]
+                                kd=[0.04, 0.02, 0.01], kvs=5.0, kvd=0.04, volume=True),
+              build_anisotropic(mesh.points, cells, azimuth=0.3, elevation=0.7, ks=[3, 2, 1, 2.5, 1.5, 0.5],
+                                kd=[0.04, 0.02, 0.01], volume=False, rest_angle="rest")]
     for m in models:
         a = simulate(m, ld, dt, 200, engine="numba", snapshots=(200,))
         b = simulate(m, ld, dt, 200, engine="numpy", integrator="verlet", snapshots=(200,))
         assert np.abs(a.x - mesh.points).max() > 1e-3          # it moved
         np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-10)
         np.testing.assert_allclose(a.volume, b.volume, rtol=1e-12)
+        c = simulate(m, ld, dt, 200, engine="numba", threads=2)
+        assert np.array_equal(a.x, c.x)                         # two threads: the same bits
+
+
+def test_parallel_spring_kernel_matches_numpy():
+    """Springs in random order and orientation, a count that is not a whole number of
+    blocks, 1-3 threads; called twice (the per-thread buffers must be left zero)."""
+    from harness.bench.dynamics import lattice
+    from harness.models.bc2000.parallel import SB, spring_forces, spring_plan
+    from harness.models.massspring import MassSpring
+    rng = np.random.default_rng(7)
+    pts, sp = lattice(6)
+    sp = sp[rng.permutation(len(sp))]
+    flip = rng.random(len(sp)) < 0.5
+    sp[flip] = sp[flip, ::-1]
+    sp = sp[:len(sp) - 5]
+    assert len(sp) % SB != 0
+    L0 = np.linalg.norm(pts[sp[:, 0]] - pts[sp[:, 1]], axis=1) * rng.uniform(0.9, 1.1, len(sp))
+    m = MassSpring(pts, sp, L0, rng.uniform(1, 3, len(sp)), rng.uniform(0, 0.2, len(sp)))
+    x = pts + 0.05 * rng.standard_normal(pts.shape)
+    v = rng.standard_normal(pts.shape)
+    ref = m.forces(x, v)
+    for T in (1, 2, 3):
+        plan = spring_plan(sp, m.ks, m.kd, m.L0, len(pts), T)
+        for _ in range(2):
+            f = np.full_like(pts, np.nan)
+            spring_forces(plan, x, v, f)
+            np.testing.assert_allclose(f, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
 
 
 # -- physics of the model (independent of the program) -------------------------------------------

@@ -2,10 +2,12 @@
 
 ``spring_plan`` + ``spring_forces`` (the fast path): springs sorted by their first node
 and cut into one contiguous chunk per thread; each thread adds its springs' forces into
-its own buffer covering only the node window its chunk touches (a band when nodes are
-numbered with locality: a lattice, or a mesh after reverse Cuthill-McKee, see
-:func:`locality_order`); the windows are then summed per node. Memory traffic is the
-springs' data once plus the node windows, no atomics and no per-spring force array.
+its own buffer covering only the node window its chunk touches (a band when the nodes
+are numbered with locality, as a lattice or a mesh renumbered by reverse Cuthill-McKee);
+the windows are then summed per node. Within a thread, blocks of SB springs are gathered
+into contiguous buffers, their forces computed four at a time (AVX2), and added back.
+Memory traffic is the springs' data once plus the node windows: no atomics, no
+per-spring force array.
 
 ``spring_forces_parallel`` (kept as the reference two-pass form): pass 1 computes every
 spring's force, pass 2 sums each node's incident springs through a node -> spring CSR
@@ -144,15 +146,14 @@ def _scatter(b, p3, q3, o3, R):
 
 @njit(parallel=True, cache=True, error_model="numpy")
 def _spring_forces(x, v, p3, q3, ks, kd, L0, bounds, lo, hi, buf, scratch, f):
-    """x, v, f flat (3n,); p3, q3 = 3 * node (uint32); buf (T, 3 W) flat windows."""
+    """x, v, f flat (3n,); p3, q3 = 3 * node (uint32); buf (T, 3 W) flat windows, zero on
+    entry and on return."""
     T = bounds.shape[0] - 1
     for t in prange(T):
         b = buf[t]
         P = scratch[t, :6 * SB]
         R = scratch[t, 6 * SB:]
         o3 = np.uint32(3 * lo[t])
-        for i in range(3 * (hi[t] - lo[t])):
-            b[i] = 0.0
         for k0 in range(bounds[t], bounds[t + 1], SB):
             k1 = k0 + SB
             _gather(x, v, p3[k0:k1], q3[k0:k1], P)
@@ -168,19 +169,12 @@ def _spring_forces(x, v, p3, q3, ks, kd, L0, bounds, lo, hi, buf, scratch, f):
                 a0 += buf[t, r]
                 a1 += buf[t, r + 1]
                 a2 += buf[t, r + 2]
+                buf[t, r] = 0.0             # the buffers are left zero for the next call
+                buf[t, r + 1] = 0.0
+                buf[t, r + 2] = 0.0
         f[3 * i] = a0
         f[3 * i + 1] = a1
         f[3 * i + 2] = a2
-
-
-def locality_order(springs, n_nodes: int) -> np.ndarray:
-    """A node numbering with locality (reverse Cuthill-McKee of the spring graph):
-    ``new_points = points[perm]``, springs renumbered by ``np.argsort(perm)[springs]``."""
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-    s = np.asarray(springs)
-    A = sp.csr_matrix((np.ones(len(s)), (s[:, 0], s[:, 1])), shape=(n_nodes, n_nodes))
-    return np.asarray(reverse_cuthill_mckee((A + A.T).tocsr(), symmetric_mode=True), np.int64)
 
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=True)
