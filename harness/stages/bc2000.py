@@ -320,7 +320,7 @@ def _cantilever(case, ctx, model, dyn):
                    "tip_deflection_max": float(u.min()), "run_seconds": sec}
             if dyn["static"]:
                 ctx.status(f"{name} statics")
-                row.update(_static_columns(m, ld, tip, mesh.points, 150 if case.mode == "full" else 30))
+                row.update(_static_columns(m, ld, tip, mesh.points))
             if ref is not None:
                 ctx.status(f"{name} vs FEM")
                 row.update(_fem_comparison(case, ref, mesh, m, tip))
