@@ -456,3 +456,36 @@ def test_seed_means_and_optimiser_table_keep_optimisers_apart():
     assert list(o.index) == ["sa", "lbfgs"] and (o["n_seeds"] == 2).all()
     assert o.loc["lbfgs", "G_final_vs_sa"] == pytest.approx((0.1 / 0.2 + 0.1 / 0.4) / 2)
     assert o.loc["sa", "budget"] == "temperatures=2"
+
+
+@pytest.mark.parametrize("grouped", [False, True])
+def test_fit_diagnostics_jacobian_matches_finite_differences(grouped):
+    """jac_* columns: the dense Jacobian of the weighted residual over log k (or log group
+    factor) against central differences of the problem's own sparse re-solve."""
+    from harness.optimize.problem import FitProblem
+    from harness.stages.sms import fit_diagnostics, weighted_jacobian
+    rng = np.random.default_rng(3)
+    p = grid_points([0, 0], [2, 2], (3, 3))
+    top = grid_structure((3, 3), "structure1")
+    free = np.ones(p.size, bool)
+    free[[0, 1, 3]] = False                               # node 0 pinned, node 1 on a roller
+    forces = rng.normal(size=(2, p.size)) * free
+    u_ref = rng.normal(size=(2, p.size)) * 0.1
+    w = rng.uniform(1, 3, p.size)
+    k0 = rng.uniform(0.5, 2.0, len(top.springs))
+    prob = FitProblem.from_network(p, top.springs, k0, [free, free], forces, u_ref, w, ["a", "b"],
+                                   groups=top.groups if grouped else None)
+    x = rng.normal(scale=0.3, size=prob.n_params)
+    k = prob.k_of(np.exp(x))
+    J = weighted_jacobian(prob, k)
+
+    def residual(x):
+        return np.concatenate([np.sqrt(b.w) * (b.u_ref - u) for b, u in zip(prob.blocks, prob.solve(prob.k_of(np.exp(x))))])
+    h = 1e-6
+    fd = np.stack([(residual(x + h * e) - residual(x - h * e)) / (2 * h) for e in np.eye(prob.n_params)], 1)
+    assert J.shape == fd.shape and np.allclose(J, fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+    d = fit_diagnostics(prob, k)
+    s = np.linalg.svd(fd, compute_uv=False)
+    assert d["jac_rank"] == int(np.sum(s > 1e-8 * s[0]))
+    assert d["jac_cond_logk"] == pytest.approx(s[0] / s[d["jac_rank"] - 1], rel=1e-4)
+    assert d["opt_at_bounds"] == 0 and fit_diagnostics(prob, prob.k_of(np.full(prob.n_params, 1e3)))["opt_at_bounds"] == prob.n_params

@@ -345,18 +345,9 @@ def fit_diagnostics(problem, k) -> dict:
         f = np.array([np.median(f[groups == g]) for g in range(problem.n_params)])
         kp = np.array([np.median(k[groups == g]) for g in range(problem.n_params)])
     out = {"opt_at_bounds": int(np.sum((f <= lo * (1 + 1e-6)) | (f >= hi * (1 - 1e-6))))}
-    if sum(b.B.shape[0] for b in problem.blocks) * problem.n_springs > JACOBIAN_MAX:
+    J = weighted_jacobian(problem, k)
+    if J is None:
         return out
-    parts = []
-    for b in problem.blocks:
-        Bd = b.B.toarray()
-        K = (Bd * k) @ Bd.T
-        u = np.linalg.solve(K, b.f)
-        X = np.linalg.solve(K, Bd * (k * (Bd.T @ u)))      # -d u / d log k_e, column e
-        parts.append(np.sqrt(b.w)[:, None] * X)
-    J = np.vstack(parts)
-    if groups is not None:
-        J = J @ np.eye(problem.n_params)[groups]
     for name, A in (("logk", J), ("k", J / kp[None, :])):
         s = np.linalg.svd(A, compute_uv=False)
         keep = s > 1e-8 * s[0] if len(s) and s[0] > 0 else np.zeros(len(s), bool)
@@ -364,6 +355,22 @@ def fit_diagnostics(problem, k) -> dict:
             out["jac_rank"] = int(keep.sum())
         out[f"jac_cond_{name}"] = float(s[0] / s[keep][-1]) if keep.any() else math.nan
     return out
+
+
+def weighted_jacobian(problem, k):
+    """J = d(sqrt(w) (u_ref - u)) / d log(parameter), all loads stacked (rows: free dofs
+    per load; columns: springs, or groups in grouped mode); dense, None if too large.
+    From K du = -b_e (b_e.u) dk_e: column e is sqrt(w) K^-1 b_e k_e (b_e.u)."""
+    if sum(b.B.shape[0] for b in problem.blocks) * problem.n_springs > JACOBIAN_MAX:
+        return None
+    parts = []
+    for b in problem.blocks:
+        Bd = b.B.toarray()
+        K = (Bd * k) @ Bd.T
+        u = np.linalg.solve(K, b.f)
+        parts.append(np.sqrt(b.w)[:, None] * np.linalg.solve(K, Bd * (k * (Bd.T @ u))))
+    J = np.vstack(parts)
+    return J if problem.groups is None else J @ np.eye(problem.n_params)[problem.groups]
 
 
 def _fem_frequencies(ref, n):
