@@ -212,31 +212,7 @@ def gather_scatter_source(kind):
     return "\n".join(L)
 
 
-STATIC = """
-@njit(parallel=True, cache=True, error_model="numpy")
-def element_forces_2(x, d, f, idx, S, P, R, m, vol, hexa):
-    \"\"\"The element forces on two threads, same bits as one: each thread computes half of
-    the blocks into its own rows of P and R; the nodal forces are then added in element
-    order.\"\"\"
-    nb = S.shape[0]
-    half = (nb + 1) // 2
-    for t in prange(2):
-        lo = 0 if t == 0 else half
-        hi = half if t == 0 else nb
-        for k in range(lo, hi):
-            if hexa:
-                hex_gather(x, d, idx[k], P[k])
-                hex_block(S[k], P[k], R[k], vol)
-            else:
-                tet_gather(x, d, idx[k], P[k])
-                tet_block(S[k], P[k], R[k], vol)
-    for k in range(nb):
-        if hexa:
-            hex_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
-        else:
-            tet_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
-
-
+VOLUME = """
 @njit(cache=True, error_model="numpy")
 def volume_of(x, vtets):
     V = 0.0
@@ -248,15 +224,12 @@ def volume_of(x, vtets):
         det = (ay * bz - az * by) * cx + (az * bx - ax * bz) * cy + (ax * by - ay * bx) * cz
         V += abs(det)
     return V / 6.0
+"""
 
-
-@njit(cache=True, error_model="numpy")
-def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
-        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
-    \"\"\"Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
-    a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
-    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. Returns the
-    number of steps done (fewer if a displacement reached ``limit``: blow-up).\"\"\"
+RUN = """
+@njit({flags}cache=True, error_model="numpy")
+def {name}(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
     n = x.shape[0]
     x1 = x.reshape(-1)
     d1 = d.reshape(-1)
@@ -284,16 +257,7 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
             return steps
         if springs[4] > 0:
             spring_forces(x1, d1, f, *springs)
-        if tet[4] > 0:
-            if two_threads:
-                element_forces_2(x1, d1, f, *tet, False)
-            else:
-                tet_forces(x1, d1, f, *tet)
-        if hexa[4] > 0:
-            if two_threads:
-                element_forces_2(x1, d1, f, *hexa, True)
-            else:
-                hex_forces(x1, d1, f, *hexa)
+{elements}
         bad = False
         for i in range(3 * n):
             dd = d1[i] + sqh * (((f[i] - drag_step * d1[i]) + c[i]) * minv[i])
@@ -307,11 +271,53 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
     return steps
 """
 
+SERIAL_ELEMENTS = """        if tet[4] > 0:
+            tet_forces(x1, d1, f, *tet)
+        if hexa[4] > 0:
+            hex_forces(x1, d1, f, *hexa)"""
+
+def threaded_elements():
+    """The element pass on two threads, written out in the parallel run itself: numba can
+    crash loading a cached serial function that calls a parallel one (numba issue 8578)."""
+    L = []
+    for kind, arg in (("tet", "tet"), ("hex", "hexa")):
+        L += [f"        if {arg}[4] > 0:",
+              f"            nb = {arg}[1].shape[0]",
+              "            half = (nb + 1) // 2",
+              "            for t in prange(2):",
+              "                lo = 0 if t == 0 else half",
+              "                hi = half if t == 0 else nb",
+              "                for k in range(lo, hi):",
+              f"                    {kind}_gather(x1, d1, {arg}[0][k], {arg}[2][k])",
+              f"                    {kind}_block({arg}[1][k], {arg}[2][k], {arg}[3][k], {arg}[5])",
+              "            for k in range(nb):",
+              f"                {kind}_scatter(f, {arg}[0][k], {arg}[3][k], min(BLOCK, {arg}[4] - k * BLOCK))"]
+    return "\n".join(L)
+
+
+DISPATCH = '''
+def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
+    """Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
+    a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
+    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. ``two_threads``:
+    each thread computes half of the element blocks (own rows of P and R), the nodal
+    forces are then added in element order: the same bits as one thread. Returns the
+    number of steps done (fewer if a displacement reached ``limit``: blow-up)."""
+    return (run_threads if two_threads else run_serial)(
+        x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit)
+'''
+
 
 def source() -> str:
     parts = [HEADER, spring_source(), element_source("tet"), element_source("hex")]
     parts += [gather_scatter_source(kind) for kind in ("spring", "tet", "hex")]
-    return "\n\n".join(parts + [STATIC.strip() + "\n"])
+    parts += [VOLUME.strip(),
+              RUN.format(flags="", name="run_serial", elements=SERIAL_ELEMENTS).strip(),
+              RUN.format(flags="parallel=True, ", name="run_threads", elements=threaded_elements()).strip(),
+              DISPATCH.strip() + "\n"]
+    return "\n\n\n".join(parts)
 
 
 def main():

@@ -13,6 +13,7 @@ ONE = np.uint32(1)
 TWO = np.uint32(2)
 
 
+
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def spring_block(S, P, R):
     for b in range(BLOCK):
@@ -28,6 +29,7 @@ def spring_block(S, P, R):
         R[0 * BLOCK + b] = nx * s
         R[1 * BLOCK + b] = ny * s
         R[2 * BLOCK + b] = nz * s
+
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def tet_block(S, P, R, vol):
@@ -233,6 +235,7 @@ def tet_block(S, P, R, vol):
             R[9 * BLOCK + b] = r3x
             R[10 * BLOCK + b] = r3y
             R[11 * BLOCK + b] = r3z
+
 
 @njit(cache=True, error_model="numpy", fastmath={"contract"})
 def hex_block(S, P, R, vol):
@@ -565,6 +568,7 @@ def hex_block(S, P, R, vol):
             R[22 * BLOCK + b] = r7y
             R[23 * BLOCK + b] = r7z
 
+
 @njit(cache=True, error_model="numpy")
 def spring_gather(x, d, idx, P):
     for b in range(BLOCK):
@@ -597,6 +601,7 @@ def spring_forces(x, d, f, idx, S, P, R, m, vol):
         spring_gather(x, d, idx[k], P[0])
         spring_block(S[k], P[0], R[0])
         spring_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
+
 
 @njit(cache=True, error_model="numpy")
 def tet_gather(x, d, idx, P):
@@ -658,6 +663,7 @@ def tet_forces(x, d, f, idx, S, P, R, m, vol):
         tet_gather(x, d, idx[k], P[0])
         tet_block(S[k], P[0], R[0], vol)
         tet_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
+
 
 @njit(cache=True, error_model="numpy")
 def hex_gather(x, d, idx, P):
@@ -764,29 +770,6 @@ def hex_forces(x, d, f, idx, S, P, R, m, vol):
         hex_block(S[k], P[0], R[0], vol)
         hex_scatter(f, idx[k], R[0], min(BLOCK, m - k * BLOCK))
 
-@njit(parallel=True, cache=True, error_model="numpy")
-def element_forces_2(x, d, f, idx, S, P, R, m, vol, hexa):
-    """The element forces on two threads, same bits as one: each thread computes half of
-    the blocks into its own rows of P and R; the nodal forces are then added in element
-    order."""
-    nb = S.shape[0]
-    half = (nb + 1) // 2
-    for t in prange(2):
-        lo = 0 if t == 0 else half
-        hi = half if t == 0 else nb
-        for k in range(lo, hi):
-            if hexa:
-                hex_gather(x, d, idx[k], P[k])
-                hex_block(S[k], P[k], R[k], vol)
-            else:
-                tet_gather(x, d, idx[k], P[k])
-                tet_block(S[k], P[k], R[k], vol)
-    for k in range(nb):
-        if hexa:
-            hex_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
-        else:
-            tet_scatter(f, idx[k], R[k], min(BLOCK, m - k * BLOCK))
-
 
 @njit(cache=True, error_model="numpy")
 def volume_of(x, vtets):
@@ -802,12 +785,8 @@ def volume_of(x, vtets):
 
 
 @njit(cache=True, error_model="numpy")
-def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
-        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
-    """Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
-    a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
-    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. Returns the
-    number of steps done (fewer if a displacement reached ``limit``: blow-up)."""
+def run_serial(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
     n = x.shape[0]
     x1 = x.reshape(-1)
     d1 = d.reshape(-1)
@@ -836,15 +815,9 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if springs[4] > 0:
             spring_forces(x1, d1, f, *springs)
         if tet[4] > 0:
-            if two_threads:
-                element_forces_2(x1, d1, f, *tet, False)
-            else:
-                tet_forces(x1, d1, f, *tet)
+            tet_forces(x1, d1, f, *tet)
         if hexa[4] > 0:
-            if two_threads:
-                element_forces_2(x1, d1, f, *hexa, True)
-            else:
-                hex_forces(x1, d1, f, *hexa)
+            hex_forces(x1, d1, f, *hexa)
         bad = False
         for i in range(3 * n):
             dd = d1[i] + sqh * (((f[i] - drag_step * d1[i]) + c[i]) * minv[i])
@@ -856,3 +829,81 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
         if bad:
             return step + 1
     return steps
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def run_threads(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit):
+    n = x.shape[0]
+    x1 = x.reshape(-1)
+    d1 = d.reshape(-1)
+    f = np.zeros(3 * n)
+    c = np.zeros(3 * n)             # constant part of the force: m g + push
+    minv = np.zeros(3 * n)          # 1 / m on integrated particles, 0 on fixed ones
+    for i in range(n):
+        for k in range(3):
+            c[3 * i + k] = grav[i, k] + push[i, k]
+            if integrate[i]:
+                minv[3 * i + k] = 1.0 / mass[i]
+    sqh = h * h
+    isnap = 0
+    for step in range(steps + 1):
+        if vtets.shape[0] > 0:
+            volume[step] = volume_of(x, vtets)
+        for k in range(obs.shape[0]):
+            for j in range(3):
+                observed[step, k, j] = x[obs[k], j]
+        if isnap < snap_steps.shape[0] and snap_steps[isnap] == step:
+            snaps[isnap] = x
+            snaps_d[isnap] = d
+            isnap += 1
+        if step == steps:
+            return steps
+        if springs[4] > 0:
+            spring_forces(x1, d1, f, *springs)
+        if tet[4] > 0:
+            nb = tet[1].shape[0]
+            half = (nb + 1) // 2
+            for t in prange(2):
+                lo = 0 if t == 0 else half
+                hi = half if t == 0 else nb
+                for k in range(lo, hi):
+                    tet_gather(x1, d1, tet[0][k], tet[2][k])
+                    tet_block(tet[1][k], tet[2][k], tet[3][k], tet[5])
+            for k in range(nb):
+                tet_scatter(f, tet[0][k], tet[3][k], min(BLOCK, tet[4] - k * BLOCK))
+        if hexa[4] > 0:
+            nb = hexa[1].shape[0]
+            half = (nb + 1) // 2
+            for t in prange(2):
+                lo = 0 if t == 0 else half
+                hi = half if t == 0 else nb
+                for k in range(lo, hi):
+                    hex_gather(x1, d1, hexa[0][k], hexa[2][k])
+                    hex_block(hexa[1][k], hexa[2][k], hexa[3][k], hexa[5])
+            for k in range(nb):
+                hex_scatter(f, hexa[0][k], hexa[3][k], min(BLOCK, hexa[4] - k * BLOCK))
+        bad = False
+        for i in range(3 * n):
+            dd = d1[i] + sqh * (((f[i] - drag_step * d1[i]) + c[i]) * minv[i])
+            d1[i] = dd
+            x1[i] += dd
+            f[i] = 0.0
+            if not (abs(dd) < limit):
+                bad = True
+        if bad:
+            return step + 1
+    return steps
+
+
+def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit, two_threads):
+    """Position Verlet (Stoermer_Derivative + Stoermer_Step): d += h^2 a, x += d, with
+    a = (f - drag_step d + m g + push) / m on the integrated particles. ``springs``,
+    ``tet``, ``hexa``: (idx, S, P, R, m, vol) from pack.kernel_arrays. ``two_threads``:
+    each thread computes half of the element blocks (own rows of P and R), the nodal
+    forces are then added in element order: the same bits as one thread. Returns the
+    number of steps done (fewer if a displacement reached ``limit``: blow-up)."""
+    return (run_threads if two_threads else run_serial)(
+        x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, hexa,
+        vtets, obs, snap_steps, snaps, snaps_d, volume, observed, limit)
