@@ -60,6 +60,20 @@ def test_lbfgs_improves_the_score(tri_mesh, tmp_path, capsys):
     assert fit.G_final < 0.9 * fit.G_initial
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("argv, factor", [
+    (["--method", "equilibrium-gap"], 1.0),   # never worse than the rule (falls back to it)
+    (["--method", "gauss-newton", "--init", "equilibrium-gap"], 0.9)])
+def test_other_fits_improve_the_score(tri_mesh, tmp_path, argv, factor):
+    out = tmp_path / "m.vtu"
+    assert cli.main(["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3", *argv,
+                     "--budget", "3", "--out", str(out), "--max-refine", "0"]) == 0
+    import pandas as pd
+    df = pd.read_csv(out.with_suffix(".csv"))
+    fit = df[df.optimizer == argv[1]].iloc[0]
+    assert fit.G_final <= factor * fit.G_initial
+
+
 @pytest.mark.parametrize("flags, expect", [
     (["--nu", "0.7"], "--nu: 0.7 is out of range"),
     (["--E", "-1"], "--E: -1.0 is not a positive number"),

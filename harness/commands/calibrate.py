@@ -1,9 +1,11 @@
-"""springbench calibrate MESH --E .. --nu .. [--density ..] [--method rule|sa|lbfgs] --out MODEL.vtu
+"""springbench calibrate MESH --E .. --nu .. [--density ..] [--method rule|sa|lbfgs|gauss-newton|equilibrium-gap]
+[--init none|equilibrium-gap] --out MODEL.vtu
 
 Turns a user's own tri/quad/tet/hex mesh (any meshio format, or the bc2000 format) into
 a calibrated spring/mass model: springs on the mesh edges (hexahedra add their body
-diagonals), masses by moment matching, initial constants by a named rule, then (``sa`` or
-``lbfgs``) spring constants fitted so the network's static response to the standard
+diagonals), masses by moment matching, initial constants by a named rule, then (``sa``,
+``lbfgs``, ``gauss-newton`` or ``equilibrium-gap``; ``--init equilibrium-gap`` starts the
+gradient fits from the equilibrium-gap estimate) spring constants fitted so the network's static response to the standard
 basic loads of the mesh's bounding box (DESIGN.md: ``basic2d`` / ``basic3d``) matches a
 FEM reference of the same body and material. Prints the before/after table (G per rule
 and after fitting) and writes:
@@ -33,7 +35,9 @@ from pathlib import Path
 from harness.errors import CaseError, SpringbenchError
 
 HELP = "calibrate spring constants for your own mesh against FEM and export them (VTU, JSON for Warp/Taichi/SOFA)"
-METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs"}
+METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
+           "equilibrium-gap": "equilibrium-gap"}
+INITS = ("none", "equilibrium-gap")
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
 
 
@@ -43,7 +47,11 @@ def add_arguments(p):
     p.add_argument("--nu", type=float, required=True, help="Poisson ratio in (-1, 0.5)")
     p.add_argument("--density", type=float, default=1000.0, help="density (kg/m^3; default 1000)")
     p.add_argument("--method", choices=tuple(METHODS), default="lbfgs",
-                   help="rule: initial constants only; sa: simulated annealing; lbfgs: adjoint gradient (default)")
+                   help="rule: initial constants only; sa: simulated annealing; lbfgs: adjoint gradient "
+                        "(default); gauss-newton; equilibrium-gap: one linear least-squares solve")
+    p.add_argument("--init", choices=INITS, default="none",
+                   help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
+                        "equilibrium-gap estimate (much faster on large meshes)")
     p.add_argument("--rule", choices=RULES, default="lloyd",
                    help="stiffness rule of the initial constants (default lloyd)")
     p.add_argument("--plane", choices=("stress", "strain"), default="stress", help="2-D meshes: plane stress/strain")
@@ -92,7 +100,9 @@ def case_text(args, dim: int, cell_types=()) -> str:
     rules = [args.rule] + [r for r in ("deussen", "vangelder", "lloyd") if r != args.rule]
     method = METHODS[args.method]
     cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
-    opt = "" if method == "none" else f"options = {{max_seconds = {float(args.budget)!r}}}\n"
+    init = f', init = "{args.init}"' if method in ("lbfgs", "gauss-newton") and args.init != "none" else ""
+    budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"  # one solve
+    opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
     return (f'name = "calibrate"\ndim = {dim}\n'
             f'[body]\nshape = "mesh"\nfile = {mesh}\n{fmt}'
             f"[material]\nE = {float(args.E)!r}\nnu = {float(args.nu)!r}\ndensity = {float(args.density)!r}\n"
