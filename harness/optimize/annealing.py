@@ -37,9 +37,9 @@ DEFAULTS = dict(
     max_seconds=None,   # budget in wall seconds (None: unlimited)
     chains=1,           # independent chains (seeds) in parallel processes; the best is kept
     engine="auto",      # "auto" | "dense" | "sparse" (incremental) | "refactor"
-    refactor_every="auto",  # accepts between base renewals; "auto": dense 64, sparse flop balance 64..256
-    dense_max=2500,     # largest free block (dofs) for the dense-inverse engine under "auto"
-    batch=32,           # proposals whose K0^-1 b_e are solved together (sparse engine)
+    refactor_every="auto",  # accepts between base renewals; "auto": dense 64, sparse flop balance 64..1024
+    dense_max=1200,     # largest free block (dofs) for the dense-inverse engine under "auto" (bench sa: crossover 1,000-1,800)
+    batch=64,           # proposals whose K0^-1 b_e are solved together
 )
 
 CHUNK = 256  # proposals drawn from the RNG at a time (fixed: the stream is engine-independent)

@@ -63,7 +63,8 @@ def _split(ls):
     return [_Set(ls, g, ls.const if i == 0 else 0.0) for i, g in enumerate(groups)]
 
 
-SOLVE_LEAF = 32   # dofs per leaf front of the engine's factorisation (see sparse_factor)
+SPARSE_MIN = 400  # below: the load set's dense Cholesky
+SOLVE_LEAF = 64   # dofs per leaf front of the engine's factorisation (see sparse_factor)
 
 
 def sparse_factor(ls, k):
@@ -73,7 +74,7 @@ def sparse_factor(ls, k):
     L on the 2,500-node grid) at the price of a slower factorisation, paid once per renewal.
     Small blocks (no coordinates or <= 2,000 dofs) use the load set's own solver."""
     from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic, warm_up
-    if ls.coords is None or ls.B.shape[0] <= 2000:
+    if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
     warm_up()   # load the compiled substitution now, not inside the timed SA loop
     K = ls.stiffness(k)
@@ -84,29 +85,156 @@ def sparse_factor(ls, k):
     return MultifrontalCholesky(K, sym, ls.name)
 
 
-AUTO_CAP = 256  # most accepted steps held in Woodbury form (memory: nfree x 256 per load set)
-AUTO_MIN = 32
+AUTO_MIN, AUTO_MAX = 64, 1024   # bounds of the automatic renewal interval (accepts)
+AUTO_MEMORY = 400e6             # bytes for the held basis Z (S x interval x nfree doubles)
 DENSE_INTERVAL = 64
+NODE_FLOPS = 2e6                # a front's fixed cost in the factorisation, in flops (Python)
 
 
 def auto_interval(sets, mode: str) -> int:
-    """Accepts between renewals. Dense: 64 (the renewal is one BLAS-3 product of 2 n^2 m
-    flops, i.e. 2 n^2 per accept whatever m, so m only bounds the O(m^2) work). Sparse:
-    a renewal costs about F (the factorisations' flops, run at ~1/3 the rate of the
-    Gram products) and each held column costs 2 n flops per proposal in A = Z^T W Y; the
-    amortised F/m + n m is least at m = sqrt(3 F / n); clipped to [AUTO_MIN, AUTO_CAP].
+    """Accepts between renewals. Dense: 64 (a renewal is one product of 2 n^2 m flops, so
+    2 n^2 per accept whatever the interval; m only bounds the O(m^2) work). Sparse: a
+    renewal costs R = the factorisations' flops plus a fixed cost per front; each held
+    column costs every proposal ~3 n flops (the Gram V^T W Y and the O(m) kernel work), n
+    = all free dofs. The amortised R a / m + 1.5 n m (a ~ 0.9 accepts per proposal) is
+    least at m = sqrt(R / (1.7 n)); clipped to [AUTO_MIN, AUTO_MAX] and to the memory
+    budget. Measured on the bench grids the optimum is flat within a factor 1.5 of this.
     Deterministic (flop counts, no timing), so a seeded run is reproducible bit for bit."""
     if mode == "dense":
         return DENSE_INTERVAL
-    F = 0.0
+    R = 0.0
     n = 0
+    seen = set()
     for st in sets:
         n += st.n
         sym = getattr(getattr(st, "fac", None), "sym", None)
         if sym is None:
-            return 64
-        F += sum(nd["nv"] ** 3 / 3 + nd["nv"] ** 2 * len(nd["U"]) + nd["nv"] * len(nd["U"]) ** 2 for nd in sym.nodes)
-    return int(np.clip(np.sqrt(3.0 * F / n), AUTO_MIN, AUTO_CAP))
+            return DENSE_INTERVAL
+        if id(st.fac) in seen:
+            continue
+        seen.add(id(st.fac))
+        R += sum(nd["nv"] ** 3 / 3 + nd["nv"] ** 2 * len(nd["U"]) + nd["nv"] * len(nd["U"]) ** 2 + NODE_FLOPS
+                 for nd in sym.nodes)
+    nmax = max(st.n for st in sets)
+    mem = AUTO_MEMORY / (8.0 * len(sets) * max(nmax, 1))
+    return int(max(AUTO_MIN, min(np.sqrt(R / (1.7 * n)), AUTO_MAX, mem)))
+
+
+def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, Cv, PV, AV,
+             YY, YR, bY, ct, Hct, bz, sv, zWz, zR0, d2s):
+    """G^2 change of a proposal, for every stacked set s (compiled by numba; plain
+    Python otherwise). Work O(m^2) per set, reading only the upper triangles of T and
+    Hz; fills the scratch arrays ct, Hct, bz, sv, zWz, zR0, d2s that an accept uses."""
+    S, L, P = T.shape[0], Cv.shape[1], gf.shape[1]
+    g = np.empty(m)
+    gt = np.empty(m)
+    bu = np.empty(L)
+    total = 0.0
+    for s in range(S):
+        for l in range(L):
+            acc = 0.0
+            for p in range(P):
+                acc += gv[s, p] * U0f[gf[s, p], l]
+            bu[l] = acc
+        row = (s * q + j) * nmax
+        for i in range(m):                       # g = Bm^T y (= Z^T b)
+            acc = 0.0
+            for p in range(P):
+                acc += acc_v[s, i, p] * Ytf[row + acc_i[s, i, p]]
+            g[i] = acc
+            gt[i] = 0.0
+        for i in range(m):                       # gt = T^T g (= V^T b), T unit upper
+            gi = g[i]
+            if gi != 0.0:
+                Ti = T[s, i]
+                for k in range(i, m):
+                    gt[k] += gi * Ti[k]
+        cs = ct[s]
+        hs = Hct[s]
+        btz = 0.0
+        for i in range(m):
+            cs[i] = gt[i] / sig[s, i]
+            btz += gt[i] * cs[i]
+            hs[i] = 0.0
+        for i in range(m):                       # Hct = Hz ct, Hz symmetric (upper read)
+            ci = cs[i]
+            Hi = Hz[s, i]
+            acc = Hi[i] * ci
+            for k in range(i + 1, m):
+                acc += Hi[k] * cs[k]
+                hs[k] += Hi[k] * ci
+            hs[i] += acc
+        bz[s] = bY[s, j] - btz
+        w = YY[s, j, j]
+        for i in range(m):
+            w += ct[s, i] * (Hct[s, i] - 2.0 * AV[s, i, j])
+        zWz[s] = w
+        d2 = 0.0
+        for l in range(L):
+            a1 = YR[s, j, l]
+            a2 = 0.0
+            for i in range(m):
+                a1 -= ct[s, i] * PV[s, l, i]
+                a2 += (AV[s, i, j] - Hct[s, i]) * Cv[s, l, i]
+                bu[l] -= gt[i] * Cv[s, l, i]
+            zR0[s, l] = a1
+            sl = delta * bu[l] / (1.0 + delta * bz[s])
+            sv[s, l] = sl
+            d2 += sl * (2.0 * (a1 + a2) + sl * w)
+        d2s[s] = d2
+        total += d2
+    return total
+
+
+def _accept(m, j, delta, gi_e, gv_e, T, Hz, sig, Cv, PV, AV, YY, Yt, Zt, acc_i, acc_v,
+            ct, Hct, bz, sv, zWz, zR0):
+    """Append the proposed z = y - V ct as basis column m (compiled by numba)."""
+    S, L, q, n = T.shape[0], Cv.shape[1], AV.shape[2], Zt.shape[2]
+    for s in range(S):
+        cs = ct[s]
+        for i in range(m):                       # T column m = [-T ct; 1]
+            Ti = T[s, i]
+            acc = 0.0
+            for k in range(i, m):
+                acc += Ti[k] * cs[k]
+            Ti[m] = -acc
+        T[s, m, m] = 1.0
+        for i in range(m):                       # Hz border: V^T W z = av - Hz ct
+            h = AV[s, i, j] - Hct[s, i]
+            Hz[s, i, m] = h
+            Hz[s, m, i] = h
+        Hz[s, m, m] = zWz[s]
+        sig[s, m] = 1.0 / delta + bz[s]
+        for l in range(L):
+            Cv[s, l, m] = sv[s, l]
+            PV[s, l, m] = zR0[s, l]
+        for jj in range(q):                      # AV row m: z^T W Y = YY[j] - ct^T AV
+            AV[s, m, jj] = YY[s, j, jj]
+        Am = AV[s, m]
+        for i in range(m):
+            ci = cs[i]
+            Ai = AV[s, i]
+            for jj in range(q):
+                Am[jj] -= ci * Ai[jj]
+        Zt[s, m, :] = Yt[s, j, :]
+        for p in range(gi_e.shape[1]):
+            acc_i[s, m, p] = gi_e[s, p]
+            acc_v[s, m, p] = gv_e[s, p]
+
+
+_KERNELS: dict = {}
+
+
+def _kernels():
+    """(propose, accept), compiled by numba (cached on disk) when it is installed."""
+    if not _KERNELS:
+        try:
+            import numba
+            jit = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})  # vectorised sums
+            _KERNELS.update(propose=jit(_propose), accept=jit(_accept))
+        except ImportError:       # pragma: no cover - numba is a declared dependency
+            _KERNELS.update(propose=_propose, accept=_accept)
+    return _KERNELS["propose"], _KERNELS["accept"]
 
 
 class IncrementalG:
@@ -118,13 +246,14 @@ class IncrementalG:
     ``batch``: proposals (this one and ``upcoming``) whose K0^-1 b_e are computed
     together. ``upcoming`` (set by the caller) holds the springs proposed next.
 
-    All load sets are stacked on a leading axis, so a proposal is a fixed number of
-    numpy calls whatever the number of loads. M^-1 is kept in product form
-    T diag(1/sigma) T^T (T unit upper triangular, column j = [-c_j; 1], the accepted
-    z_j = Z t_j): an accept writes one column, no rank-1 update of an m x m matrix."""
+    All load sets are stacked on a leading axis and a proposal or an accept is one
+    compiled call whatever the number of loads. The accepted changes are kept in the
+    basis V = Z T of the accepted z_j (T unit upper triangular, column j = [-c_j; 1]),
+    in which M^-1 = T diag(1/sigma) T^T and u = u0 - V Cv with Cv's columns the s_j:
+    an accept writes one row/column and touches nothing else of size m^2."""
 
     def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every="auto",
-                 batch: int = 32, dense_max: int = 2500):
+                 batch: int = 64, dense_max: int = 1200):
         self.problem = problem
         self.k = np.array(k, float)
         lsets = problem.load_sets()
@@ -145,27 +274,45 @@ class IncrementalG:
         cap = auto_interval(self.sets, mode) if refactor_every == "auto" else int(refactor_every)
         self.refactor_every = self.cap = max(cap, 1)
         nm, L, cap, q, P = self.nmax, self.L, self.cap, self.batch, self.gi.shape[2]
-        self.Zt = np.zeros((S, cap, nm))         # rows: K0^-1 b of the accepted springs
-        self.X = np.zeros((S, 2, cap, cap))      # [T; H T] with H = Z^T W Z
-        self.sig = np.ones((S, cap))             # sigma_j = 1/delta_j + b_j^T z_j
-        self.C = np.zeros((S, cap, L))           # u = u0 - Z C
-        self.P = np.zeros((S, cap, L))           # Z^T r0
-        self.acc_i = np.zeros((S, cap, P), np.int64)  # b of the accepted springs: rows ...
-        self.acc_v = np.zeros((S, cap, P))            # ... and values
-        self.AA = np.zeros((S, cap, q))          # Z^T W Y for the current batch
-        self.Yt = np.zeros((S, q, nm))           # rows: K0^-1 b for the batch's springs
-        self.YY = np.zeros((S, q, q))            # Y^T W Y
-        self.YR = np.zeros((S, q, L))            # Y^T r0
-        self.bY = np.zeros((S, q))               # b_j^T y_j
-        self.sidx = np.arange(S)[:, None, None]
+
+        def zeros(*shape, dtype=float):   # written now: no page faults inside the SA loop
+            a = np.empty(shape, dtype)
+            a.fill(0)
+            return a
+        self.Zt = zeros(S, cap, nm)              # rows: y = K0^-1 b of the accepted springs
+        self.T = zeros(S, cap, cap)              # V = Z T
+        self.Hz = zeros(S, cap, cap)             # V^T W V
+        self.sig = zeros(S, cap)                 # sigma_j = 1/delta_j + b_j^T z_j
+        self.Cv = zeros(S, L, cap)               # u = u0 - V Cv^T
+        self.PV = zeros(S, L, cap)               # V^T r0
+        self.acc_i = zeros(S, cap, P, dtype=np.int64)   # b of the accepted springs: rows ...
+        self.acc_v = zeros(S, cap, P)                   # ... and values
+        self.AV = zeros(S, cap, q)               # V^T W Y for the current batch
+        self.Yt = zeros(S, q, nm)                # rows: K0^-1 b for the batch's springs
+        self.YY = zeros(S, q, q)                 # Y^T W Y
+        self.YR = zeros(S, q, L)                 # Y^T r0
+        self.bY = zeros(S, q)                    # b_j^T y_j
+        self.scratch = (zeros(S, cap), zeros(S, cap), zeros(S), zeros(S, L), zeros(S), zeros(S, L), zeros(S))
+        self._kp, self._ka = _kernels()
         self.m = 0
         self.col: dict[int, int] = {}            # spring -> batch column
         self.upcoming: np.ndarray = np.empty(0, int)
         self.n_rebase = 0
         self._pending = None
         self._base_state()
+        self._warm_up()
 
-    # --- set-up ----------------------------------------------------------------------
+    # --- set-up
+    def _warm_up(self):
+        """Compile or load the kernels now (not inside a timed SA loop): a proposal and an
+        accept at m = 0 on the empty batch; the next real accept overwrites what they wrote."""
+        self._kp(0, 0, 1.0, self.gf[0], self.gv[0], self.U0f, self.Yt.reshape(-1), self.batch, self.nmax,
+                 self.acc_i, self.acc_v, self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV, self.YY,
+                 self.YR, self.bY, *self.scratch)
+        self._ka(0, 0, 1.0, self.gi[0], self.gv[0], self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
+                 self.YY, self.Yt, self.Zt, self.acc_i, self.acc_v, *self.scratch[:6])
+        self.T[:, 0, 0] = 0.0
+
     def _gather_maps(self):
         """Per spring and set: rows (local, and flat into a stacked (S * nmax) array) and
         values of b_e, padded to the most entries of any column with value 0."""
@@ -223,7 +370,7 @@ class IncrementalG:
         up = [int(x) for x in self.upcoming[: self.batch - 1]]
         springs = list(dict.fromkeys([e, *up]))[: self.batch]
         q = len(springs)
-        self.Yt[:] = 0.0
+        self.Yt.fill(0.0)
         for s, st in enumerate(self.sets):
             if st.n == 0:
                 continue
@@ -236,7 +383,7 @@ class IncrementalG:
         self._batch_grams(springs, self.m)
 
     def _batch_grams(self, springs, m0):
-        """A = Z^T W Y (first m0 rows), Y^T W Y, Y^T r0, b_j^T y_j for the batch."""
+        """V^T W Y (first m0 rows), Y^T W Y, Y^T r0, b_j^T y_j for the batch (BLAS-3)."""
         q = len(springs)
         sp_arr = np.asarray(springs)
         gi, gv = self.gi[sp_arr], self.gv[sp_arr]            # (q, S, P)
@@ -249,7 +396,7 @@ class IncrementalG:
             self.YY[s, :q, :q] = WY @ Y.T
             self.YR[s, :q] = Y @ self.R0[s, :n]
             if m0:
-                self.AA[s, :m0, :q] = self.Zt[s, :m0, :n] @ WY.T
+                self.AV[s, :m0, :q] = self.T[s, :m0, :m0].T @ (self.Zt[s, :m0, :n] @ WY.T)
 
     # --- proposals ---------------------------------------------------------------------
     @property
@@ -268,30 +415,11 @@ class IncrementalG:
         if j is None:
             self._new_batch(e)
             j = self.col[e]
-        m = self.m
-        gv = self.gv[e]                                            # (S, P)
-        bu = np.einsum("sp,spl->sl", gv, self.U0f[self.gf[e]])     # b^T u0
-        if m:
-            y_at = self.Yt[self.sidx, j, self.acc_i[:, :m]]        # (S, m, P)
-            g = np.einsum("smp,smp->sm", self.acc_v[:, :m], y_at)   # Z^T b = Bm^T y
-            ct = np.matmul(g[:, None, :], self.X[:, 0, :m, :m])[:, 0] / self.sig[:, :m]
-            cH = np.matmul(self.X[:, :, :m, :m], ct[:, None, :, None])[..., 0]
-            c, Hc = cH[:, 0], cH[:, 1]                              # M^-1 Z^T b, H c
-            a = self.AA[:, :m, j]                                   # Z^T W y
-            Cm = self.C[:, :m]
-            bz = self.bY[:, j] - np.einsum("sm,sm->s", g, c)
-            bu -= np.einsum("sm,sml->sl", g, Cm)
-            zWz = self.YY[:, j, j] + np.einsum("sm,sm->s", c, Hc - 2.0 * a)
-            zR = self.YR[:, j] - np.einsum("sm,sml->sl", c, self.P[:, :m]) + np.einsum("sm,sml->sl", a - Hc, Cm)
-        else:
-            c = a = Hc = None
-            bz = self.bY[:, j]
-            zWz = self.YY[:, j, j]
-            zR = self.YR[:, j]
-        s = (delta * bu) / (1.0 + delta * bz)[:, None]
-        d2s = (s * (2.0 * zR + s * zWz[:, None])).sum(1)
-        self._pending = (e, k_new, (delta, j, c, a, Hc, bz, s, d2s))
-        return float(np.sqrt(max(self.G2 + float(d2s.sum()), 0.0)))
+        d2 = self._kp(self.m, j, delta, self.gf[e], self.gv[e], self.U0f, self.Yt.reshape(-1), self.batch,
+                      self.nmax, self.acc_i, self.acc_v, self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
+                      self.YY, self.YR, self.bY, *self.scratch)
+        self._pending = (e, k_new, (delta, j))
+        return float(np.sqrt(max(self.G2 + d2, 0.0)))
 
     def accept(self):
         e, k_new, pend = self._pending
@@ -299,26 +427,12 @@ class IncrementalG:
         self.k[e] = k_new
         if pend is None:
             return
-        delta, j, c, a, Hc, bz, s, d2s = pend
+        delta, j = pend
         m = self.m
-        X = self.X
-        if m:
-            X[:, 0, :m, m] = -c
-            X[:, 1, :m, m] = a - Hc                                 # H t, t = [-c; 1]
-            X[:, 1, m, :m] = np.matmul(a[:, None, :], X[:, 0, :m, :m])[:, 0]   # a^T T
-            X[:, 1, m, m] = self.YY[:, j, j] - np.einsum("sm,sm->s", a, c)
-            self.C[:, :m] -= c[:, :, None] * s[:, None, :]
-        else:
-            X[:, 1, 0, 0] = self.YY[:, j, j]
-        X[:, 0, m, m] = 1.0
-        self.sig[:, m] = 1.0 / delta + bz
-        self.C[:, m] = s
-        self.P[:, m] = self.YR[:, j]
-        self.AA[:, m, :] = self.YY[:, j, :]
-        self.Zt[:, m] = self.Yt[:, j]
-        self.acc_i[:, m] = self.gi[e]
-        self.acc_v[:, m] = self.gv[e]
-        self.G2s += d2s
+        sc = self.scratch
+        self._ka(m, j, delta, self.gi[e], self.gv[e], self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
+                 self.YY, self.Yt, self.Zt, self.acc_i, self.acc_v, *sc[:6])
+        self.G2s += sc[6]
         self.m = m + 1
         if self.m >= self.cap:
             self.rebase()
@@ -327,12 +441,6 @@ class IncrementalG:
         self._pending = None
 
     # --- renewal -----------------------------------------------------------------------
-    def _minv_apply(self, G):
-        """M^-1 G for stacked G (S, m, r): T diag(1/sigma) T^T G."""
-        m = self.m
-        T = self.X[:, 0, :m, :m]
-        return np.matmul(T, np.matmul(T.transpose(0, 2, 1), G) / self.sig[:, :m, None])
-
     def rebase(self):
         """Fold the accepted changes into a new base (dense: one product; sparse: a new
         factorisation); recompute u0 and G exactly; carry the batch over by Woodbury."""
@@ -340,23 +448,24 @@ class IncrementalG:
         self.n_rebase += 1
         springs = sorted(self.col, key=self.col.get)
         q = len(springs) if self.mode == "sparse" else 0   # dense: a new batch is a cheap gather
-        if m and q:   # carried batch: y_new = y - Z M^-1 Z^T b
-            y_at = self.Yt[self.sidx, :q, self.acc_i[:, :m]]        # (S, m, P, q)
-            G = np.einsum("smp,smpj->smj", self.acc_v[:, :m], y_at)  # Bm^T Y = Z^T B
-            self.Yt[:, :q] -= np.matmul(self._minv_apply(G).transpose(0, 2, 1), self.Zt[:, :m])
+        T = self.T[:, :m, :m]
+        if m and q:   # carried batch: y_new = y - V diag(1/sigma) V^T b, V = Z T
+            y_at = self.Yt[np.arange(self.S)[:, None, None], :q, self.acc_i[:, :m]]   # (S, m, P, q)
+            G = np.einsum("smp,smpj->smj", self.acc_v[:, :m], y_at)             # Z^T B
+            W2 = np.matmul(T, np.matmul(T.transpose(0, 2, 1), G) / self.sig[:, :m, None])
+            self.Yt[:, :q] -= np.matmul(W2.transpose(0, 2, 1), self.Zt[:, :m])
         if self.mode == "dense" and m:
             done = set()
             for s, st in enumerate(self.sets):
                 if id(st.Kinv) in done or st.n == 0:
                     continue
                 done.add(id(st.Kinv))
-                Zz = self.X[s, 0, :m, :m].T @ self.Zt[s, :m, :st.n]     # rows: accepted z_j
-                st.Kinv -= Zz.T @ (Zz / self.sig[s, :m, None])
+                Vt = T[s].T @ self.Zt[s, :m, :st.n]     # rows: accepted z_j
+                st.Kinv -= Vt.T @ (Vt / self.sig[s, :m, None])
         elif m:
             self._factor_all()
         self.m = 0
-        self.X[:] = 0.0
-        self.sig[:] = 1.0
+        self.T[:, :m, :m] = 0.0
         self._base_state()
         if q:
             self._batch_grams(springs, 0)
