@@ -1,13 +1,13 @@
 """Classic spring forces for large networks on several threads (numba prange).
 
-``spring_plan`` + ``spring_forces`` (the fast path): springs sorted by their first node
-and cut into one contiguous chunk per thread; each thread adds its springs' forces into
-its own buffer covering only the node window its chunk touches (a band when the nodes
-are numbered with locality, as a lattice or a mesh renumbered by reverse Cuthill-McKee);
-the windows are then summed per node. Within a thread, blocks of SB springs are gathered
-into contiguous buffers, their forces computed four at a time (AVX2), and added back.
-Memory traffic is the springs' data once plus the node windows: no atomics, no
-per-spring force array.
+``spring_plan`` + ``spring_forces`` (the fast path): the nodes are cut into one
+contiguous range per thread; each thread computes the springs with both ends in its range
+and adds their forces straight into f (no other thread writes there), and the few
+springs between ranges follow on one thread (few when the nodes are numbered with
+locality, as a lattice or a mesh renumbered by reverse Cuthill-McKee). Within a thread,
+springs sorted by first node go in blocks of SB: gathered into contiguous buffers, their
+forces computed four at a time (AVX2), added back. Memory traffic is the springs' data
+once plus the nodes: no atomics, no per-thread copies of f, no per-spring force array.
 
 ``spring_forces_parallel`` (kept as the reference two-pass form): pass 1 computes every
 spring's force, pass 2 sums each node's incident springs through a node -> spring CSR
@@ -22,10 +22,11 @@ from numba import get_num_threads, njit, prange
 
 @dataclass(frozen=True)
 class SpringPlan:
-    """Springs ordered for ``spring_forces``: p3, q3 (s,) = 3 * node (uint32), sorted by
-    p; ks, kd, L0 (s,) in that order; ``order`` (s,) the original index of each (the last
-    block padded with zero-force copies); bounds (T+1,) the thread chunks; lo, hi (T,) the
-    node window of each chunk; buf (T, 3 W) and scratch (T, 9 SB) per-thread buffers."""
+    """Springs ordered for ``spring_forces``: p3, q3 (s,) = 3 * node (uint32); ks, kd, L0
+    (s,) in that order; ``order`` (s,) the original index of each (-1: padding, a
+    zero-force copy); thread t owns the nodes [nodes[t], nodes[t+1]) and the springs
+    bounds[t]:bounds[t+1] with both ends among them (sorted by p); the springs
+    bounds[T]: (ends of different threads) come last; scratch (T, 9 SB)."""
     p3: np.ndarray
     q3: np.ndarray
     ks: np.ndarray
@@ -33,47 +34,47 @@ class SpringPlan:
     L0: np.ndarray
     order: np.ndarray
     bounds: np.ndarray
-    lo: np.ndarray
-    hi: np.ndarray
-    buf: np.ndarray
+    nodes: np.ndarray
     scratch: np.ndarray
 
 
 def spring_plan(springs, ks, kd, L0, n_nodes: int, threads: int | None = None) -> SpringPlan:
-    """Sort the springs (s, 2) by first node and cut them into ``threads`` chunks of whole
-    blocks (default: numba's thread count). The last block is padded with copies of the
-    last spring with ks = kd = 0 (an exact zero force)."""
-    springs = np.asarray(springs)
-    T = max(1, int(threads or get_num_threads()))
-    s = len(springs)
-    order = np.lexsort((springs[:, 1], springs[:, 0]))
-    blocks = -(-s // SB)
-    pad = blocks * SB - s
-    idx = np.concatenate([order, np.full(pad, order[-1] if s else 0, order.dtype)])
-    p = np.ascontiguousarray(springs[idx, 0], np.int64)
-    q = np.ascontiguousarray(springs[idx, 1], np.int64)
-    k = [np.concatenate([np.asarray(a, float)[order], np.zeros(pad)]) for a in (ks, kd, L0)]
-    k[2][s:] = 1.0
-    bounds = SB * np.linspace(0, blocks, T + 1).round().astype(np.int64)
-    lo = np.zeros(T, np.int64)
-    hi = np.zeros(T, np.int64)
-    for t in range(T):
-        a, b = bounds[t], bounds[t + 1]
-        if b > a:
-            lo[t] = min(p[a:b].min(), q[a:b].min())
-            hi[t] = max(p[a:b].max(), q[a:b].max()) + 1
-    width = int((hi - lo).max()) if s else 0
+    """Cut the nodes into ``threads`` ranges (default: numba's thread count) with about
+    equal numbers of springs; each range's inner springs sorted by first node and padded
+    to whole blocks with copies with ks = kd = 0 (an exact zero force), then the springs
+    between ranges."""
+    springs = np.asarray(springs, np.int64)
     if 3 * n_nodes >= 2 ** 32:
         raise ValueError("more than 1.4e9 nodes: the spring kernel indexes with uint32")
-    return SpringPlan((3 * p).astype(np.uint32), (3 * q).astype(np.uint32), *k, order, bounds, lo, hi,
-                      np.zeros((T, 3 * width)), np.zeros((T, 9 * SB)))
+    T = max(1, int(threads or get_num_threads()))
+    s = len(springs)
+    p_sorted = np.sort(springs[:, 0])
+    cuts = [0] + [int(p_sorted[min(s - 1, (t * s) // T)]) if s else 0 for t in range(1, T)] + [n_nodes]
+    nodes = np.maximum.accumulate(np.asarray(cuts, np.int64))
+    owner_p = np.searchsorted(nodes, springs[:, 0], side="right") - 1
+    owner_q = np.searchsorted(nodes, springs[:, 1], side="right") - 1
+    group = np.where(owner_p == owner_q, owner_p, T)            # T: between ranges
+    order = np.lexsort((springs[:, 1], springs[:, 0], group))
+    parts, bounds = [], [0]
+    for t in range(T + 1):
+        g = order[group[order] == t]
+        if len(g):
+            g = np.concatenate([g, np.full(-len(g) % SB, -1 - g[-1])])     # -1 - i: padding copy of i
+        parts.append(g)
+        bounds.append(bounds[-1] + len(g))
+    idx = np.concatenate(parts) if s else np.zeros(0, np.int64)
+    real = idx >= 0
+    src = np.where(real, idx, -1 - idx)
+    k = [np.where(real, np.asarray(a, float)[src], z) for a, z in ((ks, 0.0), (kd, 0.0), (L0, 1.0))]
+    return SpringPlan((3 * springs[src, 0]).astype(np.uint32), (3 * springs[src, 1]).astype(np.uint32), *k,
+                      np.where(real, idx, -1), np.asarray(bounds, np.int64), nodes, np.zeros((T, 9 * SB)))
 
 
 def spring_forces(plan: SpringPlan, x, v, f):
     """f (n, 3) C-contiguous = the springs' forces F = -[ks (L - L0) + kd (dv . n)] n at p,
     -F at q."""
     _spring_forces(np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(v).reshape(-1), plan.p3, plan.q3,
-                   plan.ks, plan.kd, plan.L0, plan.bounds, plan.lo, plan.hi, plan.buf, plan.scratch, f.reshape(-1))
+                   plan.ks, plan.kd, plan.L0, plan.bounds, plan.nodes, plan.scratch, f.reshape(-1))
 
 
 SB = 64     # springs per block: gathered, then computed 4 at a time (AVX2), then added
@@ -144,37 +145,26 @@ def _scatter(b, p3, q3, o3, R):
     b[ip + TWO] += az
 
 
+@njit(cache=True, error_model="numpy")
+def _spring_chunk(x, v, p3, q3, ks, kd, L0, k0, k1, P, R, f):
+    for k in range(k0, k1, SB):
+        _gather(x, v, p3[k:k + SB], q3[k:k + SB], P)
+        _spring_block(P, R, ks[k:k + SB], kd[k:k + SB], L0[k:k + SB])
+        _scatter(f, p3[k:k + SB], q3[k:k + SB], np.uint32(0), R)
+
+
 @njit(parallel=True, cache=True, error_model="numpy")
-def _spring_forces(x, v, p3, q3, ks, kd, L0, bounds, lo, hi, buf, scratch, f):
-    """x, v, f flat (3n,); p3, q3 = 3 * node (uint32); buf (T, 3 W) flat windows, zero on
-    entry and on return."""
-    T = bounds.shape[0] - 1
+def _spring_forces(x, v, p3, q3, ks, kd, L0, bounds, nodes, scratch, f):
+    """x, v, f flat (3n,); p3, q3 = 3 * node (uint32). Thread t clears its nodes and adds
+    its inner springs (no other thread touches those nodes); the springs between ranges
+    follow on one thread."""
+    T = nodes.shape[0] - 1
     for t in prange(T):
-        b = buf[t]
-        P = scratch[t, :6 * SB]
-        R = scratch[t, 6 * SB:]
-        o3 = np.uint32(3 * lo[t])
-        for k0 in range(bounds[t], bounds[t + 1], SB):
-            k1 = k0 + SB
-            _gather(x, v, p3[k0:k1], q3[k0:k1], P)
-            _spring_block(P, R, ks[k0:k1], kd[k0:k1], L0[k0:k1])
-            _scatter(b, p3[k0:k1], q3[k0:k1], o3, R)
-    for i in prange(f.shape[0] // 3):
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        for t in range(T):
-            if lo[t] <= i < hi[t]:
-                r = 3 * (i - lo[t])
-                a0 += buf[t, r]
-                a1 += buf[t, r + 1]
-                a2 += buf[t, r + 2]
-                buf[t, r] = 0.0             # the buffers are left zero for the next call
-                buf[t, r + 1] = 0.0
-                buf[t, r + 2] = 0.0
-        f[3 * i] = a0
-        f[3 * i + 1] = a1
-        f[3 * i + 2] = a2
+        for i in range(3 * nodes[t], 3 * nodes[t + 1]):
+            f[i] = 0.0
+        _spring_chunk(x, v, p3, q3, ks, kd, L0, bounds[t], bounds[t + 1], scratch[t, :6 * SB],
+                      scratch[t, 6 * SB:], f)
+    _spring_chunk(x, v, p3, q3, ks, kd, L0, bounds[T], bounds[T + 1], scratch[0, :6 * SB], scratch[0, 6 * SB:], f)
 
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=True)
