@@ -6,16 +6,17 @@
    original C++ program's time on this kind of machine (1.5 / 7.3 / 1.6 / 6.1 ms) and
    beside our own numpy engine measured in the same run (the baseline).
 2. Classic springs at 1e6 springs (a cubic lattice with face diagonals): spring updates per
-   second of the parallel numba kernel (parallel.spring_forces: blocks, per-thread
-   buffers) on 2 threads and on 1, and of the earlier two-pass kernel, vs the vectorised
-   numpy forces in the same run (target >= 150 M/s on 2 cores; numpy ~30 M/s).
+   second of the parallel numba kernel (parallel.spring_forces: one node range per
+   thread, blocks of springs) on 2 threads and on 1, and of the earlier two-pass kernel,
+   vs the vectorised numpy forces in the same run (target >= 150 M/s on 2 cores; numpy
+   ~30 M/s).
 
 Columns: bench, case, engine, value, unit, baseline, ratio (for times ours / baseline, <1 =
 faster; for rates baseline time / ours, >1 = faster), for the Table 1 rows cxx_ms and
 ratio_to_cxx (<= 1 meets the target; the single-thread "numba" rows are the comparison,
-the C++ program is single-threaded) and cpu_ms (best process CPU time of the
-single-thread runs: on a shared machine it leaves out other processes' time slices),
-and load_average (1 min) at the end of the run.
+the C++ program is single-threaded), cpu_ms (best process CPU time of the single-thread
+runs, ms per simulated second or per force evaluation: on a shared machine it leaves out
+other processes' time slices), and load_average (1 min) at the end of the run.
 """
 
 from __future__ import annotations
@@ -109,17 +110,19 @@ def springs(quick: bool) -> list[dict]:
     s = len(sp)
     rows = []
 
-    def row(engine, t, f):
+    def row(engine, t, f, cpu=None):
         rows.append({"bench": "springs", "case": f"lattice {n}^3, {s} springs", "engine": engine,
                      "value": s / t / 1e6, "unit": "M spring updates/s", "baseline": s / t_np / 1e6,
-                     "ratio": t_np / t, "max_rel_diff_vs_numpy": float(np.abs(f - ref).max() / np.abs(ref).max())})
+                     "ratio": t_np / t, "max_rel_diff_vs_numpy": float(np.abs(f - ref).max() / np.abs(ref).max()),
+                     "cpu_ms": None if cpu is None else 1e3 * cpu})
     threads = min(2, numba.config.NUMBA_NUM_THREADS)
     f = np.empty_like(pts)
     for T in sorted({1, threads}, reverse=True):      # the target is on 2 cores; 1 for the per-core rate
         numba.set_num_threads(T)
         plan = spring_plan(sp, m.ks, m.kd, m.L0, len(pts), T)
         spring_forces(plan, x, v, f)
-        row(f"numba blocks x{T}", _best(lambda: spring_forces(plan, x, v, f), reps), f)
+        wall, cpu = _best_wall_cpu(lambda: spring_forces(plan, x, v, f), reps)
+        row(f"numba blocks x{T}", wall, f, cpu if T == 1 else None)
     numba.set_num_threads(threads)                      # the earlier two-pass kernel, for comparison
     p, q = sp[:, 0].copy(), sp[:, 1].copy()
     ptr, idx, sign = node_index(p, q, len(pts))
