@@ -20,6 +20,7 @@ from harness.errors import ModelError
 from harness.optimize.linalg import dissection_tree
 
 LEAF = 256
+FLAT_MAX = 400   # largest update block added through precomputed flat indices
 
 
 class Symbolic:
@@ -66,9 +67,12 @@ class Symbolic:
             upper = cl >= nv
             mirror = cl[upper] * nf + rows[upper]
             child_maps = [pos[U_of[c]] for c in kids]
+            # extend-add by flat indices into the front (small updates; big ones use ix_)
+            child_flat = [(loc[:, None] * nf + loc[None, :]).ravel() if len(loc) <= FLAT_MAX else None
+                          for loc in child_maps]
             start = int(rank[V[0]]) if nv else 0
             self.nodes.append(dict(V=V, U=U, nv=nv, nf=nf, kids=kids, kidx=kidx, direct=direct,
-                                   mirror=mirror, kidx_m=kidx[upper], child_maps=child_maps,
+                                   mirror=mirror, kidx_m=kidx[upper], child_maps=child_maps, child_flat=child_flat,
                                    sl=slice(start, start + nv), Ur=rank[U]))
             pos[front] = -1
         self.parent = parent
@@ -87,6 +91,7 @@ class MultifrontalCholesky:
         K = sp.csr_matrix(K)
         K.sort_indices()
         data = K.data
+        potrf, trtrs = sla.lapack.dpotrf, sla.lapack.dtrtrs
         self.sym = sym
         self.L11, self.L21 = [], []
         updates = {}
@@ -95,32 +100,32 @@ class MultifrontalCholesky:
             F = np.zeros(nf * nf)
             F[nd["direct"]] = data[nd["kidx"]]
             F[nd["mirror"]] = data[nd["kidx_m"]]
-            F = F.reshape(nf, nf)
-            for c, loc in zip(nd["kids"], nd["child_maps"]):
+            for c, loc, flat in zip(nd["kids"], nd["child_maps"], nd["child_flat"]):
                 Uc = updates.pop(c)
-                if len(loc):
-                    F[np.ix_(loc, loc)] += Uc
+                if flat is not None:
+                    F[flat] += Uc.ravel()
+                elif len(loc):
+                    F.reshape(nf, nf)[np.ix_(loc, loc)] += Uc
+            F = F.reshape(nf, nf)
             if nv:
-                try:
-                    L11 = sla.cholesky(F[:nv, :nv], lower=True, check_finite=False)
-                except np.linalg.LinAlgError:
+                L11, info = potrf(F[:nv, :nv], lower=1, clean=1, overwrite_a=0)
+                if info != 0:
                     raise ModelError(f"load '{name}': stiffness matrix is not positive definite", field="springs",
-                                     fix="the network has a mechanism or floating node, or a spring constant <= 0") from None
+                                     fix="the network has a mechanism or floating node, or a spring constant <= 0")
                 d = np.diag(L11)
                 if d.min() < 1e-7 * d.max():
                     raise ModelError(f"load '{name}': stiffness matrix is singular (pivot ratio {d.min() / d.max():.1e})",
                                      field="springs", fix="the network has a mechanism or floating node")
-                L21 = sla.solve_triangular(L11, F[nv:, :nv].T, lower=True, check_finite=False).T if nf > nv else np.empty((0, nv))
+                if nf > nv:
+                    X = trtrs(L11, F[:nv, nv:], lower=1)[0]          # L11^-1 F12 = L21^T
+                    L21 = X.T
+                    updates[t] = F[nv:, nv:] - X.T @ X               # Schur complement (symmetric)
+                else:
+                    L21 = np.empty((0, nv))
+                    updates[t] = np.empty((0, 0))
             else:
                 L11, L21 = np.empty((0, 0)), np.empty((nf, 0))
-            if nf > nv:
-                C = sla.blas.dsyrk(-1.0, L21, beta=1.0, c=np.asfortranarray(F[nv:, nv:]), lower=1) if nv else F[nv:, nv:]
-                if nv:
-                    C = np.tril(C)
-                    C = C + np.tril(C, -1).T
-                updates[t] = C
-            else:
-                updates[t] = np.empty((0, 0))
+                updates[t] = F
             self.L11.append(L11)
             self.L21.append(np.ascontiguousarray(L21))
 
@@ -128,12 +133,13 @@ class MultifrontalCholesky:
         """Forward and back substitution front by front, in elimination order (each
         front's own dofs are a contiguous slice there). Many right-hand sides at once
         (the SA engine's batches) go through a compiled loop over the fronts with the
-        inverted diagonal blocks (:func:`_subst`); one vector through LAPACK."""
+        inverted diagonal blocks (:func:`_subst`); ``_solve`` is the LAPACK version."""
         from harness.optimize.linalg import single_thread_blas
         rhs = np.asarray(rhs, float)
         with single_thread_blas():
-            if rhs.ndim == 2 and rhs.shape[1] >= SUBST_MIN and _subst_kernel() is not None:
-                return self._solve_compiled(rhs)
+            many = rhs.ndim == 2 and rhs.shape[1] >= SUBST_MIN
+            if (many or getattr(self, "_flat_cache", None) is not None) and _subst_kernel() is not None:
+                return self._solve_compiled(rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
             return self._solve(rhs)
 
     def _flat(self):
@@ -190,9 +196,8 @@ class MultifrontalCholesky:
         return out[:, 0] if vec else out
 
 
-SUBST_MIN = 8   # right-hand sides from which the compiled substitution pays
-
-
+SUBST_MIN = 8   # right-hand sides from which inverting the diagonal blocks pays (later
+                # solves with the same factor then take the compiled path too)
 _KERNEL = []
 
 
@@ -200,16 +205,40 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, LiT, L21, L21T, Ur):
     """L L^T x = b in place for the fronts' flat arrays (see ``_flat``); compiled by numba."""
     q = b.shape[1]
     nn = len(start)
+    cols = np.empty(q, np.int64)
     for t in range(nn):
         s0, k, u = start[t], nv[t], nu[t]
-        y = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k), b[s0:s0 + k])
-        b[s0:s0 + k] = y
+        nz = 0                   # right-hand sides not yet reaching this front stay 0:
+        for c in range(q):       # sparse b (the SA batches) skips most leaf work
+            for r in range(s0, s0 + k):
+                if b[r, c] != 0.0:
+                    cols[nz] = c
+                    nz += 1
+                    break
+        if nz == 0:
+            continue
+        if nz == q:
+            y = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k), b[s0:s0 + k])
+            b[s0:s0 + k] = y
+        else:
+            bb = np.empty((k, nz))
+            for r in range(k):
+                for c in range(nz):
+                    bb[r, c] = b[s0 + r, cols[c]]
+            y = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k), bb)
+            for r in range(k):
+                for c in range(nz):
+                    b[s0 + r, cols[c]] = y[r, c]
         if u:
             w = np.dot(L21[o21[t]:o21[t + 1]].reshape(u, k), y)
             for i in range(u):
                 r = Ur[oU[t] + i]
-                for c in range(q):
-                    b[r, c] -= w[i, c]
+                if nz == q:
+                    for c in range(q):
+                        b[r, c] -= w[i, c]
+                else:
+                    for c in range(nz):
+                        b[r, cols[c]] -= w[i, c]
     for t in range(nn - 1, -1, -1):
         s0, k, u = start[t], nv[t], nu[t]
         y = b[s0:s0 + k].copy()
