@@ -114,22 +114,22 @@ def _gather(x, v, p3, q3, P):
 
 
 @njit(cache=True, error_model="numpy")
-def _scatter(b, p3, q3, o3, R):
+def _scatter(f, p3, q3, R):
     # springs come sorted by p: sum a run of equal p in registers (no store-to-load chain)
-    ip = p3[0] - o3
+    ip = p3[0]
     ax = 0.0
     ay = 0.0
     az = 0.0
     for k in range(SB):
-        i = p3[k] - o3
-        j = q3[k] - o3
+        i = p3[k]
+        j = q3[k]
         fx = R[k]
         fy = R[SB + k]
         fz = R[2 * SB + k]
         if i != ip:
-            b[ip] += ax
-            b[ip + ONE] += ay
-            b[ip + TWO] += az
+            f[ip] += ax
+            f[ip + ONE] += ay
+            f[ip + TWO] += az
             ax = 0.0
             ay = 0.0
             az = 0.0
@@ -137,12 +137,12 @@ def _scatter(b, p3, q3, o3, R):
         ax += fx
         ay += fy
         az += fz
-        b[j] -= fx
-        b[j + ONE] -= fy
-        b[j + TWO] -= fz
-    b[ip] += ax
-    b[ip + ONE] += ay
-    b[ip + TWO] += az
+        f[j] -= fx
+        f[j + ONE] -= fy
+        f[j + TWO] -= fz
+    f[ip] += ax
+    f[ip + ONE] += ay
+    f[ip + TWO] += az
 
 
 @njit(cache=True, error_model="numpy")
@@ -150,7 +150,7 @@ def _spring_chunk(x, v, p3, q3, ks, kd, L0, k0, k1, P, R, f):
     for k in range(k0, k1, SB):
         _gather(x, v, p3[k:k + SB], q3[k:k + SB], P)
         _spring_block(P, R, ks[k:k + SB], kd[k:k + SB], L0[k:k + SB])
-        _scatter(f, p3[k:k + SB], q3[k:k + SB], np.uint32(0), R)
+        _scatter(f, p3[k:k + SB], q3[k:k + SB], R)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
