@@ -66,7 +66,7 @@ class ClosedFormRef:
         raise NotImplementedError
 
 
-def _dense_solve(points, springs, k, free, f):
+def _dense_K(points, springs, k):
     """Independent assembly: K = sum k d d^T blocks, written out spring by spring."""
     n, dim = points.shape
     K = np.zeros((n * dim, n * dim))
@@ -76,7 +76,13 @@ def _dense_solve(points, springs, k, free, f):
         blk = ke * np.outer(d, d)
         for a, b, sgn in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
             K[a * dim:(a + 1) * dim, b * dim:(b + 1) * dim] += sgn * blk
-    u = np.zeros(n * dim)
+    return K
+
+
+def _dense_solve(points, springs, k, free, f):
+    """Linear statics with the dense K of _dense_K, numpy solve on the free dofs."""
+    K = _dense_K(points, springs, k)
+    u = np.zeros(K.shape[0])
     u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
     return u
 
@@ -330,15 +336,8 @@ class ModalRef(ClosedFormRef):
 def _dense_frequencies(points, springs, k, masses, free, n):
     """Independent modal solve: dense K spring by spring, scipy's generalised eigh."""
     import scipy.linalg as sla
-    npts, dim = points.shape
-    K = np.zeros((npts * dim, npts * dim))
-    for (i, j), ke in zip(springs, k):
-        d = points[j] - points[i]
-        d /= np.linalg.norm(d)
-        blk = ke * np.outer(d, d)
-        for a, b, sgn in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
-            K[a * dim:(a + 1) * dim, b * dim:(b + 1) * dim] += sgn * blk
-    M = np.diag(np.repeat(masses, dim))
+    K = _dense_K(points, springs, k)
+    M = np.diag(np.repeat(masses, points.shape[1]))
     lam = sla.eigh(K[np.ix_(free, free)], M[np.ix_(free, free)], eigvals_only=True)
     return np.sqrt(np.maximum(lam[:n], 0)) / (2 * np.pi)
 
