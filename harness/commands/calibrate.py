@@ -78,6 +78,8 @@ def _check(args):
         bad("--density", f"{args.density} is not a positive number", "kg/m^3, e.g. --density 1000")
     if args.magnitude is not None and not (math.isfinite(args.magnitude) and args.magnitude > 0):
         bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
+    if args.init != "none" and args.method not in ("lbfgs", "gauss-newton"):
+        bad("--init", f"--method {args.method} has no start point to set", "use --init with --method lbfgs or gauss-newton")
     if not (args.budget > 0):
         bad("--budget", f"{args.budget} is not a positive number of seconds", "e.g. --budget 60")
     if not (args.tol > 0) or args.max_refine < 0:
