@@ -123,3 +123,19 @@ def test_lbfgs_with_frequency_term_from_the_equilibrium_gap_start():
     from harness.errors import SpringbenchError
     with pytest.raises(SpringbenchError, match="lbfgs"):
         optimize(prob, "equilibrium-gap", {}, seed=0)       # static only: says which method can
+
+
+@pytest.mark.parametrize("method,options,match", [
+    ("gauss-newton", {"maxiter": "forty"}, "maxiter = 'forty' is not a number >= 0"),
+    ("gauss-newton", {"maxiter": -3}, "optimizer.options.maxiter"),
+    ("lbfgs", {"init": 1}, "init = 1 is not a string"),
+    ("lbfgs", {"max_seconds": True}, "not a number"),
+    ("nelder-mead", {"xatol": float("nan")}, "xatol"),
+    ("equilibrium-gap", {"rtol": "tight"}, "equilibrium-gap option rtol"),
+])
+def test_bad_option_values_are_one_line_errors(method, options, match):
+    from harness.errors import SpringbenchError
+    prob, _ = recoverable_problem((3, 3), grouped=method == "nelder-mead")
+    with pytest.raises(SpringbenchError, match=match) as err:
+        optimize(prob, method, options, seed=0)
+    assert "\n" not in str(err.value)

@@ -62,7 +62,8 @@ def equation_error_system(problem: FitProblem):
 def equilibrium_gap_factors(problem: FitProblem, options: dict | None = None):
     """Parameters x = k/k0 (clipped to the bounds) minimising the equation error, and an
     info dict (CG iterations, relative residual, clipped count, seconds)."""
-    opts = _check(options or {})
+    from harness.optimize.gradient import check_options
+    opts = check_options(options or {}, EG_DEFAULTS, "equilibrium-gap")
     t0 = time.perf_counter()
     A, b = equation_error_system(problem)
     N = (A.T @ A).tocsr()
@@ -108,10 +109,3 @@ def equilibrium_gap(problem: FitProblem, options: dict, seed: int = 0, status=No
     return dict(k=k, G_initial=G0, G_final=G, trace=np.array([(0, G0), (1, G)]), seconds=time.perf_counter() - t0,
                 n_steps=1, accepted=1, info=info)
 
-
-def _check(options: dict) -> dict:
-    unknown = set(options) - set(EG_DEFAULTS)
-    if unknown:
-        raise SpringbenchError(f"unknown equilibrium-gap option(s) {sorted(unknown)}", field="optimizer.options",
-                               fix=f"use some of {sorted(EG_DEFAULTS)}")
-    return {**EG_DEFAULTS, **options}

@@ -26,6 +26,7 @@ directly; ``init = "equilibrium-gap"`` starts lbfgs / gauss-newton from its esti
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -194,7 +195,7 @@ class _Stop(Exception):
 def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
     """L-BFGS-B over log(k/k0) with the problem's bounds, in variables y = x / d scaled by the
     spring tensions at k0 (option ``scale``, see tension_scaling); deterministic (seed unused)."""
-    opts = _check(options, LBFGS_DEFAULTS, "lbfgs")
+    opts = check_options(options, LBFGS_DEFAULTS, "lbfgs")
     t0 = time.perf_counter()
     obj = Objective(problem, opts["target"], opts["max_seconds"])
     obj.t0 = t0
@@ -246,7 +247,7 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
 def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
     """Nelder-Mead over log group factors (grouped mode, few parameters); derivative-free,
     so it also serves as an independent check of the gradient fits."""
-    opts = _check(options, NM_DEFAULTS, "nelder-mead")
+    opts = check_options(options, NM_DEFAULTS, "nelder-mead")
     if problem.n_params > 50:
         raise SpringbenchError(f"nelder-mead with {problem.n_params} parameters is hopeless", field="optimizer.method",
                                fix="use grouped mode (groups) or method = 'lbfgs'")
@@ -297,11 +298,23 @@ def start_point(problem: FitProblem, init: str):
     return np.log(x), info
 
 
-def _check(options: dict, defaults: dict, method: str) -> dict:
+def check_options(options: dict, defaults: dict, method: str) -> dict:
+    """``options`` over ``defaults``. Unknown keys, and values that do not fit the
+    default (a string for a string; else a finite number >= 0: every numeric option of
+    these fits is a count, a tolerance, a weight or a budget), are one-line errors, not
+    tracebacks from deep inside scipy."""
     unknown = set(options) - set(defaults)
     if unknown:
         raise SpringbenchError(f"unknown {method} option(s) {sorted(unknown)}", field="optimizer.options",
                                fix=f"use some of {sorted(defaults)}")
+    for key, v in options.items():
+        if isinstance(defaults[key], str):
+            if not isinstance(v, str):
+                raise SpringbenchError(f"{method} option {key} = {v!r} is not a string", field=f"optimizer.options.{key}",
+                                       fix=f"e.g. {key} = {defaults[key]!r}")
+        elif not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
+            raise SpringbenchError(f"{method} option {key} = {v!r} is not a number >= 0", field=f"optimizer.options.{key}",
+                                   fix="a count, tolerance or budget" + (f", e.g. {defaults[key]!r}" if defaults[key] else ""))
     return {**defaults, **options}
 
 
@@ -369,7 +382,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     Each CG step costs one forward and one adjoint solve per load set with the kept
     factorisation. Grouped mode sums the Jacobian columns of a group."""
     import scipy.sparse.linalg as spla_
-    opts = _check(options, GN_DEFAULTS, "gauss-newton")
+    opts = check_options(options, GN_DEFAULTS, "gauss-newton")
     _static_only(problem, "gauss-newton")
     t0 = time.perf_counter()
     lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
