@@ -370,6 +370,7 @@ def test_compare_runs_each_optimiser_on_the_same_model(tmp_path, monkeypatch):
         # the stage's own re-solve agrees with the optimiser's G
         assert r["G_final"] == pytest.approx(r["G_final_optimizer"], rel=1e-9)
         assert r["opt_at_bounds"] >= 0 and 1 <= r["jac_rank"] <= r["n_params"] == r["n_springs"]
+        assert r["opt_seed"] == base["model_seed"]                 # the seed is recorded
     # the gradient fits reach a stationary point that 3 SA temperatures do not, and the
     # trace says when lbfgs first got below SA's G
     assert opt[1]["G_final"] < opt[0]["G_final"]
@@ -540,3 +541,27 @@ def test_plain_gradient_descent_is_slow_on_separate_constants_only(tmp_path, mon
     (lb, gd, g0), (lbg, gdg, _) = out[False], out[True]
     assert lb < 0.1 * g0 and gd > 1.2 * lb
     assert gdg == pytest.approx(lbg, rel=0.02) and lb < lbg
+
+
+@pytest.mark.parametrize("optimizer,field,text", [
+    ('method = "sa"\noptions = { temperatures = 2 }\ncompare = ["gauss-newton"]\n'
+     'compare_options = { "gauss-newton" = { maxiterr = 4 } }', "optimizer.compare_options.gauss-newton", "maxiterr"),
+    ('method = "lbfgs"\noptions = { maxiter = "forty" }', "optimizer.options.maxiter", "'forty'"),
+    ('method = "lbfgs"\noptions = 5', "optimizer.options", "table"),
+    ('method = "none"\n[optimizer.frequency]\noptions = 3', "optimizer.frequency.options", "table"),
+    ('method = "none"\n[optimizer.frequency]\noptions = { init = "sa" }', "optimizer.frequency.options.init", "'sa'"),
+])
+def test_bad_optimiser_options_name_the_case_file_and_field(tmp_path, monkeypatch, optimizer, field, text):
+    """Option mistakes surface as one line naming tiny.toml and the field where the options
+    were written (compare_options / frequency, not a generic optimizer.options)."""
+    from harness.errors import SpringbenchError
+    from harness.stages import StageContext
+    from harness.stages import sms as stage
+    case = load_case(_optimiser_case(tmp_path, optimizer, modes=4))
+    ref = ModalRef(case)
+    ref.target = np.ones(4)
+    monkeypatch.setattr(stage, "_reference", lambda case, ctx: (ref, ""))
+    with pytest.raises(SpringbenchError) as err:
+        stage.run(case, StageContext(out_dir=tmp_path / "out"))
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith(f"{tmp_path / 'tiny.toml'}: {field}: ") and text in msg

@@ -75,6 +75,9 @@ def run(case, ctx) -> list[dict]:
     from harness.scoring import case_weights, g_arrays, reference_displacements
 
     spec = model_spec(case)
+    opt = case.section("optimizer") or {}
+    runs = optimiser_runs(case, opt)        # case mistakes first, before any solve
+    n_modes = _check_modes(case, opt)
     weights = case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
     label = model_label(spec, case)
@@ -133,10 +136,7 @@ def run(case, ctx) -> list[dict]:
                        note=f"no reference ({why})")
         rows.append(row)
 
-    opt = case.section("optimizer") or {}
-    runs = optimiser_runs(case, opt)
     optimize = _optimizer()
-    n_modes = _check_modes(case, opt)
     fem_f = _fem_frequencies(ref, n_modes)
     opt_nets, traces = {}, []
     if runs and optimize is not None and u_ref is not None:
@@ -175,7 +175,9 @@ BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", 
 def optimiser_runs(case, opt) -> list[dict]:
     """The optimiser runs of a case, in table order: [optimizer] method, then each name
     in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
-    Each is {method, options, objective[, modes, weight]}."""
+    Each is {method, options, objective, where (the case field of its options)[, modes,
+    weight]}. Mistakes the schema cannot see (a repeated optimiser, options that are not
+    a table) are CaseErrors naming the file and field."""
     method = opt.get("method", "none")
     file = str(case.path) if case.path is not None else None
     compare = list(opt.get("compare") or ())
@@ -187,12 +189,21 @@ def optimiser_runs(case, opt) -> list[dict]:
     if stray:
         raise CaseError(f"options for '{stray[0]}', which compare does not list", file=file,
                         field="optimizer.compare_options", fix=f"add '{stray[0]}' to compare or remove its options")
-    runs = [] if method == "none" else [dict(method=method, options=dict(opt.get("options") or {}), objective="G")]
-    runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G") for m in compare]
+    def options(value, where):
+        if not isinstance(value or {}, dict):
+            raise CaseError(f"expected a table of options, got {value!r}", file=file, field=where,
+                            fix="e.g. { maxiter = 100 }")
+        return dict(value or {})
+
+    runs = [] if method == "none" else [dict(method=method, options=options(opt.get("options"), "optimizer.options"),
+                                             objective="G", where="optimizer.options")]
+    runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G", where=f"optimizer.compare_options.{m}")
+             for m in compare]
     fq = opt.get("frequency")
     if fq:
-        runs.append(dict(method=fq["method"], options=dict(fq.get("options") or {}), objective="G+freq",
-                         modes=int(fq["modes"]), weight=float(fq["weight"])))
+        where = "optimizer.frequency.options"
+        runs.append(dict(method=fq["method"], options=options(fq.get("options"), where), objective="G+freq",
+                         modes=int(fq["modes"]), weight=float(fq["weight"]), where=where))
     return runs
 
 
@@ -234,13 +245,14 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
     tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
     _, free, forces = statics.all_load_arrays(base, case)
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
+    file = str(case.path) if case.path is not None else None
     freq_kw = {}
     if objective != "G":
         if fem_f is None or len(fem_f) < run_["modes"]:
-            raise SpringbenchError("the frequency term needs the reference's natural frequencies",
+            raise SpringbenchError("the frequency term needs the reference's natural frequencies", file=file,
                                    field="optimizer.frequency", fix="use a reference with modes, or remove [optimizer.frequency]")
         if np.any(base.masses <= 0):
-            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies",
+            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies", file=file,
                              field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
         modal_free = ~statics.fixed_mask(base.points, case, case.loads[0]).ravel()
         freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
@@ -250,7 +262,16 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
                                       groups=base.groups if spec["grouped"] else None, **freq_kw)
     t0 = time.perf_counter()
     ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
-    res = optimize(problem, method, dict(run_["options"]), int(base.info["seed"]), status=ctx.status)
+    seed = int(base.info["seed"])
+    try:
+        res = optimize(problem, method, dict(run_["options"]), seed, status=ctx.status)
+    except SpringbenchError as exc:      # name the case file, and compare_options / frequency where they apply
+        if exc.file is not None:
+            raise
+        field = exc.field or "optimizer"
+        if field.startswith("optimizer.options"):
+            field = run_["where"] + field[len("optimizer.options"):]
+        raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
     seconds = time.perf_counter() - t0
     name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
     net = base.with_k(res.k, stiffness=name)
@@ -271,8 +292,11 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
     for key in ("n_steps", "accepted"):
         if hasattr(res, key):
             row[f"opt_{key}"] = getattr(res, key)
+    row["opt_seed"] = seed                   # the optimiser's random stream (SA); = model_seed
     if "stop" in info:
         row["opt_stop"] = str(info["stop"])
+    if info.get("init", "none") != "none":
+        row["opt_init"] = str(info["init"]) + (" (rejected: worse than k0)" if info.get("init_rejected") else "")
     row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:
         row["opt_iterations"] = int(info["iterations"])
