@@ -95,6 +95,21 @@ def pyplot():
     return plt
 
 
+def read_csv(folder: Path, name: str):
+    """The data file ``folder/name`` as a DataFrame, or None if the stage did not write
+    it (then the figure module draws nothing)."""
+    src = Path(folder) / name
+    if not src.exists():
+        return None
+    import pandas as pd
+    return pd.read_csv(src)
+
+
+def subplots(*args, **kwargs):
+    """``plt.subplots`` on the Agg backend: (fig, axes)."""
+    return pyplot().subplots(*args, **kwargs)
+
+
 def save(fig, path: Path, tight: bool = True) -> Path:
     """Write ``fig`` as PNG (``tight``: tight_layout first, which draws the figure twice)."""
     if tight:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import save, subplots
 
 NAME, SCOPE = "deformed", "case"
 
@@ -45,8 +45,7 @@ def _one(src: Path, folder: Path) -> Path | None:
     scale = float(data["scale"]) if "scale" in data else (0.1 * size / umax if umax > 0 else 1.0)
     cols = min(len(loads), 3 if len(loads) > 4 else 2 if len(loads) > 1 else 1)
     rows = math.ceil(len(loads) / cols)
-    plt = pyplot()
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 3.4 * rows), squeeze=False)
+    fig, axes = subplots(rows, cols, figsize=(3.4 * cols, 3.4 * rows), squeeze=False)
     for ax, load in zip(axes.ravel(), loads):
         u_ref, u = us[load]
         if springs is not None and len(springs):

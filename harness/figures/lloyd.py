@@ -5,19 +5,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "lloyd", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "lloyd.csv"
-    if not src.exists():
+    df = read_csv(folder, "lloyd.csv")
+    if df is None:
         return []
-    import pandas as pd
-    df = pd.read_csv(src)
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2))
+    fig, axes = subplots(1, 2, figsize=(8, 3.2))
     for ax, col, label in zip(axes, ("std_distance", "std_area"),
                               ("std of neighbour distances", "std of region sizes")):
         if col in df:

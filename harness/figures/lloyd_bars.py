@@ -7,18 +7,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "lloyd_bars", "suite"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "summary.csv"
-    if not src.exists():
+    df = read_csv(folder, "summary.csv")
+    if df is None:
         return []
     import numpy as np
     import pandas as pd
-    df = pd.read_csv(src)
     if "lloyd_iterations" not in df or "G_final" not in df:
         return []
     df = df.dropna(subset=["lloyd_iterations", "G_final"])
@@ -40,8 +39,7 @@ def make(folder: Path) -> list[Path]:
     for m in methods:
         bars[f"G_final{label[m]}"] = df[key == m].groupby("lloyd_iterations")["G_final"].agg(["mean", "std"]).reindex(its)
     x = np.arange(len(its))
-    plt = pyplot()
-    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax, ax2) = subplots(1, 2, figsize=(10, 4))
     w = 0.8 / len(bars)
     for i, (c, v) in enumerate(bars.items()):
         ax.bar(x + (i - (len(bars) - 1) / 2) * w, v["mean"], w, yerr=v["std"].fillna(0), label=c, capsize=2)

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "spectrum", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "frequencies.csv"
-    if not src.exists():
+    df = read_csv(folder, "frequencies.csv")
+    if df is None:
         return []
-    import pandas as pd
-    df = pd.read_csv(src)
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = subplots(figsize=(6, 4))
     modes = df["mode"] if "mode" in df else range(1, len(df) + 1)
     if "fem" in df:
         ax.plot(modes, df["fem"], "ks-", label="FEM", ms=5)

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "trace", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "trace.csv"
-    if not src.exists():
+    df = read_csv(folder, "trace.csv")
+    if df is None:
         return []
-    import pandas as pd
-    df = pd.read_csv(src)
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = subplots(figsize=(6, 4))
     groups = df.groupby("model", sort=True) if "model" in df else [("", df)]
     for model, g in groups:
         ax.plot(g["step"], g["G"], lw=0.8, label=f"{model} G".strip())
