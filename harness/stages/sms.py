@@ -1,11 +1,15 @@
 """Stage "sms": build the case's spring/mass system, score every stiffness rule as an
-unoptimised baseline row, and, when ``harness.optimize.optimize`` exists and
-[optimizer] method != "none", optimise the first rule's constants and score that.
+unoptimised baseline row, then optimise the first rule's constants with each optimiser
+run of the case (see optimiser_runs: [optimizer] method, each of ``compare``, and the
+``[optimizer.frequency]`` row that adds the natural frequencies to G, Deussen Section 8)
+and score each result: one row per run, all from the same initial model, reference and
+weights, so the table compares optimisers and not set-ups.
 
-Files (in ctx.out_dir, formats of harness/report.py): ``model-<rule>.vtu`` (the network
-with its displacements), ``deformed-<label>.npz`` (reference vs model), ``lloyd.csv``
-(Lloyd statistics), ``frequencies.csv`` (SMS vs FEM natural frequencies), and the
-optimiser's ``trace.csv``.
+Files (in ctx.out_dir, formats of harness/report.py): ``model-<tag>.vtu`` (the network
+with its displacements; tag = rule, or rule-method[-freq]), ``deformed-<tag>.npz``
+(reference vs model), ``lloyd.csv`` (Lloyd statistics), ``frequencies.csv`` (SMS vs FEM
+natural frequencies, one column per rule and optimised model), and ``trace.csv`` (G
+against optimiser steps, one ``model`` per run).
 """
 
 from __future__ import annotations
@@ -327,6 +331,8 @@ def _time_to_reach(rows, traces):
 
 
 def _trace_frame(trace, name):
+    """An optimiser's trace ((step, G) rows, a G column or a DataFrame) as trace.csv rows
+    with ``model`` = name; None if there is none or it has no recognisable shape."""
     if trace is None or not len(trace):
         return None
     try:
@@ -399,6 +405,7 @@ def weighted_jacobian(problem, k):
 
 
 def _fem_frequencies(ref, n):
+    """The reference's first n natural frequencies (Hz), or None when it has none."""
     if ref is None or n <= 0:
         return None
     try:
