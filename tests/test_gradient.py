@@ -139,3 +139,17 @@ def test_bad_option_values_are_one_line_errors(method, options, match):
     with pytest.raises(SpringbenchError, match=match) as err:
         optimize(prob, method, options, seed=0)
     assert "\n" not in str(err.value)
+
+
+def test_lbfgs_with_frequency_term_rejects_a_start_worse_than_k0():
+    """With 5 % displacement noise the equilibrium-gap start is worse than k0 (equation
+    error differences neighbouring nodes); with the frequency term too, lbfgs must compare
+    Phi there with Phi(k0) = 1 + the frequency term at k0 and start from k0 instead."""
+    from harness.optimize.gradient import Objective, freq_term_and_grad
+    prob, _ = modal_problem(weight=1.0)
+    rng = np.random.default_rng(5)
+    noisy = prob.with_reference([b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
+    assert Objective(noisy).phi0 == pytest.approx(1.0 + freq_term_and_grad(noisy, noisy.k0)[0], rel=1e-12)
+    res = optimize(noisy, "lbfgs", {"init": "equilibrium-gap", "maxiter": 30}, seed=0)
+    assert res.info.get("init_rejected") is True
+    assert res.G_final < 0.9 * res.G_initial

@@ -137,9 +137,10 @@ class Objective:
         self.target, self.max_seconds = target, max_seconds
         self.t0 = time.perf_counter()
         self.n_eval = 0
-        self.best = (np.inf, None, np.inf)
-        if problem.modal is None:         # k0 itself is a point seen (a start elsewhere may be worse)
-            self.best = (1.0, np.zeros(problem.n_params), float(np.sqrt(self.G0sq)))
+        self.phi0 = 1.0                   # Phi at k0: k0 is a point seen (a start elsewhere may be worse)
+        if problem.modal is not None and problem.modal.weight > 0:
+            self.phi0 += freq_term_and_grad(problem, problem.k0)[0]
+        self.best = (self.phi0, np.zeros(problem.n_params), float(np.sqrt(self.G0sq)))
         self.trace = []
 
     def k(self, x):
@@ -213,9 +214,9 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
 
     d = tension_scaling(problem, obj.tension2, float(opts["scale"]))   # x = d y
     first = None
-    if opts["init"] != "none" and problem.modal is None:
+    if opts["init"] != "none":
         first = (x0 / d, *obj(x0))
-        if first[1] > 1.0:              # the start is worse than k0: start from k0 instead
+        if first[1] > obj.phi0:         # the start is worse than k0: start from k0 instead
             x0, first = np.zeros(n), None
             init_info["init_rejected"] = True
 
