@@ -10,24 +10,27 @@ and with d = u_ref - u, r = W d the new squared error needs no u':
     |d'|_W^2 = |d|_W^2 + 2 s (z.r) + s^2 (z.Wz).
 
 Accepted changes since the last renewal of the base K0 are held in Woodbury form,
-K = K0 + Bm D Bm^T: with the basis Z = K0^-1 Bm (one column y = K0^-1 b per accepted
-spring) and M = D^-1 + Bm^T Z,
+K = K0 + Bm D Bm^T, in the basis of the accepted Sherman-Morrison vectors z_j: with
+Z = K0^-1 Bm (one column y = K0^-1 b per accepted spring), V = Z T (T unit upper
+triangular, column j = [-c_j; 1]) and sigma_j = 1/delta_j + b_j.z_j,
 
-    z = y - Z c,  c = M^-1 (Z^T b),      u = u0 - Z C  (C: m x loads, updated per accept).
+    K^-1 = K0^-1 - V diag(1/sigma) V^T,  z = y - V ct, ct = (V^T b) / sigma,  u = u0 - V Cv.
 
 Nothing of length n (the free dofs) is touched per proposal: z.r and z.Wz expand into
-small Gram matrices, H = Z^T W Z and P = Z^T r0 (kept, one row per accept), and per
-batch of upcoming proposals Y = K0^-1 B_batch, A = Z^T W Y, Y^T W Y, Y^T r0 -- one
-multi-right-hand-side solve and a few matrix products (BLAS-3) per batch. A proposal
-then costs O(m^2) (m = accepts held) for all load sets at once; an accept appends one
-column to Z and borders M^-1, H, C, P (O(m^2), no inverse).
+small Gram matrices kept with one new row per accept (Hz = V^T W V, V^T r0, Cv), and per
+batch of upcoming proposals (known in advance: the RNG draws them in chunks) into
+Y = K0^-1 B_batch, V^T W Y, Y^T W Y, Y^T r0 -- one multi-right-hand-side solve and a
+few BLAS-3 products per batch. A proposal then costs O(m^2) for all load sets at once
+(m = accepts held; V^T b = T^T (Bm^T y) needs y only at the accepted springs' dofs), an
+accept appends one row/column; both are compiled loops (numba) over the stacked sets.
 
 y comes from a maintained dense inverse of K0 (small systems: a row gather) or from a
-kept sparse factorisation (a batched solve). After ``refactor_every`` accepts the base is
-renewed (dense: Kinv -= Z M^-1 Z^T, one matrix product; sparse: a new factorisation),
-u0 and G are recomputed from it, so rounding cannot drift; the rest of the current batch
-is carried over by Woodbury. By default the interval balances the renewal's cost
-against the growing per-proposal Gram work (:func:`auto_interval`).
+kept sparse factorisation (multifrontal Cholesky, batched compiled substitution). After
+``refactor_every`` accepts the base is renewed (dense: Kinv -= V diag(1/sigma) V^T, one
+product; sparse: a new factorisation), u0 and G are recomputed from it by a fresh solve,
+so rounding cannot drift; the rest of the current batch is carried over by Woodbury.
+By default the interval balances the renewal's cost against the per-proposal work that
+grows with m (:func:`auto_interval`).
 """
 
 from __future__ import annotations
@@ -69,10 +72,10 @@ SOLVE_LEAF = 64   # dofs per leaf front of the engine's factorisation (see spars
 
 def sparse_factor(ls, k):
     """The sparse engine's factorisation of a load set's K(k): multifrontal Cholesky on
-    a nested-dissection tree with small leaves (32 dofs), whose batched solves cost about
-    half those of the general-purpose leaves of 256 (less fill: 0.28 M vs 0.69 M entries of
-    L on the 2,500-node grid) at the price of a slower factorisation, paid once per renewal.
-    Small blocks (no coordinates or <= 2,000 dofs) use the load set's own solver."""
+    a nested-dissection tree with leaves of 64 dofs, whose batched solves cost ~2/3 of
+    those with the general-purpose leaves of 256 (less fill: 0.35 M vs 0.69 M entries of
+    L on the 2,500-node grid) for a slightly slower factorisation, paid once per renewal.
+    Small blocks (no coordinates or <= SPARSE_MIN dofs) use the load set's own solver."""
     from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic, warm_up
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)

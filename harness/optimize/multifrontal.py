@@ -1,10 +1,15 @@
-"""Multifrontal sparse Cholesky on a geometric nested-dissection tree, numpy/LAPACK only.
+"""Multifrontal sparse Cholesky on a geometric nested-dissection tree (numpy/LAPACK, and
+a numba-compiled substitution for many right-hand sides).
 
-scipy has no sparse Cholesky (CHOLMOD is not installed) and SuperLU is slow on 3-D spring
-networks even with a good ordering. Here every node of the dissection tree (a leaf block
-or a separator) gets a dense frontal matrix over its own dofs V and its update set U (the
-ancestor dofs coupled to V or to its subtree): partial Cholesky of the front, then the
-Schur complement on U is added into the parent's front. All arithmetic is dense BLAS-3.
+scipy has no sparse Cholesky (CHOLMOD is not installed; the PyPI wheel measured ~1.3x
+SuperLU) and SuperLU is slow on 3-D spring networks even with a good ordering. Here
+every node of the dissection tree (a leaf block or a separator) gets a dense frontal
+matrix over its own dofs V and its update set U (the ancestor dofs coupled to V or to
+its subtree): partial Cholesky of the front, then the Schur complement on U is added
+into the parent's front. All arithmetic is dense BLAS-3. Measured (one thread, factor +
+one solve): 2-D 2,500 nodes 15-18 ms vs SuperLU in nested-dissection order 25-30 ms;
+3-D 8,000 nodes 1.3 s vs 3.7 s. Used by the fits, by the SA baseline and, with leaves of
+64 dofs and batched solves of 64 right-hand sides, by the incremental SA engine.
 
 The symbolic part (tree, fronts, index maps) depends only on the sparsity pattern and is
 built once per load set; ``factor(K)`` is numeric only.
