@@ -19,8 +19,8 @@ rows with ``G_initial`` != ``G_final`` get ``improvement`` = G_initial / G_final
 the paper gives both, ``paper_improvement``. ``values = {G_final = 0.55}`` applies
 to every row of the case, ``values = {grouped = {G_final = 0.55}}`` to rows whose
 ``model`` is ``grouped``. Timing columns (:data:`TIMING`: ``seconds``, ``*_seconds``,
-``*_ms``, ``*_per_s``, ``*_per_second``) are the only ones allowed to differ between two
-runs with the same seed and inputs.
+``seconds_*``, ``*_ms``, ``*_per_s``, ``*_per_second``) are the only ones allowed to differ
+between two runs with the same seed and inputs.
 
 Data files a stage may write into ``ctx.out_dir`` (figures are drawn from them by the
 registry in :mod:`harness.figures`; a missing file just means no figure):
@@ -63,9 +63,10 @@ HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
         "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
         "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final", "error_estimate",
-        "closed_form_error"]
+        "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
+        "static_status"]
 TAIL = ["seconds", "error"]
-TIMING = re.compile(r"^(seconds|time|wall)$|_(seconds|ms|per_s|per_second)$")
+TIMING = re.compile(r"^(seconds|time|wall)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
 
 
