@@ -83,7 +83,7 @@ def test_markdown_table_by_hand():
 
 def test_timing_columns():
     t = report.TIMING
-    assert all(t.search(c) for c in ["seconds", "wall_seconds", "solve_ms", "steps_per_s"])
+    assert all(t.search(c) for c in ["seconds", "wall_seconds", "solve_ms", "steps_per_s", "seconds_to_sa_G"])
     assert not any(t.search(c) for c in ["G_s", "n_springs", "G_final", "ms_error", "seed"])
 
 
