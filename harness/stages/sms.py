@@ -176,6 +176,11 @@ BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", 
                "xatol", "fatol", "cg_maxiter", "chains")
 
 
+def _file(case) -> str | None:
+    """The case file, for error messages (None for an in-memory case)."""
+    return str(case.path) if case.path is not None else None
+
+
 def optimiser_runs(case, opt) -> list[dict]:
     """The optimiser runs of a case, in table order: [optimizer] method, then each name
     in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
@@ -183,7 +188,7 @@ def optimiser_runs(case, opt) -> list[dict]:
     weight]}. Mistakes the schema cannot see (a repeated optimiser, options that are not
     a table) are CaseErrors naming the file and field."""
     method = opt.get("method", "none")
-    file = str(case.path) if case.path is not None else None
+    file = _file(case)
     compare = list(opt.get("compare") or ())
     extra = dict(opt.get("compare_options") or {})
     if method in compare or len(set(compare)) != len(compare):
@@ -216,7 +221,7 @@ def _check_modes(case, opt) -> int:
     fq = opt.get("frequency")
     if fq and fq["modes"] > n:
         raise CaseError(f"frequency modes = {fq['modes']} but the reference computes {n}",
-                        file=str(case.path) if case.path is not None else None, field="optimizer.frequency.modes",
+                        file=_file(case), field="optimizer.frequency.modes",
                         fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes")
     return n
 
@@ -249,7 +254,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
     tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
     _, free, forces = statics.all_load_arrays(base, case)
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    file = str(case.path) if case.path is not None else None
+    file = _file(case)
     freq_kw = {}
     if objective != "G":
         if fem_f is None or len(fem_f) < run_["modes"]:
