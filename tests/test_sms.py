@@ -548,6 +548,7 @@ def test_plain_gradient_descent_is_slow_on_separate_constants_only(tmp_path, mon
      'compare_options = { "gauss-newton" = { maxiterr = 4 } }', "optimizer.compare_options.gauss-newton", "maxiterr"),
     ('method = "lbfgs"\noptions = { maxiter = "forty" }', "optimizer.options.maxiter", "'forty'"),
     ('method = "lbfgs"\noptions = 5', "optimizer.options", "table"),
+    ('method = "none"\noptions = { temperatures = 5 }', "optimizer.options", "method = 'none'"),
     ('method = "none"\n[optimizer.frequency]\noptions = 3', "optimizer.frequency.options", "table"),
     ('method = "none"\n[optimizer.frequency]\noptions = { init = "sa" }', "optimizer.frequency.options.init", "'sa'"),
 ])

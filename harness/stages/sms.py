@@ -186,7 +186,7 @@ def optimiser_runs(case, opt) -> list[dict]:
     in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
     Each is {method, options, objective, where (the case field of its options)[, modes,
     weight]}. Mistakes the schema cannot see (a repeated optimiser, options that are not
-    a table) are CaseErrors naming the file and field."""
+    a table, options with method = "none") are CaseErrors naming the file and field."""
     method = opt.get("method", "none")
     file = _file(case)
     compare = list(opt.get("compare") or ())
@@ -198,14 +198,18 @@ def optimiser_runs(case, opt) -> list[dict]:
     if stray:
         raise CaseError(f"options for '{stray[0]}', which compare does not list", file=file,
                         field="optimizer.compare_options", fix=f"add '{stray[0]}' to compare or remove its options")
+
     def options(value, where):
         if not isinstance(value or {}, dict):
             raise CaseError(f"expected a table of options, got {value!r}", file=file, field=where,
                             fix="e.g. { maxiter = 100 }")
         return dict(value or {})
 
-    runs = [] if method == "none" else [dict(method=method, options=options(opt.get("options"), "optimizer.options"),
-                                             objective="G", where="optimizer.options")]
+    mine = options(opt.get("options"), "optimizer.options")
+    if method == "none" and mine:          # would be silently ignored: no run takes them
+        raise CaseError(f"options {sorted(mine)} but method = 'none' runs no optimiser", file=file,
+                        field="optimizer.options", fix="set [optimizer] method, or remove the options")
+    runs = [] if method == "none" else [dict(method=method, options=mine, objective="G", where="optimizer.options")]
     runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G", where=f"optimizer.compare_options.{m}")
              for m in compare]
     fq = opt.get("frequency")
