@@ -5,9 +5,12 @@ Turns a user's own tri/quad/tet/hex mesh (any meshio format, or the bc2000 forma
 a calibrated spring/mass model: springs on the mesh edges (hexahedra add their body
 diagonals), masses by moment matching, initial constants by a named rule, then (``sa``,
 ``lbfgs``, ``gauss-newton`` or ``equilibrium-gap``; ``--init equilibrium-gap`` starts the
-gradient fits from the equilibrium-gap estimate) spring constants fitted so the network's static response to the standard
-basic loads of the mesh's bounding box (DESIGN.md: ``basic2d`` / ``basic3d``) matches a
-FEM reference of the same body and material. Prints the before/after table (G per rule
+gradient fits from the equilibrium-gap estimate) spring constants fitted so the network's
+static response to the standard basic loads of the mesh's bounding box (DESIGN.md:
+``basic2d`` / ``basic3d``) matches a FEM reference of the same body and material. A fit
+never ends worse than the rule's constants (it keeps the best point seen; the
+equilibrium-gap estimate falls back to the rule when it is worse, as on coarse meshes
+against FEM, where equation error and output error differ). Prints the before/after table (G per rule
 and after fitting) and writes:
 
 - ``MODEL.vtu`` — ParaView-ready network (points in m, ``line`` cells = springs, point
