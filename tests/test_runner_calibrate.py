@@ -72,6 +72,7 @@ def test_gauss_newton_from_the_equilibrium_gap_improves_the_score(tri_mesh, tmp_
     df, _ = _calibrate(tri_mesh, tmp_path / "m.vtu", "--method", "gauss-newton", "--init", "equilibrium-gap")
     fit = df[df.optimizer == "gauss-newton"].iloc[0]
     assert fit.G_final < 0.9 * fit.G_initial
+    assert (df.seed == 0).all() and isinstance(fit.opt_stop, str)      # the run is recorded
 
 
 @pytest.mark.slow

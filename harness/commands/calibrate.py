@@ -23,7 +23,7 @@ and after fitting) and writes:
   MeshSpringForceField divides its stiffness by the rest length; strain-based engines
   use f = k l0 (l - l0) / l0); SOFA's SpringForceField takes k itself (``springs="i j
   k kd l0"``). 2-D models have unit thickness (k per unit thickness, N/m per m).
-- ``MODEL.csv`` — the table printed.
+- ``MODEL.csv`` — the table printed (with the ``seed`` and the optimiser's ``opt_stop``).
 """
 
 from __future__ import annotations
@@ -154,7 +154,8 @@ def main(args) -> int:
         net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
     export(net, args.out)
     cols = [c for c in ("model", "stiffness", "optimizer", "n_nodes", "n_springs", "G_initial", "G_final",
-                        "G_norm_initial", "G_norm_final", "seconds") if any(c in r for r in rows)]
+                        "G_norm_initial", "G_norm_final", "seconds", "seed", "opt_stop")  # seed: --seed, recorded
+            if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     df.to_csv(args.out.with_suffix(".csv"), index=False)
     print(df.to_string(index=False))
