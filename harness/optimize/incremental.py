@@ -79,14 +79,14 @@ def sparse_factor(ls, k):
     from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic, warm_up
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
-    warm_up()   # load the compiled substitution now, not inside the timed SA loop
     K = ls.stiffness(k)
     sym = ls.__dict__.get("_sa_symbolic")
     if sym is None:
         sym = Symbolic(K, ls.coords, leaf=SOLVE_LEAF)
         ls._sa_symbolic = sym  # pattern-only, reused by every engine on this problem
     fac = MultifrontalCholesky(K, sym, ls.name)
-    fac._flat()   # inverted diagonal blocks: every solve with this factor takes the compiled path
+    if warm_up():   # compiled now, not in the timed loop; inverted diagonal blocks: every
+        fac._flat(drop=True)   # solve with this factor takes the compiled path
     return fac
 
 

@@ -147,9 +147,10 @@ class MultifrontalCholesky:
                 return self._solve_compiled(rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
             return self._solve(rhs)
 
-    def _flat(self):
+    def _flat(self, drop: bool = False):
         """The factor as flat arrays for the compiled substitution: per front its first
-        row, sizes and offsets; inverted L11 (and transposes), L21 (and transposes)."""
+        row, sizes and offsets; inverted L11 blocks and L21 blocks (row-major). ``drop``
+        frees the LAPACK path's blocks (half the memory; numba is then required)."""
         if getattr(self, "_flat_cache", None) is None:
             keep = [t for t, nd in enumerate(self.sym.nodes) if nd["nv"]]
             nv = np.array([self.sym.nodes[t]["nv"] for t in keep], np.int64)
@@ -158,11 +159,11 @@ class MultifrontalCholesky:
             inv = [sla.lapack.dtrtri(self.L11[t], lower=1)[0] for t in keep]
             off = lambda sizes: np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
             Li = np.concatenate([x.ravel() for x in inv])
-            LiT = np.concatenate([x.T.ravel() for x in inv])
             L21 = np.concatenate([self.L21[t].ravel() for t in keep] + [np.empty(0)])
-            L21T = np.concatenate([self.L21[t].T.ravel() for t in keep] + [np.empty(0)])
             Ur = np.concatenate([self.sym.nodes[t]["Ur"] for t in keep] + [np.empty(0, np.int64)]).astype(np.int64)
-            self._flat_cache = (start, nv, nu, off(nv * nv), off(nv * nu), off(nu), Li, LiT, L21, L21T, Ur)
+            self._flat_cache = (start, nv, nu, off(nv * nv), off(nv * nu), off(nu), Li, L21, Ur)
+            if drop:   # every later solve takes the compiled path: the blocks are not needed
+                self.L11 = self.L21 = None
         return self._flat_cache
 
     def _solve_compiled(self, rhs):
@@ -206,7 +207,7 @@ SUBST_MIN = 8   # right-hand sides from which inverting the diagonal blocks pays
 _KERNEL = []
 
 
-def _subst(b, start, nv, nu, oL, o21, oU, Li, LiT, L21, L21T, Ur):
+def _subst(b, start, nv, nu, oL, o21, oU, Li, L21, Ur):
     """L L^T x = b in place for the fronts' flat arrays (see ``_flat``); compiled by numba."""
     q = b.shape[1]
     nn = len(start)
@@ -253,8 +254,8 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, LiT, L21, L21T, Ur):
                 r = Ur[oU[t] + i]
                 for c in range(q):
                     g[i, c] = b[r, c]
-            y -= np.dot(L21T[o21[t]:o21[t + 1]].reshape(k, u), g)
-        b[s0:s0 + k] = np.dot(LiT[oL[t]:oL[t + 1]].reshape(k, k), y)
+            y -= np.dot(L21[o21[t]:o21[t + 1]].reshape(u, k).T, g)
+        b[s0:s0 + k] = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k).T, y)
 
 
 def _subst_kernel():
@@ -271,10 +272,11 @@ def _subst_kernel():
     return _KERNEL[0]
 
 
-def warm_up():
-    """Compile (first time) or load the cached substitution kernel."""
+def warm_up() -> bool:
+    """Compile (first time) or load the cached substitution kernel; False without numba."""
     k = _subst_kernel()
     if k is not None and len(_KERNEL) == 1:
         z = np.zeros(1, np.int64)
-        k(np.zeros((1, 1)), z[:0], z[:0], z[:0], z, z, z, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), z[:0])
+        k(np.zeros((1, 1)), z[:0], z[:0], z[:0], z, z, z, np.zeros(0), np.zeros(0), z[:0])
         _KERNEL.append(True)
+    return k is not None
