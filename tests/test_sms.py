@@ -566,3 +566,13 @@ def test_bad_optimiser_options_name_the_case_file_and_field(tmp_path, monkeypatc
         stage.run(case, StageContext(out_dir=tmp_path / "out"))
     msg = str(err.value)
     assert "\n" not in msg and msg.startswith(f"{tmp_path / 'tiny.toml'}: {field}: ") and text in msg
+
+
+def test_a_compared_method_refusing_the_problem_names_optimizer_compare(tmp_path, monkeypatch):
+    from harness.errors import SpringbenchError
+    from harness.stages import StageContext
+    from harness.stages import sms as stage
+    case = load_case(_optimiser_case(tmp_path, 'method = "none"\ncompare = ["nelder-mead"]', grid="[6, 6]"))
+    monkeypatch.setattr(stage, "_reference", lambda case, ctx: (ClosedFormRef(case), ""))
+    with pytest.raises(SpringbenchError, match=r"tiny.toml: optimizer.compare: nelder-mead with 110 parameters"):
+        stage.run(case, StageContext(out_dir=tmp_path / "out"))

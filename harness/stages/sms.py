@@ -284,6 +284,8 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
         field = exc.field or "optimizer"
         if field.startswith("optimizer.options"):
             field = run_["where"] + field[len("optimizer.options"):]
+        elif field == "optimizer.method" and run_["where"] != "optimizer.options":   # the method came from there
+            field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
         raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
     seconds = time.perf_counter() - t0
     name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
