@@ -576,3 +576,20 @@ def test_a_compared_method_refusing_the_problem_names_optimizer_compare(tmp_path
     monkeypatch.setattr(stage, "_reference", lambda case, ctx: (ClosedFormRef(case), ""))
     with pytest.raises(SpringbenchError, match=r"tiny.toml: optimizer.compare: nelder-mead with 110 parameters"):
         stage.run(case, StageContext(out_dir=tmp_path / "out"))
+
+
+@pytest.mark.parametrize("optimizer,field", [
+    ('method = "lbfgs"\ncompare = ["lbfgs"]', "optimizer.compare"),
+    ('method = "lbfgs"\noptions = 5', "optimizer.options"),
+    ('method = "none"\noptions = { temperatures = 5 }', "optimizer.options"),
+    ('method = "none"\n[optimizer.frequency]\nmodes = 6', "optimizer.frequency.modes"),
+])
+def test_validate_sees_the_stage_checks(tmp_path, capsys, optimizer, field):
+    """Mistakes only the sms stage can see are reported by `springbench validate`, before
+    any run; a correct file still validates."""
+    f = _optimiser_case(tmp_path, optimizer, modes=4)
+    assert cli.main(["validate", str(f)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{f}: {field}: " in err[0]
+    f.write_text(f.read_text().replace(optimizer.split("\n", 1)[1], ""))
+    assert cli.main(["validate", str(f)]) == 0

@@ -6,6 +6,7 @@ import sys
 
 from harness.cases import MODES, find_cases, load_case
 from harness.errors import SpringbenchError
+from harness.stages import check_case
 
 HELP = "check case files (or folders of them) against the schema; one line per mistake"
 
@@ -20,7 +21,7 @@ def main(args) -> int:
     for f in files:
         try:
             for mode in MODES:
-                load_case(f, mode)
+                check_case(load_case(f, mode))
         except SpringbenchError as exc:
             bad += 1
             print(f"springbench: error: {exc}", file=sys.stderr)

@@ -5,7 +5,8 @@ A stage is a module with ``NAME``, ``applies(case) -> bool`` and
 ``case`` and ``model``; the runner fills ``case``, ``stage``, ``seed``, ``status`` and
 ``seconds`` when a row leaves them out). ``ctx`` is a :class:`StageContext`. A new stage
 is one module added to ``STAGES``; a case's ``[run] stages = [NAME, ...]`` restricts it
-to those stages.
+to those stages. A stage may also have ``check(case)``: the case mistakes it can see
+without solving anything (raised as CaseError); ``springbench validate`` calls it.
 
 Rules for stages (the runner relies on them):
 - write data files only inside ``ctx.out_dir`` (``ctx.file(name)`` gives a path there);
@@ -69,3 +70,11 @@ def load_stages(names=None):
             if exc.name != name:
                 raise
     return out
+
+
+def check_case(case, stages=None):
+    """Run the ``check(case)`` of every stage that applies to ``case`` (validate's view of
+    the mistakes the schema alone cannot see)."""
+    for st in load_stages(stages):
+        if hasattr(st, "check") and st.applies(case):
+            st.check(case)

@@ -181,6 +181,13 @@ def _file(case) -> str | None:
     return str(case.path) if case.path is not None else None
 
 
+def check(case):
+    """The [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
+    opt = case.section("optimizer") or {}
+    optimiser_runs(case, opt)
+    _check_modes(case, opt)
+
+
 def optimiser_runs(case, opt) -> list[dict]:
     """The optimiser runs of a case, in table order: [optimizer] method, then each name
     in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
