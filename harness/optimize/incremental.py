@@ -301,6 +301,7 @@ class IncrementalG:
         self._kp, self._ka = _kernels()
         self.m = 0
         self.col: dict[int, int] = {}            # spring -> batch column
+        self._last_j = -1                        # batch column of the latest proposal
         self.upcoming: np.ndarray = np.empty(0, int)
         self.n_rebase = 0
         self._pending = None
@@ -385,6 +386,7 @@ class IncrementalG:
             else:
                 self.Yt[s, :q, :st.n] = self._solve(st, np.asfortranarray(rows.T.toarray())).T
         self.col = {sp: j for j, sp in enumerate(springs)}
+        self._last_j = -1
         self._batch_grams(springs, self.m)
 
     def _batch_grams(self, springs, m0):
@@ -424,6 +426,7 @@ class IncrementalG:
                       self.nmax, self.acc_i, self.acc_v, self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
                       self.YY, self.YR, self.bY, *self.scratch)
         self._pending = (e, k_new, (delta, j))
+        self._last_j = j
         return float(np.sqrt(max(self.G2 + d2, 0.0)))
 
     def accept(self):
@@ -451,9 +454,16 @@ class IncrementalG:
         factorisation); recompute u0 and G exactly; carry the batch over by Woodbury."""
         m = self.m
         self.n_rebase += 1
-        springs = sorted(self.col, key=self.col.get)
-        q = len(springs) if self.mode == "sparse" else 0   # dense: a new batch is a cheap gather
+        # the batch's columns still to come (after the last proposal) are carried over
+        springs = sorted((sp for sp, j in self.col.items() if j > self._last_j), key=self.col.get)
+        if self.mode == "dense":
+            springs = []        # a new batch is a cheap gather
+        q = len(springs)
         T = self.T[:, :m, :m]
+        if q:
+            Y = self.Yt[:, [self.col[sp] for sp in springs]]
+            self.Yt.fill(0.0)
+            self.Yt[:, :q] = Y
         if m and q:   # carried batch: y_new = y - V diag(1/sigma) V^T b, V = Z T
             y_at = self.Yt[np.arange(self.S)[:, None, None], :q, self.acc_i[:, :m]]   # (S, m, P, q)
             G = np.einsum("smp,smpj->smj", self.acc_v[:, :m], y_at)             # Z^T B
@@ -472,10 +482,10 @@ class IncrementalG:
         self.m = 0
         self.T[:, :m, :m] = 0.0
         self._base_state()
+        self.col = {sp: i for i, sp in enumerate(springs)}
+        self._last_j = -1
         if q:
             self._batch_grams(springs, 0)
-        else:
-            self.col = {}
 
 
 class RefactorG:
