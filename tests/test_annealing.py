@@ -132,3 +132,20 @@ def test_accepting_an_unchanged_constant_keeps_G_exact(mode):
         eng.accept()
     assert np.isfinite(eng.G())
     assert abs(eng.G() / prob.G(eng.k) - 1) < 1e-9
+
+
+@pytest.mark.parametrize("options, field", [
+    ({"temperatures": "x"}, "optimizer.options.temperatures"),
+    ({"r": "fast"}, "optimizer.options.r"),
+    ({"nlimit": -1}, "optimizer.options.nlimit"),
+    ({"engine": "gpu"}, "optimizer.options.engine"),
+    ({"refactor_every": 0}, "optimizer.options.refactor_every"),
+    ({"r": 1.5}, "optimizer.options"),
+])
+def test_bad_sa_options_are_one_line_errors(options, field):
+    """Wrong types or values are a SpringbenchError naming the option, not a traceback."""
+    from harness.errors import SpringbenchError
+    from harness.optimize.annealing import check_options
+    with pytest.raises(SpringbenchError) as err:
+        check_options(options)
+    assert str(err.value).startswith(f"{field}: ") and "\n" not in str(err.value)

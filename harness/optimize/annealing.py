@@ -50,6 +50,16 @@ def check_options(options: dict) -> dict:
     if unknown:
         raise SpringbenchError(f"unknown simulated-annealing option(s) {sorted(unknown)}", field="optimizer.options",
                                fix=f"use some of {sorted(DEFAULTS)}")
+    from harness.optimize.gradient import check_options as check_numbers
+    numbers = [k for k in DEFAULTS if k not in ("engine", "refactor_every")]
+    check_numbers({k: options[k] for k in numbers if k in options}, dict.fromkeys(numbers, 0), "simulated-annealing")
+    if options.get("engine", "auto") not in ("auto", "dense", "sparse", "refactor"):
+        raise SpringbenchError(f"unknown engine {options['engine']!r}", field="optimizer.options.engine",
+                               fix="auto, dense, sparse or refactor")
+    every = options.get("refactor_every", "auto")
+    if every != "auto" and not (isinstance(every, int) and not isinstance(every, bool) and every > 0):
+        raise SpringbenchError(f"refactor_every = {every!r} is not a count of accepts", field="optimizer.options.refactor_every",
+                               fix='"auto" or a whole number of accepts > 0')
     opts = {**DEFAULTS, **options}
     if not (0 < opts["r"] <= 1) or opts["T0"] < 0 or opts["factor"] <= 0:
         raise SpringbenchError(f"need 0 < r <= 1, T0 >= 0, factor > 0 (got r={opts['r']}, T0={opts['T0']}, factor={opts['factor']})",
