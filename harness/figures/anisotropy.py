@@ -8,23 +8,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "anisotropy", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "anisotropy.csv"
-    if not src.exists():
+    df = read_csv(folder, "anisotropy.csv")
+    if df is None or df.empty:
         return []
     import numpy as np
-    import pandas as pd
-    df = pd.read_csv(src)
-    if df.empty:
-        return []
-    plt = pyplot()
-    fig = plt.figure(figsize=(5, 5))
-    ax = fig.add_subplot(projection="polar")
+    fig, ax = subplots(figsize=(5, 5), subplot_kw={"projection": "polar"})
     groups = df.groupby("model", sort=True) if "model" in df else [("model", df)]
     for model, g in groups:
         g = g.sort_values("angle")

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import pyplot, save
+from harness.figures import read_csv, save, subplots
 
 NAME, SCOPE = "volume", "case"
 
 
 def make(folder: Path) -> list[Path]:
-    src = folder / "volume.csv"
-    if not src.exists():
+    df = read_csv(folder, "volume.csv")
+    if df is None:
         return []
-    import pandas as pd
-    df = pd.read_csv(src)
-    plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = subplots(figsize=(6, 4))
     for col in df.columns:
         if col != "t":
             ax.plot(df["t"], df[col], lw=1.2, label=col)
