@@ -26,27 +26,34 @@ def grid(n=3):
     return np.array(np.meshgrid(a, a, a, indexing="ij")).reshape(3, -1).T
 
 
-@pytest.mark.parametrize("angle", [0.0, 30.0, 45.0, 120.0])
+@pytest.mark.parametrize("angle", [0.0, 30.0, 45.0, 120.0, 135.0])
 def test_measures_of_an_affine_field_are_its_compliance(angle):
-    """u = S sigma x with sigma = s d d^T: E_d = 1 / (d S d) and no drift for an isotropic
-    S; the transversely isotropic modulus formula equals 1 / (d.d : S_rotated : d.d)."""
+    """u = S sigma x with sigma = s d d^T: E_d = 1 / (d S d); no drift for an isotropic S
+    nor along / across the fibre, the strain across d otherwise; the transversely isotropic
+    modulus formula equals 1 / (d.d : S_rotated : d.d)."""
     P = grid()
     d = an.directions_xy([angle])[0]
     sig = 2.0 * np.outer(d, d)
     voigt = lambda t: np.array([t[0, 0], t[1, 1], t[2, 2], t[1, 2], t[0, 2], t[0, 1]])
-    for S in (isotropic_compliance(700.0, 0.3),
-              np.linalg.inv(rotate(np.linalg.inv(transversely_isotropic_compliance(4000, 1000, 0.3, 0.3, 700)),
-                                   np.array([[1.0, 1.0, 0.0]]) / np.sqrt(2))[0])):
+    iso = isotropic_compliance(700.0, 0.3)
+    fibre = np.linalg.inv(rotate(np.linalg.inv(transversely_isotropic_compliance(4000, 1000, 0.3, 0.3, 700)),
+                                 np.array([[1.0, 1.0, 0.0]]) / np.sqrt(2))[0])
+    for S in (iso, fibre):
         e = S @ voigt(sig)                      # engineering shears
         eps = np.array([[e[0], e[5] / 2, e[4] / 2], [e[5] / 2, e[1], e[3] / 2], [e[4] / 2, e[3] / 2, e[2]]])
         u = P @ eps.T + np.array([0.1, -0.2, 0.3])
         m = an.measures(P, u, d, stress=2.0)
         dd = voigt(np.outer(d, d))
         assert m["stiffness"] == pytest.approx(1.0 / (dd @ S @ dd), rel=1e-12)
+        across = eps @ d - (d @ eps @ d) * d            # the strain across d, by hand
+        assert m["drift"] == pytest.approx(np.linalg.norm(across) / (d @ eps @ d), abs=1e-12)
+        if S is iso or angle in (45.0, 135.0):          # isotropic, or along / across the fibre
+            assert m["drift"] < 1e-12
+        else:
+            assert m["drift"] > 1e-2
     # the last S is the fibre at 45 degrees: the closed form at angle - 45
     assert m["stiffness"] == pytest.approx(
         an.transversely_isotropic_modulus(np.deg2rad(angle - 45.0), 4000, 1000, 0.3, 700), rel=1e-12)
-    assert m["drift"] > 1e-3 or angle in (45.0,)
 
 
 def test_pull_loads_are_self_equilibrated_and_carry_the_stress():
