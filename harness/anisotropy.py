@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.errors import ModelError
 from harness.loadsets import Constraint, LoadCase, Traction
 from harness.parts import part_predicate
 
@@ -58,7 +59,8 @@ def pull_arrays(points, bbox, load: LoadCase) -> tuple[np.ndarray, np.ndarray]:
     for c in load.constraints:
         on = part_predicate(c.part, bbox)(points.T)
         if not on.any():
-            raise ValueError(f"no node on corner {c.part}: the body must be a box meshed to its corners")
+            raise ModelError(f"no node on corner {c.part} for the direction pulls",
+                             fix="the body must be a box meshed to its corners")
         fixed[np.ix_(on, list(c.components))] = True
     return ~fixed.ravel(), f.ravel()
 

@@ -225,3 +225,11 @@ def test_element_tangent_equals_the_coloured_complex_step(kind, cell):
     f = np.zeros_like(x)
     np.add.at(f, m.cells.ravel(), m.element_forces(x[m.cells]).reshape(-1, 3))
     np.testing.assert_allclose(f, m.forces(x), atol=1e-12 * np.abs(f).max())
+
+
+def test_pull_on_a_body_without_corner_nodes_is_a_one_line_error():
+    """A mesh that does not reach the box corners cannot hold the pulls: ModelError, not a traceback."""
+    from harness.errors import SpringbenchError
+    P = np.array([[0.5, 0.0, 0.0], [1.0, 0.5, 0.0], [0.0, 1.0, 0.5], [0.5, 0.5, 1.0]])
+    with pytest.raises(SpringbenchError, match="corner x0y0z0"):
+        an.pull_arrays(P, (P.min(0), P.max(0)), an.pull_load((1.0, 0.0, 0.0)))

@@ -433,8 +433,12 @@ def _fem(case, ctx, model, dyn):
     rows, aniso = [], []
     ctx.status("FEM direction pulls")
     bbox = (P.min(axis=0), P.max(axis=0))
-    pull_loads, fem_dir, fem_dir_err = _fem_directions(case, reference_solve, P)
     from harness import anisotropy as an
+    try:                                 # before the FEM solves: the mesh must reach the corners
+        an.pull_arrays(P, bbox, an.pull_load((1.0, 0.0, 0.0)))
+    except SpringbenchError as exc:
+        raise CaseError(exc.message, file=str(case.path), field="body.file", fix=exc.fix) from None
+    pull_loads, fem_dir, fem_dir_err = _fem_directions(case, reference_solve, P)
     kf = [r["stiffness"] for r in fem_dir]
     for a, r in zip(ANGLES, fem_dir):
         aniso.append({"angle": a, "model": "FEM", "stiffness": r["stiffness"], "drift": r["drift"],
