@@ -153,6 +153,8 @@ def test_parallel_spring_kernel_matches_numpy():
             f = np.full_like(pts, np.nan)
             spring_forces(plan, x, v, f)
             np.testing.assert_allclose(f, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    with pytest.raises(ValueError, match="C-contiguous"):     # a strided f would be silently lost
+        spring_forces(plan, x, v, np.zeros((len(pts), 6))[:, :3])
 
 
 # -- physics of the model (independent of the program) -------------------------------------------

@@ -72,7 +72,10 @@ def spring_plan(springs, ks, kd, L0, n_nodes: int, threads: int | None = None) -
 
 def spring_forces(plan: SpringPlan, x, v, f):
     """f (n, 3) C-contiguous = the springs' forces F = -[ks (L - L0) + kd (dv . n)] n at p,
-    -F at q."""
+    -F at q. f is written in place: a copy (non-contiguous or not float64) would be lost."""
+    if not (isinstance(f, np.ndarray) and f.dtype == np.float64 and f.flags.c_contiguous
+            and f.size == 3 * int(plan.nodes[-1])):
+        raise ValueError(f"f must be a C-contiguous float64 array of {3 * int(plan.nodes[-1])} values")
     _spring_forces(np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(v).reshape(-1), plan.p3, plan.q3,
                    plan.ks, plan.kd, plan.L0, plan.bounds, plan.nodes, plan.scratch, f.reshape(-1))
 
