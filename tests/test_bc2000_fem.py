@@ -233,3 +233,17 @@ def test_pull_on_a_body_without_corner_nodes_is_a_one_line_error():
     P = np.array([[0.5, 0.0, 0.0], [1.0, 0.5, 0.0], [0.0, 1.0, 0.5], [0.5, 0.5, 1.0]])
     with pytest.raises(SpringbenchError, match="corner x0y0z0"):
         an.pull_arrays(P, (P.min(0), P.max(0)), an.pull_load((1.0, 0.0, 0.0)))
+
+
+def test_cantilever_load_without_force_is_a_case_error(tmp_path):
+    """A [loads] case with no force gave NaN tip ratios; now a one-line CaseError before any solve."""
+    from harness.cases import load_case
+    from harness.errors import CaseError
+    from harness.stages import StageContext, bc2000
+    text = (ROOT / "cases/bourguignon2000/cantilever_beam336.toml").read_text()
+    text = text.replace('traction = [{ part = "z1", vector = [0.0, 0.0, 0.01] }]', "")
+    text = text.replace("../../../shared", str(ROOT.parent / "shared"))
+    p = tmp_path / "cantilever.toml"
+    p.write_text(text)
+    with pytest.raises(CaseError, match="load 'stretch' has no force"):
+        bc2000.run(load_case(p), StageContext(out_dir=tmp_path))

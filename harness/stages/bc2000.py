@@ -208,10 +208,14 @@ def lumped_masses(points, cells, density: float) -> np.ndarray:
     return m
 
 
-def _load_direction(load) -> np.ndarray:
+def _load_direction(case, load) -> np.ndarray:
+    """Unit vector of a load's gravity, else of its first traction, else of its body force."""
     v = load.gravity if load.gravity is not None else (load.tractions[0].vector if load.tractions else load.body_force)
-    v = np.asarray(v, float)
-    return v / np.linalg.norm(v)
+    n = 0.0 if v is None else float(np.linalg.norm(v))
+    if not n > 0:
+        raise CaseError(f"load '{load.name}' has no force: the tip ratio needs a direction", file=str(case.path),
+                        field="loads.case", fix="give it a non-zero gravity, traction or body_force")
+    return np.asarray(v, float) / n
 
 
 COMPARISON = ("linear (small strain): the model linearised at rest vs linear FEM, same clamp, "
@@ -238,7 +242,7 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
            "ref_n_dofs": int(ref.n_dofs)}
     ratios = {}
     for i, load in enumerate(case.loads):
-        d = _load_direction(load)
+        d = _load_direction(case, load)
         um, uf = float((u[i][tip] @ d).mean()), float((u_ref[i][tip] @ d).mean())
         ratios[load.name] = um / uf
         if load.gravity is not None and "tip_ratio" not in out:
@@ -306,6 +310,8 @@ def _cantilever(case, ctx, model, dyn):
     rows = []
     ref = None
     if case.loads:
+        for load in case.loads:          # mistakes before the solves
+            _load_direction(case, load)
         from reference import solve as reference_solve
         ctx.status("FEM reference")
         ref = reference_solve(case)
