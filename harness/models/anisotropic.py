@@ -261,18 +261,14 @@ class AnisotropicBody:
             object.__setattr__(self, "_S", S)
         return S
 
-    def forces(self, x, v=None) -> np.ndarray:
-        """Internal forces (n, 3) at positions x (n, 3) and velocities v (m/s)."""
-        I, W = self.axes.nodes, self.axes.weights
-        m = len(I)
-        P = np.einsum("mek,mekd->med", W, x[I])
-        l = P[:, 0::2] - P[:, 1::2]                     # (m, 3 axes, 3)
+    def _end_forces(self, l, dv=None) -> np.ndarray:
+        """Forces (m, 6, 3) on the six axis ends (P1, P1', P2, ...) from the axis vectors
+        l (m, 3, 3) and their rates dv: the damped axial springs and the program's angular
+        terms -ks (n_i . n_j - cos0) pulling each axis towards the other two."""
         L = np.sqrt(np.sum(l * l, axis=-1))
         n = l / L[..., None]
         s = self.ks[:, :3] * (L - self.L0)
-        if v is not None:
-            V = np.einsum("mek,mekd->med", W, v[I])
-            dv = V[:, 0::2] - V[:, 1::2]
+        if dv is not None:
             s = s + self.kd * np.sum(dv * n, axis=-1)
         F = -s[..., None] * n
         n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
@@ -282,7 +278,18 @@ class AnisotropicBody:
         G1 = F[:, 0] + K12 * n2 + K13 * n3
         G2 = F[:, 1] + K12 * n1 + K23 * n3
         G3 = F[:, 2] + K13 * n1 + K23 * n2
-        Gend = np.stack([G1, -G1, G2, -G2, G3, -G3], axis=1)      # (m, 6, 3)
+        return np.stack([G1, -G1, G2, -G2, G3, -G3], axis=1)
+
+    def forces(self, x, v=None) -> np.ndarray:
+        """Internal forces (n, 3) at positions x (n, 3) and velocities v (m/s)."""
+        I, W = self.axes.nodes, self.axes.weights
+        m = len(I)
+        P = np.einsum("mek,mekd->med", W, x[I])
+        dv = None
+        if v is not None:
+            V = np.einsum("mek,mekd->med", W, v[I])
+            dv = V[:, 0::2] - V[:, 1::2]
+        Gend = self._end_forces(P[:, 0::2] - P[:, 1::2], dv)
         contrib = [(W[..., None] * Gend[:, :, None, :]).reshape(-1, 3)]
         Xc = x[self.cells]
         nv = self.cells.shape[1]
@@ -318,18 +325,7 @@ class AnisotropicBody:
         each element can be differentiated on its own (:meth:`tangent_stiffness`)."""
         H, W = self._onehot(), self.axes.weights
         P = np.einsum("mekn,mek,mnd->med", H, W, X)
-        l = P[:, 0::2] - P[:, 1::2]
-        L = np.sqrt(np.sum(l * l, axis=-1))
-        n = l / L[..., None]
-        F = -(self.ks[:, :3] * (L - self.L0))[..., None] * n
-        n1, n2, n3 = n[:, 0], n[:, 1], n[:, 2]
-        K12 = -(self.ks[:, 3] * (np.sum(n1 * n2, -1) - self.cos0[:, 0]))[:, None]
-        K13 = -(self.ks[:, 4] * (np.sum(n1 * n3, -1) - self.cos0[:, 1]))[:, None]
-        K23 = -(self.ks[:, 5] * (np.sum(n2 * n3, -1) - self.cos0[:, 2]))[:, None]
-        G1 = F[:, 0] + K12 * n2 + K13 * n3
-        G2 = F[:, 1] + K12 * n1 + K23 * n3
-        G3 = F[:, 2] + K13 * n1 + K23 * n2
-        Gend = np.stack([G1, -G1, G2, -G2, G3, -G3], axis=1)
+        Gend = self._end_forces(P[:, 0::2] - P[:, 1::2])
         out = np.einsum("mekn,mek,med->mnd", H, W, Gend)
         if self.volume:
             d = X - X.mean(axis=1)[:, None, :]
