@@ -247,3 +247,22 @@ def test_cantilever_load_without_force_is_a_case_error(tmp_path):
     p.write_text(text)
     with pytest.raises(CaseError, match="load 'stretch' has no force"):
         bc2000.run(load_case(p), StageContext(out_dir=tmp_path))
+
+
+def test_inverted_elements_by_hand():
+    """One of two tets mirrored through its base plane is inside out; a hex with one
+    corner pushed through the opposite face has a negative sub-tetrahedron."""
+    from types import SimpleNamespace
+    from harness.stages.bc2000 import inverted_elements
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, -1]], float)
+    m = SimpleNamespace(points=pts, cells=np.array([[0, 1, 2, 3], [0, 2, 1, 4]]))
+    assert inverted_elements(m, pts) == 0
+    x = pts.copy()
+    x[3, 2] = -0.5                       # the apex of the first tet through its base
+    assert inverted_elements(m, x) == 1
+    cube = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+    h = SimpleNamespace(points=cube, cells=np.arange(8)[None])
+    assert inverted_elements(h, cube) == 0 and inverted_elements(h, 2.0 * cube) == 0
+    y = cube.copy()
+    y[6, 2] = -0.5
+    assert inverted_elements(h, y) == 1

@@ -197,12 +197,8 @@ def lumped_masses(points, cells, density: float) -> np.ndarray:
     """Node masses (n,) of a constant density: each element's volume times ``density``
     shared equally by its vertices (for a constant body force this is the consistent
     P1 / Q1 load of a tetrahedron / parallelepiped, i.e. the FEM's linear load)."""
-    from harness.models.anisotropic import hex_to_tets
     cells = np.asarray(cells)
-    tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
-    X = np.asarray(points, float)[tets]
-    vol = np.abs(np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])) / 6
-    per_cell = vol.reshape(len(cells), -1).sum(axis=1)
+    per_cell = np.abs(_sub_tet_volumes(points, cells)).sum(axis=1)
     m = np.zeros(len(points))
     np.add.at(m, cells.ravel(), np.repeat(density * per_cell / cells.shape[1], cells.shape[1]))
     return m
@@ -266,14 +262,18 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
 def inverted_elements(model, x) -> int:
     """Elements with a sub-tetrahedron of negative signed volume at x (turned inside out)."""
     cells = np.asarray(model.cells)
+    flipped = np.sign(_sub_tet_volumes(x, cells)) != np.sign(_sub_tet_volumes(model.points, cells))
+    return int(flipped.any(axis=1).sum())
+
+
+def _sub_tet_volumes(points, cells) -> np.ndarray:
+    """Signed volumes (m, k) of each element's tetrahedra (k = 1 for a tet, the hex split
+    of harness.models.anisotropic.hex_to_tets for a hex)."""
     from harness.models.anisotropic import hex_to_tets
     tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
-
-    def vol(X):
-        X = X[tets]
-        return np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0])
-    flipped = (np.sign(vol(x)) != np.sign(vol(model.points))).reshape(len(cells), -1).any(axis=1)
-    return int(flipped.sum())
+    X = np.asarray(points, float)[tets]
+    v = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
+    return v.reshape(len(cells), -1)
 
 
 def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
