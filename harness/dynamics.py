@@ -120,6 +120,8 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     """
     if integrator not in INTEGRATORS:
         raise SimulationError(f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}")
+    if engine not in ("auto", "numba", "numpy"):     # was silently the numpy engine
+        raise SimulationError(f"unknown engine '{engine}'", fix="one of auto, numba, numpy")
     if dt <= 0 or steps < 0:
         raise SimulationError(f"need dt > 0 and steps >= 0 (got dt={dt}, steps={steps})")
     x = np.array(model.points if x0 is None else x0, float)

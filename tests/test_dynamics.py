@@ -82,6 +82,12 @@ def test_blow_up_is_an_error_naming_the_step_and_the_estimate(engine):
     assert np.all(np.isfinite(tr.x)) and np.abs(tr.x - model.points).max() < 0.05   # bounded (A / sqrt(1 - 0.81))
 
 
+def test_unknown_engine_is_an_error():
+    model, ld = spring_chain(k=4.0), chain_loading(2, m=0.25)
+    with pytest.raises(SimulationError, match="unknown engine 'fast'"):
+        simulate(model, ld, 0.01, 10, engine="fast")
+
+
 def test_backward_euler_is_stable_beyond_the_limit_and_settles_at_equilibrium():
     k, m, g = 4.0, 0.25, 9.8
     model, ld = spring_chain(k=k), chain_loading(2, m=m, g=g)
