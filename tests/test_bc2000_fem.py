@@ -137,13 +137,19 @@ def test_continuation_passes_the_limit_point_of_a_tripod():
 
 
 def test_continuation_status_without_regaining_the_load():
-    """With too few continuation steps the row says 'limit point', never a traceback."""
+    """With too few continuation steps the status is one line, never a traceback: before
+    the fold 'stalled' below the closed-form limit load, after it 'limit point' at it."""
     model = tripod()
+    P_limit = tripod_force(np.linspace(0, 0.3, 100001)).max()
     push = np.zeros((4, 3))
-    push[3, 1] = -1.5 * tripod_force(np.linspace(0, 0.3, 10001)).max()
+    push[3, 1] = -1.5 * P_limit
     ld = Loading(np.ones(4), np.array([True, True, True, False]), np.zeros(3), push)
-    res = solve_static_path(model, ld, load_steps=4, arc_steps=3)
-    assert res.x is None and res.status.startswith(("limit point", "stalled"))
+    res = solve_static_path(model, ld, load_steps=4, arc_steps=1)
+    assert res.x is None and res.status.startswith("stalled") and not res.folds
+    assert 0.5 < res.load_factor < 1 / 1.5
+    res = solve_static_path(model, ld, load_steps=4, arc_steps=5)
+    assert res.x is None and res.status.startswith("limit point")
+    assert res.folds[0] == pytest.approx(1 / 1.5, rel=2e-3) and res.x_limit is not None
 
 
 def test_hexa_model_jacobian_at_a_large_deformation_vs_central_differences():
