@@ -88,10 +88,11 @@ def tet_volume(x, tets) -> float | np.ndarray:
     return np.abs(det).sum(axis=-1) / 6.0
 
 
-# -- compiled program-order Verlet -------------------------------------------------------------
+# -- compiled position Verlet (the program's loop) ---------------------------------------------
 
 def _kernel():
-    """The compiled program-order Verlet loop (harness/models/bc2000/kernels.py)."""
+    """The compiled position-Verlet loop of the program (harness/models/bc2000/kernels.py;
+    its arithmetic is rearranged, so it matches the program to rounding, not bit for bit)."""
     from harness.models.bc2000.kernels import run
     return run
 
