@@ -515,8 +515,8 @@ def _turned(m, name, model, mesh, angle_deg):
 
 def _direction_columns(name, K, P, bbox, loads, fem_dir, aniso, suffix) -> dict:
     """Columns of the direction pulls of one model (K one matrix, or one per direction):
-    spread (max/min), coefficient of variation, largest drift, and the largest deviation
-    from the FEM's stiffness per direction; rows of anisotropy.csv."""
+    spread (max/min), coefficient of variation, largest drift, and the largest deviation of
+    the stiffness per direction from the FEM's; rows of anisotropy.csv."""
     from harness import anisotropy as an
     Ks = K if isinstance(K, list) else [K] * len(loads)
     res = []
