@@ -274,8 +274,9 @@ class IncrementalG:
         self.nmax = max(max(st.n for st in self.sets), 1)
         self.L = max(st.F.shape[1] for st in self.sets)
         self.const = sum(st.const for st in self.sets)
-        self._gather_maps()
         self._factor_all()
+        self._elimination_order()
+        self._gather_maps()
         cap = auto_interval(self.sets, mode) if refactor_every == "auto" else int(refactor_every)
         self.refactor_every = self.cap = max(cap, 1)
         nm, L, cap, q, P = self.nmax, self.L, self.cap, self.batch, self.gi.shape[2]
@@ -349,9 +350,23 @@ class IncrementalG:
             else:
                 st.fac = fac[key]
 
+    def _elimination_order(self):
+        """Sparse mode: hold each set's dofs in its factor's elimination order (fixed: the
+        symbolic factorisation is kept across renewals), so no solve permutes rows. G and
+        all Grams are sums over dofs, hence independent of the order."""
+        for st in self.sets:
+            order = getattr(getattr(getattr(st, "fac", None), "sym", None), "order", None)
+            st.ordered = order is not None and hasattr(st.fac, "solve_ordered")
+            if st.ordered:
+                st.F, st.Uref, st.w = st.F[order], st.Uref[order], st.w[order]
+                st.Bt = st.Bt[:, order].tocsr()
+            st.sw = np.sqrt(st.w)
+
     def _solve(self, st, rhs):
         if self.mode == "dense":
             return st.Kinv @ rhs
+        if st.ordered:
+            return st.fac.solve_ordered(np.array(rhs, float, order="C"))
         return st.fac.solve(rhs).reshape(rhs.shape)
 
     def _base_state(self):
@@ -376,21 +391,24 @@ class IncrementalG:
         up = [int(x) for x in self.upcoming[: self.batch - 1]]
         springs = list(dict.fromkeys([e, *up]))[: self.batch]
         q = len(springs)
-        self.Yt.fill(0.0)
-        for s, st in enumerate(self.sets):
+        sp_arr = np.asarray(springs)
+        cols = np.broadcast_to(np.arange(q)[:, None], (q, self.gi.shape[2]))
+        for s, st in enumerate(self.sets):   # only rows < st.n of the first q of Yt are read
             if st.n == 0:
                 continue
-            rows = st.Bt[springs]
             if self.mode == "dense":   # rows of the symmetric inverse: 4 n flops per spring
-                self.Yt[s, :q, :st.n] = rows @ st.Kinv
-            else:
-                self.Yt[s, :q, :st.n] = self._solve(st, np.asfortranarray(rows.T.toarray())).T
+                self.Yt[s, :q, :st.n] = st.Bt[springs] @ st.Kinv
+            else:                      # b_e as columns, scattered from the gather maps
+                rhs = np.zeros((st.n, q))
+                np.add.at(rhs, (self.gi[sp_arr, s], cols), self.gv[sp_arr, s])
+                self.Yt[s, :q, :st.n] = self._solve(st, rhs).T
         self.col = {sp: j for j, sp in enumerate(springs)}
         self._last_j = -1
         self._batch_grams(springs, self.m)
 
     def _batch_grams(self, springs, m0):
         """V^T W Y (first m0 rows), Y^T W Y, Y^T r0, b_j^T y_j for the batch (BLAS-3)."""
+        from scipy.linalg.blas import dsyrk as syrk
         q = len(springs)
         sp_arr = np.asarray(springs)
         gi, gv = self.gi[sp_arr], self.gv[sp_arr]            # (q, S, P)
@@ -400,7 +418,8 @@ class IncrementalG:
             n = st.n
             Y = self.Yt[s, :q, :n]
             WY = Y * st.w
-            self.YY[s, :q, :q] = WY @ Y.T
+            YY = syrk(1.0, (Y * st.sw).T, trans=1)         # upper triangle: half the flops of WY Y^T
+            self.YY[s, :q, :q] = np.triu(YY) + np.triu(YY, 1).T
             self.YR[s, :q] = Y @ self.R0[s, :n]
             if m0:
                 self.AV[s, :m0, :q] = self.T[s, :m0, :m0].T @ (self.Zt[s, :m0, :n] @ WY.T)

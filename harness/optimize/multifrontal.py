@@ -166,6 +166,15 @@ class MultifrontalCholesky:
                 self.L11 = self.L21 = None
         return self._flat_cache
 
+    def solve_ordered(self, b: np.ndarray) -> np.ndarray:
+        """Solve in place for a C-contiguous (n, q) right-hand side already in elimination
+        order (``sym.order``): callers that keep their vectors in that order (the SA engine)
+        skip the two row permutations of every solve. Needs numba."""
+        from harness.optimize.linalg import single_thread_blas
+        with single_thread_blas():
+            _subst_kernel()(b, *self._flat())
+        return b
+
     def _solve_compiled(self, rhs):
         order = self.sym.order
         b = np.ascontiguousarray(rhs[order])
