@@ -222,6 +222,25 @@ def test_init_equilibrium_gap_then_output_error_refines_a_noisy_reference():
         optimize(noisy, "equilibrium-gap", {"target": 1e-3}, seed=0)
 
 
+def test_gauss_newton_stops_converged_at_the_noise_floor():
+    """On a noisy reference the best G is unknown but at most G(k_true), the fit of the true
+    constants (more parameters than the noise's degrees of freedom can only fit part of it):
+    gauss-newton must end below that floor and say "converged" long before maxiter; with
+    ftol = 0 it runs on (until maxiter or until no step descends) and gains less than 1e-6
+    relative after the converged stop."""
+    from harness.bench.fit import noisy
+    prob, k_true = recoverable_problem((12, 12), sigma=0.1, seed=2, diagonals="face")
+    p = noisy(prob, 1e-4, seed=7)
+    floor = p.G(k_true)
+    res = optimize(p, "gauss-newton", {"init": "equilibrium-gap", "maxiter": 200}, seed=0)
+    assert res.info["stop"] == "converged" and res.info["iterations"] < 100
+    assert res.G_final < floor
+    longer = optimize(p, "gauss-newton", {"init": "equilibrium-gap", "maxiter": res.info["iterations"] + 15, "ftol": 0.0},
+                      seed=0)
+    assert longer.info["iterations"] > res.info["iterations"]     # ran on (to maxiter or to no-descent)
+    assert longer.G_final >= res.G_final * (1 - 1e-6)
+
+
 def test_with_reference_equals_a_fresh_problem():
     pts, spr, _ = grid_network((5, 4))
     names, frees, forces = basic_loads(pts)

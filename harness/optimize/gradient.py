@@ -330,6 +330,8 @@ GN_DEFAULTS = dict(
     max_seconds=None,
     target=0.0,         # stop when G / G(k0) <= target
     init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
+    ftol=1e-8,          # converged (as MINPACK's lmder): an accepted step lowers G^2, and its model
+                        # predicts, by less than ftol * G^2; or the damping exceeds 1e12 x its start
 )
 
 
@@ -431,7 +433,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         else:
             diag = np.ones(npar)
         if mu is None:
-            mu = opts["mu"] * float(np.mean(diag))
+            mu = mu0 = opts["mu"] * float(np.mean(diag))
         A = spla_.LinearOperator((npar, npar), dtype=float,
                                  matvec=lambda v: reduce(Jc.rmatvec(Jc.matvec(expand(v)))) + mu * v)
         Minv = spla_.LinearOperator((npar, npar), dtype=float, matvec=lambda v: v / (diag + mu))
@@ -463,16 +465,20 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
                 break
         actual = 0.5 * (Jc.G2 - Jn.G2)
         if actual > 0:
+            small = 2 * max(actual, pred) <= float(opts["ftol"]) * Jc.G2
             x, Jc = xn, Jn
             rho = actual / max(pred, 1e-300)
             mu *= 1 / 3 if (t == 1.0 and rho > 0.75) else (1.0 if t == 1.0 and rho > 0.25 else 4.0)
         else:
             mu *= 16.0
+            small = mu > 1e12 * mu0
+        if small and stop != "max_seconds":
+            stop = "converged"
         trace.append((nit, np.sqrt(Jc.G2)))
         done_its = nit
         if status is not None:
             status(f"gauss-newton it {nit} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}")
-        if stop == "max_seconds":
+        if stop in ("max_seconds", "converged"):
             break
     k = problem.k_of(np.exp(x))
     G_final = float(np.sqrt(Jc.G2))          # from a fresh factorisation at k (no incremental state)
