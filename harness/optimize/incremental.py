@@ -36,6 +36,7 @@ grows with m (:func:`auto_interval`).
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg.blas import dsyrk as syrk
 
 from harness.optimize.problem import FitProblem
 
@@ -354,10 +355,12 @@ class IncrementalG:
         """Sparse mode: hold each set's dofs in its factor's elimination order (fixed: the
         symbolic factorisation is kept across renewals), so no solve permutes rows. G and
         all Grams are sums over dofs, hence independent of the order."""
+        from harness.optimize.multifrontal import MultifrontalCholesky, _subst_kernel
         for st in self.sets:
-            order = getattr(getattr(getattr(st, "fac", None), "sym", None), "order", None)
-            st.ordered = order is not None and hasattr(st.fac, "solve_ordered")
+            fac = getattr(st, "fac", None)
+            st.ordered = isinstance(fac, MultifrontalCholesky) and _subst_kernel() is not None
             if st.ordered:
+                order = fac.sym.order
                 st.F, st.Uref, st.w = st.F[order], st.Uref[order], st.w[order]
                 st.Bt = st.Bt[:, order].tocsr()
             st.sw = np.sqrt(st.w)
@@ -408,7 +411,6 @@ class IncrementalG:
 
     def _batch_grams(self, springs, m0):
         """V^T W Y (first m0 rows), Y^T W Y, Y^T r0, b_j^T y_j for the batch (BLAS-3)."""
-        from scipy.linalg.blas import dsyrk as syrk
         q = len(springs)
         sp_arr = np.asarray(springs)
         gi, gv = self.gi[sp_arr], self.gv[sp_arr]            # (q, S, P)
