@@ -228,7 +228,7 @@ def test_gauss_newton_stops_converged_at_the_noise_floor():
     gauss-newton must end below that floor and say "converged" long before maxiter; with
     ftol = 0 it runs on (until maxiter or until no step descends) and gains less than 1e-6
     relative after the converged stop."""
-    from harness.bench.fit import noisy
+    from harness.optimize.synthetic import noisy
     prob, k_true = recoverable_problem((12, 12), sigma=0.1, seed=2, diagonals="face")
     p = noisy(prob, 1e-4, seed=7)
     floor = p.G(k_true)

@@ -34,7 +34,7 @@ import numpy as np
 import pandas as pd
 
 from harness.optimize import optimize
-from harness.optimize.synthetic import recoverable_problem
+from harness.optimize.synthetic import noisy, recoverable_problem
 
 FULL = [((100, 100), 1e-4, 60.0), ((20, 20, 20), 1e-2, 60.0)]
 QUICK = [((30, 30), 1e-4, 15.0), ((8, 8, 8), 1e-2, 15.0)]
@@ -45,13 +45,6 @@ SIGMA = 0.1
 SEED = 0            # the truth's perturbation (recoverable_problem) and the optimisers' seed
 NOISE = 1e-6        # noisy rows: noise / rms displacement of each load
 NOISE_SEED = 1
-
-
-def noisy(prob, noise: float, seed: int):
-    """The problem with its reference perturbed by noise * rms(u_ref) N(0, 1) per load."""
-    rng = np.random.default_rng(seed)
-    return prob.with_reference([b.u_ref + noise * float(np.sqrt(np.mean(b.u_ref ** 2))) * rng.standard_normal(len(b.u_ref))
-                                for b in prob.blocks])
 
 
 def run(quick: bool = False) -> pd.DataFrame:

@@ -419,12 +419,11 @@ class IncrementalG:
         for s, st in enumerate(self.sets):
             n = st.n
             Y = self.Yt[s, :q, :n]
-            WY = Y * st.w
-            YY = syrk(1.0, (Y * st.sw).T, trans=1)         # upper triangle: half the flops of WY Y^T
+            YY = syrk(1.0, (Y * st.sw).T, trans=1)         # upper triangle: half the flops of (Y W) Y^T
             self.YY[s, :q, :q] = np.triu(YY) + np.triu(YY, 1).T
             self.YR[s, :q] = Y @ self.R0[s, :n]
             if m0:
-                self.AV[s, :m0, :q] = self.T[s, :m0, :m0].T @ (self.Zt[s, :m0, :n] @ WY.T)
+                self.AV[s, :m0, :q] = self.T[s, :m0, :m0].T @ (self.Zt[s, :m0, :n] @ (Y * st.w).T)
 
     # --- proposals ---------------------------------------------------------------------
     @property

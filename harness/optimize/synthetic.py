@@ -135,3 +135,11 @@ def recoverable_problem(shape, sigma: float = 0.3, seed: int = 0, grouped: bool 
     blank = FitProblem.from_network(points, springs, k0, frees, forces, np.zeros_like(forces), w, names, groups=g)
     prob = blank.with_reference(blank.solve(k_true))  # fast solver (ND ordering); shares the setup
     return prob, k_true
+
+
+def noisy(prob, noise: float, seed: int):
+    """The problem with its reference perturbed by noise * rms(u_ref) N(0, 1) per load
+    (seeded): the best G is then unknown but at most G(k_true)."""
+    rng = np.random.default_rng(seed)
+    return prob.with_reference([b.u_ref + noise * float(np.sqrt(np.mean(b.u_ref ** 2))) * rng.standard_normal(len(b.u_ref))
+                                for b in prob.blocks])
