@@ -108,8 +108,9 @@ def test_beam336_MT0_reproduces_vol_txt():
 
 # -- the numpy forces (used by the other integrators, statics, Jacobians) vs the kernel ------------
 
-@pytest.mark.parametrize("kind", ["tetra", "hexa"])
-def test_numpy_and_compiled_engines_agree(kind):
+def engines_models(kind):
+    """A pushed cube_333 and its three models (classic springs, elements with and without
+    volume forces), for the engine comparisons."""
     mesh = read_mesh(REF / f"meshes/{kind}/cube_333/cube.mesh.push")
     cells = mesh.cells["tetra" if kind == "tetra" else "hexahedron"]
     dt = 0.004
@@ -119,6 +120,12 @@ def test_numpy_and_compiled_engines_agree(kind):
                                 kd=[0.04, 0.02, 0.01], kvs=5.0, kvd=0.04, volume=True),
               build_anisotropic(mesh.points, cells, azimuth=0.3, elevation=0.7, ks=[3, 2, 1, 2.5, 1.5, 0.5],
                                 kd=[0.04, 0.02, 0.01], volume=False, rest_angle="rest")]
+    return mesh, ld, dt, models
+
+
+@pytest.mark.parametrize("kind", ["tetra", "hexa"])
+def test_numpy_and_compiled_engines_agree(kind):
+    mesh, ld, dt, models = engines_models(kind)
     for m in models:
         a = simulate(m, ld, dt, 200, engine="numba", snapshots=(200,))
         b = simulate(m, ld, dt, 200, engine="numpy", integrator="verlet", snapshots=(200,))
@@ -127,6 +134,57 @@ def test_numpy_and_compiled_engines_agree(kind):
         np.testing.assert_allclose(a.volume, b.volume, rtol=1e-12)
         c = simulate(m, ld, dt, 200, engine="numba", threads=2)
         assert np.array_equal(a.x, c.x)                         # two threads: the same bits
+
+
+def test_kernels_leave_no_rounding_to_llvm():
+    """The same-bits contract of the two-thread loop needs every compiled copy of a block
+    kernel to round alike. With fastmath={"contract"} LLVM chose per copy which products
+    to fuse, and numba keeps several copies (one per caller's module; a cached caller
+    brings its own): run_serial loaded from the cache and run_threads compiled in the
+    process then differed in the last bits of the hexa volume model. Fusions are explicit
+    fma() calls instead."""
+    from harness.models.bc2000 import codegen
+    src = codegen.source()
+    assert "fastmath" not in src
+    assert src.count("fma(") > 100
+
+
+_CACHE_HISTORY = """
+import sys, hashlib
+import numpy as np
+sys.path.insert(0, {tests!r})
+from test_bc2000 import engines_models
+from harness.dynamics import simulate
+mesh, ld, dt, models = engines_models("hexa")
+for m in models:
+    for t in sys.argv[1]:
+        x = simulate(m, ld, dt, 50, engine="numba", threads=int(t)).x
+        print(t, hashlib.sha1(x.tobytes()).hexdigest())
+"""
+
+
+@pytest.mark.slow
+def test_two_threads_same_bits_whatever_the_cache_history(tmp_path):
+    """The condition of the flaky failure (minutes: compiles the kernels twice): a fresh
+    numba cache filled by a process that ran only the serial loop, then a process that
+    loads run_serial from it and compiles run_threads itself."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
+    script = _CACHE_HISTORY.format(tests=str(Path(__file__).parent))
+
+    def run(order):
+        out = subprocess.run([sys.executable, "-c", script, order], env=env, capture_output=True, text=True,
+                             timeout=1800)
+        assert out.returncode == 0, out.stderr[-3000:]
+        return [line.split() for line in out.stdout.splitlines()]
+
+    first = run("1")                   # fills the cache with run_serial only
+    second = run("12")                 # run_serial from the cache, run_threads compiled here
+    assert len(first) == 3 and len(second) == 6
+    for k in range(3):
+        assert second[2 * k][1] == second[2 * k + 1][1] == first[k][1], k
 
 
 def test_parallel_spring_kernel_matches_numpy():

@@ -13,8 +13,14 @@ are one column of a block matrix S (rows: LAYOUT), built once by pack.py.
 The formulas are the program's (README of the reference data), rearranged: an axis
 l = P - P' = sum_i (c_i - c'_i) x_i is interpolated with the difference weights W (one
 weight per vertex instead of two ends), a force G on the axis goes back to the vertices
-as W_i G, and products feeding sums are fused (FMA). The results therefore differ from
-the program's in the last bits: on the recorded runs (cube_343 MS / MT0 / MT, 2500 steps;
+as W_i G, and products feeding sums are fused: written out as fma(a, b, c) (llvm.fma, one
+rounding), in a fixed order. The kernels carry no fast-math flags: LLVM may not contract,
+reassociate or approximate anything itself, so the bits are fixed by this source, not by
+how a function was optimised. (With fastmath={"contract"} they were not: whether LLVM fused
+a given product depended on the module it was optimised in, i.e. on whether a caller was
+compiled in this process or loaded from numba's cache, so run_serial and run_threads could
+disagree in the last bits depending on the cache's history; tests/test_bc2000.py checks.)
+The results differ from the program's in the last bits: on the recorded runs (cube_343 MS / MT0 / MT, 2500 steps;
 beam_336 MT0) the particles stay within 4e-15 m of the program's states, the volume
 curves within 6e-13 percent; tests/test_bc2000.py checks 1e-6 m and 1e-9 percent.
 
@@ -60,13 +66,47 @@ position-Verlet loop, vectorised over blocks of {BLOCK} elements (see codegen.py
 
 import numpy as np
 from numba import njit, prange
+from numba.core import types
+from numba.extending import intrinsic
 
 BLOCK = {BLOCK}
 ONE = np.uint32(1)
 TWO = np.uint32(2)
+
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """a * b + c rounded once (llvm.fma.f64): the same bits scalar or vectorised, inlined
+    or not (the kernels have no fast-math flags, so LLVM fuses nothing else)."""
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        return builder.fma(*args)
+    return sig, codegen
 '''
 
-FAST = 'fastmath={"contract"}'
+
+def _p(e):
+    """Parenthesise an operand that is not a plain name or subscript."""
+    return f"({e})" if any(ch in e for ch in " +-*/") and not e.startswith("S[") and not e.startswith("P[") else e
+
+
+def dot(pairs, base=None):
+    """sum of the products a * b (plus base) as a chain of FMAs, first pair innermost:
+    fma(a_n, b_n, ... fma(a_2, b_2, a_1 * b_1))."""
+    (a, b), rest = pairs[0], pairs[1:]
+    acc = f"{_p(a)} * {_p(b)}" if base is None else f"fma({a}, {b}, {base})"
+    for a, b in rest:
+        acc = f"fma({a}, {b}, {acc})"
+    return acc
+
+
+def norm2(v):
+    return dot([(f"{v}{cc}", f"{v}{cc}") for cc in "xyz"])
+
+
+def dot3(u, v):
+    return dot([(f"{u}{cc}", f"{v}{cc}") for cc in "xyz"])
 
 
 def _S(r):
@@ -77,17 +117,17 @@ def spring_source():
     """Per block: P rows 0-2 the spring vector l = x_p - x_q, 3-5 the difference of the
     per-step displacements; R rows 0-2 the force on p (minus on q)."""
     r = rows("spring")
-    L = [f"@njit(cache=True, error_model=\"numpy\", {FAST})",
+    L = ["@njit(cache=True, error_model=\"numpy\")",
          "def spring_block(S, P, R):",
          "    for b in range(BLOCK):"]
     a = L.append
     for c, cc in enumerate("xyz"):
         a(f"        l{cc} = P[{c} * BLOCK + b]; v{cc} = P[{3 + c} * BLOCK + b]")
-    a("        A = np.sqrt(lx * lx + ly * ly + lz * lz)")
+    a(f"        A = np.sqrt({norm2('l')})")
     a("        I = 1.0 / A")
     for cc in "xyz":
         a(f"        n{cc} = l{cc} * I")
-    a(f"        s = -({_S(r['ks'])} * (A - {_S(r['L0'])}) + {_S(r['kd'])} * (vx * nx + vy * ny + vz * nz))")
+    a(f"        s = -fma({_S(r['ks'])}, A - {_S(r['L0'])}, {_S(r['kd'])} * {dot3('v', 'n')})")
     for c, cc in enumerate("xyz"):
         a(f"        R[{c} * BLOCK + b] = n{cc} * s")
     return "\n".join(L)
@@ -99,24 +139,20 @@ def _axes(a, nv, r):
         a("        " + "; ".join(f"w{ax}_{i} = {_S(r['W'] + nv * ax + i)}" for i in range(nv)))
         for cc in "xyz":
             for pre, src in (("l", "p"), ("v", "u")):
-                expr = f"w{ax}_0 * {src}0{cc}"
-                for i in range(1, nv):
-                    expr = f"{expr} + w{ax}_{i} * {src}{i}{cc}"
-                a(f"        {pre}{ax}{cc} = {expr}")
-        a(f"        A{ax} = np.sqrt(l{ax}x * l{ax}x + l{ax}y * l{ax}y + l{ax}z * l{ax}z)")
+                a(f"        {pre}{ax}{cc} = " + dot([(f"w{ax}_{i}", f"{src}{i}{cc}") for i in range(nv)]))
+        a(f"        A{ax} = np.sqrt({norm2(f'l{ax}')})")
         a(f"        I{ax} = 1.0 / A{ax}")
         for cc in "xyz":
             a(f"        n{ax}{cc} = l{ax}{cc} * I{ax}")
     for j, (p, q) in enumerate(((0, 1), (0, 2), (1, 2))):
-        a(f"        K{p}{q} = -({_S(r['ks'] + 3 + j)} * ((n{p}x * n{q}x + n{p}y * n{q}y + n{p}z * n{q}z)"
-          f" - {_S(r['cos0'] + j)}))")
+        a(f"        K{p}{q} = -({_S(r['ks'] + 3 + j)} * ({dot3(f'n{p}', f'n{q}')} - {_S(r['cos0'] + j)}))")
     for ax in range(3):
-        a(f"        s{ax} = -({_S(r['ks'] + ax)} * (A{ax} - {_S(r['L0'] + ax)}) + {_S(r['kd'] + ax)}"
-          f" * (v{ax}x * n{ax}x + v{ax}y * n{ax}y + v{ax}z * n{ax}z))")
+        a(f"        s{ax} = -fma({_S(r['ks'] + ax)}, A{ax} - {_S(r['L0'] + ax)}, {_S(r['kd'] + ax)}"
+          f" * {dot3(f'v{ax}', f'n{ax}')})")
     for cc in "xyz":
-        a(f"        G0{cc} = n0{cc} * s0 + K01 * n1{cc} + K02 * n2{cc}")
-        a(f"        G1{cc} = n1{cc} * s1 + K01 * n0{cc} + K12 * n2{cc}")
-        a(f"        G2{cc} = n2{cc} * s2 + K02 * n0{cc} + K12 * n1{cc}")
+        a(f"        G0{cc} = " + dot([(f"n0{cc}", "s0"), ("K01", f"n1{cc}"), ("K02", f"n2{cc}")]))
+        a(f"        G1{cc} = " + dot([(f"n1{cc}", "s1"), ("K01", f"n0{cc}"), ("K12", f"n2{cc}")]))
+        a(f"        G2{cc} = " + dot([(f"n2{cc}", "s2"), ("K02", f"n0{cc}"), ("K12", f"n1{cc}")]))
 
 
 def element_source(kind):
@@ -124,7 +160,7 @@ def element_source(kind):
     displacement; R rows 3i+c the force on vertex i. Two loops (with and without the
     volume force) so that neither computes what it does not need."""
     nv, r = NV[kind], rows(kind)
-    L = [f"@njit(cache=True, error_model=\"numpy\", {FAST})",
+    L = ["@njit(cache=True, error_model=\"numpy\")",
          f"def {kind}_block(S, P, R, vol):"]
     a = L.append
     for with_vol in (True, False):
@@ -138,7 +174,7 @@ def element_source(kind):
         _axes(b, nv, r)
         for i in range(nv):
             for cc in "xyz":
-                b(f"        r{i}{cc} = w0_{i} * G0{cc} + w1_{i} * G1{cc} + w2_{i} * G2{cc}")
+                b(f"        r{i}{cc} = " + dot([(f"w{ax}_{i}", f"G{ax}{cc}") for ax in range(3)]))
         if with_vol:
             for cc in "xyz":
                 b(f"        g{cc} = {1.0 / nv!r} * (" + " + ".join(f"p{i}{cc}" for i in range(nv)) + ")")
@@ -147,22 +183,22 @@ def element_source(kind):
             for i in range(nv):
                 for cc in "xyz":
                     b(f"        d{i}{cc} = p{i}{cc} - g{cc}")
-                b(f"        R{i} = np.sqrt(d{i}x * d{i}x + d{i}y * d{i}y + d{i}z * d{i}z)")
+                b(f"        R{i} = np.sqrt({norm2(f'd{i}')})")
             if kind == "tet":    # the sum-of-distances form
                 b(f"        K = -({_S(r['kvs'])} * (R0 + R1 + R2 + R3 - {_S(r['D0'])}))")
                 for i in range(nv):
                     b(f"        J{i} = K / R{i}")
                     for c, cc in enumerate("xyz"):
-                        b(f"        R[{3 * i + c} * BLOCK + b] = r{i}{cc} + d{i}{cc} * J{i}")
+                        b(f"        R[{3 * i + c} * BLOCK + b] = fma(d{i}{cc}, J{i}, r{i}{cc})")
             else:                # eight damped radial springs
                 for i in range(nv):
                     b(f"        J{i} = 1.0 / R{i}")
                     for cc in "xyz":
                         b(f"        m{i}{cc} = d{i}{cc} * J{i}")
-                    b(f"        s = -({_S(r['kvs'])} * (R{i} - {_S(r['D0'] + i)}) + {_S(r['kvd'])}"
-                      f" * ((u{i}x - hx) * m{i}x + (u{i}y - hy) * m{i}y + (u{i}z - hz) * m{i}z))")
+                    rel = dot([(f"u{i}{cc} - h{cc}", f"m{i}{cc}") for cc in "xyz"])
+                    b(f"        s = -fma({_S(r['kvs'])}, R{i} - {_S(r['D0'] + i)}, {_S(r['kvd'])} * {rel})")
                     for c, cc in enumerate("xyz"):
-                        b(f"        R[{3 * i + c} * BLOCK + b] = r{i}{cc} + m{i}{cc} * s")
+                        b(f"        R[{3 * i + c} * BLOCK + b] = fma(m{i}{cc}, s, r{i}{cc})")
         else:
             for i in range(nv):
                 for c, cc in enumerate("xyz"):
