@@ -100,6 +100,10 @@ REFERENCE = {
     "max_refine": Field("int", 3, min=0),
     "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg")),
     "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
+    "method": Field("str", "auto", choices=("auto", "graded", "refine"),
+                    doc="graded: Q2 hexes/quads graded towards the faces, levels extrapolated "
+                        "(boxes, rectangles); refine: uniform/adaptive refinement of the cell's mesh; "
+                        "auto: graded for a box unless cell or element say otherwise, else refine"),
 }
 
 TOP = {
@@ -181,6 +185,7 @@ class ReferenceSpec:
     max_refine: int = 3
     solver: str = "auto"
     modes: int = 6
+    method: str = "refine"   # resolved: "graded" or "refine"
 
 
 @dataclass(frozen=True)
@@ -425,7 +430,18 @@ def _reference(r: dict, dim: int, body: Body, file: str) -> ReferenceSpec:
                         fix="tri/quad in 2-D, tet/hex in 3-D")
     if body.shape == "polygon" and cell == "quad":
         raise CaseError("a polygon is meshed with triangles", file=file, field="reference.cell", fix="use tri")
-    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], r["max_refine"], r["solver"], r["modes"])
+    method = r["method"]
+    if method == "auto":
+        method = "graded" if (body.shape == "box" and r["cell"] in (None, "hex") and r["element"] == "P2") else "refine"
+    if method == "graded":
+        if body.shape not in ("rectangle", "box"):
+            raise CaseError(f"graded reference meshes need a rectangle or box (the body is a {body.shape})",
+                            file=file, field="reference.method", fix="use method = \"refine\"")
+        if r["cell"] not in (None, "quad", "hex") or r["element"] != "P2":
+            raise CaseError("graded reference meshes are Q2 quadrilaterals/hexahedra", file=file,
+                            field="reference.method", fix="drop reference.cell and element, or use method = \"refine\"")
+        cell = "quad" if dim == 2 else "hex"
+    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], r["max_refine"], r["solver"], r["modes"], method)
 
 
 def find_cases(paths) -> list[Path]:

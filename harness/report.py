@@ -11,9 +11,14 @@ Layout written by :mod:`harness.runner`::
 Summary columns: ``case, model, stage, seed, status, mode`` (quick or full), then the sizes and rule columns
 (``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, objective,
 grouped, weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
-``weights``, ``G_norm_initial, G_norm_final, G_s_initial, G_s_final, G_abc_initial,
+``weights``, ``G_norm_initial, G_norm_final, G_ref, ref_error_max, G_s_initial, G_s_final, G_abc_initial,
 G_abc_final, freq_error, f1_ratio, freq_error_initial, freq_error_final``), then every other column a stage wrote, sorted by
-name, then ``seconds`` and ``error``. A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
+name, then ``seconds`` and ``error``. ``G_ref`` is the reference's own estimated error as a
+normalised G (same weights, loads and nodes as the row's ``G_norm_*``; harness.scoring.g_ref_arrays),
+``ref_error_max`` its largest point value relative to the largest reference displacement.
+``status``: ``ok``; ``ref-coarse`` (scored, but G_ref > 10 % of the row's final normalised G
+or the reference missed its tol: kept in every table, mean and paper comparison, and flagged);
+``error`` (excluded from the numbers). A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
 ``ratio_<col>`` = ours / paper right after ``<col>`` (only on rows that have ``<col>``);
 rows with ``G_initial`` != ``G_final`` get ``improvement`` = G_initial / G_final and, where
 the paper gives both, ``paper_improvement``. ``values = {G_final = 0.55}`` applies
@@ -61,11 +66,13 @@ from harness.errors import SpringbenchError
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
-        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final", "G_abc_initial",
-        "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final", "error_estimate",
+        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_ref", "ref_error_max", "G_s_initial",
+        "G_s_final", "G_abc_initial", "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final", "error_estimate",
         "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
         "static_status"]
 TAIL = ["seconds", "error"]
+SCORED = ("ok", "ref-coarse")   # row statuses whose numbers count (ref-coarse: kept, flagged)
+REF_COARSE = "ref-coarse"
 TIMING = re.compile(r"^(seconds|time|wall)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
 
@@ -102,7 +109,7 @@ def _with_expect(row: dict, expect: dict) -> dict:
     per_model = expect.get(row.get("model")) if isinstance(row.get("model"), str) else None
     if isinstance(per_model, dict):
         flat.update({k: v for k, v in per_model.items() if _num(v)})
-    if row.get("status", "ok") != "ok":
+    if row.get("status", "ok") not in SCORED:
         return row
     for col, paper in flat.items():
         ours = row.get(col)
@@ -174,7 +181,7 @@ def seeds_frame(df):
     import pandas as pd
     if df.empty or "seed" not in df or "status" not in df:
         return pd.DataFrame()
-    ok = df[df["status"] == "ok"]
+    ok = df[df["status"].isin(SCORED)]
     n_seeds = ok.groupby("case")["seed"].nunique()
     multi = ok[ok["case"].isin(n_seeds[n_seeds > 1].index)]
     if multi.empty:
@@ -187,11 +194,14 @@ def seeds_frame(df):
     out = g[num].agg(["mean", "std"])
     out.columns = [f"{c}_{s}" for c, s in out.columns]
     out.insert(0, "n_seeds", g["seed"].nunique())
+    if (multi["status"] == REF_COARSE).any():   # the flag: how many of the averaged rows are ref-coarse
+        out.insert(1, "n_ref_coarse", g["status"].agg(lambda s: int((s == REF_COARSE).sum())))
     return out.reset_index()
 
 
 OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_params", "budget", "G_initial",
-                     "G_final", "G_final_vs_sa", "seconds", "seconds_to_sa_G", "opt_evaluations", "evals_to_sa_G",
+                     "G_final", "G_final_vs_sa", "G_norm_final", "G_ref", "status", "seconds", "seconds_to_sa_G",
+                     "opt_evaluations", "evals_to_sa_G",
                      "opt_iterations", "opt_stop", "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k",
                      "f1_ratio", "freq_error_initial", "freq_error_final"]
 
@@ -205,7 +215,7 @@ def optimizer_frame(df):
         return pd.DataFrame()
     opt = df[df["optimizer"].notna() & (df["optimizer"] != "none")]
     if "status" in opt:
-        opt = opt[opt["status"] == "ok"]
+        opt = opt[opt["status"].isin(SCORED)]
     if opt.empty or opt.groupby("case")["optimizer"].nunique().max() < 2:
         return pd.DataFrame()
     opt = opt.copy()
@@ -222,6 +232,8 @@ def optimizer_frame(df):
     out = g[num].mean()
     for c in text:
         out[c] = g[c].first()
+    if "status" in opt:   # flagged if any seed's row is
+        out["status"] = g["status"].agg(lambda s: REF_COARSE if (s == REF_COARSE).any() else "ok")
     out.insert(0, "n_seeds", g["seed"].nunique())
     out = out.reset_index()
     return out[[c for c in OPTIMIZER_COLUMNS if c in out]]
@@ -249,6 +261,17 @@ def markdown_table(df) -> str:
     for row in df.itertuples(index=False):
         lines.append("| " + " | ".join(_cell(v) for v in row) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _flagged(df):
+    """The table for Markdown with ref-coarse rows marked: their ``G_ref`` cell gets a
+    trailing ``!`` (the status column says "ref-coarse")."""
+    if "status" not in df or "G_ref" not in df or not (df["status"] == REF_COARSE).any():
+        return df
+    df = df.copy()
+    coarse = (df["status"] == REF_COARSE).to_numpy()
+    df["G_ref"] = [(_cell(v) + " !" if c else _cell(v)) for v, c in zip(df["G_ref"], coarse)]
+    return df
 
 
 # -- building -----------------------------------------------------------------------------
@@ -282,12 +305,20 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     elif seeds_path.exists():
         seeds_path.unlink()
     n_err = int((df.get("status") == "error").sum()) if "status" in df else 0
+    n_coarse = int((df.get("status") == REF_COARSE).sum()) if "status" in df else 0
     key = key_columns(df.columns)
     md = [f"# {suite_dir.name}\n",
-          f"{len(manifests)} results, {len(df)} rows, {n_err} errors. The key columns are shown; "
-          f"all {len(df.columns)} (per-load G, stage details) are in summary.csv; column meanings in "
+          f"{len(manifests)} results, {len(df)} rows, {n_err} errors, {n_coarse} ref-coarse. The key columns "
+          f"are shown; all {len(df.columns)} (per-load G, stage details) are in summary.csv; column meanings in "
           "harness/report.py. The papers' absolute G depends on units they do not state: compare "
-          "`improvement` with `paper_improvement`, and trends.\n", markdown_table(df[key])]
+          "`improvement` with `paper_improvement`, and trends.\n"]
+    if n_coarse:
+        md.append(f"**{n_coarse} rows are `ref-coarse`**: the reference's own estimated error at the row's "
+                  "nodes (`G_ref`, a normalised G like `G_norm_final`) is more than 10 % of the row's "
+                  "normalised G, or the reference missed its `tol`; their G says as much about the "
+                  "reference as about the model. They stay in every table and mean, marked by their status and "
+                  "a `!` after `G_ref`.\n")
+    md.append(markdown_table(_flagged(df[key])))
     if not seeds.empty:
         md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
     opts = optimizer_frame(df)
@@ -298,7 +329,9 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches SA's G_final; "
                "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
                "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS relative error "
-               "of the first natural frequencies against the FEM.\n", markdown_table(opts)]
+               "of the first natural frequencies against the FEM; `G_ref`: the reference's own error as a "
+               "normalised G (compare with `G_norm_final`); `status` ref-coarse if any seed's row is.\n",
+               markdown_table(opts)]
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
     atomic_write(md_path, "\n".join(md).encode())

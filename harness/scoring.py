@@ -84,3 +84,88 @@ def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
     res = statics or st.solve(network, case)
     u_ref = reference_displacements(ref, network.points, res.names)
     return g_arrays(u_ref, res.u, network.classes, case_weights(case, weights), res.names)
+
+
+# -- the reference's own error beside every score (DESIGN.md) ---------------------------
+
+REF_COARSE_FRACTION = 0.1   # G_ref above this fraction of a row's normalised G: "ref-coarse"
+
+
+def g_ref_arrays(u_ref: np.ndarray, e: np.ndarray, classes: np.ndarray, weights) -> tuple[float, np.ndarray]:
+    """G_ref: the normalised G of :func:`g_arrays` with the reference's estimated error
+    e_p = |u_h - u|(p) in place of |u_ref - u|, same weights and nodes:
+
+        G_ref = sqrt(sum_i sum_p w_p e_{i,p}^2) / sqrt(sum_i sum_p w_p |u_ref,i(p)|^2)
+
+    u_ref (L, n, dim), e (L, n) in displacement units, classes (n,), weights (a, b, c).
+    Returns (total, per load (L,)); NaN where e is NaN (no estimate) or u_ref is zero."""
+    u_ref = np.asarray(u_ref, float)
+    e = np.asarray(e, float)
+    if u_ref.ndim != 3 or e.shape != u_ref.shape[:2]:
+        raise ValueError(f"u_ref {u_ref.shape} must be (loads, nodes, dim) and e {e.shape} (loads, nodes)")
+    w = node_weights(classes, weights)
+    err = np.einsum("p,lp->l", w, e ** 2)
+    ref = np.einsum("p,lpd->l", w, u_ref ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        per = np.sqrt(err / ref)
+        total = float(np.sqrt(err.sum() / ref.sum())) if ref.sum() > 0 else float("nan")
+    return total, per
+
+
+def ref_error_max(u_ref: np.ndarray, e: np.ndarray) -> float:
+    """The largest estimated error e (L, n) over loads and nodes relative to the largest
+    |u_ref| (L, n, dim): dimensionless; NaN if any estimate is NaN or u_ref is zero."""
+    e = np.asarray(e, float)
+    umax = float(np.linalg.norm(np.asarray(u_ref, float), axis=-1).max()) if np.size(u_ref) else 0.0
+    if not e.size or not umax > 0 or np.isnan(e).any():
+        return float("nan")
+    return float(e.max() / umax)
+
+
+def reference_error(ref, points: np.ndarray, names) -> np.ndarray:
+    """(L, n): the reference's estimated absolute error |u_h - u| at points per load
+    (``ref.error_estimate(points, load)``); NaN where the reference gives none (a
+    reference whose ``error_estimate`` is only the {load: relative} dict: that times
+    ``u_max(load)``, the uniform bound)."""
+    points = np.asarray(points, float)
+    est = getattr(ref, "error_estimate", None)
+    out = np.full((len(names), len(points)), np.nan)
+    for i, name in enumerate(names):
+        if callable(est):
+            out[i] = np.asarray(est(points, name), float).reshape(len(points))
+        elif isinstance(est, Mapping) and name in est and hasattr(ref, "u_max"):
+            out[i] = float(est[name]) * float(ref.u_max(name))
+    return out
+
+
+def reference_met_tol(ref) -> bool | None:
+    """``ref.met_tol`` (every load met the case's reference tol); None if the reference
+    does not say (a stand-in)."""
+    m = getattr(ref, "met_tol", None)
+    if callable(m):
+        m = m()
+    return None if m is None else bool(m)
+
+
+def ref_status(g_ref: float, g_norm: float, met_tol: bool | None) -> str:
+    """"ref-coarse" if the reference missed its tol or its own error G_ref exceeds
+    REF_COARSE_FRACTION of the row's normalised G (a NaN G_ref alone is not enough:
+    it means no estimate, which ``met_tol`` then reports as missed); else "ok"."""
+    if met_tol is False:
+        return "ref-coarse"
+    if np.isfinite(g_ref) and not np.isnan(g_norm) and g_ref > REF_COARSE_FRACTION * g_norm:
+        return "ref-coarse"
+    return "ok"
+
+
+def ref_columns(ref, points: np.ndarray, names, u_ref: np.ndarray, classes: np.ndarray, weights) -> dict:
+    """The row columns of the reference's own error at a model's nodes for loads
+    ``names``: ``G_ref``, ``ref_error_max`` and ``ref_met_tol`` (the last only when the
+    reference says). Pair with :func:`ref_status` for the row's status."""
+    e = reference_error(ref, points, names)
+    g, _ = g_ref_arrays(u_ref, e, classes, weights)
+    out = {"G_ref": g, "ref_error_max": ref_error_max(u_ref, e)}
+    met = reference_met_tol(ref)
+    if met is not None:
+        out["ref_met_tol"] = met
+    return out

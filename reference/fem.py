@@ -42,7 +42,7 @@ class Discretisation:
         self.elem = element(self.cell, self.order)
         self.dim = self.mesh.p.shape[0]
         self.q_stiff, self.q_mass = quadrature_orders(self.cell, self.order)
-        self.mapping = self.mesh._mapping()
+        self.mapping = mapping(self.mesh)
         self.basis = skfem.CellBasis(self.mesh, self.elem, mapping=self.mapping,
                                      intorder=self.q_mass)
         self.dofs = self.basis.dofs
@@ -127,7 +127,8 @@ class Discretisation:
 
     def traction_load(self, facets: np.ndarray, vector) -> np.ndarray:
         """Load vector of a constant traction ``vector`` on ``facets``."""
-        fb = skfem.FacetBasis(self.mesh, self.elem, facets=facets, intorder=self.q_mass, dofs=self.dofs)
+        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=facets, intorder=self.q_mass,
+                              dofs=self.dofs)
         w = skfem.asm(skfem.LinearForm(lambda v, _: v), fb)  # int phi_a ds, (ns,)
         return (w[:, None] * np.asarray(vector, float)[None, :]).ravel()
 
@@ -166,6 +167,24 @@ class Discretisation:
             free = nr - int(np.sum(s > 1e-8 * (s[0] if len(s) else 1)))
             raise ModelError(f"load case '{load_name}': the constraints leave {free} rigid motion(s) free",
                              fix="constrain more parts or components")
+
+
+class _Isoparametric(skfem.MappingIsoparametric):
+    """scikit-fem's quad/hex mapping with a Newton tolerance that the rounding of the
+    coordinates allows: its absolute 1e-12 on the reference coordinates (summed over a
+    facet's quadrature points) cannot be met in the thin cells of a graded mesh far from
+    the origin. The iteration converges quadratically, so 1e-9 there is exact to
+    rounding in the positions of the quadrature points."""
+
+    def invF(self, x, tind=None, newton_max_iters=50, newton_tol=1e-12):
+        return super().invF(x, tind=tind, newton_max_iters=newton_max_iters, newton_tol=max(newton_tol, 1e-9))
+
+
+def mapping(mesh: skfem.Mesh):
+    """The mesh's own mapping (affine for simplices), with _Isoparametric for quads/hexes."""
+    if mesh.affine:
+        return mesh._mapping()
+    return _Isoparametric(mesh, mesh.elem(), mesh.bndelem)
 
 
 def strain_matrix(grad: np.ndarray) -> np.ndarray:

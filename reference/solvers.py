@@ -1,11 +1,56 @@
-"""Linear solves of the constrained stiffness: sparse direct (SuperLU), pyamg smoothed
-aggregation with the rigid-body modes as near-null space, or Jacobi-preconditioned CG.
+"""Linear solves of the constrained stiffness A x = b (symmetric positive definite, dofs
+interleaved ``dim * node + component``): the project's multifrontal sparse Cholesky,
+pyamg smoothed aggregation with the rigid-body modes as near-null space (preconditioner
+of CG), Jacobi-preconditioned CG, or SuperLU (kept for checking).
 
-``auto`` picks direct for small systems; SuperLU's fill-in makes 3-D direct solves
-impractical at ~1e5 dofs, where AMG-preconditioned CG is fast.
+A well-posed solve always finishes. Every method works on the equilibrated system
+D^-1/2 A D^-1/2 (unit diagonal: nothing depends on the units of A, b or the
+coordinates) and is accepted only when the true residual ||b - A x|| <= rtol ||b|| for
+every right-hand side (rtol = RTOL, or the double-precision floor of an ill-conditioned
+system, see FLOOR); otherwise the next method is tried: ``amg`` -> ``amg-strong``
+(energy-minimising prolongation, two smoothing sweeps, more iterations) -> ``cholesky``
+(-> ``superlu`` without coordinates). The iterative methods stop early once their
+convergence rate cannot reach RTOL within their iteration budget. A singular or
+non-finite system is one ModelError line.
+
+Measured (``/tmp`` script, the project's Discretisation as the bench uses it: a cube
+[0, 1]^3 clamped at x = 0, traction on x = 1, E = 1e3, nu = 0.3, two right-hand sides;
+CPU seconds of one process, the machine was shared and 2-core, wall times were 1-4x
+these; * = wall only). Cholesky = harness.optimize.multifrontal (single-threaded
+BLAS), AMG = pyamg SA + CG to RTOL (its = iterations):
+
+    mesh          dofs     SuperLU   Cholesky (Gflop, peak RSS)   AMG (its, peak RSS)
+    tet P2  8^3   13,872     9.4*       2.4* (11, 0.40 GB)          8.7* (38)
+    hex Q2  8^3   13,872     4.9        2.0  (  , 0.45 GB)          8.6  (32)
+    tet P2 10^3   26,460    27.7        4.9  (  , 0.74 GB)         12.9  (42)
+    tet P2 12^3   45,000   171*        23.2* (123, 1.43 GB)        34.5* (45)
+    hex Q2 12^3   45,000     -         13.8  (134, 1.57 GB)        22.8  (38)
+    tet P2 14^3   70,644     -         23.5  (271, 2.37 GB)        25.9  (42, 0.51 GB)
+    tet P2 16^3  104,544     -         51.1  (   , 3.9 GB)         29.3  (44, 0.64 GB)
+    hex Q2 16^3  104,544     -           -                         48.6  (37, 1.27 GB)
+    tet P2 18^3  147,852     -         87.7  (   , 5.8 GB)         38.1  (45, 0.86 GB)
+    tri P2 2-D   262,656  (95 s, old   11.5  (20, 1.5 GB)           15.5  (58)
+                            bench)
+
+Harder systems (tet P2, one right-hand side): 10:1 bar nu = 0.49, 19,440 dofs:
+Cholesky 1.8 s; AMG gives up after 40 iterations (rate 0.96), AMG-strong 95 its, 17.9 s
+in all. 2 x 1 x 0.5 box nu = 0.49, 14,688 dofs: Cholesky 1.4 s, AMG -> AMG-strong 13.9 s.
+The same box in units of 100 with E = 1e5 (nu = 0.45): Cholesky 1.4 s, AMG 7.2 s (76 its).
+10:1 bar nu = 0.49, 138,720 dofs (313 Gflop, so 'auto' starts with AMG): AMG gives up
+(28 s), AMG-strong is skipped (Cholesky estimated 32 s), Cholesky: 56 s CPU in all,
+2.6 GB (before the skip rule: AMG-strong 88 its, 142 s).
+
+Crossovers: the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and
+always in 2-D and on thin or nearly incompressible bodies (where AMG needs its strong
+setup); 'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at
+50-150k dofs, reused by the factorisation) and factorises when it predicts <= 300 Gflop
+and <= 2.5 GB, else starts with AMG (a 150k-dof 3-D cube: AMG, 0.9 GB). Without
+coordinates SuperLU is the direct method, up to 15k dofs in 3-D (150k in 2-D).
 """
 
 from __future__ import annotations
+
+import time
 
 import numpy as np
 import scipy.sparse as sp
@@ -13,52 +58,333 @@ import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
 
-# free dofs above which 'auto' uses pyamg (crossovers measured by `springbench bench
-# reference`: 3-D P2 direct 1.7 s vs amg 4.6 s at 11k dofs, 41 s vs 11 s at 36k; 2-D
-# direct 7 s vs 13 s at 66k, 95 s vs 42 s at 264k)
-DIRECT_MAX = {2: 150_000, 3: 20_000}
-RTOL = 1e-11
+# relative residual an accepted solve reaches, ||b - A x|| <= RTOL ||b||: the direct
+# solves (with one step of refinement) reach 1e-14..1e-12 on well-conditioned systems
+# (nu = 0.3 cubes) and ~1e-9 on a 10:1 bar with nu = 0.49; the solution error
+# (<= cond * residual relative in the worst case, far less for smooth loads) stays well
+# below any discretisation error
+RTOL = 1e-10
+# ... unless double precision cannot reach it: the residual of an exact solution rounded
+# to doubles is up to ~eps ||A|| ||x||, so a column is accepted at
+# max(RTOL, FLOOR eps ||A||_inf ||x|| / ||b||), at most DIRECT_RTOL (nu = 0.49, 10:1
+# bar, cond 4e7: the direct solves reach 6e-10, and eps ||A||_inf ||x|| / ||b|| = 5.6e-9;
+# all three are invariant under A -> a A, b -> c b, i.e. under any choice of units)
+FLOOR = 1.0
+# the weakest residual a direct solve is accepted with (a worse one means singular)
+DIRECT_RTOL = 1e-6
+# 'auto' factorises when the Cholesky's symbolic estimate is below both of these (else
+# AMG, falling back to the Cholesky): the measured break-even with AMG is ~300 Gflop
+# (see the table above); the estimate's memory (factor + 3 largest fronts) is within 10%
+# of the measured peak minus the assembled system, so a solve stays under ~3 GB
+CHOLESKY_GFLOP = 300.0
+CHOLESKY_GBYTES = 2.5
+# above these free dofs 'auto' goes to AMG without the symbolic estimate (3-D: a cube of
+# 300k dofs needs ~2e3 Gflop, a 10:1 bar 140k dofs 300 Gflop)
+SYMBOLIC_MAX = {2: 2_000_000, 3: 300_000}
+# the same choice for SuperLU (no coordinates for the Cholesky's nested dissection):
+# measured 3-D P2 SuperLU 9.4 s vs AMG 8.7 s at 14k dofs
+SUPERLU_MAX = {2: 150_000, 3: 15_000}
+AMG_MAXITER = 300
+STRONG_MAXITER = 1000
+CG_MAXITER = 20_000
+# after a failed AMG, 'amg-strong' is skipped when the Cholesky's estimated time
+# (SECONDS_PER_GFLOP per Gflop of its symbolic estimate, measured 0.09-0.1 s on one
+# core) is below twice the CPU time already spent, and otherwise gets that time as its
+# budget, as long as the factor fits in FALLBACK_GBYTES
+SECONDS_PER_GFLOP = 0.1
+CHOLESKY_OVERHEAD = 1.0
+FALLBACK_GBYTES = 6.0
+METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg")
 
 
 def choose(method: str, n: int, dim: int) -> str:
+    """For callers that pass neither ``coords`` nor ``near_null`` to a direct solve: 'direct'
+    or 'amg' for 'auto' by the SuperLU crossover :data:`SUPERLU_MAX` (every method falls
+    back by itself). Callers that have the coordinates pass 'auto' straight to ``solve``."""
     if method != "auto":
         return method
-    return "direct" if n <= DIRECT_MAX[dim] else "amg"
+    return "direct" if n <= SUPERLU_MAX[dim] else "amg"
 
 
-def solve(A: sp.csr_matrix, b: np.ndarray, method: str, near_null: np.ndarray | None = None) -> np.ndarray:
-    """Solve A x = b (b (n,) or (n, m)) for symmetric positive definite A."""
-    A = sp.csr_matrix(A)
-    b2 = b.reshape(len(b), -1)
-    if method == "direct":
-        lu = spla.splu(A.tocsc(), permc_spec="COLAMD")
-        x = lu.solve(np.ascontiguousarray(b2))
-    elif method == "amg":
-        import pyamg
-        ml = pyamg.smoothed_aggregation_solver(A, B=near_null, symmetry="hermitian")
-        x = np.column_stack([_amg_one(ml, A, col) for col in b2.T])
-    elif method == "cg":
-        d = A.diagonal()
-        P = spla.LinearOperator(A.shape, matvec=lambda v: v / d)
-        cols = []
-        for col in b2.T:
-            y, info = spla.cg(A, col, rtol=RTOL, atol=0.0, maxiter=20 * A.shape[0], M=P)
-            if info != 0:
-                raise ModelError(f"CG did not converge in {info} iterations", fix="use solver = 'amg' or 'direct'")
-            cols.append(y)
-        x = np.column_stack(cols)
+def _singular() -> ModelError:
+    return ModelError("the stiffness matrix is singular", fix="check the constraints")
+
+
+def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.ndarray | None = None, *,
+          coords: np.ndarray | None = None, info: dict | None = None) -> np.ndarray:
+    """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
+    hierarchy) for symmetric positive definite A; returns x shaped like b.
+
+    ``method``: 'auto' (by the Cholesky's estimated cost, see :data:`CHOLESKY_GFLOP`), 'direct' = 'cholesky'
+    (multifrontal; needs ``coords`` (n, dim) of the free dofs' locations, or recovers
+    them from ``near_null``, else SuperLU), 'superlu', 'amg' (with ``near_null`` (n, 3|6)
+    rigid-body modes of the free dofs) or 'cg'. An iterative method that does not reach
+    :data:`RTOL` falls back to a stronger AMG and then to the Cholesky. ``info``, when
+    given, is filled with ``method`` (what solved it: 'cholesky', 'superlu', 'amg',
+    'amg-strong' or 'cg'), ``fallbacks`` (what was tried before, each
+    ``{'method', 'residual', 'reason', 'seconds'}``), ``residual`` (max over the columns of
+    ||b - A x|| / ||b||), ``rtol`` (the tolerance it was accepted at, see :data:`FLOOR`),
+    ``iterations`` (iterative methods) and ``seconds``."""
+    t0 = time.perf_counter()
+    if method not in METHODS:
+        raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
+    A = sp.csr_matrix(A, dtype=float)
+    b = np.asarray(b, float)
+    n = A.shape[0]
+    b2 = b.reshape(n, -1)
+    rec = {"method": None, "fallbacks": [], "residual": 0.0, "rtol": RTOL, "iterations": 0, "seconds": 0.0}
+    if info is not None:
+        info.clear()
+        info.update(rec)
+        rec = info
+    if not (np.all(np.isfinite(A.data)) and np.all(np.isfinite(b2))):
+        raise _singular()
+    d = A.diagonal()
+    if n == 0:
+        rec.update(method="cholesky", seconds=time.perf_counter() - t0)
+        return np.zeros_like(b)
+    if not np.all(d > 0):
+        raise _singular()
+    # equilibration: As = S A S, S = D^-1/2; A x = b  <=>  As y = S b, x = S y
+    s = 1.0 / np.sqrt(d)
+    As = sp.csr_matrix(A.multiply(s[:, None]).multiply(s[None, :]))
+    bs = b2 * s[:, None]
+    bnorm = np.linalg.norm(b2, axis=0)
+    live = bnorm > 0
+    x = np.zeros_like(b2)
+
+    normA = float(np.max(abs(A) @ np.ones(n)))    # ||A||_inf >= ||A||_2 (symmetric)
+
+    def residual(xs):
+        """(max ||b - A x|| / ||b||, the largest ratio of a column's residual to its
+        tolerance, the tolerance of the worst column) over the nonzero columns."""
+        r = np.linalg.norm(b2[:, live] - A @ xs[:, live], axis=0) / bnorm[live]
+        tol = np.clip(FLOOR * np.finfo(float).eps * normA * np.linalg.norm(xs[:, live], axis=0) / bnorm[live],
+                      RTOL, DIRECT_RTOL)
+        if not np.all(np.isfinite(r)):
+            return np.inf, np.inf, RTOL
+        return float(r.max()), float(np.max(r / tol)), float(tol[np.argmax(r / tol)])
+
+    if not live.any():
+        rec.update(method="cholesky" if method in ("auto", "direct") else method, seconds=time.perf_counter() - t0)
+        return x.reshape(b.shape)
+    dim = near_null.shape[1] // 3 + 1 if near_null is not None and near_null.shape[1] in (3, 6) else \
+        (coords.shape[1] if coords is not None else 3)
+    if coords is None and method in ("auto", "direct", "cholesky", "amg", "cg"):
+        coords = _coords_from_modes(As, near_null)
+    sym = None
+    if method == "auto":
+        if coords is None:
+            first = "superlu" if n <= SUPERLU_MAX[dim] else "amg"
+        elif n > SYMBOLIC_MAX[dim]:
+            first = "amg"
+        else:   # the Cholesky's cost is known from its symbolic factorisation (reused)
+            sym = _symbolic(As, coords)
+            est = _estimate(sym)
+            rec["estimate"] = est
+            first = "cholesky" if est["gflop"] <= CHOLESKY_GFLOP and est["gbytes"] <= CHOLESKY_GBYTES else "amg"
     else:
-        raise ValueError(method)
-    if not np.all(np.isfinite(x)):
-        raise ModelError("the stiffness matrix is singular", fix="check the constraints")
+        first = {"direct": "cholesky"}.get(method, method)
+    if first == "cholesky" and coords is None:
+        first = "superlu"
+    plan = {"cholesky": ["cholesky"], "superlu": ["superlu"], "cg": ["cg", "amg", "amg-strong", "cholesky"],
+            "amg": ["amg", "amg-strong", "cholesky"]}[first]
+    if plan[-1] == "cholesky" and coords is None:
+        plan[-1] = "superlu"
+    Bs = None if near_null is None else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
+    spent = 0.0   # CPU seconds of the failed attempts
+    for m in plan:
+        t1, c1 = time.perf_counter(), time.process_time()
+        budget = None
+        if m == "amg-strong" and plan[-1] == "cholesky":
+            # a stronger AMG only while it can beat the Cholesky it would fall back to
+            if sym is None and n <= SYMBOLIC_MAX[dim]:
+                sym = _symbolic(As, coords)
+                rec["estimate"] = _estimate(sym)
+            if sym is not None and rec["estimate"]["gbytes"] <= FALLBACK_GBYTES:
+                chol = SECONDS_PER_GFLOP * rec["estimate"]["gflop"] + CHOLESKY_OVERHEAD
+                if chol < 2 * spent:
+                    continue
+                budget = chol
+        try:
+            if m in ("cholesky", "superlu"):
+                if m == "cholesky" and sym is None:
+                    sym = _symbolic(As, coords)
+                f = _factor(As, m, sym)
+                y, its, why = f(bs[:, live]), 0, ""
+            else:
+                y, its, why = _iterative(As, bs[:, live], m, Bs, budget)
+        except ModelError:
+            raise _singular() from None
+        xs = np.zeros_like(b2)
+        xs[:, live] = y * s[:, None]
+        res, ratio, tol = residual(xs) if np.all(np.isfinite(xs)) else (np.inf, np.inf, RTOL)
+        if m in ("cholesky", "superlu") and np.isfinite(res) and res > RTOL / 100:
+            # one step of iterative refinement with the same factor
+            xs2 = xs.copy()
+            xs2[:, live] += f((b2[:, live] - A @ xs[:, live]) * s[:, None]) * s[:, None]
+            res2 = residual(xs2)
+            if res2[0] < res:
+                xs, (res, ratio, tol) = xs2, res2
+        f = None
+        if ratio <= 1 or (m in ("cholesky", "superlu") and res <= DIRECT_RTOL):
+            x = xs
+            rec.update(method=m, residual=res, rtol=tol, iterations=its)
+            break
+        if m in ("cholesky", "superlu"):
+            raise _singular()
+        rec["fallbacks"].append({"method": m, "residual": res, "reason": why or f"residual above {tol:.1e}",
+                                 "seconds": time.perf_counter() - t1})
+        spent += time.process_time() - c1
+    rec["seconds"] = time.perf_counter() - t0
     return x.reshape(b.shape)
 
 
-def _amg_one(ml, A, b):
-    if not np.any(b):
-        return np.zeros_like(b)
-    res = []
-    x = ml.solve(b, tol=RTOL, accel="cg", maxiter=500, residuals=res)
-    if np.linalg.norm(b - A @ x) > 1e3 * RTOL * np.linalg.norm(b):
-        raise ModelError(f"pyamg did not converge (residual {res[-1]:.2e})", fix="use solver = 'direct'")
-    return x
+# -- direct ------------------------------------------------------------------------------
+
+def _symbolic(As, coords):
+    from harness.optimize.multifrontal import Symbolic
+    return Symbolic(As, coords)
+
+
+def _estimate(sym) -> dict:
+    """Work (Gflop) and peak memory (GB: the factor, plus the largest front and its
+    Schur complement and product, measured ~3 of them) of the multifrontal Cholesky."""
+    nv = np.array([nd["nv"] for nd in sym.nodes], float)
+    nu = np.array([len(nd["U"]) for nd in sym.nodes], float)
+    flop = np.sum(nv ** 3 / 3 + nv ** 2 * nu + nv * nu ** 2)
+    mem = 8 * (np.sum(nv * (nv + nu)) + 3 * np.max((nv + nu) ** 2))
+    return {"gflop": float(flop / 1e9), "gbytes": float(mem / 1e9)}
+
+
+def _factor(As, method, sym):
+    """Factorise As (Cholesky on the Symbolic ``sym``); returns the solve function for
+    (n, m) right-hand sides."""
+    if method == "cholesky":
+        from harness.optimize.multifrontal import MultifrontalCholesky
+        f = MultifrontalCholesky(As, sym)
+        return lambda r: f.solve(np.ascontiguousarray(r)).reshape(r.shape)
+    try:
+        lu = spla.splu(As.tocsc(), permc_spec="COLAMD")
+    except RuntimeError:       # exactly singular
+        raise _singular() from None
+    u = np.abs(lu.U.diagonal())
+    if not np.all(np.isfinite(u)) or u.min() < 1e-14 * u.max():
+        raise _singular()
+    return lambda r: lu.solve(np.ascontiguousarray(r)).reshape(r.shape)
+
+
+def _coords_from_modes(A, near_null):
+    """Locations of the free dofs (up to scale and shift: enough for the nested
+    dissection) read off the rigid-body modes ``Discretisation.rigid_modes`` builds:
+    translations first (column c is 1 on the dofs of component c), then rotations, which
+    hold the coordinates (2-D: [-y, x]; 3-D: [-y, x, 0], [0, -z, y], [-z, 0, x]). A
+    coordinate a dof's modes do not carry is the mean over its graph neighbours that
+    carry it. None if the modes do not look like that."""
+    if near_null is None:
+        return None
+    R = np.asarray(near_null, float)
+    n = R.shape[0]
+    if R.ndim != 2 or R.shape[1] not in (3, 6):
+        return None
+    dim = 2 if R.shape[1] == 3 else 3
+    T = R[:, :dim]
+    if not (np.all((T == 0) | (T == 1)) and np.all(T.sum(axis=1) == 1)):
+        return None
+    comp = np.argmax(T, axis=1)
+    X = np.zeros((n, dim))
+    known = np.zeros((n, dim), bool)
+    # (mode column, component, coordinate, sign): mode value = sign * coordinate
+    table = [(2, 0, 1, -1), (2, 1, 0, 1)] if dim == 2 else \
+        [(3, 0, 1, -1), (3, 1, 0, 1), (4, 1, 2, -1), (4, 2, 1, 1), (5, 0, 2, -1), (5, 2, 0, 1)]
+    for col, c, j, sign in table:
+        on = comp == c
+        X[on, j] = sign * R[on, col]
+        known[on, j] = True
+    G = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
+    for _ in range(3):
+        if known.all():
+            break
+        num, cnt = G @ (X * known), G @ known.astype(float)
+        fill = ~known & (cnt > 0)
+        X[fill] = num[fill] / cnt[fill]
+        known |= fill
+    return X
+
+
+# -- iterative ---------------------------------------------------------------------------
+
+def _hierarchy(As, Bs, strong: bool):
+    import pyamg
+    if not strong:
+        return pyamg.smoothed_aggregation_solver(As, B=Bs, symmetry="hermitian")
+    smoother = ("gauss_seidel", {"sweep": "symmetric", "iterations": 2})
+    return pyamg.smoothed_aggregation_solver(
+        As, B=Bs, symmetry="hermitian", strength=("symmetric", {"theta": 0.0}),
+        smooth=("energy", {"krylov": "cg", "maxiter": 4, "degree": 2, "weighting": "local"}),
+        improve_candidates=[("gauss_seidel", {"sweep": "symmetric", "iterations": 4})] * 2 + [None],
+        presmoother=smoother, postsmoother=smoother, max_coarse=500)
+
+
+def _iterative(As, bs, method, Bs, budget=None):
+    """CG preconditioned by one AMG V-cycle ('amg', 'amg-strong') or Jacobi ('cg'; the
+    diagonal of As is 1) on every column; (y, most iterations, reason of a failure).
+    ``budget``: CPU seconds (setup included) after which it is not worth continuing."""
+    c0 = time.process_time()
+    if method == "cg":
+        M, maxiter = None, min(20 * As.shape[0], CG_MAXITER)
+    else:
+        try:
+            ml = _hierarchy(As, Bs, method == "amg-strong")
+        except Exception as exc:   # noqa: BLE001 - a failed setup is a failed attempt
+            return np.full_like(bs, np.nan), 0, f"AMG setup failed: {exc}"
+        M = ml.aspreconditioner(cycle="V")
+        maxiter = AMG_MAXITER if method == "amg" else STRONG_MAXITER
+    Y, its, why = np.zeros_like(bs), 0, ""
+    for j in range(bs.shape[1]):
+        left = None if budget is None else budget - (time.process_time() - c0)
+        Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, maxiter, 20 if M is not None else 200, left)
+        its, why = max(its, k), why or w
+    return Y, its, why
+
+
+def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
+    """Preconditioned CG to ||b - A x|| <= rtol ||b|| (recursive residual; the caller
+    checks the true one). Gives up when the iteration budget runs out or the rate of the
+    last ``window`` iterations cannot reach rtol within it (or within ``seconds`` CPU). Returns (x, iterations, reason)."""
+    c0 = time.process_time()
+    x = np.zeros_like(b)
+    r = b.copy()
+    nb = np.linalg.norm(b)
+    z = r if M is None else M @ r
+    p = z.copy()
+    rz = r @ z
+    hist = [1.0]
+    if not rz > 0:
+        return x, 0, "breakdown (the preconditioner is not positive definite)"
+    for k in range(1, maxiter + 1):
+        Ap = A @ p
+        pAp = p @ Ap
+        if not np.isfinite(pAp) or pAp <= 0:
+            return x, k, "breakdown (the matrix or the preconditioner is not positive definite)"
+        a = rz / pAp
+        x += a * p
+        r -= a * Ap
+        rel = np.linalg.norm(r) / nb
+        hist.append(rel)
+        if rel <= rtol:
+            return x, k, ""
+        if k >= 2 * window and k % 10 == 0:   # rate of the best residual over the window
+            rate = (min(hist[-window:]) / min(hist[:-window])) ** (1 / window)
+            more = np.log(rtol / rel) / np.log(rate) if rate < 1 else np.inf
+            if more > maxiter - k:
+                return x, k, f"too slow (rate {rate:.3f} per iteration at {k} iterations)"
+            if seconds is not None and more * (time.process_time() - c0) / k > seconds - (time.process_time() - c0):
+                return x, k, f"too slow ({k} iterations, ~{more:.0f} more would take longer than the Cholesky)"
+        z = r if M is None else M @ r
+        rz_new = r @ z
+        if not rz_new > 0:
+            return x, k, "breakdown (the preconditioner is not positive definite)"
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x, maxiter, f"no convergence in {maxiter} iterations"

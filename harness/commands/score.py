@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-HELP = "score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G per load, G_{a:b:c}, normalised G"
+HELP = ("score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G per load, G_{a:b:c}, "
+        "normalised G, and G_ref (the reference's own error as a normalised G)")
 
 
 def add_arguments(p):
@@ -22,16 +23,17 @@ def score_table(net, case, ref, weights=None):
     import pandas as pd
 
     from harness import statics
-    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from harness.scoring import case_weights, g_arrays, g_ref_arrays, reference_displacements, reference_error
     w = case_weights(case, weights)
     res = statics.solve(net, case)
     u_ref = reference_displacements(ref, net.points, res.names)
     sc = g_arrays(u_ref, res.u, net.classes, w, res.names)
     s1 = g_arrays(u_ref, res.u, net.classes, (1, 1, 1), res.names)
+    g_ref, g_ref_load = g_ref_arrays(u_ref, reference_error(ref, net.points, res.names), net.classes, w)
     label = ":".join(f"{x:g}" for x in w)
-    rows = [{"load": n, "G_s": s1.per_load[n], f"G_{label}": sc.per_load[n], "G_norm": sc.per_load_norm[n]}
-            for n in res.names]
-    rows.append({"load": "total", "G_s": sc.G_s, f"G_{label}": sc.G, "G_norm": sc.G_norm})
+    rows = [{"load": n, "G_s": s1.per_load[n], f"G_{label}": sc.per_load[n], "G_norm": sc.per_load_norm[n],
+             "G_ref": float(g)} for n, g in zip(res.names, g_ref_load)]
+    rows.append({"load": "total", "G_s": sc.G_s, f"G_{label}": sc.G, "G_norm": sc.G_norm, "G_ref": g_ref})
     return pd.DataFrame(rows), sc
 
 
@@ -56,6 +58,11 @@ def main(args) -> int:
     df, sc = score_table(net, case, ref, args.weights)
     print(f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights {':'.join(f'{x:g}' for x in sc.weights)}")
     print(df.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
+    from harness.scoring import ref_status, reference_met_tol
+    total = df.iloc[-1]
+    if ref_status(float(total["G_ref"]), float(total["G_norm"]), reference_met_tol(ref)) != "ok":
+        print("ref-coarse: the reference's own error (G_ref, normalised like G_norm) is above 10 % of "
+              "G_norm, or it missed its tol; G says as much about the reference as about the model")
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         df.to_csv(args.out, index=False)

@@ -224,11 +224,13 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
     gravity load is ``tip_deflection_linear / _fem / tip_ratio``; ``flexion_ratio`` =
     tip_ratio / stretch ratio (1: the model bends as stiffly as its stretching implies;
     > 1: too soft in bending); G of the gravity field, raw and after the best single
-    scale (the shape error alone)."""
+    scale (the shape error alone), with ``G_ref`` / ``ref_error_max`` of that load and a
+    "ref-coarse" status when G_ref exceeds 10 % of the scaled G or the reference missed
+    its tol."""
     from harness.dynamics import stiffness
     from harness.models.bc2000 import linear
     from harness.parts import classify_nodes
-    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
     P = mesh.points
     masses = lumped_masses(P, _cells(mesh), case.material.density)
     loads = linear.case_loads(P, case, masses)
@@ -251,6 +253,10 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
             s_raw = g_arrays(u_ref[i:i + 1], u[i:i + 1], classes, case_weights(case))
             s_fit = g_arrays(u_ref[i:i + 1], c * u[i:i + 1], classes, case_weights(case))
             out.update({"G_norm_gravity": s_raw.G_norm, "G_norm_gravity_scaled": s_fit.G_norm})
+            # the reference's own error as G of the same load and nodes, against the smaller
+            # (shape-only) G: a scaled G near the FEM's error is flagged
+            out.update(ref_columns(ref, P, [loads.names[i]], u_ref[i:i + 1], classes, case_weights(case)))
+            out["status"] = ref_status(out["G_ref"], s_fit.G_norm, out.get("ref_met_tol"))
         else:
             out[f"tip_{load.name}_ratio"] = um / uf
     if "tip_ratio" in out and "stretch" in ratios:
@@ -422,10 +428,12 @@ def _fem(case, ctx, model, dyn):
     single factor, then calibrated (all constants, least squares); also the anisotropy
     measures: the six clamped face pulls and the direction pulls (harness.anisotropy) of
     the calibrated model beside the FEM's. Rows per model: G_initial/G_final (+
-    normalised), the fitted constants, the pull columns; anisotropy.csv per direction."""
+    normalised), ``G_ref`` / ``ref_error_max`` (the reference's own error at the same nodes;
+    status "ref-coarse" above 10 % of the final normalised G or when the reference missed
+    its tol), the fitted constants, the pull columns; anisotropy.csv per direction."""
     from harness.models.bc2000 import linear
     from harness.parts import classify_nodes
-    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
     from reference import solve as reference_solve
     path, mesh = _meshes(case, dyn)[0]
     P = mesh.points
@@ -436,6 +444,7 @@ def _fem(case, ctx, model, dyn):
     weights = case_weights(case)
     u_ref = reference_displacements(ref, P, loads.names)
     w = np.asarray(weights)[classes]
+    refcols = ref_columns(ref, P, loads.names, u_ref, classes, weights)   # same nodes, loads, weights as G
     rows, aniso = [], []
     ctx.status("FEM direction pulls")
     bbox = (P.min(axis=0), P.max(axis=0))
@@ -480,6 +489,9 @@ def _fem(case, ctx, model, dyn):
             row.update({f"fit_{k}": float(v) for k, v in zip(names, theta1)})
         else:
             theta1 = theta0
+        row.update(refcols)
+        row["status"] = ref_status(row["G_ref"], row.get("G_norm_final", row["G_norm_initial"]),
+                                   refcols.get("ref_met_tol"))
         # undesired anisotropy (1): the six clamped face pulls, fibre along the pull
         def K_of(d, name=name, theta1=theta1):
             mm = m if name == "MS" else build(name, dict(model, direction=tuple(d), fibre_field=None), mesh, 1.0)

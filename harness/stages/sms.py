@@ -3,7 +3,11 @@ unoptimised baseline row, then optimise the first rule's constants with each opt
 run of the case (see optimiser_runs: [optimizer] method, each of ``compare``, and the
 ``[optimizer.frequency]`` row that adds the natural frequencies to G, Deussen Section 8)
 and score each result: one row per run, all from the same initial model, reference and
-weights, so the table compares optimisers and not set-ups.
+weights, so the table compares optimisers and not set-ups. Every scored row carries
+``G_ref`` (the reference's own estimated error as a normalised G at the same nodes, loads
+and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coarse" when
+G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
+(harness.scoring.ref_status).
 
 Files (in ctx.out_dir, formats of harness/report.py): ``model-<tag>.vtu`` (the network
 with its displacements; tag = rule, or rule-method[-freq]), ``deformed-<tag>.npz``
@@ -76,7 +80,7 @@ def run(case, ctx) -> list[dict]:
     from harness.homogenize import case_report
     from harness.models.sms import build_network, model_spec
     from harness.models.stiffness_rules import spring_constants
-    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
 
     spec = model_spec(case)
     opt = case.section("optimizer") or {}
@@ -156,6 +160,13 @@ def run(case, ctx) -> list[dict]:
         _time_to_reach(rows, traces)
     elif runs:
         rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
+
+    if u_ref is not None:   # every net shares base's nodes, loads and weights: one G_ref for all rows
+        refcols = ref_columns(ref, base.points, names, u_ref, base.classes, weights)
+        for row in rows:
+            if "G_norm_final" in row:
+                row.update(refcols)
+                row["status"] = ref_status(row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol"))
 
     freqs = _frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = _error_modes(opt, n_modes)

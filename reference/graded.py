@@ -1,0 +1,59 @@
+"""Graded tensor-product meshes of rectangles and boxes, refined in levels.
+
+Elastic solutions on a box are singular along its edges (where a clamped or loaded face
+meets a free one), and uniform P2 tetrahedra converge there only like h^1.1 at the
+scored points. A tensor mesh whose nodes along each axis follow a power law
+x = w (i / n)^beta towards both ends of the axis (the end zones, w = half the shortest
+side) puts small cells along every face, edge and corner; the middle of a long axis gets
+uniform cells as large as the largest graded one. Level k has ``n_k`` cells per end zone
+(and the middle's cells scale with it): one family of meshes, uniformly refined in the
+parameter s = i / n, which is what Richardson extrapolation over the levels needs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import skfem
+
+GRADE_EXPONENT = 3.0   # beta: measured on the sec6 box (shear, Q2), see reference/extrapolate.py
+MESHES = {2: skfem.MeshQuad, 3: skfem.MeshHex}
+
+
+def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT) -> np.ndarray:
+    """Node coordinates in [0, length]: ``n`` power-graded cells in each end zone of
+    width min(length, shortest) / 2, uniform cells in between (as many as keep them no
+    larger than the largest graded cell at n, proportional to n)."""
+    if n < 1:
+        raise ValueError("need at least one cell per end zone")
+    w = 0.5 * min(length, shortest)
+    end = w * np.linspace(0.0, 1.0, n + 1) ** beta
+    middle = length - 2 * w
+    if middle <= 1e-12 * length:
+        return np.concatenate([end, length - end[::-1][1:]])
+    # largest graded cell ~ beta w / n (its limit for large n keeps the count proportional to n)
+    m = max(1, int(np.ceil(middle * n / (beta * w) - 1e-9)))
+    mid = w + middle * np.linspace(0.0, 1.0, m + 1)[1:-1]
+    return np.concatenate([end, mid, length - end[::-1]])
+
+
+def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT) -> skfem.Mesh:
+    """Quadrilateral (2-D) or hexahedral (3-D) tensor mesh of [origin, origin + size]
+    graded towards every face, ``n`` cells per end zone."""
+    origin, size = np.asarray(origin, float), np.asarray(size, float)
+    shortest = float(size.min())
+    axes = [o + axis_nodes(s, shortest, n, beta) for o, s in zip(origin, size)]
+    return MESHES[len(size)].init_tensor(*axes)
+
+
+def probe_points(origin, size, per_axis: int = 9) -> np.ndarray:
+    """A tensor grid of points (per_axis along every axis, faces, edges and corners
+    included) on which the levels are compared to fit the order and decide when to stop."""
+    origin, size = np.asarray(origin, float), np.asarray(size, float)
+    axes = [o + np.linspace(0.0, s, per_axis) for o, s in zip(origin, size)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(size))
+
+
+def level_divisions(first: int, levels: int) -> list[int]:
+    """Cells per end zone of levels 0..levels: first, first + 1, ... (ratios near 1 keep
+    the finest level affordable; extrapolation uses the true ratio n_k+1 / n_k)."""
+    return [first + k for k in range(levels + 1)]

@@ -1,0 +1,141 @@
+"""The ``graded`` reference of rectangles and boxes: Q2 quadrilaterals/hexahedra graded
+towards every face (reference/graded.py), solved on levels n = divisions, divisions + 1,
+... cells per end zone, and Richardson-extrapolated over the last three levels
+(reference/extrapolate.py). The extrapolant is the reference field; the difference of
+the last two extrapolants is its per-point error estimate. A load whose last two levels
+agree to rounding (a field the mesh represents exactly, like the stretches' linear
+closed form) stops refining; the others go on until every estimate at the probe points
+is below ``reference.tol``, ``reference.max_refine`` levels are done, or the next level
+would pass the dof budget.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reference.extrapolate import extrapolate, observed_order
+from reference.fem import Discretisation
+from reference.graded import graded_mesh, level_divisions, probe_points
+from reference.locate import Locator
+from reference.problem import solve_mesh
+
+FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
+# (divisions counts cells along the shortest side: two end zones)
+MAX_DOFS = {2: 400_000, 3: 240_000}
+EXACT = 1e-9                    # relative change between two levels below which a field is exact
+
+
+def n_dofs(mesh, dim: int) -> int:
+    """Q2 dofs of a tensor mesh: (2 cells + 1) nodes along each axis."""
+    cells = [len(np.unique(mesh.p[a])) - 1 for a in range(dim)]
+    return dim * int(np.prod([2 * c + 1 for c in cells]))
+
+
+@dataclass
+class Levels:
+    """The solved levels: ``ns`` cells per end zone, ``meshes``, per load the
+    (level, dof vector) pairs kept (the last three; for a load found exact, the two
+    that agree, the coarser last: it is the field used) and the observed order."""
+    dim: int
+    ns: list = field(default_factory=list)
+    meshes: list = field(default_factory=list)
+    fields: dict = field(default_factory=dict)
+    orders: dict = field(default_factory=dict)
+    _eval: dict = field(default_factory=dict, repr=False)
+
+    def add_mesh(self, n: int, mesh):
+        self.ns.append(n)
+        self.meshes.append(mesh)
+
+    def _evaluator(self, k: int):
+        if k not in self._eval:
+            mesh = self.meshes[k]
+            self._eval[k] = (Locator(mesh), Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2").basis)
+        return self._eval[k]
+
+    def at(self, points, load: str, k: int, u: np.ndarray) -> np.ndarray:
+        loc, basis = self._evaluator(k)
+        return loc.evaluate(basis, u.reshape(-1, self.dim), points)
+
+    def values(self, points, load: str):
+        """The load's kept levels evaluated at points: ([(n, dim) arrays], [h])."""
+        pairs = self.fields[load]
+        return ([self.at(points, load, k, u) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
+
+    def evaluate(self, points, load: str):
+        """(extrapolated displacement (n, dim), estimate of its error (n,)) at points."""
+        vals, h = self.values(np.asarray(points, float), load)
+        return extrapolate(vals, h, self.orders.get(load, float("nan")))
+
+    def finest_field(self, load: str, disc: Discretisation) -> np.ndarray:
+        """The load's dof vector on the finest mesh: its own if solved there, else its
+        (exactly represented) last field interpolated at the finest dof locations."""
+        k, u = self.fields[load][-1]
+        if k == len(self.meshes) - 1:
+            return u
+        return self.at(disc.doflocs.T, load, k, u).ravel()
+
+    def to_arrays(self, names) -> dict:
+        out = {"ns": np.asarray(self.ns, np.int64),
+               "orders": np.array([self.orders.get(n, np.nan) for n in names])}
+        for i, n in enumerate(names):
+            out[f"lv{i}"] = np.array([k for k, _ in self.fields[n]], np.int64)
+            for k, u in self.fields[n]:
+                out[f"u{i}_{k}"] = u
+        return out
+
+    @classmethod
+    def from_arrays(cls, case, names, arrays) -> "Levels":
+        lo, hi = case.body.bbox()
+        lev = cls(case.dim)
+        for n in arrays["ns"]:
+            lev.add_mesh(int(n), graded_mesh(lo, hi - lo, int(n)))
+        for i, name in enumerate(names):
+            lev.fields[name] = [(int(k), arrays[f"u{i}_{int(k)}"]) for k in arrays[f"lv{i}"]]
+            if np.isfinite(arrays["orders"][i]):
+                lev.orders[name] = float(arrays["orders"][i])
+        return lev
+
+
+def solve_graded(case, status=lambda msg: None, info: list | None = None):
+    """(Levels, {load: relative estimate}, history rows) of a rectangle or box case."""
+    spec = case.reference
+    lo, hi = case.body.bbox()
+    size = hi - lo
+    names = [l.name for l in case.loads]
+    probes = probe_points(lo, size)
+    lev = Levels(case.dim, fields={n: [] for n in names})
+    active = list(names)
+    est = {n: float("nan") for n in names}
+    history = []
+    first = -(-spec.divisions // 2) if spec.divisions else FIRST    # divisions: cells along the shortest side
+    for k, n in enumerate(level_divisions(first, spec.max_refine)):
+        mesh = graded_mesh(lo, size, n)
+        dofs = n_dofs(mesh, case.dim)
+        if k > 0 and dofs > MAX_DOFS[case.dim]:
+            status(f"FEM: the next graded level ({dofs} dofs) would exceed {MAX_DOFS[case.dim]}; stopping")
+            break
+        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, {len(active)} loads)")
+        lev.add_mesh(n, mesh)
+        U = solve_mesh(case, mesh, loads=set(active), info=info)
+        for name in active:
+            lev.fields[name] = (lev.fields[name] + [(k, U[name])])[-3:]
+        for name in list(active):
+            vals, h = lev.values(probes, name)
+            if len(vals) < 2:
+                continue
+            scale = max(float(np.linalg.norm(vals[-1], axis=1).max()), 1e-300)
+            if np.abs(vals[-1] - vals[-2]).max() <= EXACT * scale:
+                active.remove(name)           # represented exactly: no further level helps;
+                lev.orders.pop(name, None)    # the coarser of the two (less rounding) goes last
+                lev.fields[name] = lev.fields[name][-1:] + lev.fields[name][-2:-1]
+            elif len(vals) >= 3:
+                lev.orders[name] = observed_order(vals[-3:], h[-3:])
+            _, e = extrapolate(vals, h, lev.orders.get(name, float("nan")))
+            est[name] = float(e.max()) / scale
+        history.append(dict(n_dofs=dofs, **est))
+        if not active or (k >= 2 and max(est.values()) < spec.tol):
+            break
+    return lev, est, history

@@ -1,0 +1,104 @@
+"""The FEM problem of a case on one mesh: constraints, load vectors, the constrained
+solves (loads that share constraints share one factorisation)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from harness.elasticity import densities, element_stiffness
+from harness.errors import ModelError
+from harness.parts import part_predicate
+from reference import solvers
+from reference.fem import Discretisation
+
+
+def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
+    if case.body.shape == "mesh":
+        return mesh.p.min(axis=1), mesh.p.max(axis=1)
+    return case.body.bbox()
+
+
+def fixed_dofs(d: Discretisation, case, load, bbox) -> np.ndarray:
+    out = []
+    for c in load.constraints:
+        dofs = d.part_dofs(part_predicate(c.part, bbox, case.body.parts), c.components)
+        if len(dofs) == 0:
+            raise ModelError(f"load case '{load.name}': constraint part '{c.part}' contains no mesh node",
+                             file=str(case.path), fix="enlarge the part or refine the mesh")
+        out.append(dofs)
+    fixed = np.unique(np.concatenate(out))
+    try:
+        d.check_rigid(fixed, load.name)
+    except ModelError as exc:
+        raise ModelError(exc.message, file=str(case.path), fix=exc.fix) from None
+    return fixed
+
+
+def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray) -> np.ndarray:
+    F = np.zeros(d.ndof)
+    for t in load.tractions:
+        facets = d.part_facets(part_predicate(t.part, bbox, case.body.parts))
+        if len(facets) == 0:
+            raise ModelError(f"load case '{load.name}': traction part '{t.part}' has no boundary facets",
+                             file=str(case.path), fix="put tractions on faces (2-D: edges) of the body")
+        F += d.traction_load(facets, t.vector)
+    f = np.zeros((d.nelems, d.dim))
+    if load.gravity is not None:
+        f += rho[:, None] * np.asarray(load.gravity, float)
+    if load.body_force is not None:
+        f += np.asarray(load.body_force, float)
+    if np.any(f):
+        F += d.body_load(f)
+    return F
+
+
+def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
+                 prescribed: dict | None = None, info: list | None = None) -> dict:
+    """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
+    Loads sharing a constraint set share one factorisation; ``info`` (a list) gets the
+    solver's record of each (method, residual, fallbacks, seconds) with the loads named."""
+    out = {}
+    groups: dict[bytes, list[str]] = {}
+    for name in loads:
+        groups.setdefault(fixed[name].tobytes(), []).append(name)
+    R = None
+    for names in groups.values():
+        fx = fixed[names[0]]
+        free = np.setdiff1d(np.arange(d.ndof), fx)
+        A = K[free][:, free]
+        rhs = []
+        for n in names:
+            F = loads[n].copy()
+            if prescribed and n in prescribed:
+                F -= K[:, fx] @ prescribed[n]
+            rhs.append(F[free])
+        if R is None:
+            R = d.rigid_modes()
+            coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
+        rec: dict = {}
+        x = solvers.solve(A, np.column_stack(rhs), method, R[free], info=rec, coords=coords[free])
+        if info is not None:
+            info.append(dict(rec, loads=list(names), n=len(free)))
+        for i, n in enumerate(names):
+            u = np.zeros(d.ndof)
+            u[free] = x[:, i]
+            if prescribed and n in prescribed:
+                u[fx] = prescribed[n]
+            out[n] = u
+    return out
+
+
+def solve_mesh(case, mesh, loads=None, info: list | None = None) -> dict:
+    """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
+    those named in ``loads``). ``info``: a list that gets one solver record per
+    factorisation (reference/solvers.py)."""
+    d = Discretisation(mesh, case.reference.cell, case.reference.element)
+    cent = d.centroids()
+    C = element_stiffness(case.material, cent)
+    rho = densities(case.material, cent)
+    bbox = body_bbox(case, mesh)
+    chosen = [l for l in case.loads if loads is None or l.name in loads]
+    fixed = {l.name: fixed_dofs(d, case, l, bbox) for l in chosen}
+    F = {l.name: load_vector(d, case, l, bbox, rho) for l in chosen}
+    K = d.stiffness(C)
+    return solve_system(K, F, fixed, case.reference.solver, d, info=info)
