@@ -105,7 +105,8 @@ def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
         phi = V * minv[:, None]
     else:
         import scipy.sparse as sp
-        mu, phi = spla.eigsh(K, k=nk, M=sp.diags(mt.m), sigma=0.0, which="LM")
+        mu, phi = spla.eigsh(K, k=nk, M=sp.diags(mt.m), sigma=0.0, which="LM",
+                             v0=np.random.default_rng(0).standard_normal(K.shape[0]))  # seeded start
         o = np.argsort(mu)
         mu, phi = mu[o], phi[:, o]
         phi = phi / np.sqrt(np.sum(phi * phi * mt.m[:, None], axis=0))[None, :]
