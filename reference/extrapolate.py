@@ -49,8 +49,8 @@ def extrapolate(values, h, p: float):
 
     Two or more levels and a finite p: the extrapolant of the last two, and as estimate
     the pointwise norm of its difference from the previous extrapolant times
-    SAFETY / ((h_old / h_new)^p - 1) (needs three levels; with two, the plain difference
-    of the levels). Without a usable p (the
+    SAFETY / ((h_old / h_new)^p - 1), at least the correction to the finest level (needs
+    three levels; with two, the plain difference of the levels). Without a usable p (the
     levels agree to rounding: an exactly represented solution) the finest values with
     the plain difference as estimate."""
     values = [np.asarray(v, float) for v in values]
@@ -67,7 +67,10 @@ def extrapolate(values, h, p: float):
     # E_new - E_old ~ D (h_old^q - h_new^q) for the next order q > p, so the error of E_new,
     # D h_new^q, is about the difference / ((h_old / h_new)^p - 1); SAFETY covers the rest
     # (a misfit p, two terms that cancel in the difference but not in the error)
-    return e_new, SAFETY * _norm(e_new - e_old) / ((h[-2] / h[-1]) ** p - 1.0)
+    gci = SAFETY * _norm(e_new - e_old) / ((h[-2] / h[-1]) ** p - 1.0)
+    # where the two extrapolants happen to agree, the correction the extrapolation made to
+    # the finest level there (that level's estimated error) stands in
+    return e_new, np.maximum(gci, _norm(e_new - fine))
 
 
 def _norm(d: np.ndarray) -> np.ndarray:

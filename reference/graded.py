@@ -15,17 +15,19 @@ from __future__ import annotations
 import numpy as np
 import skfem
 
-GRADE_EXPONENT = 3.0   # beta: measured on the sec6 box (shear, Q2), see reference/extrapolate.py
+GRADE_EXPONENT = 3.0   # beta, and ZONE: the end zones' width / the shortest side. Measured on the
+ZONE = 0.5             # sec6 cube's shear against an independent solve (tests/independent_elasticity.py)
 MESHES = {2: skfem.MeshQuad, 3: skfem.MeshHex}
 
 
-def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT) -> np.ndarray:
+def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT,
+               zone: float = ZONE) -> np.ndarray:
     """Node coordinates in [0, length]: ``n`` power-graded cells in each end zone of
-    width min(length, shortest) / 2, uniform cells in between (as many as keep them no
-    larger than the largest graded cell at n, proportional to n)."""
+    width zone * min(length, shortest) (at most half the axis), uniform cells in between
+    (as many as keep them no larger than the largest graded cell at n, proportional to n)."""
     if n < 1:
         raise ValueError("need at least one cell per end zone")
-    w = 0.5 * min(length, shortest)
+    w = min(zone * shortest, 0.5 * length)
     end = w * np.linspace(0.0, 1.0, n + 1) ** beta
     middle = length - 2 * w
     if middle <= 1e-12 * length:
@@ -36,12 +38,12 @@ def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPON
     return np.concatenate([end, mid, length - end[::-1]])
 
 
-def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT) -> skfem.Mesh:
+def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> skfem.Mesh:
     """Quadrilateral (2-D) or hexahedral (3-D) tensor mesh of [origin, origin + size]
     graded towards every face, ``n`` cells per end zone."""
     origin, size = np.asarray(origin, float), np.asarray(size, float)
     shortest = float(size.min())
-    axes = [o + axis_nodes(s, shortest, n, beta) for o, s in zip(origin, size)]
+    axes = [o + axis_nodes(s, shortest, n, beta, zone) for o, s in zip(origin, size)]
     return MESHES[len(size)].init_tensor(*axes)
 
 

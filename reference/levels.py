@@ -18,7 +18,7 @@ import numpy as np
 from reference.extrapolate import extrapolate, observed_order
 from reference.fem import Discretisation
 from reference.graded import graded_mesh, level_divisions, probe_points
-from reference.locate import Locator
+from reference.gridvalues import GridField
 from reference.problem import solve_mesh
 
 FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
@@ -49,15 +49,16 @@ class Levels:
         self.ns.append(n)
         self.meshes.append(mesh)
 
-    def _evaluator(self, k: int):
+    def _evaluator(self, k: int) -> GridField:
         if k not in self._eval:
             mesh = self.meshes[k]
-            self._eval[k] = (Locator(mesh), Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2").basis)
+            self._eval[k] = GridField(Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2").doflocs)
         return self._eval[k]
 
     def at(self, points, load: str, k: int, u: np.ndarray) -> np.ndarray:
-        loc, basis = self._evaluator(k)
-        return loc.evaluate(basis, u.reshape(-1, self.dim), points)
+        """Level k's field u at points by cubic interpolation of its nodal values
+        (reference/gridvalues.py: O(h^4) everywhere, so the levels extrapolate cleanly)."""
+        return self._evaluator(k).evaluate(u.reshape(-1, self.dim), np.asarray(points, float))
 
     def values(self, points, load: str):
         """The load's kept levels evaluated at points: ([(n, dim) arrays], [h])."""

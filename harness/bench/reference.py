@@ -1,11 +1,18 @@
 """Benchmark of the FEM reference: P2 assembly + solve times in 2-D and 3-D (sparse
 direct vs pyamg smoothed aggregation on the same system), and point evaluation with the
 KD-tree locator for 1e6 points against scikit-fem's own ``Basis.probes`` on a smaller
-count (its points x elements matrix limits it), as a per-point time ratio."""
+count (its points x elements matrix limits it), as a per-point time ratio; and the
+accuracy of the reference's methods on the Deussen sec6 cube's shear (task "accuracy")
+against the independent truth of tests/independent_elasticity.py (loaded by path)."""
 
 from __future__ import annotations
 
+import importlib.util
+import sys
+import tempfile
 import time
+import tomllib
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -88,4 +95,133 @@ def run(quick: bool = False) -> pd.DataFrame:
     rows.append(dict(task="probe", dim=2, element="P2 tri", n_dofs=basis.N, solver="kd-tree locator",
                      seconds=t_loc, points=n_big, ratio=(t_sk / n_small) / (t_loc / n_big), residual=agree,
                      note="ratio = per-point time of probes / locator; residual = max difference"))
+    rows += accuracy_rows(quick)
     return pd.DataFrame(rows)
+
+
+# -- accuracy against the independent truth ----------------------------------------------
+
+ROOT = Path(__file__).resolve().parents[2]
+INDEPENDENT = ROOT / "tests" / "independent_elasticity.py"
+SEC6 = ROOT / "cases" / "deussen1995" / "sec6_box3d.toml"
+LOAD = "shear-xz"
+# the truth: the independent quarter solve (beta 2.5, knot 3/4: the grid points are nodes of
+# every level), Richardson over the last three levels
+TRUTH_LEVELS = {True: (8, 12, 16), False: (16, 20, 24)}
+TRUTH_BETA, TRUTH_KNOT = 2.5, 0.75
+
+
+def _independent():
+    """The module tests/independent_elasticity.py, or None (with a message) if absent."""
+    if not INDEPENDENT.is_file():
+        print(f"bench reference: {INDEPENDENT} not found: the accuracy rows are skipped "
+              "(they need the independent truth from the repository's tests/)", file=sys.stderr)
+        return None
+    spec = importlib.util.spec_from_file_location("independent_elasticity", INDEPENDENT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _shear_case(folder: Path, name: str, reference: dict):
+    """The sec6 cube (body and material of cases/deussen1995/sec6_box3d.toml) with the one
+    load shear-xz (z0 clamped, traction s e_x on z1) and the given [reference] keys."""
+    from harness.cases import load_case
+    raw = tomllib.loads(SEC6.read_text())
+    body, mat = raw["body"], raw["material"]
+    s = float(raw.get("loads", {}).get("magnitude", 1.0))
+    def val(v):
+        return f'"{v}"' if isinstance(v, str) else repr(v)
+    ref = "\n".join(f"{k} = {val(v)}" for k, v in reference.items())
+    text = f"""name = "{name}"
+dim = 3
+[body]
+shape = "box"
+origin = {list(map(float, body.get("origin", [0.0, 0.0, 0.0])))}
+size = {list(map(float, body["size"]))}
+[material]
+E = {float(mat["E"])}
+nu = {float(mat["nu"])}
+[[loads.case]]
+name = "{LOAD}"
+[[loads.case.constraint]]
+part = "z0"
+components = ["all"]
+[[loads.case.traction]]
+part = "z1"
+vector = [{s}, 0.0, 0.0]
+[reference]
+{ref}
+"""
+    path = folder / f"{name}.toml"
+    path.write_text(text)
+    return load_case(path), s
+
+
+def _truth(ie, case, s, quick: bool):
+    lo, hi = case.body.bbox()
+    size = tuple(float(v) for v in hi - lo)
+    axes = [np.linspace(lo[d], hi[d], 4) for d in range(3)]
+    points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    levels = TRUTH_LEVELS[quick]
+    t0 = time.perf_counter()
+    lv = ie.shear_levels(size, case.material.E, case.material.nu, s, points - lo, levels, TRUTH_BETA,
+                         knot=TRUTH_KNOT)
+    u, change, p = ie.extrapolate_levels([v for _, v, *_ in lv], levels)
+    return points, u, dict(change=change, order=p, seconds=time.perf_counter() - t0, n_dofs=lv[-1][2])
+
+
+def _accuracy_row(method, sol, u, u_true, estimate, seconds, note=""):
+    scale = float(np.linalg.norm(u_true, axis=1).max())
+    err = np.linalg.norm(u - u_true, axis=1)
+    row = dict(task="accuracy", dim=3, element="P2 tet" if sol.cell == "tet" else "Q2 hex", method=method,
+               n_dofs=sol.n_dofs, seconds=seconds, true_error=float(err.max()) / scale, points=len(u_true),
+               note=note)
+    if estimate is None or not np.all(np.isfinite(estimate)):
+        row.update(estimate=np.nan, bound_ok=np.nan)
+    else:
+        row.update(estimate=float(np.max(estimate)) / scale, bound_ok=bool(np.all(estimate >= err)))
+    return row
+
+
+def accuracy_rows(quick: bool = False) -> list[dict]:
+    """True errors of the reference on the sec6 cube's shear-xz at the 4 x 4 x 4 grid: uniform
+    P2 tetrahedra (one level), the graded Q2 levels' finest plain field, and their
+    Richardson extrapolant with its per-point estimate."""
+    import reference
+    ie = _independent()
+    if ie is None:
+        return [dict(task="accuracy", note=f"skipped: {INDEPENDENT.relative_to(ROOT)} not found")]
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        base, s = _shear_case(tmp, "truth", {})
+        points, u_true, info = _truth(ie, base, s, quick)
+        rows.append(dict(task="accuracy", dim=3, element="Q2 hex", method="independent truth",
+                         n_dofs=info["n_dofs"], seconds=info["seconds"], true_error=np.nan,
+                         estimate=info["change"], points=len(points),
+                         note=f"quarter, levels {TRUTH_LEVELS[quick]}, beta {TRUTH_BETA}, knot {TRUTH_KNOT}, "
+                              f"order {info['order']:.2f}; estimate = change of the extrapolant"))
+        tets = (2, 3, 4, 6) if quick else (2, 3, 4, 5, 6, 8, 12)
+        for div in tets:
+            case, _ = _shear_case(tmp, f"tet{div}", dict(method="refine", cell="tet", divisions=div, max_refine=0))
+            sol = reference.solve(case)
+            u = sol.displacement(points, LOAD)
+            rows.append(_accuracy_row("uniform P2 tet", sol, u, u_true, sol.error_estimate(points, LOAD),
+                                      sol.seconds, f"divisions {div}, no refinement"))
+        graded = [(None, None)] + ([(4, 2), (6, 2)] if quick else [(4, 2), (6, 2), (8, 2)])   # [8, 9, 10]: ~17 min, not kept
+        for last, n_more in graded:
+            keys = dict(method="graded")
+            if last is not None:       # levels last - 2 .. last cells per end zone, no early stop
+                keys.update(divisions=2 * (last - n_more), max_refine=n_more, tol=1e-12)
+            case, _ = _shear_case(tmp, f"graded{last}", keys)
+            sol = reference.solve(case)
+            ns = list(sol.levels.ns)
+            what = "defaults" if last is None else f"levels n = {ns}"
+            vals, _ = sol.levels.values(points, LOAD)
+            rows.append(_accuracy_row("graded Q2 finest level", sol, vals[-1], u_true, None, sol.seconds,
+                                      f"{what}; plain field of n = {ns[-1]}"))
+            rows.append(_accuracy_row("graded Q2 + Richardson", sol, sol.displacement(points, LOAD), u_true,
+                                      sol.error_estimate(points, LOAD), sol.seconds,
+                                      f"{what}; order {sol.levels.orders.get(LOAD, np.nan):.2f}"))
+    return rows
