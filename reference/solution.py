@@ -27,7 +27,6 @@ from reference.problem import body_bbox, fixed_dofs, load_vector, solve_mesh, so
 from reference.refine import solve_refined
 
 
-
 # -- the solution --------------------------------------------------------------------
 
 class ErrorEstimate(dict):

@@ -443,6 +443,12 @@ def test_stage_rows(tmp_path):
     assert all(r["model"] == "FEM" and r["n_dofs"] > 0 for r in rows)
     assert rows[0]["closed_form_error"] < 1e-10 and np.isnan(rows[2]["closed_form_error"])
     assert rows[0]["u_max"] == pytest.approx(np.hypot(2.5 * 2.5 / 3.7e3, 0.27 * 2.5 * 0.8 / 3.7e3), rel=1e-9)
+    # a row whose estimate misses the case's tol (or has none) says so
+    for r in rows:
+        assert r["status"] == ("ok" if r["error_estimate"] < r["ref_tol"] else "ref-coarse")
+    assert rows[0]["status"] == "ok" and rows[2]["status"] == "ref-coarse"    # one refinement: shear 1e-2
+    coarse = stage.run(rect_case(tmp_path, "tri", "P2", divisions=2, max_refine=0), StageContext(out_dir=tmp_path))
+    assert all(r["status"] == "ref-coarse" for r in coarse)                # one level: no estimate
 
 
 # -- polygons ------------------------------------------------------------------------------

@@ -50,9 +50,12 @@ def run(case, ctx) -> list[dict]:
     sol = reference.solve(case, status=ctx.status)
     rows = []
     for load in case.loads:
+        est = float(sol.error_estimate[load.name])
         row = dict(case=case.name, model="FEM", load=load.name, n_dofs=sol.n_dofs,
-                   error_estimate=sol.error_estimate[load.name], u_max=sol.u_max(load.name),
-                   closed_form_error=closed_form_error(case, sol, load), cached=sol.from_cache)
+                   error_estimate=est, u_max=sol.u_max(load.name), ref_tol=case.reference.tol,
+                   ref_method=case.reference.method,
+                   closed_form_error=closed_form_error(case, sol, load), cached=sol.from_cache,
+                   status="ok" if est < case.reference.tol else "ref-coarse")   # NaN (one level) too
         if "modal" in case.tags:
             ctx.status(f"FEM modes ({load.name})")
             row["f1_hz"] = float(sol.frequencies(load=load.name)[0])
