@@ -49,7 +49,8 @@ ROOT = Path(__file__).resolve().parent.parent
 # package (no cases/ beside it) uses the current folder's
 _HOME = ROOT if (ROOT / "cases").is_dir() else Path.cwd()
 DEFAULT_CASES = _HOME / "cases"
-DEFAULT_RESULTS = _HOME / "results"
+DEFAULT_RESULTS = _HOME / "results"   # the published tables: the --full run, committed
+DEFAULT_RUNS = _HOME / "runs"         # where a user's runs go by default (git-ignored)
 RESULT_PREFIX = "result-seed"
 HASH_VERSION = "springbench-job-1"
 # loaded sources that cannot change a result (drawing, tables, command-line plumbing)

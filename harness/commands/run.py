@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-HELP = "run case files or folders of them (default: every case under cases/) and write tables to results/"
+HELP = ("run case files or folders of them (default: every case under cases/) and write tables to runs/ "
+        "(the published results/ are the --full run: --full --results results)")
 
 
 def _positive_int(text):
@@ -26,7 +27,9 @@ def add_arguments(p):
     mode.add_argument("--full", dest="mode", action="store_const", const="full",
                       help="the case's full budget: reproduces the papers")
     p.set_defaults(mode="quick")
-    p.add_argument("--results", type=Path, default=None, help="output folder (default: results/)")
+    p.add_argument("--results", type=Path, default=None,
+                   help="output folder (default: runs/; results/ holds the published --full run and takes "
+                        "only --full)")
     p.add_argument("--jobs", "-j", type=_positive_int, default=None, metavar="N",
                    help="parallel cases/seeds (default: the number of cores; 1 runs in this process)")
     p.add_argument("--executor", choices=("local", "dask"), default="local",
@@ -40,8 +43,13 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from harness.runner import DEFAULT_RESULTS, run_suite
-    results = args.results or DEFAULT_RESULTS
+    from harness.errors import SpringbenchError
+    from harness.runner import DEFAULT_RESULTS, DEFAULT_RUNS, run_suite
+    results = args.results or DEFAULT_RUNS
+    if args.mode != "full" and Path(results).resolve() == Path(DEFAULT_RESULTS).resolve():
+        raise SpringbenchError("results/ holds the published --full run; a quick run would overwrite it",
+                               file=str(results), field="--results",
+                               fix="drop --results (quick runs go to runs/) or add --full to republish")
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
                     scheduler=args.scheduler, force=args.force, figures=args.figures)
     import pandas as pd
