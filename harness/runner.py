@@ -35,7 +35,6 @@ import os
 import re
 import shutil
 import sys
-import tempfile
 import time
 import traceback
 import uuid
@@ -43,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from harness.errors import CaseError, SpringbenchError
+from harness.runlock import clean_stale_scratch, run_lock, scratch_dir
 
 ROOT = Path(__file__).resolve().parent.parent
 # an editable install / checkout runs its own cases/ into its own results/; an installed
@@ -320,7 +320,7 @@ def execute(job: Job, sink=None) -> JobResult:
 
     t_job = time.perf_counter()
     status = _Throttled(sink, job.label)
-    tmp = Path(tempfile.mkdtemp(prefix="springbench-"))
+    tmp = scratch_dir()
     stage_name = "case"
     try:
         case = load_case(job.case_file, job.mode)
@@ -575,6 +575,12 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
     except OSError as exc:
         raise SpringbenchError(f"cannot create the results folder ({exc.strerror})", file=str(results),
                                field="--results", fix="give a writable folder")
+    clean_stale_scratch()
+    with run_lock(results):
+        return _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress)
+
+
+def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress) -> RunReport:
     planned, failed = plan(list(paths), mode, stages)
     _prune_seeds(results, planned)
     done: list[JobResult] = []
