@@ -142,8 +142,6 @@ def reference_met_tol(ref) -> bool | None:
     """``ref.met_tol`` (every load met the case's reference tol); None if the reference
     does not say (a stand-in)."""
     m = getattr(ref, "met_tol", None)
-    if callable(m):
-        m = m()
     return None if m is None else bool(m)
 
 

@@ -24,8 +24,9 @@ class GridField:
         flat = np.zeros(doflocs.shape[1], np.int64)
         for a in range(dim):
             x = doflocs[a]
-            g, inv = np.unique(np.round((x - x.min()) / max(np.ptp(x), 1e-300), 10), return_inverse=True)
-            self.axes.append(doflocs[a][np.unique(inv, return_index=True)[1]])
+            g, first, inv = np.unique(np.round((x - x.min()) / max(np.ptp(x), 1e-300), 10),
+                                      return_index=True, return_inverse=True)
+            self.axes.append(x[first])
             flat = flat * len(g) + inv
         self.shape = tuple(len(g) for g in self.axes)
         if np.prod(self.shape) != doflocs.shape[1]:

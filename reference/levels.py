@@ -55,7 +55,7 @@ class Levels:
             self._eval[k] = GridField(Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2").doflocs)
         return self._eval[k]
 
-    def at(self, points, load: str, k: int, u: np.ndarray) -> np.ndarray:
+    def at(self, points, k: int, u: np.ndarray) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
         (reference/gridvalues.py: O(h^4) everywhere, so the levels extrapolate cleanly)."""
         return self._evaluator(k).evaluate(u.reshape(-1, self.dim), np.asarray(points, float))
@@ -63,7 +63,7 @@ class Levels:
     def values(self, points, load: str):
         """The load's kept levels evaluated at points: ([(n, dim) arrays], [h])."""
         pairs = self.fields[load]
-        return ([self.at(points, load, k, u) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
+        return ([self.at(points, k, u) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
 
     def evaluate(self, points, load: str):
         """(extrapolated displacement (n, dim), estimate of its error (n,)) at points."""
@@ -76,7 +76,7 @@ class Levels:
         k, u = self.fields[load][-1]
         if k == len(self.meshes) - 1:
             return u
-        return self.at(disc.doflocs.T, load, k, u).ravel()
+        return self.at(disc.doflocs.T, k, u).ravel()
 
     def to_arrays(self, names) -> dict:
         out = {"ns": np.asarray(self.ns, np.int64),

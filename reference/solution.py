@@ -56,7 +56,7 @@ class ReferenceSolution:
 
     def __init__(self, case, mesh, U: dict, estimates: dict, history: list, key: str,
                  from_cache: bool = False, seconds: float = 0.0, solver: list | None = None,
-                 levels: Levels | None = None):
+                 levels: Levels | None = None, disc: Discretisation | None = None):
         self.case = case
         self.mesh = mesh
         self.dim = case.dim
@@ -64,6 +64,8 @@ class ReferenceSolution:
         self._U = U
         self.loads = tuple(U)
         self.levels = levels
+        if disc is not None:
+            self.__dict__["disc"] = disc   # already built (graded: the finest level's)
         self.solver = list(solver or [])
         self.error_estimate = ErrorEstimate(estimates, self._uniform_estimate if levels is None else self._level_estimate)
         self.history = history
@@ -229,7 +231,5 @@ def _graded_solution(case, levels: Levels, est, history, key, seconds, solver, f
     mesh = levels.meshes[-1]
     disc = Discretisation(mesh, case.reference.cell, case.reference.element)
     U = {n: levels.finest_field(n, disc) for n in levels.fields}
-    sol = ReferenceSolution(case, mesh, U, est, history, key, from_cache=from_cache, seconds=seconds,
-                            solver=solver, levels=levels)
-    sol.__dict__["disc"] = disc
-    return sol
+    return ReferenceSolution(case, mesh, U, est, history, key, from_cache=from_cache, seconds=seconds,
+                             solver=solver, levels=levels, disc=disc)

@@ -147,7 +147,7 @@ def test_shears_are_extrapolated_with_a_per_point_estimate(graded_box):
     # the extrapolant differs from the finest level by about the finest level's error, which the
     # estimate of the previous level pair bounds: the correction is smaller than the coarse change
     (k1, u1), (k2, u2) = sol.levels.fields["shear-xz"][-2:]
-    fine, prev = (sol.levels.at(x, "shear-xz", k, u) for k, u in ((k2, u2), (k1, u1)))
+    fine, prev = (sol.levels.at(x, k, u) for k, u in ((k2, u2), (k1, u1)))
     corr = np.linalg.norm(sol.displacement(x, "shear-xz") - fine, axis=1)
     assert 0 < corr.max() < np.linalg.norm(fine - prev, axis=1).max()
     assert sol.error_estimate["shear-xz"] > 1e-4 and not sol.met_tol   # three coarse levels cannot meet 1e-4
