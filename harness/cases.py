@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Mapping
@@ -20,7 +20,7 @@ import numpy as np
 from harness import case_sections
 from harness.errors import CaseError, SpringbenchError
 from harness.fibres import NAMED_FIELDS
-from harness.loadsets import AXES, LOAD_SETS, Constraint, LoadCase, Traction
+from harness.loadsets import ANCHORS, AXES, LOAD_SETS, Constraint, LoadCase, Traction, anchor_points
 from harness.parts import part_exists
 from harness.schema import Field, check
 
@@ -90,14 +90,20 @@ LOADS = {
     "set": Field("str", None, choices=tuple(LOAD_SETS)),
     "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units)"),
     "case": Field("tables", (), spec=USER_LOAD),
+    "fit": Field("strs", None, doc="the load cases a fit may use (default: all that are not held out)"),
+    "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
 }
+
+GRADED_LEVELS = 6   # default max_refine of the graded method: n = 2..8 cells per end zone, where a
+# cube's shears reach 7e-5 (tests/test_graded_vs_independent.py); the dof budget stops thin boxes earlier
 
 REFERENCE = {
     "element": Field("str", "P2", choices=("P1", "P2")),
     "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
     "divisions": Field("int", None, min=1, doc="initial elements along the shortest side"),
     "tol": Field("float", 1e-4, min=0, min_exclusive=True),
-    "max_refine": Field("int", 3, min=0),
+    "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 6, "
+                                                "within a 64k-dof system in 3-D)"),
     "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg")),
     "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
     "method": Field("str", "auto", choices=("auto", "graded", "refine"),
@@ -205,9 +211,15 @@ class Case:
     mode: str = "quick"
     sections: Mapping[str, Mapping] = field(default_factory=dict)
     digest: str = ""
+    heldout: tuple[str, ...] = ()
 
     def section(self, name: str) -> Mapping | None:
         return self.sections.get(name)
+
+    @property
+    def fit_loads(self) -> tuple[str, ...]:
+        """The load cases a fit uses: every one that is not held out."""
+        return tuple(l.name for l in self.loads if l.name not in self.heldout)
 
     @property
     def suite(self) -> str:
@@ -261,12 +273,14 @@ def load_case(path, mode: str = "quick") -> Case:
     dim = d["dim"]
     body = _body(d["body"], dim, path, file)
     material = _material(d["material"], dim, file)
+    body = _with_anchors(d["loads"], body, file)
     loads, load_set = _loads(d["loads"], dim, body, file)
+    heldout = _heldout(d["loads"], loads, file)
     reference = _reference(d["reference"], dim, body, file)
     return Case(path=path, name=d["name"], dim=dim, body=body, material=material, loads=loads,
                 reference=reference, load_set=load_set, magnitude=d["loads"]["magnitude"],
                 description=d["description"], tags=d["tags"], mode=mode,
-                sections=MappingProxyType(sections), digest=digest)
+                sections=MappingProxyType(sections), digest=digest, heldout=heldout)
 
 
 def _body(b: dict, dim: int, path: Path, file: str) -> Body:
@@ -387,7 +401,10 @@ def _loads(l: dict, dim: int, body: Body, file: str):
         if want != dim:
             raise CaseError(f"load set '{l['set']}' is {want}-D but dim = {dim}", file=file,
                             field="loads.set", fix=f"use basic{dim}d")
-        cases.extend(make(l["magnitude"]))
+        anchors = None
+        if body.shape not in ("rectangle", "box") and ANCHORS[0] in body.parts:
+            anchors = np.array([body.parts[a][0] for a in ANCHORS[:dim]])
+        cases.extend(make(l["magnitude"], anchors))
     names = {c.name for c in cases}
     for i, u in enumerate(l["case"]):
         where = f"loads.case[{i}]"
@@ -416,6 +433,52 @@ def _loads(l: dict, dim: int, body: Body, file: str):
     return tuple(cases), l["set"]
 
 
+def _heldout(l: dict, loads, file: str) -> tuple[str, ...]:
+    """The held-out load names from [loads] fit / heldout (either one, or both covering
+    every load case once)."""
+    names = [c.name for c in loads]
+    for key in ("fit", "heldout"):
+        for n in l[key] or ():
+            if n not in names:
+                raise CaseError(f"no load case '{n}'", file=file, field=f"loads.{key}",
+                                fix=f"one of {', '.join(names)}")
+    fit, held = l["fit"], l["heldout"]
+    if fit is not None and held is not None:
+        both = sorted(set(fit) & set(held))
+        rest = [n for n in names if n not in fit and n not in held]
+        if both or rest:
+            raise CaseError(f"load case '{(both or rest)[0]}' is {'in both' if both else 'in neither'} of fit and heldout",
+                            file=file, field="loads.heldout", fix="list every load case in exactly one of them")
+    held = tuple(held) if held is not None else tuple(n for n in names if fit is not None and n not in fit)
+    if names and len(held) == len(names):
+        raise CaseError("every load case is held out: nothing to fit", file=file, field="loads.fit",
+                        fix="fit at least one load case")
+    return tuple(n for n in names if n in held)
+
+
+def _with_anchors(l: dict, body: Body, file: str) -> Body:
+    """A body that is not a box gets the parts anchor-a, -b, -c (points on its boundary,
+    harness.loadsets.anchor_points) when its load set is a homogeneous one."""
+    if not (l["set"] or "").startswith("homogeneous") or body.shape in ("rectangle", "box"):
+        return body
+    if body.shape == "polygon":
+        boundary = np.asarray(body.vertices, float)
+    else:
+        from harness.meshfile import boundary_facets, read_mesh
+        try:
+            m = read_mesh(body.file, body.format)
+        except SpringbenchError as exc:
+            raise CaseError(exc.message, file=str(body.file), field="body.file", fix=exc.fix) from None
+        boundary = m.points[np.unique(np.concatenate([f.ravel() for f in boundary_facets(m.cells)]))]
+    taken = [a for a in ANCHORS if a in body.parts]
+    if taken:
+        raise CaseError(f"part name '{taken[0]}' is reserved for the homogeneous loads' constraints", file=file,
+                        field=f"body.parts.{taken[0]}", fix="rename that part")
+    pts = anchor_points(boundary)
+    parts = dict(body.parts, **{a: (tuple(p), tuple(p)) for a, p in zip(ANCHORS, pts)})
+    return replace(body, parts=MappingProxyType(parts))
+
+
 def _check_part(name: str, dim: int, body: Body, file: str, where: str):
     if not part_exists(name, dim, body.parts):
         user = ", ".join(body.parts) or "none defined"
@@ -441,7 +504,8 @@ def _reference(r: dict, dim: int, body: Body, file: str) -> ReferenceSpec:
             raise CaseError("graded reference meshes are Q2 quadrilaterals/hexahedra", file=file,
                             field="reference.method", fix="drop reference.cell and element, or use method = \"refine\"")
         cell = "quad" if dim == 2 else "hex"
-    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], r["max_refine"], r["solver"], r["modes"], method)
+    levels = r["max_refine"] if r["max_refine"] is not None else (GRADED_LEVELS if method == "graded" else 3)
+    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], levels, r["solver"], r["modes"], method)
 
 
 def find_cases(paths) -> list[Path]:

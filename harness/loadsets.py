@@ -11,6 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+import numpy as np
+
 AXES = "xyz"
 
 
@@ -32,12 +34,15 @@ class Traction:
 @dataclass(frozen=True)
 class LoadCase:
     """One static load case. ``gravity`` is an acceleration (force = density * g);
-    ``body_force`` a force per volume; both may be None."""
+    ``body_force`` a force per volume; both may be None. ``stress`` (Voigt, VOIGT
+    order) is a homogeneous stress state whose traction sigma . n acts on the whole
+    boundary (the ``homogeneous`` sets on bodies that are not boxes)."""
     name: str
     constraints: tuple[Constraint, ...]
     tractions: tuple[Traction, ...] = ()
     gravity: tuple[float, ...] | None = None
     body_force: tuple[float, ...] | None = None
+    stress: tuple[float, ...] | None = None
 
     @property
     def parts(self) -> set[str]:
@@ -50,7 +55,7 @@ def _unit(dim: int, axis: int, s: float) -> tuple[float, ...]:
     return tuple(v)
 
 
-def basic2d(s: float) -> tuple[LoadCase, ...]:
+def basic2d(s: float, anchors=None) -> tuple[LoadCase, ...]:
     """Deussen Fig. 4: two stretches (rollers + one pinned corner) and two shears."""
     return (
         LoadCase("stretch-x", (Constraint("x0", (0,)), Constraint("x0y0", (1,))),
@@ -62,7 +67,7 @@ def basic2d(s: float) -> tuple[LoadCase, ...]:
     )
 
 
-def basic3d(s: float) -> tuple[LoadCase, ...]:
+def basic3d(s: float, anchors=None) -> tuple[LoadCase, ...]:
     """Deussen Fig. 7: three stretches and six shears on a box.
 
     stretch-a: rollers on face a0, the corner (a0, b0, c0) fixed in b and c, the
@@ -87,16 +92,138 @@ def basic3d(s: float) -> tuple[LoadCase, ...]:
     return tuple(cases)
 
 
-LOAD_SETS: dict[str, tuple[int, Callable[[float], tuple[LoadCase, ...]]]] = {
+VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
+ANCHORS = ("anchor-a", "anchor-b", "anchor-c")   # part names of the minimal constraints
+
+
+def stress_tensor(voigt) -> "np.ndarray":
+    """Voigt stress (VOIGT order) -> symmetric (dim, dim) tensor."""
+    dim = 2 if len(voigt) == 3 else 3
+    sig = np.zeros((dim, dim))
+    for v, (i, j) in zip(voigt, VOIGT[dim]):
+        sig[i, j] = sig[j, i] = v
+    return sig
+
+
+def anchor_points(points) -> np.ndarray:
+    """Three (2-D: two) well-separated points of a body's boundary vertices (m, dim) for
+    the minimal constraints: A farthest from the centroid, B farthest from A, C farthest
+    from the line AB. Near-ties (symmetric bodies have many) go to the lexicographically
+    smallest point, so rounding the coordinates cannot change the choice."""
+    p = np.asarray(points, float)
+    tol = 1e-9 * float(np.ptp(p, axis=0).max())
+    key = np.round(p / max(tol, 1e-300) / 1e3) if tol > 0 else p       # lexicographic on rounded coordinates
+
+    def pick(score):
+        cand = np.flatnonzero(score >= score.max() - tol * 1e3)
+        return p[cand[np.lexsort(key[cand].T[::-1])[0]]]
+    a = pick(np.linalg.norm(p - p.mean(0), axis=1))
+    b = pick(np.linalg.norm(p - a, axis=1))
+    if p.shape[1] == 2:
+        return np.array([a, b])
+    d = (b - a) / np.linalg.norm(b - a)
+    r = (p - a) - np.outer((p - a) @ d, d)
+    return np.array([a, b, pick(np.linalg.norm(r, axis=1))])
+
+
+def minimal_constraints(anchors, names=ANCHORS) -> tuple[Constraint, ...]:
+    """3-2-1 (2-D: 2-1) constraints at the anchor points that remove exactly the rigid
+    motions: A all components; B the components across AB's main direction; C the
+    component along the normal of the plane ABC (its largest entry)."""
+    p = np.asarray(anchors, float)
+    dim = p.shape[1]
+    main = int(np.argmax(np.abs(p[1] - p[0])))
+    cons = [Constraint(names[0], tuple(range(dim))), Constraint(names[1], tuple(c for c in range(dim) if c != main))]
+    if dim == 3:
+        n = np.cross(p[1] - p[0], p[2] - p[0])
+        cons.append(Constraint(names[2], (int(np.argmax(np.abs(n))),)))
+    return tuple(cons)
+
+
+def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
+    """The homogeneous stress states (DESIGN.md), one unit Voigt component times s each
+    (sxx, syy, [szz, syz, sxz,] sxy). A box gets them as face tractions sigma . n and the
+    corner constraints of the stretches; any other body (``anchors``: its anchor points)
+    as ``stress`` on the whole boundary with minimal constraints at the anchors."""
+    out = []
+    for I, (i, j) in enumerate(VOIGT[dim]):
+        voigt = np.zeros(len(VOIGT[dim]))
+        voigt[I] = s
+        name = f"s{AXES[i]}{AXES[j]}"
+        if anchors is not None:
+            out.append(LoadCase(name, minimal_constraints(anchors), stress=tuple(voigt)))
+            continue
+        sig = stress_tensor(voigt)
+        tracs = []
+        for a in range(dim):
+            for side, sign in ((0, -1.0), (1, 1.0)):
+                t = sign * sig[:, a]
+                if np.any(t):
+                    tracs.append(Traction(f"{AXES[a]}{side}", tuple(float(v) for v in t)))
+        corners = [(0,) * dim, (1,) + (0,) * (dim - 1), (0, 1) + (0,) * (dim - 2)]
+        names = ["".join(f"{AXES[a]}{c[a]}" for a in range(dim)) for c in corners]
+        out.append(LoadCase(name, minimal_constraints(np.array(corners[:dim], float), names), tuple(tracs)))
+    return tuple(out)
+
+
+def homogeneous2d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+    return homogeneous(2, s, anchors)
+
+
+def homogeneous3d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+    return homogeneous(3, s, anchors)
+
+
+# name -> (dim, make(s, anchors)): anchors are the body's anchor points (None for a box)
+LOAD_SETS: dict[str, tuple[int, Callable[..., tuple[LoadCase, ...]]]] = {
     "basic2d": (2, basic2d),
     "basic3d": (3, basic3d),
+    "homogeneous2d": (2, homogeneous2d),
+    "homogeneous3d": (3, homogeneous3d),
 }
+
+
+def homogeneous_closed_form(load: LoadCase, points, compliance, anchors) -> "np.ndarray":
+    """u (n, dim) of a homogeneous stress load on a homogeneous body with Voigt
+    compliance S: u = eps x plus the rigid motion the load's constraints at ``anchors``
+    (one point per constraint) select."""
+    points = np.asarray(points, float)
+    dim = points.shape[1]
+    voigt = load.stress if load.stress is not None else _box_stress(load, dim)
+    e = np.asarray(compliance, float) @ np.asarray(voigt, float)
+    eps = np.zeros((dim, dim))
+    for v, (i, j) in zip(e, VOIGT[dim]):
+        eps[i, j] = eps[j, i] = v if i == j else v / 2
+    # rigid motion a + w x x (2-D: a + w (-y, x)): one equation per constrained component
+    def rigid(x):
+        if dim == 2:
+            return np.hstack([np.eye(2), [[-x[1]], [x[0]]]])
+        return np.hstack([np.eye(3), [[0, x[2], -x[1]], [-x[2], 0, x[0]], [x[1], -x[0], 0]]])
+    rows, rhs = [], []
+    for c, x in zip(load.constraints, np.asarray(anchors, float)):
+        R = rigid(x)
+        for comp in c.components:
+            rows.append(R[comp])
+            rhs.append(-(eps @ np.asarray(x, float))[comp])
+    coef = np.linalg.solve(np.array(rows), np.array(rhs))
+    a, w = coef[:dim], coef[dim:]
+    spin = np.cross(w, points) if dim == 3 else w[0] * np.stack([-points[:, 1], points[:, 0]], axis=1)
+    return points @ eps.T + a + spin
+
+
+def _box_stress(load: LoadCase, dim: int):
+    """The Voigt stress of a box's homogeneous load from its x1/y1/z1 face tractions."""
+    sig = np.zeros((dim, dim))
+    for t in load.tractions:
+        a, side = AXES.index(t.part[0]), int(t.part[1])
+        if side == 1:
+            sig[:, a] = t.vector
+    return tuple(sig[i, j] for i, j in VOIGT[dim])
 
 
 def stretch_closed_form(load: LoadCase, points, E: float, nu: float, origin):
     """Closed-form displacement (n, dim) of a standard stretch of a homogeneous isotropic
     box (plane stress in 2-D): u_a = s (a - a0)/E, others -nu s (b - b0)/E."""
-    import numpy as np
     points = np.asarray(points, float)
     (t,) = load.tractions
     a = int(np.flatnonzero(t.vector)[0])

@@ -6,8 +6,9 @@ non-finite coordinates, empty mesh, node indices out of range, repeated nodes wi
 cell, duplicate nodes (distinct indices, same position), nodes used by no cell,
 degenerate cells (|signed size| tiny relative to the median cell), inverted cells (signed
 size of the opposite sign to the majority: a consistently mirrored mesh is accepted),
-and non-manifold input (a face of a volume mesh, or an edge of a surface mesh, shared by
-more than two cells). Everything is vectorised over cells.
+non-manifold input (a face of a volume mesh, or an edge of a surface mesh, shared by
+more than two cells) and a body in several disconnected pieces (a loose piece has no
+constraint and floats). Everything is vectorised over cells.
 """
 
 from __future__ import annotations
@@ -121,3 +122,22 @@ def check_mesh(mesh, file: str | None = None) -> None:
             what = "edges" if kind in ("triangle", "quad") else "faces"
             fail(f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
                  "each face may belong to at most two cells; remove overlapping or duplicate cells")
+    _check_connected(pts, cells, fail)
+
+
+def _check_connected(pts, cells, fail):
+    """One piece: every node reachable from every other through the cells."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    rows = np.concatenate([np.repeat(c[:, :1], c.shape[1] - 1, axis=1).ravel() for c in cells.values()])
+    cols = np.concatenate([c[:, 1:].ravel() for c in cells.values()])
+    n = len(pts)
+    count, label = connected_components(sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
+                                        directed=False)
+    if count > 1:
+        sizes = np.bincount(label)
+        small = int(np.argmin(sizes))
+        fail(f"the mesh is {count} disconnected pieces (node counts {sorted(sizes.tolist(), reverse=True)[:5]}; "
+             f"node {int(np.flatnonzero(label == small)[0])} is in one of {sizes[small]} nodes)",
+             "mesh the body as one connected piece, or remove the loose pieces")
+

@@ -101,3 +101,29 @@ def read_mesh(path, fmt: str | None = None) -> Mesh:
     except Exception as exc:  # any parser failure becomes one line
         raise SpringbenchError(f"cannot read mesh ({type(exc).__name__}: {exc})".replace("\n", " "),
                                file=str(path), fix="give a bc2000 mesh or any format meshio reads")
+
+
+FACETS = {"triangle": [(0, 1), (1, 2), (2, 0)], "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+          "tetra": [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)],
+          "hexahedron": [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]}
+
+
+def boundary_facets(cells, points=None):
+    """The facets (edges in 2-D, triangles / quads in 3-D) that belong to exactly one
+    cell, one (m, k) vertex-index array per facet size. With ``points``, also the
+    centroids of their cells (one (m, dim) array each): the inside of every facet."""
+    by_size: dict[int, list] = {}
+    for ctype, c in cells.items():
+        c = np.asarray(c, int)
+        cent = points[c].mean(axis=1) if points is not None else None
+        for f in FACETS[ctype]:
+            by_size.setdefault(len(f), []).append((c[:, list(f)], cent))
+    out, inside = [], []
+    for pairs in by_size.values():
+        faces = np.concatenate([f for f, _ in pairs])
+        _, first, count = np.unique(np.sort(faces, axis=1), axis=0, return_index=True, return_counts=True)
+        keep = np.sort(first[count == 1])
+        out.append(faces[keep])
+        if points is not None:
+            inside.append(np.concatenate([c for _, c in pairs])[keep])
+    return (out, inside) if points is not None else out

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import Delaunay
+from scipy.spatial import Delaunay, cKDTree
 
 from harness.errors import ModelError
 from harness.parts import part_predicate
@@ -105,10 +105,65 @@ def tributary_measure(points: np.ndarray, on_part) -> np.ndarray:
     return out
 
 
+def _facet_measure(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(size (m,), unit normal (m, dim) up to sign) of segments (m, 2, 2) or planar
+    polygons (m, k, 3) given by their vertices in order."""
+    if x.shape[2] == 2:
+        d = x[:, 1] - x[:, 0]
+        n = np.stack([d[:, 1], -d[:, 0]], axis=1)
+        size = np.linalg.norm(d, axis=1)
+        return size, n / size[:, None]
+    a = np.zeros((len(x), 3))
+    for i in range(1, x.shape[1] - 1):
+        a += np.cross(x[:, i] - x[:, 0], x[:, i + 1] - x[:, 0]) / 2
+    size = np.linalg.norm(a, axis=1)
+    return size, a / size[:, None]
+
+
+def stress_forces(points: np.ndarray, case, voigt) -> np.ndarray:
+    """Nodal forces (n, dim) of the traction sigma . n of a homogeneous stress on the
+    body's whole boundary: each boundary facet (a polygon's edges, a mesh body's boundary
+    faces) gives sigma . n times its size equally to its vertices, which must be nodes."""
+    from harness.loadsets import stress_tensor
+    from harness.meshfile import boundary_facets, read_mesh
+    body = case.body
+    if body.shape == "polygon":
+        v = np.asarray(body.vertices, float)
+        area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
+        v = v if area > 0 else v[::-1]
+        facets = [np.stack([np.arange(len(v)), (np.arange(len(v)) + 1) % len(v)], axis=1)]
+        corners, inside = v, [None]          # counter-clockwise: (dy, -dx) points out
+    elif body.shape == "mesh":
+        m = read_mesh(body.file, body.format)
+        corners = m.points
+        facets, inside = boundary_facets(m.cells, m.points)
+    else:
+        raise ModelError("a homogeneous stress on the whole boundary needs a polygon or mesh body", field="loads",
+                         fix="boxes get the homogeneous sets as face tractions")
+    sigma = stress_tensor(voigt)
+    tol = 1e-8 * float(np.ptp(corners, axis=0).max())
+    dist, node = cKDTree(points).query(corners)
+    f = np.zeros(points.shape)
+    for fac, cell_centre in zip(facets, inside):
+        x = corners[fac]
+        size, n = _facet_measure(x)
+        if body.shape == "mesh":   # outwards, away from the facet's cell (cells may be numbered either way)
+            n *= np.where(np.einsum("ij,ij->i", n, x.mean(axis=1) - cell_centre) < 0, -1.0, 1.0)[:, None]
+        share = (size / fac.shape[1])[:, None] * (n @ sigma.T)
+        used = np.unique(fac)
+        if np.any(dist[used] > tol):
+            raise ModelError("the homogeneous loads need a node at every vertex of the body's surface",
+                             field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")
+        np.add.at(f, node[fac].ravel(), np.repeat(share, fac.shape[1], axis=0))
+    return f
+
+
 def force_vector(network, case, load) -> np.ndarray:
     """Nodal forces (n, dim) of a load case."""
     pts = network.points
     f = np.zeros(pts.shape)
+    if load.stress is not None:
+        f += stress_forces(pts, case, load.stress)
     for t in load.tractions:
         meas = tributary_measure(pts, _predicate(case, t.part))
         if not np.any(meas > 0):

@@ -132,6 +132,16 @@ class Discretisation:
         w = skfem.asm(skfem.LinearForm(lambda v, _: v), fb)  # int phi_a ds, (ns,)
         return (w[:, None] * np.asarray(vector, float)[None, :]).ravel()
 
+    def stress_load(self, sigma: np.ndarray) -> np.ndarray:
+        """Load vector of the traction sigma . n of a constant stress (dim, dim) on the
+        whole boundary (n the outward normal of each facet)."""
+        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=self.mesh.boundary_facets(),
+                              intorder=self.q_mass, dofs=self.dofs)
+        out = np.zeros((self.ns, self.dim))
+        for c in range(self.dim):
+            out[:, c] = skfem.asm(skfem.LinearForm(lambda v, w: v * sum(sigma[c, j] * w.n[j] for j in range(self.dim))), fb)
+        return out.ravel()
+
     def part_dofs(self, predicate, components) -> np.ndarray:
         """Vector dofs of the components at every dof location inside the part.
 

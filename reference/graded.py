@@ -24,7 +24,8 @@ def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPON
                zone: float = ZONE) -> np.ndarray:
     """Node coordinates in [0, length]: ``n`` power-graded cells in each end zone of
     width zone * min(length, shortest) (at most half the axis), uniform cells in between
-    (as many as keep them no larger than the largest graded cell at n, proportional to n)."""
+    (an even number, as many as keep them no larger than the largest graded cell at n,
+    proportional to n), so the axis is symmetric and its midpoint is a node."""
     if n < 1:
         raise ValueError("need at least one cell per end zone")
     w = min(zone * shortest, 0.5 * length)
@@ -32,19 +33,28 @@ def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPON
     middle = length - 2 * w
     if middle <= 1e-12 * length:
         return np.concatenate([end, length - end[::-1][1:]])
-    # largest graded cell ~ beta w / n (its limit for large n keeps the count proportional to n)
-    m = max(1, int(np.ceil(middle * n / (beta * w) - 1e-9)))
+    # largest graded cell ~ beta w / n (its limit for large n keeps the count proportional to n);
+    # an even count puts a vertex on the mid-plane, where reference/symmetry.py cuts the box
+    m = 2 * max(1, int(np.ceil(middle * n / (2 * beta * w) - 1e-9)))
     mid = w + middle * np.linspace(0.0, 1.0, m + 1)[1:-1]
     return np.concatenate([end, mid, length - end[::-1]])
+
+
+def graded_axes(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> list:
+    """The node coordinates along each axis of the graded mesh of [origin, origin + size]."""
+    origin, size = np.asarray(origin, float), np.asarray(size, float)
+    shortest = float(size.min())
+    return [o + axis_nodes(s, shortest, n, beta, zone) for o, s in zip(origin, size)]
+
+
+def tensor_mesh(axes) -> skfem.Mesh:
+    return MESHES[len(axes)].init_tensor(*axes)
 
 
 def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> skfem.Mesh:
     """Quadrilateral (2-D) or hexahedral (3-D) tensor mesh of [origin, origin + size]
     graded towards every face, ``n`` cells per end zone."""
-    origin, size = np.asarray(origin, float), np.asarray(size, float)
-    shortest = float(size.min())
-    axes = [o + axis_nodes(s, shortest, n, beta, zone) for o, s in zip(origin, size)]
-    return MESHES[len(size)].init_tensor(*axes)
+    return tensor_mesh(graded_axes(origin, size, n, beta, zone))
 
 
 def probe_points(origin, size, per_axis: int = 9) -> np.ndarray:

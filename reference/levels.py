@@ -6,7 +6,8 @@ the last two extrapolants is its per-point error estimate. A load whose last two
 agree to rounding (a field the mesh represents exactly, like the stretches' linear
 closed form) stops refining; the others go on until every estimate at the probe points
 is below ``reference.tol``, ``reference.max_refine`` levels are done, or the next level
-would pass the dof budget.
+would pass the dof budget. A load with mirror symmetry is solved on the half, quarter or
+eighth of the box it determines and unfolded (reference/symmetry.py).
 """
 
 from __future__ import annotations
@@ -17,20 +18,24 @@ import numpy as np
 
 from reference.extrapolate import extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import graded_mesh, level_divisions, probe_points
+from reference.graded import graded_axes, graded_mesh, level_divisions, probe_points, tensor_mesh
 from reference.gridvalues import GridField
 from reference.problem import solve_mesh
+from reference.symmetry import Mirror, lower_half, mirror_of, unfold
 
 FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
 # (divisions counts cells along the shortest side: two end zones)
-MAX_DOFS = {2: 400_000, 3: 240_000}
+MAX_DOFS = {2: 400_000, 3: 64_000}     # the largest system one level may solve (3-D: ~15 s a factorisation)
 EXACT = 1e-9                    # relative change between two levels below which a field is exact
 
 
 def n_dofs(mesh, dim: int) -> int:
     """Q2 dofs of a tensor mesh: (2 cells + 1) nodes along each axis."""
-    cells = [len(np.unique(mesh.p[a])) - 1 for a in range(dim)]
-    return dim * int(np.prod([2 * c + 1 for c in cells]))
+    return _dofs([np.unique(mesh.p[a]) for a in range(dim)], dim)
+
+
+def _dofs(axes, dim: int) -> int:
+    return dim * int(np.prod([2 * len(x) - 1 for x in axes]))
 
 
 @dataclass
@@ -49,11 +54,31 @@ class Levels:
         self.ns.append(n)
         self.meshes.append(mesh)
 
+    def disc(self, mesh) -> Discretisation:
+        return Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2")
+
     def _evaluator(self, k: int) -> GridField:
         if k not in self._eval:
-            mesh = self.meshes[k]
-            self._eval[k] = GridField(Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2").doflocs)
+            self._eval[k] = GridField(self.disc(self.meshes[k]).doflocs)
         return self._eval[k]
+
+    def solve(self, case, k: int, axes: list, mirrors: dict, info=None) -> dict:
+        """Level k's displacements {load: whole-box dof vector} of the loads in
+        ``mirrors`` ({name: Mirror}): each group of loads with the same mirror solved on
+        its cut of the box (reference/symmetry.py) and unfolded."""
+        groups: dict[Mirror, list[str]] = {}
+        for name, mirror in mirrors.items():
+            groups.setdefault(mirror, []).append(name)
+        out = {}
+        for mirror, names in groups.items():
+            if not mirror:
+                out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
+                continue
+            d = self.disc(tensor_mesh(lower_half(axes, mirror)))
+            U = solve_mesh(case, d.mesh, loads=set(names), info=info, mirror=mirror, disc=d)
+            half = GridField(d.doflocs)
+            out.update({n: unfold(self._evaluator(k), half, U[n], mirror) for n in names})
+        return out
 
     def at(self, points, k: int, u: np.ndarray) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
@@ -110,17 +135,21 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
     lev = Levels(case.dim, fields={n: [] for n in names})
     active = list(names)
     est = {n: float("nan") for n in names}
+    mirrors = {l.name: mirror_of(case, l) for l in case.loads}
     history = []
     first = -(-spec.divisions // 2) if spec.divisions else FIRST    # divisions: cells along the shortest side
     for k, n in enumerate(level_divisions(first, spec.max_refine)):
-        mesh = graded_mesh(lo, size, n)
+        axes = graded_axes(lo, size, n)
+        mesh = tensor_mesh(axes)
         dofs = n_dofs(mesh, case.dim)
-        if k > 0 and dofs > MAX_DOFS[case.dim]:
-            status(f"FEM: the next graded level ({dofs} dofs) would exceed {MAX_DOFS[case.dim]}; stopping")
+        largest = max(_dofs(lower_half(axes, mirrors[n]), case.dim) for n in active)
+        if k > 0 and largest > MAX_DOFS[case.dim]:
+            status(f"FEM: the next graded level (a system of {largest} dofs) would exceed {MAX_DOFS[case.dim]}; stopping")
             break
-        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, {len(active)} loads)")
+        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest}, "
+               f"{len(active)} loads)")
         lev.add_mesh(n, mesh)
-        U = solve_mesh(case, mesh, loads=set(active), info=info)
+        U = lev.solve(case, k, axes, {n: mirrors[n] for n in active}, info=info)
         for name in active:
             lev.fields[name] = (lev.fields[name] + [(k, U[name])])[-3:]
         for name in list(active):

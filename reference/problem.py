@@ -7,9 +7,11 @@ import numpy as np
 
 from harness.elasticity import densities, element_stiffness
 from harness.errors import ModelError
+from harness.loadsets import stress_tensor
 from harness.parts import part_predicate
 from reference import solvers
 from reference.fem import Discretisation
+from reference.symmetry import Mirror, plane_dofs
 
 
 def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -18,10 +20,14 @@ def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
     return case.body.bbox()
 
 
-def fixed_dofs(d: Discretisation, case, load, bbox) -> np.ndarray:
-    out = []
+def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror()) -> np.ndarray:
+    """The load's constrained dofs (and, on a cut box, the cut planes' dofs). A part may
+    miss a cut box when its mirror image is in it."""
+    out = [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, _tol(bbox))] if mirror else []
     for c in load.constraints:
         dofs = d.part_dofs(part_predicate(c.part, bbox, case.body.parts), c.components)
+        if len(dofs) == 0 and mirror:
+            continue
         if len(dofs) == 0:
             raise ModelError(f"load case '{load.name}': constraint part '{c.part}' contains no mesh node",
                              file=str(case.path), fix="enlarge the part or refine the mesh")
@@ -34,14 +40,22 @@ def fixed_dofs(d: Discretisation, case, load, bbox) -> np.ndarray:
     return fixed
 
 
-def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray) -> np.ndarray:
+def _tol(bbox) -> float:
+    return 1e-8 * float(np.linalg.norm(np.asarray(bbox[1]) - np.asarray(bbox[0])))
+
+
+def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror()) -> np.ndarray:
     F = np.zeros(d.ndof)
     for t in load.tractions:
         facets = d.part_facets(part_predicate(t.part, bbox, case.body.parts))
+        if len(facets) == 0 and mirror:
+            continue
         if len(facets) == 0:
             raise ModelError(f"load case '{load.name}': traction part '{t.part}' has no boundary facets",
                              file=str(case.path), fix="put tractions on faces (2-D: edges) of the body")
         F += d.traction_load(facets, t.vector)
+    if load.stress is not None:
+        F += d.stress_load(stress_tensor(load.stress))
     f = np.zeros((d.nelems, d.dim))
     if load.gravity is not None:
         f += rho[:, None] * np.asarray(load.gravity, float)
@@ -88,17 +102,20 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
     return out
 
 
-def solve_mesh(case, mesh, loads=None, info: list | None = None) -> dict:
+def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror = Mirror(),
+               disc: Discretisation | None = None) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
     those named in ``loads``). ``info``: a list that gets one solver record per
-    factorisation (reference/solvers.py)."""
-    d = Discretisation(mesh, case.reference.cell, case.reference.element)
+    factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
+    case's box cut at these mid-planes, and every load named has that parity
+    (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built."""
+    d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
     C = element_stiffness(case.material, cent)
     rho = densities(case.material, cent)
     bbox = body_bbox(case, mesh)
     chosen = [l for l in case.loads if loads is None or l.name in loads]
-    fixed = {l.name: fixed_dofs(d, case, l, bbox) for l in chosen}
-    F = {l.name: load_vector(d, case, l, bbox, rho) for l in chosen}
+    fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror) for l in chosen}
+    F = {l.name: load_vector(d, case, l, bbox, rho, mirror) for l in chosen}
     K = d.stiffness(C)
     return solve_system(K, F, fixed, case.reference.solver, d, info=info)

@@ -463,7 +463,7 @@ def test_fit_diagnostics_jacobian_matches_finite_differences(grouped):
     """jac_* columns: the dense Jacobian of the weighted residual over log k (or log group
     factor) against central differences of the problem's own sparse re-solve."""
     from harness.optimize.problem import FitProblem
-    from harness.stages.sms import fit_diagnostics, weighted_jacobian
+    from harness.optimize.diagnostics import fit_diagnostics, weighted_jacobian
     rng = np.random.default_rng(3)
     p = grid_points([0, 0], [2, 2], (3, 3))
     top = grid_structure((3, 3), "structure1")

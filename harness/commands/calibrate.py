@@ -1,28 +1,45 @@
 """springbench calibrate MESH --E .. --nu .. [--density ..] [--method rule|sa|lbfgs|gauss-newton|equilibrium-gap]
-[--init none|equilibrium-gap] --out MODEL.vtu
+--out MODEL.vtu
 
 Turns a user's own tri/quad/tet/hex mesh (any meshio format, or the bc2000 format) into
-a calibrated spring/mass model: springs on the mesh edges (hexahedra add their body
-diagonals), masses by moment matching, initial constants by a named rule, then (``sa``,
-``lbfgs``, ``gauss-newton`` or ``equilibrium-gap``; ``--init equilibrium-gap`` starts the
-gradient fits from the equilibrium-gap estimate) spring constants fitted so the network's
-static response to the standard basic loads of the mesh's bounding box (DESIGN.md:
-``basic2d`` / ``basic3d``) matches a FEM reference of the same body and material. A fit
-never ends worse than the rule's constants (it keeps the best point seen; the
-equilibrium-gap estimate falls back to the rule when it is worse, as on coarse meshes
-against FEM, where equation error and output error differ). Prints the before/after table (G per rule
-and after fitting) and writes:
+a calibrated spring/mass model an explicit engine can run: springs on the mesh edges
+(hexahedra add their body diagonals), lumped element masses (never negative; ``--masses``),
+initial constants by a stiffness rule (``--rule``, or ``best`` of them), then spring
+constants fitted (``--method``) so the network's statics match a FEM reference of the
+same body and material on the fitted loads, and scored on held-out loads it never saw.
+
+Loads (DESIGN.md). Fitted (``--loads homogeneous``, the default): the homogeneous stress
+states sxx, syy, szz, syz, sxz, sxy (2-D: sxx, syy, sxy) as tractions sigma . n on the
+whole surface with minimal constraints, which every shape has and which probe the whole
+elastic tensor; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
+Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (gravity) and
+``tip`` (an end traction), the low end of the longest axis clamped
+(harness/default_loads.py; printed when chosen). Tractions have magnitude ``--magnitude``
+(default 1e-3 E: small strains).
+
+Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
+Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
+
+Writes (and prints the table and a one-sentence verdict):
 
 - ``MODEL.vtu`` — ParaView-ready network (points in m, ``line`` cells = springs, point
   data ``mass`` in kg, cell data ``stiffness`` = linear k in N/m with f = k (l - l0)).
-- ``MODEL.json`` — arrays for other engines, SI units: ``particle_q`` (n, 3) m,
-  ``particle_mass`` (n) kg, ``spring_indices`` (e, 2), ``spring_rest_length`` (e) m,
-  ``spring_stiffness`` (e) N/m — NVIDIA Warp's ``ModelBuilder.add_spring(i, j, ke, kd,
-  control)`` ``ke`` and Taichi-style ``ke`` arrays (f = ke (l - l0)) —, and
-  ``spring_stiffness_times_length`` (e) N = k l0, the per-length convention (SOFA's
-  MeshSpringForceField divides its stiffness by the rest length; strain-based engines
-  use f = k l0 (l - l0) / l0); SOFA's SpringForceField takes k itself (``springs="i j
-  k kd l0"``). 2-D models have unit thickness (k per unit thickness, N/m per m).
+- ``MODEL.json`` — for engines, SI units: ``particle_q`` (n, 3) m, ``particle_mass`` (n) kg,
+  ``spring_indices`` (e, 2), ``spring_rest_length`` (e) m, ``spring_stiffness`` (e) N/m
+  (f = ke (l - l0): NVIDIA Newton's ``ModelBuilder.add_spring(i, j, ke, kd, control)`` ``ke``,
+  Taichi-style ``ke``), ``spring_damping`` (e) N s/m (``kd``: ``--damping-ratio`` of each
+  spring's critical damping, harness/engine_export.py), ``spring_stiffness_times_length``
+  (e) N = k l0 (SOFA's MeshSpringForceField divides its stiffness by the rest length;
+  SOFA's SpringForceField takes k itself, ``springs="i j k kd l0"``), ``dt_stable`` and
+  ``dt_stable_float32`` (s: explicit symplectic Euler limit with that damping, and with a
+  float32 margin), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
+  ``loads_fitted``, ``loads_heldout``, ``G_norm`` and ``G_norm_heldout`` (RMS displacement
+  error relative to the FEM's, fitted / held-out loads), ``reference_error`` (the FEM's
+  own estimated error, relative), ``mass_residual`` and ``units``. 2-D models have unit
+  thickness (k, masses per unit thickness).
+  Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
+  (give a small one, or the particles collide with each other); ``add_spring`` recomputes
+  the rest length from the particle positions, so add the particles at ``particle_q``.
 - ``MODEL.csv`` — the table printed (with the ``seed`` and the optimiser's ``opt_stop``).
 """
 
@@ -37,11 +54,14 @@ from pathlib import Path
 
 from harness.errors import CaseError, SpringbenchError
 
-HELP = "calibrate spring constants for your own mesh against FEM and export them (VTU, JSON for Warp/Taichi/SOFA)"
+HELP = ("calibrate spring constants for your own mesh against FEM and export them "
+        "(VTU, JSON for Newton/Warp/Taichi/SOFA: k, damping, masses, stable step)")
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
+MASSES = ("lumped", "moments-nonneg", "moments")
+UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
 
 def add_arguments(p):
@@ -55,18 +75,33 @@ def add_arguments(p):
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
-    p.add_argument("--rule", choices=RULES, default="lloyd",
-                   help="stiffness rule of the initial constants (default lloyd)")
+    p.add_argument("--rule", choices=RULES + ("best",), default="lloyd",
+                   help="stiffness rule of the initial constants (default lloyd; best: the rule with the "
+                        "lowest G on the fitted loads)")
+    p.add_argument("--loads", choices=("homogeneous", "basic"), default="homogeneous",
+                   help="fitted loads: homogeneous stress states on the whole surface (any shape, default) "
+                        "or the basic loads of the bounding box (boxes)")
+    p.add_argument("--heldout", choices=("ends", "none"), default="ends",
+                   help="held-out loads: sag and tip load with one end clamped (default) or none")
+    p.add_argument("--masses", choices=MASSES, default="lumped",
+                   help="lumped element masses (default, never negative), moments-nonneg, or moments "
+                        "(Deussen's moment matching: may be negative, which explicit engines cannot run)")
+    p.add_argument("--damping-ratio", dest="damping_ratio", type=float, default=0.05,
+                   help="spring damping as a fraction of each spring's critical damping (default 0.05)")
+    p.add_argument("--length-unit", dest="length_unit", choices=tuple(UNITS), default="m",
+                   help="unit of the mesh's coordinates (default m; exports are in m)")
     p.add_argument("--plane", choices=("stress", "strain"), default="stress", help="2-D meshes: plane stress/strain")
     p.add_argument("--magnitude", type=float, default=None,
-                   help="traction of the basic loads (Pa; default 1e-3 E: small strains)")
+                   help="traction of the loads (Pa; default 1e-3 E: small strains)")
     p.add_argument("--tol", type=float, default=1e-3,
                    help="reference (FEM) error tolerance relative to the displacement scale (default 1e-3)")
     p.add_argument("--max-refine", dest="max_refine", type=int, default=1,
                    help="reference refinements at most (default 1; each multiplies the dofs by 4-8)")
+    p.add_argument("--solver", choices=("auto", "direct", "amg", "cg"), default="auto",
+                   help="FEM linear solver (default auto: sparse Cholesky or AMG, with fallbacks)")
     p.add_argument("--budget", type=float, default=60.0, help="optimiser wall-time budget in seconds (default 60)")
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell (meshio name or bc2000)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa; >= 0)")
     p.add_argument("--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)")
 
 
@@ -81,12 +116,16 @@ def _check(args):
         bad("--density", f"{args.density} is not a positive number", "kg/m^3, e.g. --density 1000")
     if args.magnitude is not None and not (math.isfinite(args.magnitude) and args.magnitude > 0):
         bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
+    if not (math.isfinite(args.damping_ratio) and 0 <= args.damping_ratio < 1):
+        bad("--damping-ratio", f"{args.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
     if args.init != "none" and args.method not in ("lbfgs", "gauss-newton"):
         bad("--init", f"--method {args.method} has no start point to set", "use --init with --method lbfgs or gauss-newton")
     if not (args.budget > 0):
         bad("--budget", f"{args.budget} is not a positive number of seconds", "e.g. --budget 60")
     if not (args.tol > 0) or args.max_refine < 0:
         bad("--tol", "needs --tol > 0 and --max-refine >= 0", "e.g. --tol 1e-3 --max-refine 1")
+    if args.seed < 0:
+        bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
     if args.out.suffix.lower() != ".vtu":
         bad("--out", f"'{args.out}' does not end in .vtu", "e.g. --out model.vtu")
     if not args.mesh.is_file():
@@ -96,92 +135,182 @@ def _check(args):
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
 
 
-def case_text(args, dim: int, cell_types=()) -> str:
-    """The in-memory case that calibrate runs: the mesh body, the material, the basic
-    loads of the bounding box, an SMS on the mesh's nodes and edges."""
-    mesh = json.dumps(str(args.mesh.resolve()))
-    fmt = f"format = {json.dumps(args.format)}\n" if args.format else ""
-    s = args.magnitude if args.magnitude is not None else 1e-3 * args.E
-    rules = [args.rule] + [r for r in ("deussen", "vangelder", "lloyd") if r != args.rule]
+def magnitude(args) -> float:
+    return args.magnitude if args.magnitude is not None else 1e-3 * args.E
+
+
+def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rules=None, ends=None) -> str:
+    """The in-memory case that calibrate runs: the mesh body, the material, the fitted
+    load set and the held-out end loads, an SMS on the mesh's nodes and edges."""
+    mesh = json.dumps(str(Path(mesh_file or args.mesh).resolve()))
+    fmt = f"format = {json.dumps(args.format)}\n" if args.format and mesh_file is None else ""
+    s = magnitude(args)
+    if rules is None:
+        first = args.rule if args.rule != "best" else "lloyd"
+        rules = [first] + [r for r in ("deussen", "vangelder", "lloyd") if r != first]
     method = METHODS[args.method]
     cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
     init = f', init = "{args.init}"' if method in ("lbfgs", "gauss-newton") and args.init != "none" else ""
     budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"  # one solve
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
+    parts, cases, held = ("", "", "")
+    if ends is not None:
+        parts, cases = ends.toml(s)
+        parts = "[body.parts]\n" + parts
+        held = 'heldout = ["sag", "tip"]\n'
     return (f'name = "calibrate"\ndim = {dim}\n'
-            f'[body]\nshape = "mesh"\nfile = {mesh}\n{fmt}'
+            f'[body]\nshape = "mesh"\nfile = {mesh}\n{fmt}{parts}'
             f"[material]\nE = {float(args.E)!r}\nnu = {float(args.nu)!r}\ndensity = {float(args.density)!r}\n"
             f'plane = "{args.plane}"\n'
-            f'[loads]\nset = "basic{dim}d"\nmagnitude = {float(s)!r}\n'
-            f'[reference]\nmodes = 0\ntol = {float(args.tol)!r}\nmax_refine = {int(args.max_refine)}\n{cell}'
-            f'[model]\nkind = "sms"\nplacement = "mesh"\nstiffness = {json.dumps(rules)}\n'
+            f'[loads]\nset = "{args.loads}{dim}d"\nmagnitude = {float(s)!r}\n{held}{cases}'
+            f'[reference]\nmodes = 0\ntol = {float(args.tol)!r}\nmax_refine = {int(args.max_refine)}\n'
+            f'solver = "{args.solver}"\n{cell}'
+            f'[model]\nkind = "sms"\nplacement = "mesh"\nmasses = "{args.masses}"\nstiffness = {json.dumps(rules)}\n'
             f'[optimizer]\nmethod = "{method}"\n{opt}')
 
 
 def main(args) -> int:
     _check(args)
-    from harness.cases import load_case
+    from harness.mesh_checks import check_mesh
     from harness.meshfile import read_mesh
-    from harness.stages import StageContext
-    from harness.stages import sms as stage
-    import pandas as pd
-
     mesh = read_mesh(args.mesh, args.format)
-    dim = mesh.dim
+    check_mesh(mesh, str(args.mesh))          # the mesh's mistakes first, before anything is built on it
     with tempfile.TemporaryDirectory(prefix="springbench-calibrate-") as tmp:
         tmp = Path(tmp)
-        (tmp / "calibrate.toml").write_text(case_text(args, dim, mesh.cells))
+        try:
+            rows, net, case = _run(args, mesh, tmp)
+        except SpringbenchError as exc:   # name the user's mesh, never our temporary files
+            if exc.file is None or str(tmp) in str(exc.file):
+                raise type(exc)(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
+            raise
+    _report(args, rows, net, case)
+    return 0
+
+
+def _run(args, mesh, tmp: Path):
+    """(rows, the exported network, the case) of one calibration in the folder tmp."""
+    from harness.cases import load_case
+    from harness.default_loads import end_loads
+    from harness.io_vtu import read_vtu
+    from harness.stages import StageContext
+    from harness.stages import sms as stage
+    mesh_file = None
+    if args.length_unit != "m" or args.format == "bc2000":     # hand the body over in metres
+        import meshio
+        mesh_file = tmp / "mesh.vtu"
+        meshio.write(mesh_file, meshio.Mesh(mesh.points * UNITS[args.length_unit],
+                                            [(c, a) for c, a in mesh.cells.items()]))
+        print(f"  mesh coordinates in {args.length_unit}: scaled by {UNITS[args.length_unit]:g} to m",
+              file=sys.stderr)
+    pts = mesh.points * UNITS[args.length_unit]
+    ends = end_loads(pts, mesh.cells) if args.heldout == "ends" else None
+    if ends is not None:
+        print(f"  {ends.describe()}", file=sys.stderr)
+    last = [0.0]
+
+    def status(msg):  # at most one line a second
+        now = time.monotonic()
+        if now - last[0] >= 1.0:
+            last[0] = now
+            print(f"  {msg}", file=sys.stderr, flush=True)
+
+    def run(rules, method):
+        a = _with(args, method=method)
+        (tmp / "calibrate.toml").write_text(case_text(a, mesh.dim, mesh.cells, mesh_file, rules, ends))
         try:
             case = load_case(tmp / "calibrate.toml")
-        except CaseError as exc:  # name the user's mesh or flag, not our temporary case file
-            raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix)
-
-        last = [0.0]
-
-        def status(msg):  # at most one line a second
-            now = time.monotonic()
-            if now - last[0] >= 1.0:
-                last[0] = now
-                print(f"  {msg}", file=sys.stderr, flush=True)
+        except CaseError as exc:
+            raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
         ctx = StageContext(out_dir=tmp / "out", seed=args.seed, status=status)
-        rows = stage.run(case, ctx)
-        best = rows[-1]
-        tag = best["stiffness"] if best.get("optimizer", "none") == "none" else \
-            f"{best['stiffness']}-{best['optimizer']}"
-        if args.method == "rule":
-            tag = args.rule
-        from harness.io_vtu import read_vtu
-        net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
-    export(net, args.out)
-    cols = [c for c in ("model", "stiffness", "optimizer", "n_nodes", "n_springs", "G_initial", "G_final",
-                        "G_norm_initial", "G_norm_final", "seconds", "seed", "opt_stop")  # seed: --seed, recorded
+        return stage.run(case, ctx), ctx, case
+
+    rules = None
+    if args.rule == "best":
+        first, _, _ = run(list(RULES), "rule")
+        best = min(first, key=lambda r: r.get("G_norm_final", math.inf))["stiffness"]
+        print(f"  best rule on the fitted loads: {best}", file=sys.stderr)
+        rules = [best] + [r for r in RULES if r != best]
+    rows, ctx, case = run(rules, args.method)
+    exported = rows[0] if args.method == "rule" else rows[-1]
+    tag = exported["stiffness"] if exported.get("optimizer", "none") == "none" else \
+        f"{exported['stiffness']}-{exported['optimizer']}"
+    net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
+    for r in rows:
+        r["exported"] = r is exported
+    return rows, net, case
+
+
+def _with(args, **changes):
+    import argparse
+    return argparse.Namespace(**{**vars(args), **changes})
+
+
+def _report(args, rows, net, case):
+    """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
+    import pandas as pd
+    exported = next(r for r in rows if r["exported"])
+    meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
+                loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
+                G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
+                reference_error=max(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
+                mass_residual=exported.get("mass_residual", math.nan), masses=args.masses)
+    data = export(net, args.out, meta)
+    cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
+                        "G_norm_initial", "G_norm_final", "G_heldout", "ref_error_max", "ref_error_heldout", "status",
+                        "seconds", "seed", "opt_stop")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     df.to_csv(args.out.with_suffix(".csv"), index=False)
     print(df.to_string(index=False))
-    print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
-          f"k from {tag}; G normalised {best.get('G_norm_initial', math.nan):.4g} -> {best.get('G_norm_final', math.nan):.4g}")
-    return 0
+    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    best = min(rules, key=lambda r: r.get("G_norm_final", math.inf))
+    pct = lambda v: f"{100 * v:.3g} %" if v is not None and math.isfinite(v) else "n/a"   # noqa: E731
+    held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
+    print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
+          f"FEM error <= {pct(meta['reference_error'])}; the best stiffness rule ({best['stiffness']}) gave "
+          f"{pct(best.get('G_norm_final'))}.")
+    step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
+            if data["dt_stable"] is not None else data.get("warning", ""))
+    print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "
+          f"k {min(data['spring_stiffness']):.3g}..{max(data['spring_stiffness']):.3g} N/m, {step}")
 
 
-def export(net, out: Path):
-    """MODEL.vtu and MODEL.json (units in the module docstring)."""
+def export(net, out: Path, meta: dict | None = None) -> dict:
+    """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
     import numpy as np
+    from harness.engine_export import spring_damping, stable_step
     from harness.io_vtu import write_vtu
+    meta = dict(meta or {})
     out.parent.mkdir(parents=True, exist_ok=True)
     write_vtu(out, net)
     L = net.rest_lengths
     q = np.hstack([net.points, np.zeros((net.n_nodes, 3 - net.dim))]) if net.dim < 3 else net.points
+    k = np.asarray(net.k, float)
+    zeta = float(meta.pop("damping_ratio", 0.0))
+    positive = bool(np.all(np.asarray(net.masses) > 0))
+    kd = spring_damping(net.springs, k, net.masses, zeta) if positive else np.full(len(k), np.nan)
+    step = stable_step(net.points, net.springs, k, net.masses, kd) if positive else {}
     data = {
-        "units": {"length": "m", "mass": "kg", "spring_stiffness": "N/m (f = k (l - l0))",
+        "units": {"length": "m", "mass": "kg", "time": "s", "spring_stiffness": "N/m (f = k (l - l0))",
+                  "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
                   "spring_stiffness_times_length": "N (k l0; per-length convention, f = k l0 (l - l0) / l0)",
+                  "E": "Pa", "density": "kg/m^3", "omega_max": "rad/s",
+                  "G_norm": "RMS displacement error / RMS FEM displacement (weighted, fitted loads)",
                   "note": "2-D models: unit thickness" if net.dim == 2 else ""},
         "dim": net.dim,
         "particle_q": q.tolist(),
         "particle_mass": np.asarray(net.masses, float).tolist(),
         "spring_indices": np.asarray(net.springs, int).tolist(),
         "spring_rest_length": L.tolist(),
-        "spring_stiffness": np.asarray(net.k, float).tolist(),
-        "spring_stiffness_times_length": (np.asarray(net.k, float) * L).tolist(),
+        "spring_stiffness": k.tolist(),
+        "spring_damping": kd.tolist(),
+        "damping_ratio": zeta,
+        "spring_stiffness_times_length": (k * L).tolist(),
+        **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
+        **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
     }
+    data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
+    if not positive:
+        data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"
     out.with_suffix(".json").write_text(json.dumps(data))
+    return data

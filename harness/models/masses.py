@@ -8,6 +8,10 @@ the solution set nor the min-norm solution, only the conditioning of A A^T.
 with a tiny min-norm regularisation); equal to "moments" when those are already >= 0.
 "voronoi": density times the size of each node's Voronoi region clipped to the body
 (exact in 2-D, sampled in 3-D), scaled to the exact total mass. "uniform": total / n.
+"lumped" (mesh bodies, nodes = the mesh's vertices): each simplex (quads and hexahedra
+split into triangles / tetrahedra) gives rho V / (dim + 1) to each of its vertices, rho
+at its centroid: never negative, the total mass exact, the first moments exact for
+affine cells; the second moments are not matched (the residual says how far).
 Every rule reports the relative moment residual and the number of negative masses.
 """
 
@@ -21,7 +25,7 @@ from scipy.optimize import lsq_linear
 from harness.errors import ModelError
 from harness.geometry.bodies import BodyGeom, clip_box, polygon as make_polygon
 
-RULES = ("moments", "moments-nonneg", "voronoi", "uniform")
+RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 
 EXPONENTS = {
     2: [(0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (0, 2)],
@@ -61,9 +65,9 @@ def box_moments(lo, hi) -> np.ndarray:
 _TET_A, _TET_B = 0.5854101966249685, 0.1381966011250105
 
 
-def _quadrature(points: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
-    """Points and weights exact for quadratics on triangles/tetrahedra (quads split into
-    2 triangles, hexahedra into 6 tetrahedra: exact when their faces are planar)."""
+def _simplices(points: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
+    """(simplices (m, dim + 1), their sizes (m,)): quads split into 2 triangles,
+    hexahedra into 6 tetrahedra (exact when their faces are planar)."""
     simp = []
     for ctype, c in cells.items():
         c = np.asarray(c, int)
@@ -76,8 +80,14 @@ def _quadrature(points: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
                 simp.append(c[:, t])
     simp = np.concatenate(simp)
     p = points[simp]
+    return simp, np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / (2 if points.shape[1] == 2 else 6)
+
+
+def _quadrature(points: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
+    """Points and weights exact for quadratics on the simplices of the mesh."""
+    simp, vol = _simplices(points, cells)
+    p = points[simp]
     d = points.shape[1]
-    vol = np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / (2 if d == 2 else 6)
     if d == 2:  # edge midpoints, weight A/3
         q = np.stack([(p[:, 0] + p[:, 1]) / 2, (p[:, 1] + p[:, 2]) / 2, (p[:, 0] + p[:, 2]) / 2], 1)
         w = np.repeat(vol[:, None] / 3, 3, 1)
@@ -205,6 +215,14 @@ def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None,
         m *= p[0] / m.sum()
     elif rule == "uniform":
         m = np.full(len(z), p[0] / len(z))
+    elif rule == "lumped":
+        if sb.kind != "mesh" or sb.mesh_points.shape != z.shape or not np.allclose(sb.mesh_points, z, atol=1e-12):
+            raise ModelError("lumped masses need the nodes to be the mesh's own vertices", field="model.masses",
+                             fix="use placement = 'mesh', or masses = 'moments-nonneg'")
+        simp, vol = _simplices(z, sb.mesh_cells)
+        rho = density_function(sm, body.dim)(z[simp].mean(axis=1))
+        m = np.zeros(len(z))
+        np.add.at(m, simp.ravel(), np.repeat(rho * vol / simp.shape[1], simp.shape[1]))
     else:
         raise ModelError(f"unknown mass rule '{rule}'", field="model.masses", fix=f"one of {', '.join(RULES)}")
     res = float(np.linalg.norm(A @ m - p) / np.linalg.norm(p))

@@ -99,7 +99,7 @@ def make_network(points, springs, k=None, masses=None, classes=None, groups=None
 # -- [model] kind = "sms" -------------------------------------------------------------------
 
 PLACEMENTS = ("grid", "random", "lloyd", "mesh")
-MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform")
+MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 
 MODEL_SPEC = {

@@ -7,7 +7,10 @@ weights, so the table compares optimisers and not set-ups. Every scored row carr
 ``G_ref`` (the reference's own estimated error as a normalised G at the same nodes, loads
 and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coarse" when
 G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
-(harness.scoring.ref_status).
+(harness.scoring.ref_status). Loads the case holds out (``[loads] heldout``) are never
+fitted: G_* and G_ref are on the fitted loads, ``G_heldout`` (normalised, the same weights),
+``G_ref_heldout`` and ``ref_error_heldout`` on the held-out ones, ``freq_error_heldout`` on
+the natural frequencies no fit used.
 
 Files (in ctx.out_dir, formats of harness/report.py): ``model-<tag>.vtu`` (the network
 with its displacements; tag = rule, or rule-method[-freq]), ``deformed-<tag>.npz``
@@ -96,6 +99,8 @@ def run(case, ctx) -> list[dict]:
     ctx.status("reference solve")
     ref, why = _reference(case, ctx)
     names = tuple(l.name for l in case.loads)
+    fit = [names.index(n) for n in case.fit_loads]
+    held = [names.index(n) for n in case.heldout]
     u_ref = reference_displacements(ref, base.points, names) if ref is not None else None
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
@@ -112,9 +117,14 @@ def run(case, ctx) -> list[dict]:
                       "std_area": base.info["lloyd_std_size"]}).to_csv(ctx.file("lloyd.csv"), index=False)
 
     def evaluate(net):
+        """(statics, score on the fitted loads, score on the held-out loads or None)."""
         res = statics.solve(net, case)
-        sc = g_arrays(u_ref, res.u, net.classes, weights, res.names) if u_ref is not None else None
-        return res, sc
+        if u_ref is None:
+            return res, None, None
+        u = np.asarray(res.u)
+        sc = g_arrays(u_ref[fit], u[fit], net.classes, weights, [names[i] for i in fit])
+        sh = g_arrays(u_ref[held], u[held], net.classes, weights, [names[i] for i in held]) if held else None
+        return res, sc, sh
 
     def write(net, res, tag):
         from harness.io_vtu import write_vtu
@@ -132,13 +142,13 @@ def run(case, ctx) -> list[dict]:
         net = base if rule == base.info["stiffness"] else base.with_k(
             spring_constants(rule, base.points, base.springs, base.cells, case.material), stiffness=rule)
         nets[rule] = net
-        res, sc = evaluate(net)
+        res, sc, sh = evaluate(net)
         write(net, res, rule)
         row = {**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
                "seconds": build_seconds + time.perf_counter() - t1}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
-                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **{f"G_{k}": v for k, v in sc.per_load.items()})
+                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **_per_load(sc, sh), **_heldout(sh))
         else:
             row.update(G_initial=math.nan, G_final=math.nan, G_norm_initial=math.nan, G_norm_final=math.nan,
                        note=f"no reference ({why})")
@@ -149,8 +159,8 @@ def run(case, ctx) -> list[dict]:
     opt_nets, traces = {}, []
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
-            row, net, trace = _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, label, common,
-                                        rows[0], evaluate, write, fem_f)
+            row, net, trace = _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label,
+                                        common, rows[0], evaluate, write, fem_f)
             rows.append(row)
             opt_nets[row["_tag"]] = net
             if trace is not None:
@@ -162,11 +172,17 @@ def run(case, ctx) -> list[dict]:
         rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
 
     if u_ref is not None:   # every net shares base's nodes, loads and weights: one G_ref for all rows
-        refcols = ref_columns(ref, base.points, names, u_ref, base.classes, weights)
+        refcols = ref_columns(ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights)
+        heldcols = {}
+        if held:
+            hc = ref_columns(ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights)
+            heldcols = {"G_ref_heldout": hc["G_ref"], "ref_error_heldout": hc["ref_error_max"]}
         for row in rows:
             if "G_norm_final" in row:
-                row.update(refcols)
+                row.update(refcols, **heldcols)
                 row["status"] = ref_status(row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol"))
+                if held and ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
+                    row["status"] = "ref-coarse"     # the held-out score is the reference's error too
 
     freqs = _frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = _error_modes(opt, n_modes)
@@ -178,7 +194,27 @@ def run(case, ctx) -> list[dict]:
             row["freq_error_final"] = _freq_error(freqs[tag], freqs["fem"], m)
             start = first if row["optimizer"] != "none" else tag
             row["freq_error_initial"] = _freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
+            fitted = int(row.get("freq_modes", 0) or 0)     # modes the fit saw; the others are held out
+            if len(freqs["fem"]) > fitted:
+                row["freq_error_heldout"] = _freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
     return rows
+
+
+def _per_load(sc, sh) -> dict:
+    """G_<load> of every load, fitted and held out."""
+    out = {f"G_{k}": v for k, v in sc.per_load.items()}
+    if sh is not None:
+        out.update({f"G_{k}": v for k, v in sh.per_load.items()})
+    return out
+
+
+def _heldout(sh, first=None) -> dict:
+    """G_heldout (normalised, the same weights) on the held-out loads, and for an
+    optimised row the start's (G_heldout_initial); none without held-out loads."""
+    if sh is None:
+        return {}
+    return {"G_heldout": sh.G_norm} if first is None else {"G_heldout": sh.G_norm,
+                                                          "G_heldout_initial": first.get("G_heldout", math.nan)}
 
 
 # -- optimisers -------------------------------------------------------------------------
@@ -266,15 +302,18 @@ def budget_label(options: dict) -> str:
     return ", ".join(parts) or "default"
 
 
-def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, label, common, first, evaluate, write,
+def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label, common, first, evaluate, write,
               fem_f):
+    """One optimiser run on the fitted loads (indices ``fit`` of ``names``) and its row."""
     from harness import statics
+    from harness.optimize.diagnostics import fit_diagnostics
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
     method, objective = run_["method"], run_["objective"]
     stiff = base.info["stiffness"]
     tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
     _, free, forces = statics.all_load_arrays(base, case)
+    free, forces, u_fit, names = free[fit], forces[fit], u_ref[fit], [names[i] for i in fit]
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
     file = _file(case)
     freq_kw = {}
@@ -289,7 +328,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
         freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
                        freq_weight=run_["weight"], modal_free=modal_free)
     problem = FitProblem.from_network(base.points, base.springs, base.k, free, forces,
-                                      u_ref.reshape(len(names), -1), wdof, list(names),
+                                      u_fit.reshape(len(names), -1), wdof, list(names),
                                       groups=base.groups if spec["grouped"] else None, **freq_kw)
     t0 = time.perf_counter()
     ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
@@ -308,7 +347,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
     seconds = time.perf_counter() - t0
     name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
     net = base.with_k(res.k, stiffness=name)
-    sres, sc = evaluate(net)
+    sres, sc, sh = evaluate(net)
     write(net, sres, tag)
     info = dict(getattr(res, "info", {}) or {})
     row = {**common, "model": f"{label}[{stiff}]", "stiffness": stiff,
@@ -317,7 +356,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, weights, spec, labe
            "G_s_initial": first.get("G_s_initial", math.nan),
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **{f"G_{k}": v for k, v in sc.per_load.items()},
+           **_per_load(sc, sh), **_heldout(sh, first),
            "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
            "_tag": tag}
     if freq_kw:
@@ -379,58 +418,6 @@ def _trace_frame(trace, name):
         return df
     except (ValueError, TypeError):
         return None
-
-
-JACOBIAN_MAX = 4e6   # entries of the dense Jacobian the diagnostics may form (dense SVD: 1.4e6 entries
-                    # took 0.9 s, 1.1e7 took 21 s on one core; Deussen cases are below 1e6)
-
-
-def fit_diagnostics(problem, k) -> dict:
-    """Why optimisers differ, measured at the constants k they return:
-
-    - ``opt_at_bounds``: parameters at their bounds (L-BFGS-B stops there);
-    - ``jac_rank``: identifiable directions, singular values of the weighted residual's
-      Jacobian d(sqrt(w)(u_ref - u))/d log(parameter) above 1e-8 of the largest;
-    - ``jac_cond_logk`` / ``jac_cond_k``: largest / smallest of those singular values,
-      over log k (what lbfgs and gauss-newton use) and over k itself (plain gradient
-      descent on k, as the paper tried); the Gauss-Newton Hessian's condition is the square.
-
-    Dense numpy solves, independent of the optimisers' own code."""
-    lo, hi = problem.bounds
-    k = np.asarray(k, float)
-    groups = problem.groups
-    f = k / problem.k0
-    kp = k
-    if groups is not None:  # one factor (and one representative k) per group
-        f = np.array([np.median(f[groups == g]) for g in range(problem.n_params)])
-        kp = np.array([np.median(k[groups == g]) for g in range(problem.n_params)])
-    out = {"opt_at_bounds": int(np.sum((f <= lo * (1 + 1e-6)) | (f >= hi * (1 - 1e-6))))}
-    J = weighted_jacobian(problem, k)
-    if J is None:
-        return out
-    for name, A in (("logk", J), ("k", J / kp[None, :])):
-        s = np.linalg.svd(A, compute_uv=False)
-        keep = s > 1e-8 * s[0] if len(s) and s[0] > 0 else np.zeros(len(s), bool)
-        if name == "logk":
-            out["jac_rank"] = int(keep.sum())
-        out[f"jac_cond_{name}"] = float(s[0] / s[keep][-1]) if keep.any() else math.nan
-    return out
-
-
-def weighted_jacobian(problem, k):
-    """J = d(sqrt(w) (u_ref - u)) / d log(parameter), all loads stacked (rows: free dofs
-    per load; columns: springs, or groups in grouped mode); dense, None if too large.
-    From K du = -b_e (b_e.u) dk_e: column e is sqrt(w) K^-1 b_e k_e (b_e.u)."""
-    if sum(b.B.shape[0] for b in problem.blocks) * problem.n_springs > JACOBIAN_MAX:
-        return None
-    parts = []
-    for b in problem.blocks:
-        Bd = b.B.toarray()
-        K = (Bd * k) @ Bd.T
-        u = np.linalg.solve(K, b.f)
-        parts.append(np.sqrt(b.w)[:, None] * np.linalg.solve(K, Bd * (k * (Bd.T @ u))))
-    J = np.vstack(parts)
-    return J if problem.groups is None else J @ np.eye(problem.n_params)[problem.groups]
 
 
 def _fem_frequencies(ref, n):
