@@ -75,6 +75,9 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                             "gradient fits, nelder-mead = grouped mode, none = keep the initial constants"),
         "options": Field("any", {}, doc="method options, checked by the optimiser (unknown keys are errors); "
                                         "see harness/optimize/annealing.py DEFAULTS and gradient.py *_DEFAULTS"),
+        "start": Field("str", "first", choices=("first", "best"),
+                       doc="the fits start from the first rule of [model] stiffness (first) or from the rule "
+                           "with the lowest G on the fitted loads (best)"),
         "compare": Field("strs", (), choices=_COMPARE,
                          doc="e.g. compare = [\"lbfgs\", \"gauss-newton\"]: more optimisers on the same initial model, "
                              "reference and weights, one row each"),

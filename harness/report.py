@@ -66,8 +66,10 @@ from harness.errors import SpringbenchError
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
-        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_ref", "ref_error_max", "G_s_initial",
-        "G_s_final", "G_abc_initial", "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final", "error_estimate",
+        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_ref", "ref_error_max", "G_heldout_initial",
+        "G_heldout", "G_ref_heldout", "ref_error_heldout", "G_s_initial",
+        "G_s_final", "G_abc_initial", "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final",
+        "freq_error_heldout", "error_estimate",
         "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
         "static_status"]
 TAIL = ["seconds", "error"]
@@ -200,7 +202,8 @@ def seeds_frame(df):
 
 
 OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_params", "budget", "G_initial",
-                     "G_final", "G_final_vs_sa", "G_norm_final", "G_ref", "status", "seconds", "seconds_to_sa_G",
+                     "G_final", "G_final_vs_sa", "G_norm_final", "G_ref", "G_heldout", "status", "seconds",
+                     "seconds_to_sa_G",
                      "opt_evaluations", "evals_to_sa_G",
                      "opt_iterations", "opt_stop", "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k",
                      "f1_ratio", "freq_error_initial", "freq_error_final"]
@@ -330,7 +333,8 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
                "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS relative error "
                "of the first natural frequencies against the FEM; `G_ref`: the reference's own error as a "
-               "normalised G (compare with `G_norm_final`); `status` ref-coarse if any seed's row is.\n",
+               "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
+               "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
                markdown_table(opts)]
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})

@@ -247,12 +247,25 @@ def _mechanism(K: sp.spmatrix, free_dofs: np.ndarray, points, name: str, rtol: f
                      fix="add springs (e.g. diagonals: structure = 'structure1') or constraints")
 
 
+MULTIFRONTAL_MIN = 20_000   # free dofs from which a 3-D network is factorised by the multifrontal
+# Cholesky (harness/optimize/multifrontal.py): SuperLU took 15 s per load set on a 50k-tet mesh
+
+
 class _Factor:
     def __init__(self, K, free_dofs, points, name):
         self.K = K
         d = K.diagonal()
         if np.any(d <= 0):
             _mechanism(K, free_dofs, points, name)
+        self.lu = None
+        if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN:
+            from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic
+            coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
+            try:
+                self.chol = MultifrontalCholesky(K, Symbolic(K, coords), name)
+                return
+            except ModelError:          # not positive definite: a mechanism; name its nodes
+                _mechanism(K, free_dofs, points, name)
         try:
             self.lu = spla.splu(K.tocsc())
         except RuntimeError:
@@ -264,7 +277,7 @@ class _Factor:
             _mechanism(K, free_dofs, points, name)
 
     def __call__(self, f):
-        return self.lu.solve(f)
+        return self.lu.solve(f) if self.lu is not None else self.chol.solve(f)
 
 
 def solve_arrays(points, springs, k, free: np.ndarray, f: np.ndarray, name: str = "") -> np.ndarray:

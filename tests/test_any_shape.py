@@ -56,7 +56,11 @@ def compliance(case):
 
 
 @pytest.mark.parametrize("name,nu", [("cylinder", 0.45), ("holed_plate", 0.3), ("ellipsoid", 0.49)])
-def test_fem_meets_the_closed_form_on_curved_meshes(tmp_path, bodies, name, nu):
+def test_fem_meets_the_closed_form_on_curved_meshes(tmp_path, bodies, name, nu, monkeypatch):
+    """A real FEM solve (the closed-form shortcut of reference/problem.py switched off)
+    meets the closed form: what the shortcut relies on."""
+    import reference.problem
+    monkeypatch.setattr(reference.problem, "homogeneous_field", lambda *a: None)
     dim = 2 if name == "holed_plate" else 3
     case = mesh_case(tmp_path, bodies[name], dim, nu)
     assert [l.name for l in case.loads] == (["sxx", "syy", "sxy"] if dim == 2 else
@@ -68,6 +72,26 @@ def test_fem_meets_the_closed_form_on_curved_meshes(tmp_path, bodies, name, nu):
         want = homogeneous_closed_form(load, x, compliance(case), anchors)
         got = sol.nodal(load.name).reshape(-1, dim)
         assert np.abs(got - want).max() <= 1e-10 * np.abs(want).max(), load.name
+
+
+def test_the_reference_takes_the_closed_form_only_where_it_is_exact(tmp_path, bodies):
+    """Homogeneous loads on one elastic tensor: the reference returns the closed form
+    without a solve (no solver record), equal to the solved field; with a stiffer region
+    the field is not linear, so it is solved."""
+    case = mesh_case(tmp_path, bodies["holed_block"], 3)
+    sol = reference.solve(case, cache=False)
+    assert sol.solver == []
+    import dataclasses
+    from harness.cases import Region
+    stiff = dataclasses.replace(case, material=dataclasses.replace(
+        case.material, regions=(Region((0.0, 0.0, 0.0), (0.2, 0.3, 0.2), 3e5),)))
+    solved = reference.solve(stiff, cache=False)
+    assert len(solved.solver) == 1          # the six loads share the anchors: one factorisation
+    anchors = np.array([case.body.parts[a][0] for a in ANCHORS])
+    x = solved.disc.doflocs.T
+    want = homogeneous_closed_form(case.loads[0], x, compliance(case), anchors)
+    got = solved.nodal("sxx").reshape(-1, 3)
+    assert np.abs(got - want).max() > 1e-3 * np.abs(want).max()
 
 
 def test_anchor_constraints_remove_exactly_the_rigid_motions(tmp_path, bodies):

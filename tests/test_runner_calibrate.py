@@ -80,7 +80,7 @@ def test_equilibrium_gap_improves_or_exports_the_rule_unchanged(tri_mesh, tmp_pa
     """The equation-error estimate is not min G for a FEM reference: it either lowers G or
     (when it is worse than the rule) falls back to the rule's constants, exactly those that
     ``--method rule`` exports."""
-    df, data = _calibrate(tri_mesh, tmp_path / "m.vtu", "--method", "equilibrium-gap")
+    df, data = _calibrate(tri_mesh, tmp_path / "m.vtu", "--method", "equilibrium-gap", "--rule", "lloyd")
     _, rule = _calibrate(tri_mesh, tmp_path / "r.vtu", "--method", "rule", "--rule", "lloyd")
     fit = df[df.optimizer == "equilibrium-gap"].iloc[0]
     if fit.G_final == pytest.approx(fit.G_initial, rel=1e-12):

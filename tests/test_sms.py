@@ -593,3 +593,29 @@ def test_validate_sees_the_stage_checks(tmp_path, capsys, optimizer, field):
     assert len(err) == 1 and f"{f}: {field}: " in err[0]
     f.write_text(f.read_text().replace(optimizer.split("\n", 1)[1], ""))
     assert cli.main(["validate", str(f)]) == 0
+
+
+def test_large_3d_statics_use_the_multifrontal_cholesky_and_still_name_mechanisms():
+    """Above MULTIFRONTAL_MIN free dofs a 3-D network is factorised by the multifrontal
+    Cholesky: the same displacements as scipy's spsolve (independent), and a mechanism
+    is still a ModelError naming nodes, not a traceback."""
+    import scipy.sparse.linalg as spla
+    from harness.geometry import grid_points
+    from harness.springs import incidence, stiffness_matrix
+    shape = (14, 14, 36)
+    pts = grid_points(np.zeros(3), np.array([1.3, 1.3, 3.5]), shape)
+    top = grid_structure(shape, "edges+face+body")
+    k = np.exp(np.random.default_rng(3).normal(0, 0.3, len(top.springs)))
+    free = np.ones(pts.size, bool)
+    free[: 3 * shape[0] * shape[1]] = False            # the z = 0 layer (ids: x fastest, z slowest)
+    assert np.allclose(pts[~free.reshape(-1, 3)[:, 0], 2], 0.0)
+    assert free.sum() >= statics.MULTIFRONTAL_MIN
+    f = np.random.default_rng(4).normal(size=pts.size)
+    u = statics.solve_arrays(pts, top.springs, k, free, f)
+    K = stiffness_matrix(incidence(pts, top.springs), k).tocsc()
+    fd = np.flatnonzero(free)
+    want = spla.spsolve(K[fd][:, fd], f[fd])
+    np.testing.assert_allclose(u[fd], want, rtol=0, atol=1e-9 * np.abs(want).max())
+    edges = grid_structure(shape, "edges")             # no diagonals: every cell shears freely
+    with pytest.raises(ModelError, match="mechanism"):
+        statics.solve_arrays(pts, edges.springs, np.ones(len(edges.springs)), free, f)

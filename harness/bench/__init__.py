@@ -9,4 +9,5 @@ BENCHES = {
     "sa": "harness.bench.sa",
     "fit": "harness.bench.fit",
     "dynamics": "harness.bench.dynamics",
+    "calibrate": "harness.bench.calibrate",
 }

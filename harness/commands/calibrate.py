@@ -4,7 +4,8 @@
 Turns a user's own tri/quad/tet/hex mesh (any meshio format, or the bc2000 format) into
 a calibrated spring/mass model an explicit engine can run: springs on the mesh edges
 (hexahedra add their body diagonals), lumped element masses (never negative; ``--masses``),
-initial constants by a stiffness rule (``--rule``, or ``best`` of them), then spring
+initial constants by a stiffness rule (``--rule``; by default the best of them on the fitted
+loads, which the fit then starts from), then spring
 constants fitted (``--method``) so the network's statics match a FEM reference of the
 same body and material on the fitted loads, and scored on held-out loads it never saw.
 
@@ -56,6 +57,21 @@ from harness.errors import CaseError, SpringbenchError
 
 HELP = ("calibrate spring constants for your own mesh against FEM and export them "
         "(VTU, JSON for Newton/Warp/Taichi/SOFA: k, damping, masses, stable step)")
+EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
+  MODEL.vtu   network for ParaView: points (m), line cells = springs, point data mass (kg),
+              cell data stiffness (N/m, f = k (l - l0))
+  MODEL.json  particle_q (m), particle_mass (kg), spring_indices, spring_rest_length (m),
+              spring_stiffness (N/m), spring_damping (N s/m), spring_stiffness_times_length (N),
+              damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
+              density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
+              displacement error / RMS FEM displacement), reference_error (FEM's own, relative),
+              mass_residual, masses, units
+  MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
+              n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
+              G_norm_final (fitted loads), G_heldout, ref_error_max and ref_error_heldout (the
+              FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
+              dt_stable (s) with --k-ratio, seconds, seed, opt_stop
+2-D meshes: unit thickness (k and masses per unit thickness)."""
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
@@ -75,9 +91,9 @@ def add_arguments(p):
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
-    p.add_argument("--rule", choices=RULES + ("best",), default="lloyd",
-                   help="stiffness rule of the initial constants (default lloyd; best: the rule with the "
-                        "lowest G on the fitted loads)")
+    p.add_argument("--rule", choices=RULES + ("best",), default="best",
+                   help="stiffness rule of the initial constants: best (default: the rule with the lowest G "
+                        "on the fitted loads, which the fit then starts from) or one of them")
     p.add_argument("--loads", choices=("homogeneous", "basic"), default="homogeneous",
                    help="fitted loads: homogeneous stress states on the whole surface (any shape, default) "
                         "or the basic loads of the bounding box (boxes)")
@@ -88,6 +104,9 @@ def add_arguments(p):
                         "(Deussen's moment matching: may be negative, which explicit engines cannot run)")
     p.add_argument("--damping-ratio", dest="damping_ratio", type=float, default=0.05,
                    help="spring damping as a fraction of each spring's critical damping (default 0.05)")
+    p.add_argument("--k-ratio", dest="k_ratio", type=float, default=None,
+                   help="cap the fitted constants at this multiple of their median (max/median): a larger "
+                        "stable step for some G; the table shows both")
     p.add_argument("--length-unit", dest="length_unit", choices=tuple(UNITS), default="m",
                    help="unit of the mesh's coordinates (default m; exports are in m)")
     p.add_argument("--plane", choices=("stress", "strain"), default="stress", help="2-D meshes: plane stress/strain")
@@ -124,6 +143,8 @@ def _check(args):
         bad("--budget", f"{args.budget} is not a positive number of seconds", "e.g. --budget 60")
     if not (args.tol > 0) or args.max_refine < 0:
         bad("--tol", "needs --tol > 0 and --max-refine >= 0", "e.g. --tol 1e-3 --max-refine 1")
+    if args.k_ratio is not None and not (math.isfinite(args.k_ratio) and args.k_ratio >= 1):
+        bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
     if args.seed < 0:
         bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
     if args.out.suffix.lower() != ".vtu":
@@ -147,12 +168,14 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
     s = magnitude(args)
     if rules is None:
         first = args.rule if args.rule != "best" else "lloyd"
-        rules = [first] + [r for r in ("deussen", "vangelder", "lloyd") if r != first]
+        rules = [first] + [r for r in RULES if r != first]
     method = METHODS[args.method]
     cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
     init = f', init = "{args.init}"' if method in ("lbfgs", "gauss-newton") and args.init != "none" else ""
     budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"  # one solve
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
+    if args.rule == "best" and method != "none":
+        opt += 'start = "best"\n'
     parts, cases, held = ("", "", "")
     if ends is not None:
         parts, cases = ends.toml(s)
@@ -214,35 +237,59 @@ def _run(args, mesh, tmp: Path):
             last[0] = now
             print(f"  {msg}", file=sys.stderr, flush=True)
 
-    def run(rules, method):
-        a = _with(args, method=method)
-        (tmp / "calibrate.toml").write_text(case_text(a, mesh.dim, mesh.cells, mesh_file, rules, ends))
-        try:
-            case = load_case(tmp / "calibrate.toml")
-        except CaseError as exc:
-            raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
-        ctx = StageContext(out_dir=tmp / "out", seed=args.seed, status=status)
-        return stage.run(case, ctx), ctx, case
-
-    rules = None
-    if args.rule == "best":
-        first, _, _ = run(list(RULES), "rule")
-        best = min(first, key=lambda r: r.get("G_norm_final", math.inf))["stiffness"]
-        print(f"  best rule on the fitted loads: {best}", file=sys.stderr)
-        rules = [best] + [r for r in RULES if r != best]
-    rows, ctx, case = run(rules, args.method)
-    exported = rows[0] if args.method == "rule" else rows[-1]
+    (tmp / "calibrate.toml").write_text(case_text(args, mesh.dim, mesh.cells, mesh_file, None, ends))
+    try:
+        case = load_case(tmp / "calibrate.toml")
+    except CaseError as exc:
+        raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
+    ctx = StageContext(out_dir=tmp / "out", seed=args.seed, status=status)
+    rows = stage.run(case, ctx)
+    if args.method == "rule":
+        exported = min(rows, key=lambda r: r.get("G_norm_final", math.inf)) if args.rule == "best" else rows[0]
+    else:
+        exported = rows[-1]
     tag = exported["stiffness"] if exported.get("optimizer", "none") == "none" else \
         f"{exported['stiffness']}-{exported['optimizer']}"
     net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
+    if args.k_ratio is not None:
+        capped = _capped_row(net, case, exported, args.k_ratio, args.damping_ratio)
+        rows.append(capped)
+        net, exported = capped.pop("_net"), capped
     for r in rows:
         r["exported"] = r is exported
     return rows, net, case
 
 
-def _with(args, **changes):
-    import argparse
-    return argparse.Namespace(**{**vars(args), **changes})
+def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
+    """The exported constants capped at ratio x their median, scored like the stage does
+    (fitted and held-out loads), with the stable step of both (what the cap gains)."""
+    import numpy as np
+    import reference
+    from harness import statics
+    from harness.engine_export import spring_damping, stable_step
+    from harness.scoring import case_weights, g_arrays, reference_displacements
+    k = np.asarray(net.k, float)
+    capped = net.with_k(np.minimum(k, ratio * np.median(k)))
+    ref = reference.solve(case)             # cached by the stage's solve
+    res = statics.solve(capped, case)
+    names = list(res.names)
+    u_ref = reference_displacements(ref, capped.points, names)
+    u = np.asarray(res.u)
+    w = case_weights(case)
+
+    def g(load_names):
+        idx = [names.index(n) for n in load_names]
+        return g_arrays(u_ref[idx], u[idx], capped.classes, w, load_names).G_norm if idx else math.nan
+    out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed")}
+    out.update(optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}", G_norm_initial=row.get("G_norm_final"),
+               G_norm_final=g(case.fit_loads), G_heldout=g(case.heldout), k_ratio=float(capped.k.max() / np.median(capped.k)),
+               _net=capped)
+    if np.all(net.masses > 0):
+        for r, n in ((row, net), (out, capped)):
+            kd = spring_damping(n.springs, n.k, n.masses, zeta)
+            r["dt_stable"] = stable_step(n.points, n.springs, n.k, n.masses, kd)["dt_stable"]
+    row["k_ratio"] = float(k.max() / np.median(k))
+    return out
 
 
 def _report(args, rows, net, case):
@@ -257,7 +304,7 @@ def _report(args, rows, net, case):
     data = export(net, args.out, meta)
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_heldout", "ref_error_max", "ref_error_heldout", "status",
-                        "seconds", "seed", "opt_stop")
+                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     df.to_csv(args.out.with_suffix(".csv"), index=False)
@@ -266,9 +313,11 @@ def _report(args, rows, net, case):
     best = min(rules, key=lambda r: r.get("G_norm_final", math.inf))
     pct = lambda v: f"{100 * v:.3g} %" if v is not None and math.isfinite(v) else "n/a"   # noqa: E731
     held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
+    fem = meta["reference_error"]
+    fem = (f"FEM error <= {pct(fem)}" if fem is not None and math.isfinite(fem) else
+           "FEM error not estimated (no refinement: --max-refine 0, or the next level passes the dof budget)")
     print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
-          f"FEM error <= {pct(meta['reference_error'])}; the best stiffness rule ({best['stiffness']}) gave "
-          f"{pct(best.get('G_norm_final'))}.")
+          f"{fem}; the best stiffness rule ({best['stiffness']}) gave {pct(best.get('G_norm_final'))}.")
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "

@@ -157,10 +157,14 @@ def run(case, ctx) -> list[dict]:
     optimize = _optimizer()
     fem_f = _fem_frequencies(ref, n_modes)
     opt_nets, traces = {}, []
+    start_row, start = rows[0], base
+    if opt.get("start", "first") == "best" and u_ref is not None:
+        start_row = min(rows, key=lambda r: r["G_norm_final"])
+        start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
-            row, net, trace = _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label,
-                                        common, rows[0], evaluate, write, fem_f)
+            row, net, trace = _optimise(case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label,
+                                        common, start_row, evaluate, write, fem_f)
             rows.append(row)
             opt_nets[row["_tag"]] = net
             if trace is not None:
@@ -186,13 +190,12 @@ def run(case, ctx) -> list[dict]:
 
     freqs = _frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = _error_modes(opt, n_modes)
-    first = base.info["stiffness"]
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
             row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
             row["freq_error_final"] = _freq_error(freqs[tag], freqs["fem"], m)
-            start = first if row["optimizer"] != "none" else tag
+            start = row["stiffness"]         # the rule (an optimised row's start)
             row["freq_error_initial"] = _freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
             fitted = int(row.get("freq_modes", 0) or 0)     # modes the fit saw; the others are held out
             if len(freqs["fem"]) > fitted:

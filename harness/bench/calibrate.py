@@ -1,0 +1,95 @@
+"""springbench bench calibrate: ``springbench calibrate`` end to end (mesh check, FEM
+reference, rules, fit, held-out scoring, export) on gmsh cylinders of about 1k, 10k and
+50k tetrahedra (E = 1e5 Pa, nu = 0.45, density 1000), each in its own process so its
+peak memory is its own.
+
+Target (issue 12): the 50k-tet mesh calibrated in <= 5 min on 2 cores with <= 6 GB.
+Columns: mesh size, seconds, peak memory, G_norm before (the start rule) and after the
+fit, G_heldout, the reference's dofs and the ratio of seconds to the 1k mesh's (the
+baseline run in the same benchmark).
+"""
+
+from __future__ import annotations
+
+import json
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+FULL = (1_000, 10_000, 50_000)
+QUICK = (1_000, 5_000)
+RADIUS, LENGTH = 0.1, 0.5
+BUDGET = 60.0                 # the optimiser's wall-time budget (calibrate's default)
+
+
+def cylinder(path: Path, n_tets: int) -> int:
+    """A gmsh cylinder with about n_tets tetrahedra (one size correction); returns the count."""
+    import gmsh
+    import meshio
+    h = (8.5 * np.pi * RADIUS ** 2 * LENGTH / n_tets) ** (1 / 3)
+    for _ in range(2):
+        gmsh.initialize(["-noenv"])
+        try:
+            gmsh.option.setNumber("General.Terminal", 0)
+            gmsh.option.setNumber("General.NumThreads", 1)
+            gmsh.option.setNumber("Mesh.RandomSeed", 0)
+            gmsh.model.occ.addCylinder(0, 0, 0, LENGTH, 0, 0, RADIUS)
+            gmsh.model.occ.synchronize()
+            gmsh.option.setNumber("Mesh.MeshSizeMax", h)
+            gmsh.option.setNumber("Mesh.MeshSizeMin", h)
+            gmsh.model.mesh.generate(3)
+            tags, coords, _ = gmsh.model.mesh.getNodes()
+            _, nodes = gmsh.model.mesh.getElementsByType(4)
+        finally:
+            gmsh.finalize()
+        tets = len(nodes) // 4
+        h *= (tets / n_tets) ** (1 / 3)
+    index = np.zeros(int(tags.max()) + 1, int)
+    index[tags.astype(int)] = np.arange(len(tags))
+    cells = index[nodes.astype(int)].reshape(-1, 4)
+    used = np.unique(cells)
+    remap = np.full(len(tags), -1)
+    remap[used] = np.arange(len(used))
+    meshio.write(path, meshio.Mesh(coords.reshape(-1, 3)[used], [("tetra", remap[cells])]))
+    return tets
+
+
+def _one(mesh: Path, out: Path) -> dict:
+    cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45",
+           "--budget", str(BUDGET), "--out", str(out)]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    seconds = time.perf_counter() - t0
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6      # GB; sizes run in increasing order
+    if proc.returncode != 0:
+        return dict(seconds=seconds, peak_gb=peak, note=(proc.stderr.strip().splitlines() or ["failed"])[-1])
+    df = pd.read_csv(out.with_suffix(".csv"))
+    data = json.loads(out.with_suffix(".json").read_text())
+    fit = df[df.exported].iloc[0]
+    return dict(seconds=seconds, peak_gb=peak, n_nodes=int(fit.n_nodes), n_springs=int(fit.n_springs),
+                G_norm_before=float(fit.G_norm_initial), G_norm_after=float(fit.G_norm_final),
+                G_heldout=float(fit.G_heldout), reference_error=data.get("reference_error"),
+                dt_stable=data.get("dt_stable"), note=f"lbfgs {BUDGET:g} s budget; stop {fit.get('opt_stop', '')}")
+
+
+def run(quick: bool = False) -> pd.DataFrame:
+    try:
+        import gmsh  # noqa: F401
+    except ImportError:
+        return pd.DataFrame([dict(task="calibrate", note="skipped: gmsh not installed (pip install gmsh)")])
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
+        tmp = Path(tmp)
+        for n in (QUICK if quick else FULL):
+            mesh = tmp / f"cylinder{n}.vtu"
+            tets = cylinder(mesh, n)
+            rows.append(dict(task="calibrate", n_tets=tets, **_one(mesh, tmp / f"model{n}.vtu")))
+    df = pd.DataFrame(rows)
+    df["ratio"] = df["seconds"] / df["seconds"].iloc[0]
+    return df
