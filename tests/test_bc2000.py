@@ -418,3 +418,31 @@ def test_fem_stage_calibration_never_worsens_G(tmp_path):
         assert r["G_final"] <= r["G_initial"] * (1 + 1e-9)
     df = pd.read_csv(tmp_path / "anisotropy.csv")
     assert set(df.columns) >= {"angle", "model", "stiffness", "drift"}
+
+
+def test_fem_stage_heldout_loads_are_not_fitted(tmp_path, monkeypatch):
+    """Against the same reference, the case without its held-out loads fits exactly the
+    same constants and G on the fitted loads; with them, G_heldout is reported. (The
+    reference itself may refine further for the held-out loads: that is why it is shared.)"""
+    import dataclasses
+    import reference
+    from harness.cases import load_case
+    from harness.stages import StageContext
+    from harness.stages import bc2000
+    case = load_case(ROOT / "cases/bourguignon2000/fem_cube333_hexa.toml")
+    assert case.heldout == ("sag", "tip")
+    ref, solve = reference.solve(case), reference.solve
+
+    def shared(c, *a, **k):          # the case's loads (or a subset): the one reference; pulls: their own
+        return ref if {l.name for l in c.loads} <= set(ref.loads) else solve(c, *a, **k)
+    monkeypatch.setattr(reference, "solve", shared)
+    plain = dataclasses.replace(case, loads=tuple(l for l in case.loads if l.name not in case.heldout), heldout=())
+    with_held = bc2000.run(case, StageContext(out_dir=tmp_path / "a"))
+    without = bc2000.run(plain, StageContext(out_dir=tmp_path / "b"))
+    for a, b in zip(with_held, without):
+        if "G_final" not in b:
+            continue
+        fits = [k for k in b if k.startswith("fit_")]
+        assert fits and all(a[k] == pytest.approx(b[k], rel=1e-9) for k in fits)
+        assert a["G_final"] == pytest.approx(b["G_final"], rel=1e-9)
+        assert np.isfinite(a["G_heldout"]) and np.isfinite(a["G_ref_heldout"]) and "G_heldout" not in b

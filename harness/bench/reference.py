@@ -96,6 +96,8 @@ def run(quick: bool = False) -> pd.DataFrame:
                      seconds=t_loc, points=n_big, ratio=(t_sk / n_small) / (t_loc / n_big), residual=agree,
                      note="ratio = per-point time of probes / locator; residual = max difference"))
     rows += accuracy_rows(quick)
+    if not quick:
+        rows += shape_rows()
     return pd.DataFrame(rows)
 
 
@@ -225,3 +227,52 @@ def accuracy_rows(quick: bool = False) -> list[dict]:
                                       sol.error_estimate(points, LOAD), sol.seconds,
                                       f"{what}; order {sol.levels.orders.get(LOAD, np.nan):.2f}"))
     return rows
+
+
+# thin and nearly incompressible boxes at default settings (issue 11's second target); the
+# truth's levels are those at which the independent solver still converges there
+SHAPES = (((10.0, 1.0, 1.0), 0.49, (16, 20, 24)), ((3.0, 3.0, 3.0), 0.49, (8, 12, 16)))
+
+
+def shape_rows() -> list[dict]:
+    """True error of the default graded reference of shear-xz on SHAPES (E 1000, s 1)."""
+    import reference
+    from harness.cases import load_case
+    ie = _independent()
+    if ie is None:
+        return []
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for size, nu, levels in SHAPES:
+            axes = [np.linspace(0.0, a, 4) for a in size]
+            points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+            t0 = time.perf_counter()
+            lv = ie.shear_levels(size, 1000.0, nu, 1.0, points, levels, TRUTH_BETA, knot=TRUTH_KNOT)
+            truth, change, _ = ie.extrapolate_levels([v for _, v, *_ in lv], levels)
+            t_truth = time.perf_counter() - t0
+            path = Path(tmp) / "shape.toml"
+            path.write_text(f"""name = "shape"
+dim = 3
+[body]
+shape = "box"
+size = {list(size)}
+[material]
+E = 1000.0
+nu = {nu}
+[[loads.case]]
+name = "{LOAD}"
+[[loads.case.constraint]]
+part = "z0"
+components = ["all"]
+[[loads.case.traction]]
+part = "z1"
+vector = [1.0, 0.0, 0.0]
+""")
+            sol = reference.solve(load_case(path), cache=False)
+            row = _accuracy_row("graded Q2 + Richardson", sol, sol.displacement(points, LOAD), truth,
+                                sol.error_estimate(points, LOAD), sol.seconds,
+                                f"box {size}, nu {nu}, defaults: levels n = {list(sol.levels.ns)}; truth levels "
+                                f"{levels} ({t_truth:.0f} s), its relative change {change:.1e}")
+            rows.append(row)
+    return rows
+

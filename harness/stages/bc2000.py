@@ -430,7 +430,9 @@ def _fem(case, ctx, model, dyn):
     the calibrated model beside the FEM's. Rows per model: G_initial/G_final (+
     normalised), ``G_ref`` / ``ref_error_max`` (the reference's own error at the same nodes;
     status "ref-coarse" above 10 % of the final normalised G or when the reference missed
-    its tol), the fitted constants, the pull columns; anisotropy.csv per direction."""
+    its tol), the fitted constants, the pull columns; anisotropy.csv per direction. Loads
+    held out (``[loads] heldout``) are neither scaled to nor fitted: ``G_heldout``
+    (``_initial``: with the scaled constants), ``G_ref_heldout``, ``ref_error_heldout``."""
     from harness.models.bc2000 import linear
     from harness.parts import classify_nodes
     from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
@@ -444,7 +446,16 @@ def _fem(case, ctx, model, dyn):
     weights = case_weights(case)
     u_ref = reference_displacements(ref, P, loads.names)
     w = np.asarray(weights)[classes]
-    refcols = ref_columns(ref, P, loads.names, u_ref, classes, weights)   # same nodes, loads, weights as G
+    fit = [loads.names.index(n) for n in case.fit_loads]        # held-out loads: scored, never fitted
+    held = [loads.names.index(n) for n in case.heldout]
+    fitted = linear.Loads([loads.names[i] for i in fit], loads.free[fit], loads.forces[fit])
+    refcols = ref_columns(ref, P, fitted.names, u_ref[fit], classes, weights)   # same nodes, loads, weights as G
+    if held:
+        hc = ref_columns(ref, P, [loads.names[i] for i in held], u_ref[held], classes, weights)
+        refcols.update(G_ref_heldout=hc["G_ref"], ref_error_heldout=hc["ref_error_max"])
+
+    def heldout(u):
+        return g_arrays(u_ref[held], u[held], classes, weights, [loads.names[i] for i in held]).G_norm
     rows, aniso = [], []
     ctx.status("FEM direction pulls")
     bbox = (P.min(axis=0), P.max(axis=0))
@@ -473,25 +484,31 @@ def _fem(case, ctx, model, dyn):
                          "note": f"{zm} zero-energy modes under the case's constraints: no static answer"})
             continue
         u = linear.solve(K0, loads)
-        c = float(np.einsum("p,lpd,lpd->", w, u_ref, u) / np.einsum("p,lpd,lpd->", w, u, u))
-        theta0 = theta / c                                   # best single scale
-        s0 = g_arrays(u_ref, u * c, classes, weights, loads.names)
+        c = float(np.einsum("p,lpd,lpd->", w, u_ref[fit], u[fit]) / np.einsum("p,lpd,lpd->", w, u[fit], u[fit]))
+        theta0 = theta / c                                   # best single scale (on the fitted loads)
+        s0 = g_arrays(u_ref[fit], u[fit] * c, classes, weights, fitted.names)
         row = {"model": name, "mesh": _label(path, mesh), "n_nodes": len(P), "n_elements": len(_cells(mesh)),
                "mechanisms": zm, "G_initial": s0.G, "G_norm_initial": s0.G_norm, **fem_cols}
+        if held:
+            row["G_heldout_initial"] = row["G_heldout"] = heldout(u * c)
         names = linear.parameter_names(m)
         row.update({f"scaled_{k}": float(v) for k, v in zip(names, theta0)})
         if dyn["calibrate"]:
             ctx.status(f"{name}: calibration")
-            theta1, _, _ = linear.fit(Ks, theta0, u_ref, loads, w)
+            theta1, _, _ = linear.fit(Ks, theta0, u_ref[fit], fitted, w)
             u1 = linear.solve(sum(t * K for t, K in zip(theta1, Ks)), loads)
-            s1 = g_arrays(u_ref, u1, classes, weights, loads.names)
+            s1 = g_arrays(u_ref[fit], u1[fit], classes, weights, fitted.names)
             row.update({"G_final": s1.G, "G_norm_final": s1.G_norm})
+            if held:
+                row["G_heldout"] = heldout(u1)
             row.update({f"fit_{k}": float(v) for k, v in zip(names, theta1)})
         else:
             theta1 = theta0
         row.update(refcols)
         row["status"] = ref_status(row["G_ref"], row.get("G_norm_final", row["G_norm_initial"]),
                                    refcols.get("ref_met_tol"))
+        if held and ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
+            row["status"] = "ref-coarse"
         # undesired anisotropy (1): the six clamped face pulls, fibre along the pull
         def K_of(d, name=name, theta1=theta1):
             mm = m if name == "MS" else build(name, dict(model, direction=tuple(d), fibre_field=None), mesh, 1.0)
