@@ -209,6 +209,44 @@ OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_pa
                      "f1_ratio", "freq_error_initial", "freq_error_final"]
 
 
+def headline_frame(df):
+    """One line per case, what a person reads first: the worst status, the best stiffness
+    rule and the best fit (normalised G on the fitted loads), the fit's G on held-out
+    loads, the reference's own error (G_ref) and the case's seconds; cases without a G
+    (dynamics experiments) show their status and a pointer to summary.md."""
+    import pandas as pd
+    out = []
+    for case, g in df.groupby("case", sort=False):
+        row = {"case": case, "rows": len(g)}
+        status = g["status"].astype(str) if "status" in g else pd.Series(dtype=str)
+        row["status"] = ("error" if (status == "error").any() else
+                         REF_COARSE if (status == REF_COARSE).any() else "ok")
+        scored = g[g["G_norm_final"].notna()] if "G_norm_final" in g else g.iloc[:0]
+        if "optimizer" in scored:       # sms: rules (no optimiser) and fits
+            opt = scored["optimizer"].astype(str)
+            rules, fits, label = scored[opt == "none"], scored[opt != "none"], "optimizer"
+        else:                           # bc2000 fem: one calibrated row per model
+            rules, fits, label = scored.iloc[:0], scored, "model"
+        if len(rules):
+            r = rules.loc[rules["G_norm_final"].idxmin()]
+            row.update(best_rule=r["stiffness"], G_norm_rule=r["G_norm_final"])
+        if len(fits):
+            f = fits.loc[fits["G_norm_final"].idxmin()]
+            row.update(best_fit=f[label], G_norm_fit=f["G_norm_final"], G_heldout=f.get("G_heldout", math.nan))
+        if "G_ref" in scored and scored["G_ref"].notna().any():
+            row["G_ref"] = scored["G_ref"].max()
+        if "seconds" in g:
+            row["seconds"] = g["seconds"].sum()
+        if not len(scored):
+            row["note"] = "; ".join(sorted({str(e) for e in g.get("error", pd.Series()).dropna()}))[:80] \
+                or "see summary.md"
+        out.append(row)
+    order = ["case", "rows", "status", "best_rule", "G_norm_rule", "best_fit", "G_norm_fit", "G_heldout", "G_ref",
+             "seconds", "note"]
+    frame = pd.DataFrame(out)
+    return frame[[c for c in order if c in frame]]
+
+
 def optimizer_frame(df):
     """The optimised rows side by side (issue 4: SA vs L-BFGS-B on the same cases): one
     line per case, model, optimizer and objective, numbers averaged over seeds (spread in

@@ -142,14 +142,14 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
         axes = graded_axes(lo, size, n)
         mesh = tensor_mesh(axes)
         dofs = n_dofs(mesh, case.dim)
-        largest = max(_dofs(lower_half(axes, mirrors[n]), case.dim) for n in active)
+        largest = max(_dofs(lower_half(axes, mirrors[name]), case.dim) for name in active)
         if k > 0 and largest > MAX_DOFS[case.dim]:
             status(f"FEM: the next graded level (a system of {largest} dofs) would exceed {MAX_DOFS[case.dim]}; stopping")
             break
         status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest}, "
                f"{len(active)} loads)")
         lev.add_mesh(n, mesh)
-        U = lev.solve(case, k, axes, {n: mirrors[n] for n in active}, info=info)
+        U = lev.solve(case, k, axes, {name: mirrors[name] for name in active}, info=info)
         for name in active:
             lev.fields[name] = (lev.fields[name] + [(k, U[name])])[-3:]
         for name in list(active):

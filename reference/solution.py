@@ -152,8 +152,11 @@ class ReferenceSolution:
             lam, vec = sl.eigh(Kf.toarray(), Mf.toarray())
             lam, vec = lam[:k], vec[:, :k]
         else:
-            from scipy.sparse.linalg import eigsh
-            lam, vec = eigsh(Kf.tocsc(), k=k, M=Mf.tocsc(), sigma=0.0, which="LM",
+            from scipy.sparse.linalg import LinearOperator, eigsh
+            from reference.solvers import inverse
+            solve = inverse(Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free])
+            opinv = None if solve is None else LinearOperator(Kf.shape, matvec=solve, dtype=float)
+            lam, vec = eigsh(Kf.tocsc(), k=k, M=Mf.tocsc(), sigma=0.0, which="LM", OPinv=opinv,
                              v0=np.random.default_rng(0).standard_normal(Kf.shape[0]))  # seeded: same bits
         order = np.argsort(lam)
         lam, vec = lam[order], vec[:, order]

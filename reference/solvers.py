@@ -274,6 +274,23 @@ def _factor(As, method, sym):
     return lambda r: lu.solve(np.ascontiguousarray(r)).reshape(r.shape)
 
 
+INVERSE_GBYTES = 6.0     # memory the shift-invert Cholesky may take (its only alternative is SuperLU)
+
+
+def inverse(A: sp.spmatrix, coords: np.ndarray):
+    """A solve function r -> A^-1 r by the multifrontal Cholesky when its symbolic estimate
+    fits in INVERSE_GBYTES (the shift-invert operator of the modal solves: SuperLU, eigsh's
+    own, took over 10 minutes on a 108k-dof Q2 box), else None."""
+    As = sp.csr_matrix(A)
+    sym = _symbolic(As, coords)
+    if _estimate(sym)["gbytes"] > INVERSE_GBYTES:
+        return None
+    try:
+        return _factor(As, "cholesky", sym)
+    except ModelError:         # not positive definite: leave it to eigsh's own factorisation
+        return None
+
+
 def _coords_from_modes(A, near_null):
     """Locations of the free dofs (up to scale and shift: enough for the nested
     dissection) read off the rigid-body modes ``Discretisation.rigid_modes`` builds:

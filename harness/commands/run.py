@@ -53,15 +53,13 @@ def main(args) -> int:
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
                     scheduler=args.scheduler, force=args.force, figures=args.figures)
     import pandas as pd
+    from harness.report import headline_frame
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)
-        cols = [c for c in ("case", "model", "seed", "status", "n_nodes", "n_springs", "stiffness", "optimizer",
-                            "G_initial", "G_final", "G_norm_final", "paper_G_final", "seconds", "error")
-                if c in df]
-        print(f"\n== {suite.name}: {len(df)} rows -> {csv}")
-        with pd.option_context("display.width", 160, "display.max_columns", 20):
-            print(df[cols].to_string(index=False, max_colwidth=60))
+        print(f"\n== {suite.name}: {len(df)} rows in {csv} (all columns; tables and figures: summary.md)")
+        with pd.option_context("display.width", 160, "display.max_columns", 20, "display.precision", 4):
+            print(headline_frame(df).to_string(index=False, max_colwidth=50))
     n = len(rep.results)
     print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
           f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "

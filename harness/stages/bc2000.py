@@ -441,7 +441,7 @@ def _fem(case, ctx, model, dyn):
     P = mesh.points
     ctx.status("FEM reference")
     ref = reference_solve(case)
-    loads = linear.case_loads(P, case)
+    loads = linear.case_loads(P, case, lumped_masses(P, _cells(mesh), case.material.density))  # gravity: rho V
     classes = classify_nodes(P, case.body.bbox())
     weights = case_weights(case)
     u_ref = reference_displacements(ref, P, loads.names)
