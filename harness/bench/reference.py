@@ -125,12 +125,15 @@ def _independent():
     return mod
 
 
-def _shear_case(folder: Path, name: str, reference: dict):
-    """The sec6 cube (body and material of cases/deussen1995/sec6_box3d.toml) with the one
-    load shear-xz (z0 clamped, traction s e_x on z1) and the given [reference] keys."""
+def _shear_case(folder: Path, name: str, reference: dict, size=None, nu=None):
+    """The sec6 cube (body and material of cases/deussen1995/sec6_box3d.toml; or another
+    ``size`` / ``nu``) with the one load shear-xz (z0 clamped, traction s e_x on z1) and
+    the given [reference] keys."""
     from harness.cases import load_case
     raw = tomllib.loads(SEC6.read_text())
-    body, mat = raw["body"], raw["material"]
+    body, mat = dict(raw["body"]), dict(raw["material"])
+    body.update({} if size is None else {"size": list(size), "origin": [0.0, 0.0, 0.0]})
+    mat.update({} if nu is None else {"nu": nu})
     s = float(raw.get("loads", {}).get("magnitude", 1.0))
     def val(v):
         return f'"{v}"' if isinstance(v, str) else repr(v)
@@ -235,9 +238,8 @@ SHAPES = (((10.0, 1.0, 1.0), 0.49, (16, 20, 24)), ((3.0, 3.0, 3.0), 0.49, (8, 12
 
 
 def shape_rows() -> list[dict]:
-    """True error of the default graded reference of shear-xz on SHAPES (E 1000, s 1)."""
+    """True error of the default graded reference of shear-xz on SHAPES (sec6's E and s)."""
     import reference
-    from harness.cases import load_case
     ie = _independent()
     if ie is None:
         return []
@@ -246,29 +248,12 @@ def shape_rows() -> list[dict]:
         for size, nu, levels in SHAPES:
             axes = [np.linspace(0.0, a, 4) for a in size]
             points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+            case, s = _shear_case(Path(tmp), "shape", {}, size, nu)
             t0 = time.perf_counter()
-            lv = ie.shear_levels(size, 1000.0, nu, 1.0, points, levels, TRUTH_BETA, knot=TRUTH_KNOT)
+            lv = ie.shear_levels(size, case.material.E, nu, s, points, levels, TRUTH_BETA, knot=TRUTH_KNOT)
             truth, change, _ = ie.extrapolate_levels([v for _, v, *_ in lv], levels)
             t_truth = time.perf_counter() - t0
-            path = Path(tmp) / "shape.toml"
-            path.write_text(f"""name = "shape"
-dim = 3
-[body]
-shape = "box"
-size = {list(size)}
-[material]
-E = 1000.0
-nu = {nu}
-[[loads.case]]
-name = "{LOAD}"
-[[loads.case.constraint]]
-part = "z0"
-components = ["all"]
-[[loads.case.traction]]
-part = "z1"
-vector = [1.0, 0.0, 0.0]
-""")
-            sol = reference.solve(load_case(path), cache=False)
+            sol = reference.solve(case, cache=False)
             row = _accuracy_row("graded Q2 + Richardson", sol, sol.displacement(points, LOAD), truth,
                                 sol.error_estimate(points, LOAD), sol.seconds,
                                 f"box {size}, nu {nu}, defaults: levels n = {list(sol.levels.ns)}; truth levels "
