@@ -12,7 +12,9 @@ for every central-force lattice whose nodes are centres of symmetry. An isotropi
 target satisfies them only for lambda = mu: nu = 1/3 in 2-D plane stress, 1/4 in 2-D
 plane strain and in 3-D. Any other target nu (or an anisotropic target breaking the
 relations) is out of reach: the relative misfit of the best non-negative group
-constants is the error floor no optimiser can beat in the interior of a large grid.
+constants is the error floor no optimiser can beat in the interior of a large grid under
+a uniform strain. It is not a floor for a finite network's G on particular loads: the
+boundary layers and the fit to those loads can take G well below it (README).
 """
 
 from __future__ import annotations
