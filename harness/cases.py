@@ -100,7 +100,7 @@ GRADED_LEVELS = 6   # default max_refine of the graded method: n = 2..8 cells pe
 REFERENCE = {
     "element": Field("str", "P2", choices=("P1", "P2")),
     "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
-    "divisions": Field("int", None, min=1, doc="initial elements along the shortest side"),
+    "divisions": Field("int", None, min=1, max=4096, doc="initial elements along the shortest side"),
     "tol": Field("float", 1e-4, min=0, min_exclusive=True),
     "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 6, "
                                                 "within a 64k-dof system in 3-D)"),

@@ -38,7 +38,14 @@ def score_table(net, case, ref, weights=None):
 
 
 def main(args) -> int:
+    import math
+
     import reference
+    from harness.errors import SpringbenchError
+    if args.weights is not None and not (all(math.isfinite(w) and w >= 0 for w in args.weights)
+                                         and sum(args.weights) > 0):
+        raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
+                               "not all zero", field="--weights", fix="e.g. --weights 1 3 15")
 
     from harness.cases import load_case
     from harness.errors import ModelError

@@ -232,7 +232,14 @@ def _file(case) -> str | None:
 
 
 def check(case):
-    """The [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
+    """The [model] and [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
+    from harness.models.sms import model_spec
+    spec = model_spec(case)
+    grid = spec.get("grid")
+    if spec["placement"] == "grid" and not (isinstance(grid, (list, tuple)) and len(grid) == case.dim
+                                            and all(isinstance(g, int) and g >= 2 for g in grid)):
+        raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=_file(case),
+                        field="model.grid", fix=f"e.g. grid = {[5] * case.dim}")
     opt = case.section("optimizer") or {}
     optimiser_runs(case, opt)
     _check_modes(case, opt)
