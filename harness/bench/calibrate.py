@@ -1,7 +1,8 @@
 """springbench bench calibrate: ``springbench calibrate`` end to end (mesh check, FEM
 reference, rules, fit, held-out scoring, export) on gmsh cylinders of about 1k, 10k and
 50k tetrahedra (E = 1e5 Pa, nu = 0.45, density 1000), each in its own process (so its
-peak memory is its own) with an empty reference cache.
+peak memory is its own) with an empty reference cache. Needs gmsh (``pip install -e
+".[bench]"``); without it the benchmark writes one row saying so.
 
 Target (issue 12): the 50k-tet mesh calibrated in <= 5 min on 2 cores with <= 6 GB.
 Columns: mesh size, seconds, peak memory, G_norm before (the start rule, the best on the
