@@ -88,6 +88,18 @@ OPTIMIZERS = {
 }
 
 
+def check_method_options(method: str, options: dict) -> dict:
+    """``options`` of ``method`` over its defaults, checked without running it (for
+    ``springbench validate``: unknown keys and unusable values are one-line errors)."""
+    from harness.optimize import annealing, equilibrium, gradient
+    from harness.optimize.options import check_options
+    if method in ("sa", "sa-refactor"):
+        return annealing.check_options(options)
+    defaults = {"lbfgs": gradient.LBFGS_DEFAULTS, "nelder-mead": gradient.NM_DEFAULTS,
+                "gauss-newton": gradient.GN_DEFAULTS, "equilibrium-gap": equilibrium.EG_DEFAULTS}.get(method)
+    return dict(options) if defaults is None else check_options(options, defaults, method)
+
+
 def optimize(problem: FitProblem, method: str, options: dict | None = None, seed: int = 0,
              status=None) -> FitResult:
     """Run optimiser ``method`` on ``problem``; randomness comes only from ``seed``."""

@@ -23,6 +23,7 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.optimize.incremental import IncrementalG, RefactorG
+from harness.optimize.options import check_options as check_numbers, static_only
 from harness.optimize.problem import FitProblem
 
 DEFAULTS = dict(
@@ -50,7 +51,6 @@ def check_options(options: dict) -> dict:
     if unknown:
         raise SpringbenchError(f"unknown simulated-annealing option(s) {sorted(unknown)}", field="optimizer.options",
                                fix=f"use some of {sorted(DEFAULTS)}")
-    from harness.optimize.gradient import check_options as check_numbers
     numbers = [k for k in DEFAULTS if k not in ("engine", "refactor_every")]
     check_numbers({k: options[k] for k in numbers if k in options}, dict.fromkeys(numbers, 0), "simulated-annealing")
     if options.get("engine", "auto") not in ("auto", "dense", "sparse", "refactor"):
@@ -71,8 +71,7 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
     """One chain. Returns a dict of FitResult fields (k, G_initial, G_final, trace,
     seconds, n_steps, accepted, info)."""
     opts = check_options(options)
-    from harness.optimize.gradient import _static_only
-    _static_only(problem, "sa")
+    static_only(problem, "sa")
     t_start = time.perf_counter()
     grouped = problem.groups is not None
     npar = problem.n_params

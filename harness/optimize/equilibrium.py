@@ -30,7 +30,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import SpringbenchError
-from harness.optimize.problem import FitProblem
+from harness.optimize.options import check_options, static_only
+from harness.optimize.problem import FitProblem, value_and_grad
 
 EG_DEFAULTS = dict(
     rtol=1e-10,         # relative residual of CG on the normal equations
@@ -62,7 +63,6 @@ def equation_error_system(problem: FitProblem):
 def equilibrium_gap_factors(problem: FitProblem, options: dict | None = None):
     """Parameters x = k/k0 (clipped to the bounds) minimising the equation error, and an
     info dict (CG iterations, relative residual, clipped count, seconds)."""
-    from harness.optimize.gradient import check_options
     opts = check_options(options or {}, EG_DEFAULTS, "equilibrium-gap")
     t0 = time.perf_counter()
     A, b = equation_error_system(problem)
@@ -92,8 +92,7 @@ def equilibrium_gap_factors(problem: FitProblem, options: dict | None = None):
 
 def equilibrium_gap(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
     """The equilibrium-gap estimate as an optimiser (deterministic; G by full re-solves)."""
-    from harness.optimize.gradient import value_and_grad, _static_only
-    _static_only(problem, "equilibrium-gap")
+    static_only(problem, "equilibrium-gap")
     t0 = time.perf_counter()
     G0 = float(np.sqrt(value_and_grad(problem, problem.k0, grad=False)[0]))
     if status is not None:

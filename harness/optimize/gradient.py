@@ -34,7 +34,9 @@ import scipy.optimize as so
 import scipy.sparse.linalg as spla
 
 from harness.errors import SpringbenchError
-from harness.optimize.problem import FitProblem, stiffness
+from harness.optimize.equilibrium import equilibrium_gap_factors
+from harness.optimize.options import check_options, static_only
+from harness.optimize.problem import FitProblem, stiffness, value_and_grad
 
 LBFGS_DEFAULTS = dict(
     maxiter=15000,      # L-BFGS-B iterations
@@ -55,27 +57,6 @@ NM_DEFAULTS = dict(
     fatol=0.0,          # objective spread (on Phi)
     target=0.0,
 )
-
-
-def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None):
-    """G^2 and dG^2/dk (e,) by the adjoint method. If ``tension2`` (e,) is given, the
-    squared spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2,
-    are added to it."""
-    k = np.asarray(k, float)
-    G2 = 0.0
-    g = np.zeros(len(k)) if grad else None
-    for s in problem.load_sets():
-        fac = s.factor(k)
-        U = fac.solve(s.F).reshape(s.F.shape)
-        D = s.Uref - U
-        R = s.W * D
-        G2 += float(np.sum(D * R)) + s.const
-        if grad:
-            Lam = fac.solve(R).reshape(R.shape)
-            g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
-        if tension2 is not None:
-            tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
-    return G2, g
 
 
 def tension_scaling(problem: FitProblem, tension2: np.ndarray, power: float) -> np.ndarray:
@@ -280,12 +261,6 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
     return _result(obj, t0, stop, nit[0], {})
 
 
-def _static_only(problem: FitProblem, method: str):
-    if problem.modal is not None and problem.modal.weight > 0:
-        raise SpringbenchError(f"method '{method}' fits static displacements only; the frequency term needs 'lbfgs'",
-                               field="optimizer.method", fix="use method = 'lbfgs' or set the frequency weight to 0")
-
-
 INITS = ("none", "equilibrium-gap")
 
 
@@ -295,29 +270,8 @@ def start_point(problem: FitProblem, init: str):
         raise SpringbenchError(f"unknown init '{init}'", field="optimizer.options.init", fix=f"use one of {list(INITS)}")
     if init == "none":
         return np.zeros(problem.n_params), {}
-    from harness.optimize.equilibrium import equilibrium_gap_factors
     x, info = equilibrium_gap_factors(problem)
     return np.log(x), info
-
-
-def check_options(options: dict, defaults: dict, method: str) -> dict:
-    """``options`` over ``defaults``. Unknown keys, and values that do not fit the
-    default (a string for a string; else a finite number >= 0: every numeric option of
-    these fits is a count, a tolerance, a weight or a budget), are one-line errors, not
-    tracebacks from deep inside scipy."""
-    unknown = set(options) - set(defaults)
-    if unknown:
-        raise SpringbenchError(f"unknown {method} option(s) {sorted(unknown)}", field="optimizer.options",
-                               fix=f"use some of {sorted(defaults)}")
-    for key, v in options.items():
-        if isinstance(defaults[key], str):
-            if not isinstance(v, str):
-                raise SpringbenchError(f"{method} option {key} = {v!r} is not a string", field=f"optimizer.options.{key}",
-                                       fix=f"e.g. {key} = {defaults[key]!r}")
-        elif not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0):
-            raise SpringbenchError(f"{method} option {key} = {v!r} is not a number >= 0", field=f"optimizer.options.{key}",
-                                   fix="a count, tolerance or budget" + (f", e.g. {defaults[key]!r}" if defaults[key] else ""))
-    return {**defaults, **options}
 
 
 GN_DEFAULTS = dict(
@@ -387,7 +341,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     factorisation. Grouped mode sums the Jacobian columns of a group."""
     import scipy.sparse.linalg as spla_
     opts = check_options(options, GN_DEFAULTS, "gauss-newton")
-    _static_only(problem, "gauss-newton")
+    static_only(problem, "gauss-newton")
     t0 = time.perf_counter()
     lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
     npar = problem.n_params

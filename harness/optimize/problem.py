@@ -298,3 +298,24 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
 def stiffness(B: sp.csc_matrix, k: np.ndarray) -> sp.csc_matrix:
     """K = B diag(k) B^T on a block's free dofs."""
     return (B.multiply(k[None, :]) @ B.T).tocsc()
+
+
+def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None):
+    """G^2 and dG^2/dk (e,) by the adjoint method. If ``tension2`` (e,) is given, the
+    squared spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2,
+    are added to it."""
+    k = np.asarray(k, float)
+    G2 = 0.0
+    g = np.zeros(len(k)) if grad else None
+    for s in problem.load_sets():
+        fac = s.factor(k)
+        U = fac.solve(s.F).reshape(s.F.shape)
+        D = s.Uref - U
+        R = s.W * D
+        G2 += float(np.sum(D * R)) + s.const
+        if grad:
+            Lam = fac.solve(R).reshape(R.shape)
+            g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
+        if tension2 is not None:
+            tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
+    return G2, g
