@@ -26,7 +26,6 @@ directly; ``init = "equilibrium-gap"`` starts lbfgs / gauss-newton from its esti
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
