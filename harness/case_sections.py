@@ -2,13 +2,41 @@
 the stage that reads a section owns its spec here. Free-form keys ("any") are
 validated by their owner when the stage runs."""
 
-from harness.models.sms import MODEL_SPEC as SMS
 from harness.optimize import OPTIMIZERS
 from harness.schema import Field
 
 # [optimizer] method / compare: the registry's names (a new optimiser needs no edit here)
 _METHODS = tuple(OPTIMIZERS)
 _COMPARE = tuple(m for m in OPTIMIZERS if m != "none")
+
+# [model] kind = "sms": spring/mass systems of Deussen 1995 (harness/models/sms.py)
+PLACEMENTS = ("grid", "random", "lloyd", "mesh")
+MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
+STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
+
+SMS = {
+    "placement": Field("str", "grid", choices=PLACEMENTS,
+                       doc="grid | random | lloyd (random + Lloyd iterations) | mesh (the body mesh's nodes)"),
+    "grid": Field("any", None, doc="nodes per axis [nx, ny(, nz)] for placement = 'grid'",
+                  check=lambda v: None if (isinstance(v, list) and len(v) in (2, 3) and all(
+                      isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in v))
+                  else "expected 2 or 3 integers >= 2 (nodes per axis)"),
+    "structure": Field("str", None, doc="grid structure: structure1, edges+diagonal, edges+diagonals+second, "
+                                        "edges (2-D); edges+face+body, edges+face, edges+body (3-D)"),
+    "n_points": Field("int", None, min=4, doc="number of points for random / lloyd placement"),
+    "n_boundary": Field("int", None, min=0, doc="random points on the boundary (2-D; default: matched spacing)"),
+    "lloyd_iterations": Field("int", 0, min=0, doc="Lloyd (iterated Voronoi) steps for placement = 'lloyd'"),
+    "seed": Field("int", 0, min=0, doc="seed of the random placement (>= 0, added to the run's seed)"),
+    "masses": Field("str", "moments", choices=MASS_RULES),
+    "stiffness": Field("strs", ("deussen",), choices=STIFFNESS_RULES,
+                       doc="initial spring-constant rule(s); the first one starts the optimiser"),
+    "grouped": Field("bool", False, doc="optimise one constant per spring group (Fig. 8: horizontal, "
+                                        "vertical, diagonal) instead of one per spring"),
+    "min_quality": Field("float", 1e-3, min=0, max=1, doc="Delaunay simplices below this quality are dropped"),
+    "mesh": Field("str", None, doc="placement = 'mesh': a mesh file (relative to the case file) whose nodes and "
+                                   "edges form the network; default: the body's own mesh"),
+    "mesh_format": Field("str", None, doc="meshio format name or 'bc2000' for model.mesh; guessed if absent"),
+}
 
 # [model] kind = "bc2000": Bourguignon & Cani 2000 (harness/models/anisotropic.py,
 # massspring.py). Damping constants are the program's per-step ones unless
@@ -33,7 +61,7 @@ BC2000 = {
     "azimuth_deg": Field("float", None),
     "elevation_deg": Field("float", None),
     "direction": Field("floats", None, length=3),
-    "seed": Field("int", 0),
+    "seed": Field("int", 0, min=0, doc="seed of the random fibre field (>= 0)"),
     "mass": Field("float", 0.01, min=0, min_exclusive=True, doc="kg per node"),
 }
 
@@ -94,7 +122,8 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
     # [score]: G criteria weights (harness/scoring)
     "score": {
         "weights": Field("floats", (1.0, 1.0, 1.0), length=3, min=0,
-                         doc="G_{a:b:c} weights: inner, border, corner"),
+                         check=lambda v: None if any(v) else "all zero (G would be 0/0)",
+                         doc="G_{a:b:c} weights: inner, border, corner, not all zero"),
     },
     # [expect]: the paper's numbers, reported beside ours
     "expect": {

@@ -18,11 +18,13 @@ from typing import Mapping
 import numpy as np
 
 from harness import case_sections
-from harness.errors import CaseError, SpringbenchError
+from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.fibres import NAMED_FIELDS
 from harness.case_loads import parse_heldout, parse_loads, with_anchors
 from harness.loadsets import LOAD_SETS, LoadCase
-from harness.schema import Field, check
+from harness.mesh_checks import COORDINATE_FIX, coordinate_problem
+from harness.mesh_groups import GroupPart, require_group
+from harness.schema import Field, check, did_you_mean
 
 MODES = ("quick", "full")
 
@@ -37,7 +39,8 @@ BODY = {
     "vertices": Field("matrix", None, doc="polygon vertices [[x, y], ...] in order"),
     "file": Field("str", None, doc="mesh file, relative to the case file"),
     "format": Field("str", None, doc="meshio format name or 'bc2000'; guessed if absent"),
-    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}"),
+    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}, or mesh groups: "
+                                  "name = {group = \"physical group\"}"),
 }
 
 FIBRE = {
@@ -53,7 +56,7 @@ FIBRE = {
     "azimuth_deg": Field("float", None),
     "elevation_deg": Field("float", None),
     "field": Field("str", None, choices=NAMED_FIELDS),
-    "seed": Field("int", 0),
+    "seed": Field("int", 0, min=0, doc="seed of a random fibre field (>= 0)"),
 }
 
 REGION = {
@@ -78,7 +81,8 @@ CONSTRAINT = {
     "part": Field("str"),
     "components": Field("strs", ("all",), choices=COMPONENTS),
 }
-TRACTION = {"part": Field("str"), "vector": Field("floats", length=(2, 3))}
+TRACTION = {"part": Field("str"), "vector": Field("floats", None, length=(2, 3)),
+            "twist": Field("floats", None, length=3, doc="w: adds w x (x - c), c the part's centroid (torsion)")}
 USER_LOAD = {
     "name": Field("str"),
     "constraint": Field("tables", (), spec=CONSTRAINT),
@@ -88,7 +92,8 @@ USER_LOAD = {
 }
 LOADS = {
     "set": Field("str", None, choices=tuple(LOAD_SETS)),
-    "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units)"),
+    "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units), not 0",
+                       check=lambda v: "a zero traction moves nothing (G would be 0/0)" if v == 0 else None),
     "case": Field("tables", (), spec=USER_LOAD),
     "fit": Field("strs", None, doc="the load cases a fit may use (default: all that are not held out)"),
     "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
@@ -255,21 +260,17 @@ def load_case(path, mode: str = "quick") -> Case:
     raw = _merge({k: v for k, v in raw.items() if k not in MODES}, raw.get(mode, {}))
     core = {k: v for k, v in raw.items() if k in TOP}
     rest = {k: v for k, v in raw.items() if k not in TOP}
-    d = check(core, TOP, file)
-    sections = {}
+    errors, sections = [], {}     # the schema's mistakes in every section, one line each
+    try:
+        d = check(core, TOP, file)
+    except CaseError as exc:
+        errors.append(exc)
     for key, value in rest.items():
-        if key not in case_sections.SECTIONS:
-            known = ", ".join(sorted(set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
-            raise CaseError("unknown section", file=file, field=key, fix=f"known: {known}")
-        spec = case_sections.SECTIONS[key]
-        if spec == "model":
-            kinds = case_sections.MODEL_KINDS
-            kind = value.get("kind") if isinstance(value, dict) else None
-            if kind not in kinds:
-                raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
-                                fix=f"one of {', '.join(kinds)}")
-            spec = {"kind": Field("str"), **kinds[kind]}
-        sections[key] = MappingProxyType(check(value, spec, file, key + "."))
+        try:
+            sections[key] = MappingProxyType(_section(key, value, file))
+        except CaseError as exc:
+            errors.append(exc)
+    raise_all(errors)
     dim = d["dim"]
     body = _body(d["body"], dim, path, file)
     material = _material(d["material"], dim, file)
@@ -281,6 +282,22 @@ def load_case(path, mode: str = "quick") -> Case:
                 reference=reference, load_set=load_set, magnitude=d["loads"]["magnitude"],
                 description=d["description"], tags=d["tags"], mode=mode,
                 sections=MappingProxyType(sections), digest=digest, heldout=heldout)
+
+
+def _section(key: str, value, file: str) -> dict:
+    """A stage-owned section checked against its spec ([model]: the spec of its kind)."""
+    if key not in case_sections.SECTIONS:
+        raise CaseError("unknown section", file=file, field=key,
+                        fix=did_you_mean(key, set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
+    spec = case_sections.SECTIONS[key]
+    if spec == "model":
+        kinds = case_sections.MODEL_KINDS
+        kind = value.get("kind") if isinstance(value, dict) else None
+        if kind not in kinds:
+            raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
+                            fix=f"one of {', '.join(kinds)}")
+        spec = {"kind": Field("str"), **kinds[kind]}
+    return check(value, spec, file, key + ".")
 
 
 def _body(b: dict, dim: int, path: Path, file: str) -> Body:
@@ -299,6 +316,9 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         origin = b["origin"] or (0.0,) * dim
         if len(origin) != dim:
             fail("origin", f"expected {dim} entries, got {len(origin)}")
+        problem = coordinate_problem([origin, np.add(origin, b["size"])])
+        if problem:  # blame the size if it alone is the problem
+            fail("size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin", problem, COORDINATE_FIX)
         body = Body(shape, origin=origin, size=b["size"])
     elif shape == "polygon":
         if dim != 2:
@@ -306,6 +326,8 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         v = b["vertices"]
         if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
             fail("vertices", "expected at least 3 points [x, y]")
+        if coordinate_problem(v):
+            fail("vertices", coordinate_problem(v), COORDINATE_FIX)
         x, y = np.asarray(v, float).T
         area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
         if abs(area) <= 1e-14:
@@ -329,14 +351,23 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
     if not isinstance(b["parts"], dict):
         fail("parts", "expected a table of name = {box = [[lo], [hi]]}")
     for name, spec in b["parts"].items():
+        if isinstance(spec, dict) and set(spec) == {"group"}:     # a named group of the mesh file
+            if shape != "mesh" or not isinstance(spec["group"], str):
+                fail(f"parts.{name}.group", "expected the name of a group of the body's mesh file",
+                     "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}")
+            require_group(mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError)
+            parts[name] = GroupPart(spec["group"], body.file, body.format)
+            continue
         if not isinstance(spec, dict) or set(spec) != {"box"}:
-            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]}")
+            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]} or {group = \"name\"}")
         box = spec["box"]
         ok = (isinstance(box, list) and len(box) == 2 and all(
             isinstance(r, list) and len(r) == dim and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
             for r in box))
         if not ok:
             fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
+        if np.isnan(np.asarray(box, float)).any():   # every comparison with nan is false: selects nothing
+            fail(f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)")
         if any(lo > hi for lo, hi in zip(*box)):
             fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
         parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
@@ -411,7 +442,11 @@ def find_cases(paths) -> list[Path]:
     out = []
     for p in map(Path, paths):
         if p.is_dir():
-            out.extend(sorted(q for q in p.rglob("*.toml") if not q.name.startswith("_")))
+            found = sorted(q for q in p.rglob("*.toml") if not q.name.startswith("_"))
+            if not found:   # a wrong folder, not a suite with nothing to do
+                raise SpringbenchError("no case files (*.toml) in this folder", file=str(p),
+                                       fix="give case files or a folder of them, e.g. cases/")
+            out.extend(found)
         elif p.exists():
             out.append(p)
         else:

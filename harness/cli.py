@@ -8,7 +8,8 @@ import argparse
 import importlib
 import sys
 
-from harness.errors import SpringbenchError
+from harness.errors import SpringbenchError, error_lines
+from harness.outputs import os_error
 
 COMMANDS = ["run", "validate", "reference", "build", "score", "calibrate", "bench", "report"]
 
@@ -49,7 +50,11 @@ def main(argv=None) -> int:
     try:
         return int(args._main(args) or 0)
     except SpringbenchError as exc:
-        print(f"springbench: error: {exc}", file=sys.stderr)
+        for line in error_lines(exc):
+            print(f"springbench: error: {line}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # the file system refused (disk full, read-only, ...): still one line
+        print(f"springbench: error: {os_error(exc, exc.filename or '', None)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("springbench: interrupted; finished cases are kept", file=sys.stderr)

@@ -33,3 +33,34 @@ class ModelError(SpringbenchError):
 
 class SimulationError(SpringbenchError):
     """A time integration failed (unstable step, NaN)."""
+
+
+class CaseErrors(CaseError):
+    """Several mistakes found in one pass: ``errors`` holds one error each; ``str`` is the
+    first and how many more (``springbench validate`` and the CLI print one line each)."""
+
+    def __init__(self, errors):
+        self.errors = [e for err in errors for e in getattr(err, "errors", [err])]
+        first = self.errors[0]
+        super().__init__(first.message, file=first.file, field=first.field, fix=first.fix)
+
+    def __reduce__(self):   # picklable (worker processes)
+        return CaseErrors, (self.errors,)
+
+    def __str__(self) -> str:
+        more = len(self.errors) - 1
+        return super().__str__() + (f" [and {more} more mistake{'s' if more > 1 else ''}: "
+                                    "springbench validate lists each]")
+
+
+def raise_all(errors) -> None:
+    """Raise the collected errors, if any: one as itself, several as CaseErrors."""
+    if len(errors) == 1:
+        raise errors[0]
+    if errors:
+        raise CaseErrors(errors)
+
+
+def error_lines(exc: SpringbenchError) -> list[str]:
+    """One line per mistake of ``exc``."""
+    return [SpringbenchError.__str__(e) for e in getattr(exc, "errors", [exc])]

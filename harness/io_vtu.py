@@ -24,8 +24,8 @@ def _pad3(a: np.ndarray) -> np.ndarray:
 def write_vtu(path, network, displacements: dict | None = None) -> Path:
     """Write ``network`` (and {load name: (n, dim)} displacements) to ``path``."""
     import meshio
+    from harness.outputs import staged
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     point_data = {"mass": np.asarray(network.masses, float), "class": np.asarray(network.classes, np.int32)}
     for name, u in (displacements or {}).items():
         point_data[f"u_{name}"] = _pad3(u)
@@ -34,7 +34,8 @@ def write_vtu(path, network, displacements: dict | None = None) -> Path:
                        cell_data={"stiffness": [np.asarray(network.k, float)],
                                   "group": [np.asarray(network.groups, np.int32)]},
                        field_data={"dim": np.array([network.dim], np.int32)})
-    meshio.write(path, mesh, file_format="vtu")
+    with staged([path]) as (tmp,):     # atomic: never half a file (e.g. disk full)
+        meshio.write(tmp, mesh, file_format="vtu")
     return path
 
 
@@ -51,9 +52,11 @@ def read_vtu(path):
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             m = meshio.read(path)
-    except (Exception, SystemExit) as exc:
-        raise SpringbenchError(f"cannot read it as a mesh ({type(exc).__name__})", file=str(path),
-                               fix="give a VTU file written by 'springbench build' or meshio")
+    except (Exception, SystemExit) as exc:   # meshio exits on some broken files
+        why = "the file is empty" if path.stat().st_size == 0 else (
+            "not a mesh file meshio reads (truncated, or another format?)" if isinstance(exc, SystemExit)
+            else f"cannot read it as a mesh ({type(exc).__name__}: {exc})")
+        raise SpringbenchError(why, file=str(path), fix="give a VTU file written by 'springbench build' or meshio")
     blocks = [i for i, c in enumerate(m.cells) if c.type == "line"]
     if not blocks:
         raise SpringbenchError("no 'line' cells (springs)", file=str(path), fix="springs are a line cell block")
@@ -66,10 +69,18 @@ def read_vtu(path):
     pts = np.asarray(m.points, float)
     dim = int(np.ravel(m.field_data["dim"])[0]) if "dim" in m.field_data else (2 if np.allclose(pts[:, 2:], 0) else 3)
     pts = pts[:, :dim]
+    bad = np.flatnonzero(~np.isfinite(pts).all(1))
+    if len(bad):
+        raise SpringbenchError(f"non-finite coordinates at points {bad[:5].tolist()}", file=str(path),
+                               fix="fix the point coordinates")
     masses = np.asarray(m.point_data["mass"], float).ravel() if "mass" in m.point_data else None
     classes = np.asarray(m.point_data["class"]).astype(int).ravel() if "class" in m.point_data else None
     if np.any(~np.isfinite(k)) or np.any(k <= 0):
         raise SpringbenchError("stiffness must be positive and finite", file=str(path), field="stiffness")
-    net = make_network(pts, springs, k, masses, classes, groups)
+    try:
+        net = make_network(pts, springs, k, masses, classes, groups)
+    except SpringbenchError as exc:         # about this file's springs: name it
+        raise SpringbenchError(exc.message, file=str(path), field=exc.field,
+                               fix=exc.fix or "springs are pairs of distinct point indices 0 .. n-1") from None
     disp = {name[2:]: np.asarray(v, float)[:, :dim] for name, v in m.point_data.items() if name.startswith("u_")}
     return net, disp

@@ -26,9 +26,12 @@ class Constraint:
 @dataclass(frozen=True)
 class Traction:
     """A constant traction ``vector`` (force per area in 3-D, per length in 2-D with unit
-    thickness) on the boundary ``part``."""
+    thickness) on the boundary ``part``. With ``twist`` w (3-D; stress per length) it is
+    t(x) = vector + w x (x - c), c the area centroid of the part's facets: w x (x - c)
+    has no resultant, only the torque int (x - c) x (w x (x - c)) dA (torsion)."""
     part: str
     vector: tuple[float, ...]
+    twist: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)

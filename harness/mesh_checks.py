@@ -2,13 +2,15 @@
 
 ``check_mesh(mesh, file)`` raises a one-line :class:`SpringbenchError` naming the file,
 the problem, the first offending cells/nodes and the fix. Checked, in this order:
-non-finite coordinates, empty mesh, node indices out of range, repeated nodes within a
-cell, duplicate nodes (distinct indices, same position), nodes used by no cell,
+non-finite coordinates, coordinates too large or a body too small to compute with (for
+its distance from the origin too), empty mesh, node indices out of range, repeated nodes
+within a cell, duplicate nodes (distinct indices, same position), nodes used by no cell,
 degenerate cells (|signed size| tiny relative to the median cell), inverted cells (signed
 size of the opposite sign to the majority: a consistently mirrored mesh is accepted),
-non-manifold input (a face of a volume mesh, or an edge of a surface mesh, shared by
-more than two cells) and a body in several disconnected pieces (a loose piece has no
-constraint and floats). Everything is vectorised over cells.
+mixed cell types (the FEM reference meshes one), non-manifold input (a face of a volume
+mesh, or an edge of a surface mesh, shared by more than two cells) and a body in several
+disconnected pieces (a loose piece has no constraint and floats). Everything is
+vectorised over cells.
 """
 
 from __future__ import annotations
@@ -27,6 +29,9 @@ FACES = {
     "quad": ((0, 1), (1, 2), (2, 3), (3, 0)),
 }
 DEGENERATE_RTOL = 1e-8
+# a body's extent relative to its largest coordinate: below this too few significant digits
+# are left inside the body (cell sizes, duplicate-node and degeneracy tests lose their meaning)
+EXTENT_RTOL = 1e-6
 
 
 def _first(idx, n=5) -> str:
@@ -58,6 +63,24 @@ def signed_size(points: np.ndarray, kind: str, cells: np.ndarray) -> np.ndarray:
     raise ValueError(kind)
 
 
+def coordinate_problem(points) -> str | None:
+    """Why a body's coordinates cannot be computed with (None if they can): too large,
+    a body too small, or too small for its distance from the origin."""
+    from harness.schema import LARGEST, SMALLEST
+    p = np.asarray(points, float)
+    big, extent = float(np.abs(p).max()), float(np.max(p.max(0) - p.min(0)))
+    if big > LARGEST:
+        return f"coordinates up to {big:.3g} are too large to compute with"
+    if extent < SMALLEST:
+        return f"the body is {extent:.3g} across, too small to compute with"
+    if extent < EXTENT_RTOL * big:
+        return f"the body is {extent:.3g} across but {big:.3g} from the origin (too few significant digits)"
+    return None
+
+
+COORDINATE_FIX = "change the length unit or move the body near the origin"
+
+
 def check_mesh(mesh, file: str | None = None) -> None:
     """Raise :class:`SpringbenchError` if ``mesh`` (a harness.meshfile.Mesh) is unusable."""
     file = file or getattr(mesh, "source", "") or None
@@ -72,6 +95,9 @@ def check_mesh(mesh, file: str | None = None) -> None:
     bad = np.flatnonzero(~np.isfinite(pts).all(axis=1))
     if len(bad):
         fail(f"non-finite coordinates at nodes {_first(bad)}", "fix the node coordinates")
+    problem = coordinate_problem(pts)
+    if problem:
+        fail(problem, COORDINATE_FIX)
     cells = {k: np.asarray(v) for k, v in mesh.cells.items() if len(v)}
     if not cells:
         fail("the mesh has no cells", "give triangle, quad, tetra or hexahedron cells")
@@ -114,6 +140,10 @@ def check_mesh(mesh, file: str | None = None) -> None:
             wrong = neg if len(neg) <= len(pos) else pos
             fail(f"{len(wrong)} inverted {kind} cells (cells {_first(wrong)}) have the opposite orientation to the rest",
                  "reorder their nodes so every cell has positive volume")
+    if len(cells) > 1:    # the FEM reference meshes one cell type: it would drop the others
+        split = "hexahedra into tetrahedra" if "hexahedron" in cells else "quads into triangles"
+        fail(f"the mesh mixes {' and '.join(sorted(cells))} cells",
+             f"give one cell type, e.g. split the {split}")
     for kind, c in cells.items():
         faces = np.concatenate([np.sort(c[:, list(f)], axis=1) for f in FACES[kind]])
         _, counts = np.unique(faces, axis=0, return_counts=True)

@@ -20,11 +20,13 @@ FREE, FIXED, PULLED, OBSERVED = 0, 1, 2, 3
 @dataclass(frozen=True)
 class Mesh:
     """points (n, dim); cells: cell type ("triangle", "quad", "tetra", "hexahedron")
-    -> (m, k) int array; flags (n,) node flags of the original format (0 if none)."""
+    -> (m, k) int array; flags (n,) node flags of the original format (0 if none);
+    groups: name -> harness.mesh_groups.Group (physical groups, cell and node sets)."""
     points: np.ndarray
     cells: dict
     flags: np.ndarray
     source: str = ""
+    groups: dict = field(default_factory=dict)
 
     @property
     def dim(self) -> int:
@@ -57,7 +59,7 @@ def looks_like_bc2000(path: Path) -> bool:
         return False
 
 
-def read_meshio(path: Path) -> Mesh:
+def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
     import contextlib
     import io
 
@@ -65,7 +67,7 @@ def read_meshio(path: Path) -> Mesh:
     # meshio prints and calls sys.exit on some unreadable files: keep both contained
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         try:
-            m = meshio.read(path)
+            m = meshio.read(path, file_format=file_format)
         except SystemExit:
             raise ValueError("meshio could not read it") from None
     pts = np.asarray(m.points, float)
@@ -80,7 +82,53 @@ def read_meshio(path: Path) -> Mesh:
         cells = {k: v for k, v in cells.items() if k in ("tetra", "hexahedron")}
     else:
         pts = pts[:, :2] if np.allclose(pts[:, 2:], 0) else pts
-    return Mesh(pts, cells, np.zeros(len(pts), int), str(path))
+    return Mesh(pts, cells, np.zeros(len(pts), int), str(path), read_groups(m))
+
+
+# corner nodes of the cell types a group may hold (higher-order types by their corners)
+CORNERS = {"vertex": 1, "line": 2, "line3": 2, "triangle": 3, "triangle6": 3, "quad": 4, "quad8": 4, "quad9": 4,
+           "tetra": 4, "tetra10": 4, "hexahedron": 8, "hexahedron20": 8, "hexahedron27": 8}
+DIMS = {"vertex": 0, "line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3}
+
+
+@dataclass(frozen=True)
+class Group:
+    """One named region: cells (meshio type -> (m, k) node indices) and loose nodes (p,)."""
+    cells: dict = field(default_factory=dict)
+    nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+def read_groups(m) -> dict[str, Group]:
+    """The named groups of a meshio mesh: its cell sets (gmsh physical groups arrive as
+    these; meshio's own ``gmsh:*`` bookkeeping sets are skipped), gmsh physical tags
+    without a cell set, and its point sets."""
+    out: dict[str, dict] = {}
+
+    def add(name, ctype, data):
+        if ctype in CORNERS and len(data):
+            cells = out.setdefault(name, {})
+            data = np.asarray(data, int)[:, :CORNERS[ctype]]
+            base = ctype.rstrip("0123456789")          # tetra10 -> tetra, triangle6 -> triangle
+            cells[base] = np.vstack([cells[base], data]) if base in cells else data
+    for name, per_block in (m.cell_sets or {}).items():
+        if name.startswith("gmsh:"):
+            continue
+        for block, idx in zip(m.cells, per_block):
+            if idx is not None and len(idx):
+                add(name, block.type, block.data[np.asarray(idx, int)])
+            else:
+                out.setdefault(name, {})
+    tags = (m.cell_data or {}).get("gmsh:physical")
+    if tags is not None:            # gmsh tags are per dimension: field_data holds (tag, dim)
+        for name, (tag, dim) in ((n, v) for n, v in (m.field_data or {}).items() if n not in out):
+            for block, t in zip(m.cells, tags):
+                if DIMS.get(block.type.rstrip("0123456789")) == dim:
+                    add(name, block.type, block.data[np.asarray(t) == tag])
+    groups = {n: Group(c) for n, c in out.items()}
+    for name, idx in (m.point_sets or {}).items():
+        nodes = np.unique(np.asarray(idx, int))
+        groups[name] = Group(groups[name].cells if name in groups else {}, nodes)
+    return groups
 
 
 READERS = {"bc2000": read_bc2000, "meshio": read_meshio}
@@ -92,10 +140,12 @@ def read_mesh(path, fmt: str | None = None) -> Mesh:
     if not path.is_file():  # meshio's own error for this is a long ReadError
         raise SpringbenchError(f"no such mesh file '{path.name}'", file=str(path),
                                fix="check the path (relative to the case file)")
+    if path.stat().st_size == 0:
+        raise SpringbenchError("the mesh file is empty", file=str(path), fix="give a mesh with nodes and cells")
     if fmt is None:
         fmt = "bc2000" if looks_like_bc2000(path) else "meshio"
     try:
-        return READERS[fmt](path)
+        return READERS[fmt](path) if fmt in READERS else read_meshio(path, fmt)   # any meshio format name
     except FileNotFoundError:
         raise SpringbenchError("file not found", file=str(path), fix="check the path")
     except Exception as exc:  # any parser failure becomes one line

@@ -15,15 +15,21 @@ from harness.springs import incidence, stiffness_matrix
 
 def frequencies_arrays(points, springs, k, masses, free: np.ndarray, n_modes: int = 6) -> np.ndarray:
     """First ``n_modes`` frequencies (Hz) on the free dofs (plain arrays)."""
-    points = np.asarray(points, float)
     masses = np.asarray(masses, float)
     if np.any(masses <= 0):
         raise ModelError(f"{int(np.sum(masses <= 0))} nodes have masses <= 0, so M is not positive definite",
                          field="model.masses", fix="use masses = 'moments-nonneg', 'voronoi' or 'uniform'")
-    dim = points.shape[1]
     K = stiffness_matrix(incidence(points, springs), k)
+    return matrix_frequencies(K, masses, free, n_modes)
+
+
+def matrix_frequencies(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndarray:
+    """First ``n_modes`` frequencies (Hz) of a stiffness matrix K (ndof, ndof) with the
+    node masses (n,) on the free dofs (also the linearised Bourguignon-Cani models)."""
+    masses = np.asarray(masses, float)
+    dim = K.shape[0] // len(masses)
     fd = np.flatnonzero(np.asarray(free, bool))
-    Kf = K[fd][:, fd]
+    Kf = sp.csr_matrix(K)[fd][:, fd]
     m = np.repeat(masses, dim)[fd]
     n_modes = min(n_modes, len(fd))
     if len(fd) <= 1500:
@@ -39,8 +45,10 @@ def frequencies_arrays(points, springs, k, masses, free: np.ndarray, n_modes: in
 
 
 def frequencies(network, case, n_modes: int = 6, load: str | None = None) -> np.ndarray:
-    """First ``n_modes`` natural frequencies (Hz) with the constraints of load ``load``."""
+    """First ``n_modes`` natural frequencies (Hz) with the constraints of load ``load``
+    (default: harness.case_loads.modal_load)."""
+    from harness.case_loads import modal_load
     from harness.statics import fixed_mask
-    lc = case.loads[0] if load is None else next(l for l in case.loads if l.name == load)
+    lc = modal_load(case) if load is None else next(l for l in case.loads if l.name == load)
     free = ~fixed_mask(network.points, case, lc).ravel()
     return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)

@@ -3,8 +3,9 @@
 Built-in names are intersections of bounding-box faces: ``x0`` is the face x = xmin,
 ``x1`` the face x = xmax (likewise y, z); ``x0y0`` is their intersection (a corner in
 2-D, an edge in 3-D), ``x0y0z0`` a corner in 3-D. User parts are axis-aligned boxes
-declared in ``[body.parts]``. A predicate takes coordinates shaped (dim, n), as
-scikit-fem does, and returns a boolean mask.
+declared in ``[body.parts]``, or groups of the body's mesh file (harness.mesh_groups).
+A predicate takes coordinates shaped (dim, n), as scikit-fem does, and returns a
+boolean mask.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import re
 from typing import Callable, Mapping
 
 import numpy as np
+
+from harness.mesh_groups import GroupPart, group_predicate
 
 FACE = re.compile(r"([xyz])([01])")
 AXES = "xyz"
@@ -36,6 +39,8 @@ def part_predicate(name: str, bbox: tuple[np.ndarray, np.ndarray],
     """Predicate for the named part; raises KeyError for an unknown name."""
     lo, hi = (np.asarray(b, float) for b in bbox)
     tol = rtol * float(np.linalg.norm(hi - lo))
+    if user_parts and isinstance(user_parts.get(name), GroupPart):
+        return group_predicate(user_parts[name], tol)
     if user_parts and name in user_parts:
         plo, phi = (np.asarray(b, float) for b in user_parts[name])
 

@@ -56,13 +56,14 @@ CSV files are read with pandas; write them with ``DataFrame.to_csv(path, index=F
 
 from __future__ import annotations
 
-import html
 import json
 import math
 import re
 from pathlib import Path
 
 from harness.errors import SpringbenchError
+from harness.report_frames import (OPTIMIZER_COLUMNS, REF_COARSE, SCORED,  # noqa: F401  (re-exported)
+                                   headline_frame, optimizer_frame)
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
@@ -73,8 +74,6 @@ HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "
         "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
         "static_status"]
 TAIL = ["seconds", "error"]
-SCORED = ("ok", "ref-coarse")   # row statuses whose numbers count (ref-coarse: kept, flagged)
-REF_COARSE = "ref-coarse"
 TIMING = re.compile(r"^(seconds|time|wall)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
 
@@ -89,9 +88,10 @@ def load_results(suite_dir: Path) -> list[dict]:
         try:
             m = json.loads(f.read_text())
         except (OSError, ValueError):
-            continue
-        if not isinstance(m, dict) or not isinstance(m.get("rows"), list):
-            continue
+            m = None
+        if not isinstance(m, dict) or not isinstance(m.get("rows"), list):  # never skipped silently
+            raise SpringbenchError("not a result file springbench wrote (truncated or edited?)", file=str(f),
+                                   fix="delete it and re-run that case with 'springbench run'")
         m["_folder"] = f.parent.name
         key = (m.get("file") or f.parent.name, m.get("seed", 0))
         t = f.stat().st_mtime
@@ -201,85 +201,6 @@ def seeds_frame(df):
     return out.reset_index()
 
 
-OPTIMIZER_COLUMNS = ["case", "model", "optimizer", "objective", "n_seeds", "n_params", "budget", "G_initial",
-                     "G_final", "G_final_vs_sa", "G_norm_final", "G_ref", "G_heldout", "status", "seconds",
-                     "seconds_to_sa_G",
-                     "opt_evaluations", "evals_to_sa_G",
-                     "opt_iterations", "opt_stop", "opt_at_bounds", "jac_rank", "jac_cond_logk", "jac_cond_k",
-                     "f1_ratio", "freq_error_initial", "freq_error_final"]
-
-
-def headline_frame(df):
-    """One line per case, what a person reads first: the worst status, the best stiffness
-    rule and the best fit (normalised G on the fitted loads), the fit's G on held-out
-    loads, the reference's own error (G_ref) and the case's seconds; cases without a G
-    (dynamics experiments) show their status and a pointer to summary.md."""
-    import pandas as pd
-    out = []
-    for case, g in df.groupby("case", sort=False):
-        row = {"case": case, "rows": len(g)}
-        status = g["status"].astype(str) if "status" in g else pd.Series(dtype=str)
-        row["status"] = ("error" if (status == "error").any() else
-                         REF_COARSE if (status == REF_COARSE).any() else "ok")
-        scored = g[g["G_norm_final"].notna()] if "G_norm_final" in g else g.iloc[:0]
-        if "optimizer" in scored:       # sms: rules (no optimiser) and fits
-            opt = scored["optimizer"].astype(str)
-            rules, fits, label = scored[opt == "none"], scored[opt != "none"], "optimizer"
-        else:                           # bc2000 fem: one calibrated row per model
-            rules, fits, label = scored.iloc[:0], scored, "model"
-        if len(rules):
-            r = rules.loc[rules["G_norm_final"].idxmin()]
-            row.update(best_rule=r["stiffness"], G_norm_rule=r["G_norm_final"])
-        if len(fits):
-            f = fits.loc[fits["G_norm_final"].idxmin()]
-            row.update(best_fit=f[label], G_norm_fit=f["G_norm_final"], G_heldout=f.get("G_heldout", math.nan))
-        if "G_ref" in scored and scored["G_ref"].notna().any():
-            row["G_ref"] = scored["G_ref"].max()
-        if "seconds" in g:
-            row["seconds"] = g["seconds"].sum()
-        if not len(scored):
-            row["note"] = "; ".join(sorted({str(e) for e in g.get("error", pd.Series()).dropna()}))[:80] \
-                or "see summary.md"
-        out.append(row)
-    order = ["case", "rows", "status", "best_rule", "G_norm_rule", "best_fit", "G_norm_fit", "G_heldout", "G_ref",
-             "seconds", "note"]
-    frame = pd.DataFrame(out)
-    return frame[[c for c in order if c in frame]]
-
-
-def optimizer_frame(df):
-    """The optimised rows side by side (issue 4: SA vs L-BFGS-B on the same cases): one
-    line per case, model, optimizer and objective, numbers averaged over seeds (spread in
-    seeds.csv); ``G_final_vs_sa`` = G_final / G_final of the case's SA row, same seed."""
-    import pandas as pd
-    if df.empty or "optimizer" not in df:
-        return pd.DataFrame()
-    opt = df[df["optimizer"].notna() & (df["optimizer"] != "none")]
-    if "status" in opt:
-        opt = opt[opt["status"].isin(SCORED)]
-    if opt.empty or opt.groupby("case")["optimizer"].nunique().max() < 2:
-        return pd.DataFrame()
-    opt = opt.copy()
-    if "objective" not in opt:
-        opt["objective"] = "G"
-    opt["objective"] = opt["objective"].fillna("G")
-    sa = opt[(opt["optimizer"] == "sa") & (opt["objective"] == "G")].set_index(["case", "seed"])["G_final"]
-    sa = sa[~sa.index.duplicated()]
-    opt["G_final_vs_sa"] = [g / sa.get((c, s), math.nan) for c, s, g in zip(opt["case"], opt["seed"], opt["G_final"])]
-    keys = ["case", "model", "optimizer", "objective"]
-    num = [c for c in OPTIMIZER_COLUMNS if c in opt and c not in keys and pd.api.types.is_numeric_dtype(opt[c])]
-    text = [c for c in ("budget", "opt_stop") if c in opt]
-    g = opt.groupby(keys, sort=False, dropna=False)
-    out = g[num].mean()
-    for c in text:
-        out[c] = g[c].first()
-    if "status" in opt:   # flagged if any seed's row is
-        out["status"] = g["status"].agg(lambda s: REF_COARSE if (s == REF_COARSE).any() else "ok")
-    out.insert(0, "n_seeds", g["seed"].nunique())
-    out = out.reset_index()
-    return out[[c for c in OPTIMIZER_COLUMNS if c in out]]
-
-
 # -- markdown and html ---------------------------------------------------------------------
 
 def _cell(v) -> str:
@@ -337,7 +258,7 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                                fix="give a folder results/<suite> written by 'springbench run'")
     df = summary_frame(manifests)
     csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
-    from harness.runner import atomic_write
+    from harness.outputs import atomic_write
     atomic_write(csv_path, df.to_csv(index=False).encode())
     seeds = seeds_frame(df)
     seeds_path = suite_dir / "seeds.csv"
@@ -395,63 +316,18 @@ def suites_under(results_root) -> list[Path]:
 
 
 def build_index(results_root) -> Path:
-    """``results/index.html``: every suite's tables and figures, relative links only."""
-    import pandas as pd
-    root = Path(results_root)
-    parts = ["<!doctype html><html><head><meta charset='utf-8'><title>springbench results</title>",
-             "<style>body{font-family:sans-serif;margin:2em;max-width:110em}"
-             "table{border-collapse:collapse;font-size:12px}td,th{border:1px solid #ccc;padding:2px 5px}"
-             "img{width:320px;margin:4px;border:1px solid #ddd}.err{color:#b00}</style></head><body>",
-             "<h1>springbench results</h1><ul>"]
-    suites = suites_under(root)
-    for s in suites:
-        parts.append(f"<li><a href='#{html.escape(s.name)}'>{html.escape(s.name)}</a></li>")
-    bench = sorted((root / "bench").glob("*.csv")) if (root / "bench").is_dir() else []
-    if bench:
-        parts.append("<li><a href='#bench'>bench</a></li>")
-    parts.append("</ul>")
-    for s in suites:
-        rel = s.relative_to(root).as_posix()
-        parts.append(f"<h2 id='{html.escape(s.name)}'>{html.escape(s.name)}</h2><p>")
-        for name in ("summary.md", "summary.csv", "seeds.csv"):
-            if (s / name).exists():
-                parts.append(f"<a href='{rel}/{name}'>{name}</a> ")
-        parts.append("</p>")
-        if (s / "summary.csv").exists():
-            try:
-                df = pd.read_csv(s / "summary.csv")
-                df = df[key_columns(df.columns)]
-                parts.append(df.to_html(index=False, na_rep="", float_format=lambda v: f"{v:.4g}",
-                                        border=0, escape=True))
-            except (ValueError, pd.errors.EmptyDataError):
-                parts.append("<p class='err'>summary.csv could not be read</p>")
-        by_folder: dict[str, list[Path]] = {}
-        for png in sorted(s.rglob("*.png")):
-            by_folder.setdefault(png.parent.relative_to(s).as_posix(), []).append(png)
-        for folder, pngs in by_folder.items():
-            parts.append(f"<h3>{html.escape(folder if folder != '.' else s.name + ' (suite)')}</h3><p>")
-            for png in pngs:
-                href = png.relative_to(root).as_posix()
-                parts.append(f"<a href='{html.escape(href)}'><img src='{html.escape(href)}' "
-                             f"alt='{html.escape(png.name)}' title='{html.escape(png.name)}'></a>")
-            parts.append("</p>")
-    if bench:
-        parts.append("<h2 id='bench'>bench</h2><ul>")
-        for b in bench:
-            href = b.relative_to(root).as_posix()
-            parts.append(f"<li><a href='{html.escape(href)}'>{html.escape(b.name)}</a></li>")
-        parts.append("</ul>")
-    parts.append("</body></html>\n")
-    out = root / "index.html"
-    from harness.runner import atomic_write
-    atomic_write(out, "\n".join(parts).encode())
+    """``<results_root>/index.html``, the page a person reads (:mod:`harness.report_page`)."""
+    from harness.report_page import index_html
+    from harness.outputs import atomic_write
+    out = Path(results_root) / "index.html"
+    atomic_write(out, index_html(results_root).encode())
     return out
 
 
 def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = False) -> list[dict]:
     """``springbench report``: rebuild the named suite folders (default: all under the
     results root) and the index."""
-    from harness.runner import DEFAULT_RESULTS
+    from harness.paths import DEFAULT_RESULTS
     if paths:
         suites = []
         for p in map(Path, paths):

@@ -16,6 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from harness.errors import SpringbenchError
+from harness.outputs import os_error
 
 LOCK = ".springbench.lock"
 SCRATCH = "springbench-"
@@ -52,11 +53,19 @@ def run_lock(folder: Path):
                 raise SpringbenchError(f"another springbench run (pid {pid}) is writing here", file=str(folder),
                                        field="--results", fix="wait for it to finish or give another --results folder")
             path.unlink(missing_ok=True)          # stale: its run was killed
+        except OSError as exc:                    # read-only folder, ...
+            raise os_error(exc, folder, "--results") from None
     else:
         raise SpringbenchError("cannot take the results folder's lock", file=str(path), fix="remove the file")
     try:
-        os.write(fd, f"{os.getpid()}\n".encode())
-        os.close(fd)
+        try:
+            os.write(fd, f"{os.getpid()}\n".encode())
+        finally:
+            os.close(fd)
+    except OSError as exc:                        # disk full: no lock, no empty lock file left
+        path.unlink(missing_ok=True)
+        raise os_error(exc, folder, "--results") from None
+    try:
         yield
     finally:
         if _owner(path) == os.getpid():

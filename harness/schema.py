@@ -11,9 +11,12 @@ import math
 from dataclasses import dataclass, field as dc_field
 from typing import Any, Callable
 
-from harness.errors import CaseError
+from harness.errors import CaseError, raise_all
 
 REQUIRED = object()
+# the magnitudes a number may have (0 aside): the solvers multiply and square them (stiffness
+# E L, G sums |u|^2 with u ~ s L / E), and double precision overflows near 1e308
+SMALLEST, LARGEST = 1e-30, 1e30
 
 
 @dataclass(frozen=True)
@@ -54,22 +57,37 @@ def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
 
     if not isinstance(data, dict):
         fail("", f"expected a table, got {_describe(data)}")
-    unknown = sorted(set(data) - set(spec))
-    if unknown:
-        allowed = ", ".join(sorted(spec))
-        fail(unknown[0], "unknown key", f"allowed here: {allowed}")
+    errors = []       # every mistake of the table, not just the first
+    for key in sorted(set(data) - set(spec)):
+        errors.append(CaseError("unknown key", file=file, field=path + key, fix=did_you_mean(key, spec)))
     out = {}
     for key, f in spec.items():
-        if key not in data:
-            if f.default is REQUIRED:
-                fail(key, f"missing required {f.kind} field",
-                     f.doc or (f"add a [{path}{key}] table" if f.kind == "table" else None))
-            # an absent table with a {} default still gets its own defaults
-            out[key] = (check({}, f.spec, file, path + key + ".")
-                        if f.kind == "table" and f.default == {} else f.default)
-            continue
-        out[key] = _value(data[key], f, file, path + key)
+        try:
+            if key not in data:
+                if f.default is REQUIRED:
+                    fail(key, f"missing required {f.kind} field",
+                         f.doc or (f"add a [{path}{key}] table" if f.kind == "table" else f"add {key} = ..."))
+                # an absent table with a {} default still gets its own defaults
+                out[key] = (check({}, f.spec, file, path + key + ".")
+                            if f.kind == "table" and f.default == {} else f.default)
+                continue
+            out[key] = _value(data[key], f, file, path + key)
+        except CaseError as exc:
+            errors.append(exc)
+    raise_all(errors)
     return out
+
+
+def did_you_mean(key: str, allowed) -> str:
+    """'did you mean ...? allowed here: ...' for an unknown key."""
+    import difflib
+    allowed = sorted(allowed)
+    close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
+    k = str(key).lower()      # or one is the other's start: 'tolerance' for 'tol'
+    close = close or [a for a in allowed if min(len(k), len(a)) >= 3
+                      and (k.startswith(a.lower()) or a.lower().startswith(k))]
+    hint = f"did you mean '{close[0]}'? " if close else ""
+    return f"{hint}allowed here: {', '.join(allowed)}"
 
 
 def _value(v, f: Field, file: str, where: str):
@@ -88,6 +106,7 @@ def _value(v, f: Field, file: str, where: str):
         v = float(v)
         if not math.isfinite(v):
             fail("expected a finite number")
+        _magnitude(v, fail)
         _range(v, f, fail)
     elif k == "int":
         if not isinstance(v, int) or isinstance(v, bool):
@@ -120,12 +139,18 @@ def _value(v, f: Field, file: str, where: str):
             fail("expected finite numbers")
         _length(v, f, fail)
         for x in v:
+            _magnitude(x, fail)
             _range(x, f, fail)
     elif k == "matrix":
         if not isinstance(v, list) or not all(
                 isinstance(r, list) and all(_is_number(x) for x in r) for r in v):
             fail("expected a list of lists of numbers")
         v = tuple(tuple(float(x) for x in r) for r in v)
+        if not all(math.isfinite(x) for r in v for x in r):
+            fail("expected finite numbers (no nan or inf)")
+        for r in v:
+            for x in r:
+                _magnitude(x, fail)
         _length(v, f, fail)
     elif k == "table":
         v = check(v, f.spec, file, where + ".")
@@ -142,6 +167,12 @@ def _value(v, f: Field, file: str, where: str):
         if msg:
             fail(msg)
     return v
+
+
+def _magnitude(x: float, fail):
+    if x != 0 and not SMALLEST <= abs(x) <= LARGEST:
+        fail(f"{x:g} is too {'large' if abs(x) > LARGEST else 'small'} to compute with",
+             f"numbers between {SMALLEST:g} and {LARGEST:g} in size (or 0): change the units")
 
 
 def _range(x, f: Field, fail):

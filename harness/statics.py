@@ -27,6 +27,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
 from harness.errors import ModelError
+from harness.facet_loads import facet_forces, needs_facets, part_facets
 from harness.parts import part_predicate
 from harness.springs import incidence, stiffness_matrix
 
@@ -165,6 +166,13 @@ def force_vector(network, case, load) -> np.ndarray:
     if load.stress is not None:
         f += stress_forces(pts, case, load.stress)
     for t in load.tractions:
+        if needs_facets(case, t):       # a mesh group or a twist: on the part's facets (harness/facet_loads.py)
+            fac = part_facets(pts, case, _predicate(case, t.part))
+            if not any(len(a) for a in fac):
+                raise ModelError(f"load '{load.name}': traction part '{t.part}' has no boundary facets", field="model",
+                                 fix="put tractions on faces (2-D: edges) of the body")
+            f += facet_forces(pts, fac, t.vector, t.twist)
+            continue
         meas = tributary_measure(pts, _predicate(case, t.part))
         if not np.any(meas > 0):
             raise ModelError(f"load '{load.name}': traction part '{t.part}' holds too few nodes to carry a traction",

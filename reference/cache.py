@@ -15,7 +15,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-_CODE = ["elasticity.py", "fibres.py", "loadsets.py", "parts.py", "meshfile.py"]
+_CODE = ["elasticity.py", "fibres.py", "loadsets.py", "parts.py", "meshfile.py", "mesh_groups.py"]
 
 
 def cache_dir() -> Path:

@@ -119,10 +119,12 @@ class Discretisation:
         return F.ravel()
 
     def part_facets(self, predicate) -> np.ndarray:
-        """Boundary facets all of whose vertices satisfy ``predicate``."""
+        """Boundary facets all of whose vertices and whose centroid satisfy ``predicate``
+        (the centroid keeps a facet that only spans between a part's edges out)."""
         bf = self.mesh.boundary_facets()
         nodes = self.mesh.facets[:, bf]  # nvf, nf
         ok = predicate(self.mesh.p[:, nodes.ravel()]).reshape(nodes.shape).all(axis=0)
+        ok[ok] = predicate(self.mesh.p[:, nodes[:, ok]].mean(axis=1))
         return bf[ok]
 
     def traction_load(self, facets: np.ndarray, vector) -> np.ndarray:
@@ -131,6 +133,21 @@ class Discretisation:
                               dofs=self.dofs)
         w = skfem.asm(skfem.LinearForm(lambda v, _: v), fb)  # int phi_a ds, (ns,)
         return (w[:, None] * np.asarray(vector, float)[None, :]).ravel()
+
+    def twist_load(self, facets: np.ndarray, w) -> np.ndarray:
+        """Load vector of the traction w x (x - c) on ``facets`` (3-D), c their area
+        centroid: a torque without resultant (harness.loadsets.Traction)."""
+        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=facets, intorder=self.q_mass,
+                              dofs=self.dofs)
+        xq, dx = np.asarray(fb.global_coordinates()), fb.dx
+        c = np.einsum("dfq,fq->d", xq, dx) / dx.sum()
+        w = np.asarray(w, float)
+        out = np.zeros((self.ns, self.dim))
+        for comp in range(3):            # (w x r)_comp = w_a r_b - w_b r_a
+            a, b = (comp + 1) % 3, (comp + 2) % 3
+            out[:, comp] = skfem.asm(skfem.LinearForm(
+                lambda v, p: v * (w[a] * (p.x[b] - c[b]) - w[b] * (p.x[a] - c[a]))), fb)
+        return out.ravel()
 
     def stress_load(self, sigma: np.ndarray) -> np.ndarray:
         """Load vector of the traction sigma . n of a constant stress (dim, dim) on the

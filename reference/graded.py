@@ -12,6 +12,8 @@ parameter s = i / n, which is what Richardson extrapolation over the levels need
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import skfem
 
@@ -20,24 +22,95 @@ ZONE = 0.5             # sec6 cube's shear against an independent solve (tests/i
 MESHES = {2: skfem.MeshQuad, 3: skfem.MeshHex}
 
 
+@dataclass(frozen=True)
+class AxisMap:
+    """The graded map of one axis at level n: the continuous cell index t in [0, N]
+    (node i at t = i) to the coordinate x in [0, length] and back. ``n`` power-graded
+    cells in each end zone of width zone * min(length, shortest) (at most half the axis),
+    ``m`` uniform cells in between (an even number, as many as keep them no larger than
+    the largest graded cell at n, proportional to n), so the axis is symmetric and its
+    midpoint is a node."""
+    length: float
+    w: float
+    n: int
+    m: int
+    beta: float
+
+    @classmethod
+    def of(cls, length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT,
+           zone: float = ZONE) -> "AxisMap":
+        if n < 1:
+            raise ValueError("need at least one cell per end zone")
+        w = min(zone * shortest, 0.5 * length)
+        middle = length - 2 * w
+        # largest graded cell ~ zone_slope w / n (the zone's end slope; the count is proportional to n);
+        # an even count puts a vertex on the mid-plane, where reference/symmetry.py cuts the box
+        m = 0 if middle <= 1e-12 * length else 2 * max(1, int(np.ceil(middle * n / (2 * zone_slope(beta) * w) - 1e-9)))
+        return cls(float(length), float(w) if m else 0.5 * float(length), int(n), m, float(beta))
+
+    @property
+    def cells(self) -> int:
+        return 2 * self.n + self.m
+
+    def x(self, t) -> np.ndarray:
+        t = np.clip(np.asarray(t, float), 0.0, self.cells)
+        end = lambda s: self.w * zone_map(np.clip(s, 0.0, self.n) / self.n, self.beta)   # noqa: E731
+        mid = self.w + (t - self.n) * (self.length - 2 * self.w) / max(self.m, 1)
+        return np.where(t <= self.n, end(t), np.where(t >= self.n + self.m, self.length - end(self.cells - t), mid))
+
+    def t(self, x) -> np.ndarray:
+        x = np.clip(np.asarray(x, float), 0.0, self.length)
+        end = lambda d: self.n * zone_inverse(np.clip(d, 0.0, self.w) / self.w, self.beta)   # noqa: E731
+        mid = self.n + (x - self.w) * max(self.m, 1) / max(self.length - 2 * self.w, 1e-300)
+        return np.where(x <= self.w, end(x), np.where(x >= self.length - self.w, self.cells - end(self.length - x), mid))
+
+
+def zone_map(s, beta: float = GRADE_EXPONENT) -> np.ndarray:
+    """The end zone's map [0, 1] -> [0, 1]: s^beta + c (s^(beta+1) - s^(beta+2)) with c
+    = beta (beta - 1) / (2 beta + 2), which makes its curvature vanish where the zone
+    ends. A plain s^beta has curvature there, and at a cube's mid-plane the mirrored zone
+    has the opposite: a kink in the cell sizes that the averaging window of
+    reference/gridvalues.py straddles for points near the mid-plane, whose level values
+    then swing again. Near the face it is s^beta, the grading the edges need."""
+    s = np.asarray(s, float)
+    c = beta * (beta - 1) / (2 * beta + 2)
+    return s ** beta + c * (s ** (beta + 1) - s ** (beta + 2))
+
+
+def zone_slope(beta: float = GRADE_EXPONENT) -> float:
+    """d zone_map / ds at s = 1: the size of the zone's last cell times n / w."""
+    c = beta * (beta - 1) / (2 * beta + 2)
+    return beta - c
+
+
+def zone_inverse(y, beta: float = GRADE_EXPONENT) -> np.ndarray:
+    """s in [0, 1] with zone_map(s) = y, by Newton from below (the map is increasing and
+    convex on [0, 1], so the iterates stay in it and converge)."""
+    y = np.clip(np.asarray(y, float), 0.0, 1.0)
+    c = beta * (beta - 1) / (2 * beta + 2)
+    s = y ** (1.0 / beta) * 0.0 + np.clip(y, 0.0, 1.0) ** (1.0 / beta)
+    for _ in range(100):
+        d = beta * s ** (beta - 1) + c * ((beta + 1) * s ** beta - (beta + 2) * s ** (beta + 1))
+        step = np.divide(zone_map(s, beta) - y, d, out=np.zeros_like(s), where=d > 0)
+        s = np.clip(s - step, 0.0, 1.0)
+        if np.all(np.abs(step) <= 1e-15):
+            break
+    return s
+
+
 def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT,
                zone: float = ZONE) -> np.ndarray:
-    """Node coordinates in [0, length]: ``n`` power-graded cells in each end zone of
-    width zone * min(length, shortest) (at most half the axis), uniform cells in between
-    (an even number, as many as keep them no larger than the largest graded cell at n,
-    proportional to n), so the axis is symmetric and its midpoint is a node."""
-    if n < 1:
-        raise ValueError("need at least one cell per end zone")
-    w = min(zone * shortest, 0.5 * length)
-    end = w * np.linspace(0.0, 1.0, n + 1) ** beta
-    middle = length - 2 * w
-    if middle <= 1e-12 * length:
-        return np.concatenate([end, length - end[::-1][1:]])
-    # largest graded cell ~ beta w / n (its limit for large n keeps the count proportional to n);
-    # an even count puts a vertex on the mid-plane, where reference/symmetry.py cuts the box
-    m = 2 * max(1, int(np.ceil(middle * n / (2 * beta * w) - 1e-9)))
-    mid = w + middle * np.linspace(0.0, 1.0, m + 1)[1:-1]
-    return np.concatenate([end, mid, length - end[::-1]])
+    """Node coordinates in [0, length] of the graded axis (AxisMap) at level n."""
+    a = AxisMap.of(length, shortest, n, beta, zone)
+    x = a.x(np.arange(a.cells + 1))
+    x[-1] = length
+    return x
+
+
+def axis_maps(size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> list[AxisMap]:
+    """The AxisMap of every axis of a box of ``size`` at level n."""
+    size = np.asarray(size, float)
+    return [AxisMap.of(s, float(size.min()), n, beta, zone) for s in size]
 
 
 def graded_axes(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> list:

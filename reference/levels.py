@@ -16,9 +16,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference.extrapolate import extrapolate, observed_order
+from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import graded_axes, graded_mesh, level_divisions, probe_points, tensor_mesh
+from reference.graded import axis_maps, graded_axes, graded_mesh, level_divisions, probe_points, tensor_mesh
 from reference.gridvalues import GridField
 from reference.problem import solve_mesh
 from reference.symmetry import Mirror, lower_half, mirror_of, unfold
@@ -44,6 +44,8 @@ class Levels:
     (level, dof vector) pairs kept (the last three; for a load found exact, the two
     that agree, the coarser last: it is the field used) and the observed order."""
     dim: int
+    origin: np.ndarray = None
+    size: np.ndarray = None
     ns: list = field(default_factory=list)
     meshes: list = field(default_factory=list)
     fields: dict = field(default_factory=dict)
@@ -80,15 +82,33 @@ class Levels:
             out.update({n: unfold(self._evaluator(k), half, U[n], mirror) for n in names})
         return out
 
-    def at(self, points, k: int, u: np.ndarray) -> np.ndarray:
+    def at(self, points, k: int, u: np.ndarray, average: np.ndarray | None = None) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
-        (reference/gridvalues.py: O(h^4) everywhere, so the levels extrapolate cleanly)."""
-        return self._evaluator(k).evaluate(u.reshape(-1, self.dim), np.asarray(points, float))
+        (reference/gridvalues.py: O(h^4) everywhere), averaged over a window of cells
+        along the axes ``average`` (m, dim) marks (the swing with the point's place in
+        its cell then averages out, so the levels extrapolate cleanly)."""
+        ev = self._evaluator(k)
+        points = np.asarray(points, float)
+        if average is None or not average.any():
+            return ev.evaluate(u.reshape(-1, self.dim), points)
+        return ev.evaluate_window(u.reshape(-1, self.dim), points, axis_maps(self.size, self.ns[k]),
+                                  self.origin, average)
+
+    def window_axes(self, points, n: int) -> np.ndarray:
+        """(m, dim): the axes along which the window (one cell each way) fits inside the
+        box at level n, and so at every finer level; never along an axis on whose end
+        faces a point lies (there the cell coordinate is fixed and nothing swings)."""
+        t = np.stack([a.t(points[:, d] - self.origin[d]) for d, a in enumerate(axis_maps(self.size, n))], axis=1)
+        cells = np.array([a.cells for a in axis_maps(self.size, n)])
+        return (t >= 1.0 - 1e-9) & (t <= cells - 1.0 + 1e-9)
 
     def values(self, points, load: str):
-        """The load's kept levels evaluated at points: ([(n, dim) arrays], [h])."""
+        """The load's kept levels evaluated at points: ([(n, dim) arrays], [h]); every
+        level averaged along the same axes (those that fit at the coarsest of them)."""
         pairs = self.fields[load]
-        return ([self.at(points, k, u) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
+        points = np.asarray(points, float)
+        average = None if self.origin is None else self.window_axes(points, min(self.ns[k] for k, _ in pairs))
+        return ([self.at(points, k, u, average) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
 
     def evaluate(self, points, load: str):
         """(extrapolated displacement (n, dim), estimate of its error (n,)) at points."""
@@ -115,7 +135,7 @@ class Levels:
     @classmethod
     def from_arrays(cls, case, names, arrays) -> "Levels":
         lo, hi = case.body.bbox()
-        lev = cls(case.dim)
+        lev = cls(case.dim, np.asarray(lo, float), np.asarray(hi - lo, float))
         for n in arrays["ns"]:
             lev.add_mesh(int(n), graded_mesh(lo, hi - lo, int(n)))
         for i, name in enumerate(names):
@@ -132,7 +152,7 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
     size = hi - lo
     names = [l.name for l in case.loads]
     probes = probe_points(lo, size)
-    lev = Levels(case.dim, fields={n: [] for n in names})
+    lev = Levels(case.dim, np.asarray(lo, float), np.asarray(size, float), fields={n: [] for n in names})
     active = list(names)
     est = {n: float("nan") for n in names}
     mirrors = {l.name: mirror_of(case, l) for l in case.loads}
@@ -161,8 +181,8 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
                 active.remove(name)           # represented exactly: no further level helps;
                 lev.orders.pop(name, None)    # the coarser of the two (less rounding) goes last
                 lev.fields[name] = lev.fields[name][-1:] + lev.fields[name][-2:-1]
-            elif len(vals) >= 3:
-                lev.orders[name] = observed_order(vals[-3:], h[-3:])
+            elif len(vals) >= 3:   # a higher observed order is the next terms at work, not the leading one
+                lev.orders[name] = min(FORMAL_ORDER, observed_order(vals[-3:], h[-3:]))
             _, e = extrapolate(vals, h, lev.orders.get(name, float("nan")))
             est[name] = float(e.max()) / scale
         history.append(dict(n_dofs=dofs, **est))

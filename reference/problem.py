@@ -20,12 +20,18 @@ def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
     return case.body.bbox()
 
 
-def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror()) -> np.ndarray:
+def predicate(case, name: str, bbox, parts=None):
+    """The part's point predicate: harness.parts', or ``parts(name, bbox)`` when given
+    (reference/meshparts.py: a mesh body's parts resolved on the user's mesh)."""
+    return part_predicate(name, bbox, case.body.parts) if parts is None else parts(name, bbox)
+
+
+def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), parts=None) -> np.ndarray:
     """The load's constrained dofs (and, on a cut box, the cut planes' dofs). A part may
     miss a cut box when its mirror image is in it."""
     out = [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, _tol(bbox))] if mirror else []
     for c in load.constraints:
-        dofs = d.part_dofs(part_predicate(c.part, bbox, case.body.parts), c.components)
+        dofs = d.part_dofs(predicate(case, c.part, bbox, parts), c.components)
         if len(dofs) == 0 and mirror:
             continue
         if len(dofs) == 0:
@@ -44,16 +50,19 @@ def _tol(bbox) -> float:
     return 1e-8 * float(np.linalg.norm(np.asarray(bbox[1]) - np.asarray(bbox[0])))
 
 
-def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror()) -> np.ndarray:
+def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror(),
+                parts=None) -> np.ndarray:
     F = np.zeros(d.ndof)
     for t in load.tractions:
-        facets = d.part_facets(part_predicate(t.part, bbox, case.body.parts))
+        facets = d.part_facets(predicate(case, t.part, bbox, parts))
         if len(facets) == 0 and mirror:
             continue
         if len(facets) == 0:
             raise ModelError(f"load case '{load.name}': traction part '{t.part}' has no boundary facets",
                              file=str(case.path), fix="put tractions on faces (2-D: edges) of the body")
         F += d.traction_load(facets, t.vector)
+        if t.twist is not None:
+            F += d.twist_load(facets, t.twist)
     if load.stress is not None:
         F += d.stress_load(stress_tensor(load.stress))
     f = np.zeros((d.nelems, d.dim))
@@ -103,12 +112,13 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
 
 
 def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror = Mirror(),
-               disc: Discretisation | None = None) -> dict:
+               disc: Discretisation | None = None, parts=None) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
     those named in ``loads``). ``info``: a list that gets one solver record per
     factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
     case's box cut at these mid-planes, and every load named has that parity
-    (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built."""
+    (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
+    ``parts``: part predicates in place of harness.parts' (see :func:`predicate`)."""
     d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
     C = element_stiffness(case.material, cent)
@@ -119,8 +129,8 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
     chosen = [l for l in chosen if l.name not in exact]
     if not chosen:
         return exact
-    fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror) for l in chosen}
-    F = {l.name: load_vector(d, case, l, bbox, rho, mirror) for l in chosen}
+    fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror, parts) for l in chosen}
+    F = {l.name: load_vector(d, case, l, bbox, rho, mirror, parts) for l in chosen}
     K = d.stiffness(C)
     return {**solve_system(K, F, fixed, case.reference.solver, d, info=info), **exact}
 

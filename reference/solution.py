@@ -4,8 +4,11 @@ own error estimate is below the case's tolerance, cached on disk.
 Two methods (``[reference] method``): ``graded`` (rectangles and boxes; the default for
 boxes) solves Q2 meshes graded towards the faces on several levels and extrapolates
 (reference/levels.py): the reference field is the extrapolant and the estimate is
-per point. ``refine`` (any body) refines the case's mesh (reference/refine.py): the
-finest solve is kept, with the relative change from the previous level as estimate.
+per point. ``refine`` (any body) refines the case's mesh: a mesh body of triangles or
+tetrahedra adaptively (reference/adaptive.py: residual indicators, Dörfler marking; the
+estimate is per point, from the last changes between levels and their observed order),
+any other body uniformly (reference/refine.py: the relative change from the previous
+level, the same at every point). The finest solve is kept.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import skfem
 from harness.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from reference import cache as _cache
+from reference.adaptive import Changes, applies, solve_adaptive
 from reference.fem import Discretisation
 from reference.levels import Levels, solve_graded
 from reference.locate import Locator
@@ -51,12 +55,14 @@ class ReferenceSolution:
     ``history`` (rows of n_dofs and the estimates per level), ``solver`` (one record
     per factorisation: method, residual), ``mesh`` (the finest), ``basis`` (scalar) and
     ``vector_basis`` for plots. With ``levels`` (the graded method), ``displacement``
-    is the extrapolated field and ``nodal`` the finest level's.
+    is the extrapolated field and ``nodal`` the finest level's. With ``changes`` (the
+    adaptive method) the per-point estimate comes from the last changes between levels.
     """
 
     def __init__(self, case, mesh, U: dict, estimates: dict, history: list, key: str,
                  from_cache: bool = False, seconds: float = 0.0, solver: list | None = None,
-                 levels: Levels | None = None, disc: Discretisation | None = None):
+                 levels: Levels | None = None, disc: Discretisation | None = None,
+                 changes: Changes | None = None):
         self.case = case
         self.mesh = mesh
         self.dim = case.dim
@@ -67,7 +73,10 @@ class ReferenceSolution:
         if disc is not None:
             self.__dict__["disc"] = disc   # already built (graded: the finest level's)
         self.solver = list(solver or [])
-        self.error_estimate = ErrorEstimate(estimates, self._uniform_estimate if levels is None else self._level_estimate)
+        self.changes = changes
+        point = self._level_estimate if levels is not None else (
+            self._change_estimate if changes is not None else self._uniform_estimate)
+        self.error_estimate = ErrorEstimate(estimates, point)
         self.history = history
         self.key = key
         self.from_cache = from_cache
@@ -122,6 +131,9 @@ class ReferenceSolution:
 
     def _level_estimate(self, points, load: str) -> np.ndarray:
         return self.levels.evaluate(points, self._check_load(load))[1]
+
+    def _change_estimate(self, points, load: str) -> np.ndarray:
+        return self.changes.at(self.locator, self.basis, points, self._check_load(load))
 
     def _uniform_estimate(self, points, load: str) -> np.ndarray:
         """The load's relative estimate times its largest displacement at every point:
@@ -208,11 +220,15 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
             mesh = MESHES[case.reference.cell](hit["p"], hit["t"])
             U = {n: hit["u"][i] for i, n in enumerate(names)}
             return ReferenceSolution(case, mesh, U, est, hist, key, from_cache=True,
-                                     seconds=float(hit["seconds"]), solver=solver)
+                                     seconds=float(hit["seconds"]), solver=solver,
+                                     changes=Changes.from_arrays(names, hit))
     t0 = time.perf_counter()
     info: list = []
+    changes = None
     if graded:
         levels, est, history = solve_graded(case, status, info)
+    elif applies(case):
+        mesh, U, est, history, changes = solve_adaptive(case, status, info)
     else:
         mesh, U, est, history = solve_refined(case, status, info)
     seconds = time.perf_counter() - t0
@@ -226,8 +242,9 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
             _cache.save(key, **levels.to_arrays(names), **common)
         return _graded_solution(case, levels, est, history, key, seconds, solver, False)
     if cache:
-        _cache.save(key, p=mesh.p, t=mesh.t, u=np.stack([U[n] for n in names]), **common)
-    return ReferenceSolution(case, mesh, U, est, history, key, seconds=seconds, solver=solver)
+        _cache.save(key, p=mesh.p, t=mesh.t, u=np.stack([U[n] for n in names]), **common,
+                    **(changes.to_arrays(names) if changes is not None else {}))
+    return ReferenceSolution(case, mesh, U, est, history, key, seconds=seconds, solver=solver, changes=changes)
 
 
 def _graded_solution(case, levels: Levels, est, history, key, seconds, solver, from_cache):

@@ -80,3 +80,33 @@ def wedge(folder: Path, length=1.0, half_width=0.3, h=0.1) -> Path:
     path = Path(folder) / "wedge.vtu"
     meshio.write(path, meshio.Mesh(np.c_[pts, np.zeros(len(pts))], [("triangle", tri)]))
     return path
+
+
+def cylinder_groups(folder: Path, radius=0.1, length=0.5, size=0.05, name="cylinder.msh") -> Path:
+    """A cylinder along x as gmsh .msh 4.1 with named physical groups: surfaces ``clamp``
+    (x = 0), ``tip`` (x = length) and ``side``, the volume ``body``."""
+    import gmsh
+    path = Path(folder) / name
+    gmsh.initialize(["-noenv"])
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.option.setNumber("Mesh.RandomSeed", 0)
+        gmsh.model.add("body")
+        v = gmsh.model.occ.addCylinder(0, 0, 0, length, 0, 0, radius)
+        gmsh.model.occ.synchronize()
+        faces = {}
+        for _, tag in gmsh.model.getBoundary([(3, v)], oriented=False):
+            x = gmsh.model.occ.getCenterOfMass(2, tag)[0]
+            faces["clamp" if x < 0.25 * length else "tip" if x > 0.75 * length else "side"] = tag
+        for group, tag in faces.items():
+            gmsh.model.addPhysicalGroup(2, [tag], name=group)
+        gmsh.model.addPhysicalGroup(3, [v], name="body")
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", size / 3)
+        gmsh.model.mesh.generate(3)
+        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+        gmsh.write(str(path))
+    finally:
+        gmsh.finalize()
+    return path

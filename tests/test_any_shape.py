@@ -163,7 +163,8 @@ def test_end_loads_clamp_the_low_end_of_the_longest_axis(tmp_path, bodies):
 
 
 def test_heldout_keys_are_checked(tmp_path, bodies):
-    good = '[[loads.case]]\nname = "pull"\n[[loads.case.constraint]]\npart = "anchor-a"\ncomponents = "all"\n'
+    good = ('[[loads.case]]\nname = "pull"\ngravity = [0.0, 0.0, -9.81]\n'   # a load of zero is an error
+            '[[loads.case.constraint]]\npart = "anchor-a"\ncomponents = "all"\n')
     with pytest.raises(CaseError, match="no load case 'nope'"):
         mesh_case(tmp_path, bodies["cylinder"], 3, loads='heldout = ["nope"]\n')
     with pytest.raises(CaseError, match="nothing to fit"):

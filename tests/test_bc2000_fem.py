@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from harness import anisotropy as an
-from harness.dynamics import Loading, jacobian, solve_static_path
+from harness.dynamics import Loading, jacobian
+from harness.static_path import solve_static_path
 from harness.elasticity import isotropic_compliance, rotate, transversely_isotropic_compliance
 from harness.meshfile import read_mesh
 from harness.models.anisotropic import build_anisotropic
@@ -212,7 +213,7 @@ def test_linearised_model_is_the_small_load_limit_of_the_statics():
     """tip_deflection_linear_program_load is the derivative of the nonlinear statics."""
     from harness.cases import load_case
     from harness.stages import bc2000
-    from harness.dynamics import solve_static
+    from harness.static_path import solve_static
     case = load_case(ROOT / "cases/bourguignon2000/cantilever_beam336.toml")
     model, dyn = dict(case.section("model")), dict(case.section("dynamics"))
     mesh = read_mesh(REF / "meshes/tetra/beam_336/cube.mesh")
@@ -258,7 +259,7 @@ def test_cantilever_load_without_force_is_a_case_error(tmp_path):
     text = text.replace("../../../shared", str(ROOT.parent / "shared"))
     p = tmp_path / "cantilever.toml"
     p.write_text(text)
-    with pytest.raises(CaseError, match="load 'stretch' has no force"):
+    with pytest.raises(CaseError, match="load 'stretch' (has no force|is zero)"):   # load_case sees it now
         bc2000.run(load_case(p), StageContext(out_dir=tmp_path))
 
 

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.dynamics import (Loading, jacobian, simulate, solve_static, stable_step, stiffness)
+from harness.dynamics import Loading, jacobian, simulate, stable_step, stiffness
+from harness.static_path import solve_static
 from harness.errors import SimulationError
 from harness.models.anisotropic import build_anisotropic
 from harness.models.massspring import MassSpring, build_massspring

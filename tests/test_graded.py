@@ -11,7 +11,7 @@ import reference
 from harness.cases import load_case
 from harness.errors import CaseError
 from reference.extrapolate import extrapolate, observed_order, richardson
-from reference.graded import axis_nodes, graded_mesh
+from reference.graded import AxisMap, axis_nodes, graded_mesh, zone_inverse, zone_map, zone_slope
 
 
 @pytest.fixture(autouse=True)
@@ -53,13 +53,32 @@ def test_axis_nodes_are_graded_towards_both_ends(length):
     np.testing.assert_allclose(x, length - x[::-1], atol=1e-12)          # symmetric
     assert len(x) % 2 == 1 and x[len(x) // 2] == pytest.approx(length / 2)  # a vertex on the mid-plane
     w = 0.5 * min(length, 1.0)
-    assert x[1] == pytest.approx(w / 4 ** 3)                             # power law at the end
+    assert x[1] == pytest.approx(w * zone_map(0.25))                     # the zone's map at the end
     h = np.diff(x)
-    assert h.max() <= 3.0 * w / 4 * 1.0001                               # middle cells no larger than the graded limit
+    assert h.max() <= zone_slope() * w / 4 * 1.0001                      # middle cells no larger than the graded limit
     # the middle scales with n: twice the end-zone cells, about twice the middle cells
     mid = lambda n: int(np.sum(axis_nodes(length, 1.0, n) > w + 1e-12)) - 1 - n   # noqa: E731
     if length > 1.0:
         assert mid(8) == pytest.approx(2 * mid(4), abs=2)      # both even
+
+
+def test_zone_map_is_a_power_law_at_the_face_and_flat_where_the_zone_ends():
+    """s^3 near the face (the grading the singular edges need), value 1 and no curvature
+    at s = 1 (so a cube's two zones meet without a kink in the cell sizes), increasing;
+    the inverse and AxisMap's t(x) undo it."""
+    s = np.linspace(0.0, 1.0, 2001)
+    f = zone_map(s)
+    assert np.all(np.diff(f) > 0) and f[-1] == pytest.approx(1.0, abs=1e-15)
+    assert zone_map(1e-4) / 1e-12 == pytest.approx(1.0, rel=1e-3)
+    e = 1e-4
+    assert (zone_map(1 + e) - 2 * zone_map(1.0) + zone_map(1 - e)) / e ** 2 == pytest.approx(0.0, abs=1e-5)
+    assert (zone_map(1 + e) - zone_map(1 - e)) / (2 * e) == pytest.approx(zone_slope(), rel=1e-7)
+    np.testing.assert_allclose(zone_inverse(f), s, atol=1e-12)
+    for length, n in ((3.0, 4), (10.0, 3), (1.05, 5)):
+        a = AxisMap.of(length, 1.0, n)
+        t = np.linspace(0.0, a.cells, 301)
+        np.testing.assert_allclose(a.t(a.x(t)), t, atol=1e-9)
+        np.testing.assert_allclose(a.x(np.arange(a.cells + 1)), axis_nodes(length, 1.0, n), atol=1e-12 * length)
 
 
 def test_graded_mesh_is_a_tensor_mesh_of_the_box():
@@ -145,12 +164,12 @@ def test_shears_are_extrapolated_with_a_per_point_estimate(graded_box):
     assert len(sol.levels.fields["shear-xz"]) == 3 and 1.0 <= sol.levels.orders["shear-xz"] <= 5.0
     est = sol.error_estimate(x, "shear-xz")
     assert est.shape == (200,) and np.all(est >= 0) and np.isfinite(est).all()
-    # the extrapolant differs from the finest level by about the finest level's error, which the
-    # estimate of the previous level pair bounds: the correction is smaller than the coarse change
-    (k1, u1), (k2, u2) = sol.levels.fields["shear-xz"][-2:]
-    fine, prev = (sol.levels.at(x, k, u) for k, u in ((k2, u2), (k1, u1)))
-    corr = np.linalg.norm(sol.displacement(x, "shear-xz") - fine, axis=1)
-    assert 0 < corr.max() < np.linalg.norm(fine - prev, axis=1).max()
+    # the extrapolant is Richardson's of the last two (window-averaged) levels at the order used
+    vals, h = sol.levels.values(x, "shear-xz")
+    p = sol.levels.orders["shear-xz"]
+    want = vals[-1] + (vals[-1] - vals[-2]) / ((h[-2] / h[-1]) ** p - 1)
+    np.testing.assert_allclose(sol.displacement(x, "shear-xz"), want, rtol=0, atol=1e-12 * np.abs(want).max())
+    assert np.abs(want - vals[-1]).max() > 0
     assert sol.error_estimate["shear-xz"] > 1e-4 and not sol.met_tol   # three coarse levels cannot meet 1e-4
     assert [h["n_dofs"] for h in sol.history] == sorted(h["n_dofs"] for h in sol.history)
 

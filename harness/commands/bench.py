@@ -20,12 +20,14 @@ def add_arguments(p):
 def main(args) -> int:
     from harness.bench import BENCHES
     from harness.runner import DEFAULT_RESULTS
+    from harness.outputs import atomic_write, check_out_dir, check_out_file
     out = args.out or DEFAULT_RESULTS / "bench"
-    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{args.name}.csv"
+    check_out_dir(out, "--out" if args.out else None)      # before a bench that takes minutes
+    check_out_file(path, "--out" if args.out else None)
     mod = importlib.import_module(BENCHES[args.name])
     df = mod.run(quick=args.quick)
-    path = out / f"{args.name}.csv"
-    df.to_csv(path, index=False)
+    atomic_write(path, df.to_csv(index=False).encode(), "--out" if args.out else None)
     print(df.to_string(index=False))
     print(f"-> {path}")
     return 0

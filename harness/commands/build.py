@@ -20,10 +20,14 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.cases import load_case
-    from harness.errors import CaseError
+    from harness.errors import CaseError, SpringbenchError
     from harness.io_vtu import write_vtu
     from harness.models.sms import build_network
+    from harness.outputs import check_out_file
     case = load_case(args.case, args.mode)
+    check_out_file(args.out, "--out")
+    if args.seed < 0:
+        raise SpringbenchError(f"{args.seed} is negative", field="--seed", fix="a seed >= 0, e.g. --seed 0")
     sec = case.section("model")
     if sec is None or sec.get("kind") != "sms":
         raise CaseError("no [model] with kind = 'sms'", file=str(args.case), field="model.kind",

@@ -13,10 +13,11 @@ Loads (DESIGN.md). Fitted (``--loads homogeneous``, the default): the homogeneou
 states sxx, syy, szz, syz, sxz, sxy (2-D: sxx, syy, sxy) as tractions sigma . n on the
 whole surface with minimal constraints, which every shape has and which probe the whole
 elastic tensor; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
-Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (gravity) and
-``tip`` (an end traction), the low end of the longest axis clamped
-(harness/default_loads.py; printed when chosen). Tractions have magnitude ``--magnitude``
-(default 1e-3 E: small strains).
+Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (gravity),
+``tip`` (an end traction) and, in 3-D, ``torsion`` (a twist of the same end), the low end
+of the longest axis clamped (harness/default_loads.py; printed when chosen); ``--clamp``
+and ``--load-region`` name mesh groups to clamp and to load instead. Tractions have
+magnitude ``--magnitude`` (default 1e-3 E: small strains).
 
 Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
 Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
@@ -98,7 +99,13 @@ def add_arguments(p):
                    help="fitted loads: homogeneous stress states on the whole surface (any shape, default) "
                         "or the basic loads of the bounding box (boxes)")
     p.add_argument("--heldout", choices=("ends", "none"), default="ends",
-                   help="held-out loads: sag and tip load with one end clamped (default) or none")
+                   help="held-out loads: sag, tip load and (3-D) torsion with one end clamped (default) or none")
+    p.add_argument("--clamp", metavar="GROUP", default=None,
+                   help="clamp of the held-out loads: a named group of the mesh (gmsh physical group, cell or "
+                        "node set; default: the low end of the longest axis)")
+    p.add_argument("--load-region", dest="load_region", metavar="GROUP", default=None,
+                   help="where the held-out tip load and torsion act: a named group of the mesh (default: the "
+                        "high end of the longest axis)")
     p.add_argument("--masses", choices=MASSES, default="lumped",
                    help="lumped element masses (default, never negative), moments-nonneg, or moments "
                         "(Deussen's moment matching: may be negative, which explicit engines cannot run)")
@@ -115,7 +122,8 @@ def add_arguments(p):
     p.add_argument("--tol", type=float, default=1e-3,
                    help="reference (FEM) error tolerance relative to the displacement scale (default 1e-3)")
     p.add_argument("--max-refine", dest="max_refine", type=int, default=1,
-                   help="reference refinements at most (default 1; each multiplies the dofs by 4-8)")
+                   help="reference refinements at most (default 1; tri/tet meshes: 2-3 adaptive bisection "
+                        "steps each, within twice the mesh's dofs; quad/hex: uniform, x4-8 dofs; 0: no estimate)")
     p.add_argument("--solver", choices=("auto", "direct", "amg", "cg"), default="auto",
                    help="FEM linear solver (default auto: sparse Cholesky or AMG, with fallbacks)")
     p.add_argument("--budget", type=float, default=60.0, help="optimiser wall-time budget in seconds (default 60)")
@@ -147,10 +155,21 @@ def _check(args):
         bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
     if args.seed < 0:
         bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
+    from harness.schema import LARGEST, SMALLEST     # what the case-file numbers may be
+    # E's lower end leaves room for the default traction, 1e-3 E
+    for flag, v, lo in (("--E", args.E, 1e3 * SMALLEST), ("--density", args.density, SMALLEST),
+                        ("--magnitude", args.magnitude, SMALLEST)):
+        if v is not None and not lo <= v <= LARGEST:
+            bad(flag, f"{v:g} is too {'large' if v > LARGEST else 'small'} to compute with",
+                f"a value between {lo:g} and {LARGEST:g}: change the units")
     if args.out.suffix.lower() != ".vtu":
         bad("--out", f"'{args.out}' does not end in .vtu", "e.g. --out model.vtu")
+    from harness.outputs import check_out_file
+    for out in (args.out, args.out.with_suffix(".json"), args.out.with_suffix(".csv")):
+        check_out_file(out, "--out")       # before the work, not after it
     if not args.mesh.is_file():
-        raise SpringbenchError("no such mesh file", file=str(args.mesh), fix="check the path")
+        raise SpringbenchError("is a folder, not a mesh file" if args.mesh.is_dir() else "no such mesh file",
+                               file=str(args.mesh), fix="check the path")
 
 
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
@@ -180,7 +199,7 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
     if ends is not None:
         parts, cases = ends.toml(s)
         parts = "[body.parts]\n" + parts
-        held = 'heldout = ["sag", "tip"]\n'
+        held = f"heldout = {json.dumps(list(ends.names))}\n"
     return (f'name = "calibrate"\ndim = {dim}\n'
             f'[body]\nshape = "mesh"\nfile = {mesh}\n{fmt}{parts}'
             f"[material]\nE = {float(args.E)!r}\nnu = {float(args.nu)!r}\ndensity = {float(args.density)!r}\n"
@@ -217,16 +236,25 @@ def _run(args, mesh, tmp: Path):
     from harness.io_vtu import read_vtu
     from harness.stages import StageContext
     from harness.stages import sms as stage
+    from harness.mesh_groups import require_group, scaled_copy
+    for flag, group in (("--clamp", args.clamp), ("--load-region", args.load_region)):
+        if group is not None and args.heldout == "none":
+            raise SpringbenchError("--heldout none has no held-out loads", field=flag, fix="drop it, or --heldout ends")
+        if group is not None:
+            require_group(mesh, group, file=str(args.mesh), field=flag)
     mesh_file = None
     if args.length_unit != "m" or args.format == "bc2000":     # hand the body over in metres
         import meshio
         mesh_file = tmp / "mesh.vtu"
-        meshio.write(mesh_file, meshio.Mesh(mesh.points * UNITS[args.length_unit],
-                                            [(c, a) for c, a in mesh.cells.items()]))
+        if args.clamp or args.load_region:                     # the file itself, scaled: its groups stay
+            mesh_file = scaled_copy(args.mesh, args.format, UNITS[args.length_unit], tmp)
+        else:
+            meshio.write(mesh_file, meshio.Mesh(mesh.points * UNITS[args.length_unit],
+                                                [(c, a) for c, a in mesh.cells.items()]))
         print(f"  mesh coordinates in {args.length_unit}: scaled by {UNITS[args.length_unit]:g} to m",
               file=sys.stderr)
     pts = mesh.points * UNITS[args.length_unit]
-    ends = end_loads(pts, mesh.cells) if args.heldout == "ends" else None
+    ends = end_loads(pts, mesh.cells, args.clamp, args.load_region, mesh.groups) if args.heldout == "ends" else None
     if ends is not None:
         print(f"  {ends.describe()}", file=sys.stderr)
     last = [0.0]
@@ -292,6 +320,11 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     return out
 
 
+def _worst(*values) -> float:
+    """The largest value, NaN if any is NaN (a load without an estimate: none overall)."""
+    return math.nan if any(math.isnan(v) for v in values) else max(values)
+
+
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
@@ -299,15 +332,18 @@ def _report(args, rows, net, case):
     meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
                 G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
-                reference_error=max(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
+                reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
                 mass_residual=exported.get("mass_residual", math.nan), masses=args.masses)
-    data = export(net, args.out, meta)
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_heldout", "ref_error_max", "ref_error_heldout", "status",
                         "k_ratio", "dt_stable", "seconds", "seed", "opt_stop")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
-    df.to_csv(args.out.with_suffix(".csv"), index=False)
+    from harness.outputs import staged
+    out = args.out              # the three files appear together or not at all (disk full: none)
+    with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
+        data = export(net, vtu, meta)         # writes vtu and its .json beside it
+        df.to_csv(csv, index=False)
     print(df.to_string(index=False))
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
     best = min(rules, key=lambda r: r.get("G_norm_final", math.inf))

@@ -22,36 +22,49 @@ def main(args) -> int:
     import reference
     from harness.cases import load_case
     from harness.errors import SpringbenchError
+    from harness.outputs import atomic_write, check_out_file
     case = load_case(args.case, "full" if args.full else "quick")
+    check_out_file(args.out, "--out")
     axes = "xyz"[: case.dim]
+    header = f"a CSV file with a header line {','.join(axes)} and one point per row"
+
+    def bad(msg, fix=header):
+        return SpringbenchError(msg, file=str(args.points), field="--points", fix=fix)
     try:
         pts = pd.read_csv(args.points)
     except FileNotFoundError:
-        raise SpringbenchError("file not found", file=str(args.points), fix="check the path")
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        raise SpringbenchError(f"not a CSV file ({type(exc).__name__})", file=str(args.points))
+        raise bad("file not found", "check the path")
+    except IsADirectoryError:
+        raise bad("is a folder, not a CSV file")
+    except pd.errors.EmptyDataError:
+        raise bad("the file is empty")
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise bad(f"not a CSV file ({type(exc).__name__})")
     missing = [a for a in axes if a not in pts.columns]
     if missing:
-        raise SpringbenchError(f"missing column(s) {', '.join(missing)}", file=str(args.points),
-                               fix=f"give a header line {','.join(axes)}")
+        raise bad(f"missing column(s) {', '.join(missing)}")
     try:
         x = pts[list(axes)].to_numpy(float)
     except ValueError:
-        raise SpringbenchError("non-numeric coordinates", file=str(args.points), fix="numbers only")
+        raise bad("non-numeric coordinates", "numbers only")
     if not np.all(np.isfinite(x)):
-        raise SpringbenchError("missing or infinite coordinates", file=str(args.points))
+        raise bad("missing or infinite coordinates", "a finite number in every column of every row")
+    if len(x) == 0:
+        raise bad("no points (a header line only)")
     sol = reference.solve(case, cache=not args.no_cache)
     frames = []
     for load in sol.loads:
-        u = sol.displacement(x, load)
+        try:
+            u = sol.displacement(x, load)
+        except SpringbenchError as exc:   # e.g. points outside the body: this file's
+            raise bad(exc.message, exc.fix) from None
         df = pd.DataFrame(x, columns=list(axes))
         df.insert(0, "load", load)
         for i, a in enumerate(axes):
             df["u" + a] = u[:, i]
         frames.append(df)
     out = pd.concat(frames, ignore_index=True)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    out.to_csv(args.out, index=False, float_format="%.17g")
+    atomic_write(args.out, out.to_csv(index=False, float_format="%.17g").encode(), "--out")
     est = ", ".join(f"{k} {v:.1e}" for k, v in sol.error_estimate.items())
     print(f"{len(out)} rows -> {args.out} ({sol.n_dofs} dofs; estimates: {est})")
     return 0

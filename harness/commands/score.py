@@ -53,6 +53,9 @@ def main(args) -> int:
     from harness.io_vtu import read_vtu
     from harness.models.sms import node_classes
     case = load_case(args.case, args.mode)
+    if args.out:
+        from harness.outputs import check_out_file
+        check_out_file(args.out, "--out")
     net, _ = read_vtu(args.model)
     if net.dim != case.dim:
         raise ModelError(f"the network is {net.dim}-D but the case is {case.dim}-D", file=str(args.model),
@@ -62,7 +65,10 @@ def main(args) -> int:
         import dataclasses
         net = dataclasses.replace(net, classes=node_classes(net.points, body))
     ref = reference.solve(case)
-    df, sc = score_table(net, case, ref, args.weights)
+    try:
+        df, sc = score_table(net, case, ref, args.weights)
+    except ModelError as exc:  # the network cannot carry the case's loads: it is the model file's fault
+        raise ModelError(exc.message, file=str(args.model), fix=exc.fix) from None
     print(f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights {':'.join(f'{x:g}' for x in sc.weights)}")
     print(df.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
     from harness.scoring import ref_status, reference_met_tol
@@ -71,7 +77,7 @@ def main(args) -> int:
         print("ref-coarse: the reference's own error (G_ref, normalised like G_norm) is above 10 % of "
               "G_norm, or it missed its tol; G says as much about the reference as about the model")
     if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        df.to_csv(args.out, index=False)
+        from harness.outputs import atomic_write
+        atomic_write(args.out, df.to_csv(index=False).encode(), "--out")
         print(f"-> {args.out}")
     return 0

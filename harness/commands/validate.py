@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 
 from harness.cases import MODES, find_cases, load_case
-from harness.errors import SpringbenchError
+from harness.errors import SpringbenchError, error_lines
 from harness.stages import check_case
 
 HELP = "check case files (or folders of them) against the schema; one line per mistake"
@@ -24,7 +24,8 @@ def main(args) -> int:
                 check_case(load_case(f, mode))
         except SpringbenchError as exc:
             bad += 1
-            print(f"springbench: error: {exc}", file=sys.stderr)
+            for line in error_lines(exc):   # one line per mistake
+                print(f"springbench: error: {line}", file=sys.stderr)
         else:
             print(f"ok  {f}")
     return 2 if bad else 0

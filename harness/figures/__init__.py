@@ -11,6 +11,7 @@ report carries on.
 from __future__ import annotations
 
 import importlib
+import re
 import sys
 from pathlib import Path
 
@@ -110,9 +111,32 @@ def subplots(*args, **kwargs):
     return pyplot().subplots(*args, **kwargs)
 
 
+LENGTH_UNIT = "m"   # case files are in SI units (lengths m, stresses Pa, times s)
+
+
+def title(folder: Path) -> str:
+    """The case a data folder belongs to, for figure titles: ``case`` or ``case seed<N>``."""
+    folder = Path(folder)
+    return f"{folder.parent.name} {folder.name}" if re.fullmatch(r"seed\d+", folder.name) else folder.name
+
+
+def log_if_decades(ax, values, axis: str = "y", decades: float = 1.5) -> bool:
+    """Put ``axis`` on a log scale when the positive ``values`` span more than ``decades``
+    decades (then small values stay readable beside large ones); True if it did."""
+    import numpy as np
+    v = np.asarray(values, float).ravel()
+    v = v[np.isfinite(v)]
+    if not len(v) or (v <= 0).any() or v.max() / v.min() < 10 ** decades:
+        return False
+    (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+    return True
+
+
 def save(fig, path: Path, tight: bool = True) -> Path:
     """Write ``fig`` as PNG (``tight``: tight_layout first, which draws the figure twice)."""
+    from harness.outputs import staged
     if tight:
         fig.tight_layout()
-    fig.savefig(path, dpi=100, metadata={"Software": None})
+    with staged([path]) as (tmp,):     # never half a PNG (disk full): the old one stays
+        fig.savefig(tmp, dpi=100, format="png", metadata={"Software": None})
     return path

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from harness.figures import read_csv, save, subplots
+from harness.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots
 
 NAME, SCOPE = "lloyd_bars", "suite"
 
@@ -43,8 +43,10 @@ def make(folder: Path) -> list[Path]:
     w = 0.8 / len(bars)
     for i, (c, v) in enumerate(bars.items()):
         ax.bar(x + (i - (len(bars) - 1) / 2) * w, v["mean"], w, yerr=v["std"].fillna(0), label=c, capsize=2)
+    if log_if_decades(ax, np.concatenate([v["mean"].to_numpy(float) for v in bars.values()])):
+        ax.set_ylim(bottom=0.5 * min(float(v["mean"].min()) for v in bars.values()))  # bars start below the data
     ax.set_title("ours: G before / after optimisation (mean, std over seeds)", fontsize=9)
-    ax.set_ylabel("G")
+    ax.set_ylabel(f"G ({LENGTH_UNIT})")
     series = {f"ours{label[m]}": bars[f"G_final{label[m]}"]["mean"].to_numpy() for m in methods}
     if ("paper_G_final", "mean") in g:
         series["paper"] = g[("paper_G_final", "mean")].to_numpy()
@@ -53,6 +55,7 @@ def make(folder: Path) -> list[Path]:
         ax2.bar(x + (i - (len(series) - 1) / 2) * w2, v / v[0], w2, label=name)
     ax2.axhline(1, color="k", lw=0.5)
     ax2.set_title(f"trend: G_final / G_final at {int(its[0])} iterations", fontsize=9)
+    ax2.set_ylabel(f"G_final / G_final at {int(its[0])} iterations (ratio)")
     for a in (ax, ax2):
         a.set_xticks(x, [f"{int(v)}" for v in its])
         a.set_xlabel("Lloyd iterations")

@@ -16,8 +16,8 @@ from typing import Mapping
 
 import numpy as np
 
+from harness.case_sections import SMS as MODEL_SPEC   # the [model] keys of kind = "sms"
 from harness.errors import ModelError
-from harness.schema import Field
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,37 +94,6 @@ def make_network(points, springs, k=None, masses=None, classes=None, groups=None
         np.zeros(e, int) if groups is None else np.asarray(groups, int),
         tuple(group_names or ("all",)),
         MappingProxyType(dict(cells or {})), MappingProxyType(dict(info or {})))
-
-
-# -- [model] kind = "sms" -------------------------------------------------------------------
-
-PLACEMENTS = ("grid", "random", "lloyd", "mesh")
-MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
-STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
-
-MODEL_SPEC = {
-    "placement": Field("str", "grid", choices=PLACEMENTS,
-                       doc="grid | random | lloyd (random + Lloyd iterations) | mesh (the body mesh's nodes)"),
-    "grid": Field("any", None, doc="nodes per axis [nx, ny(, nz)] for placement = 'grid'",
-                  check=lambda v: None if (isinstance(v, list) and len(v) in (2, 3) and all(
-                      isinstance(x, int) and not isinstance(x, bool) and x >= 2 for x in v))
-                  else "expected 2 or 3 integers >= 2 (nodes per axis)"),
-    "structure": Field("str", None, doc="grid structure: structure1, edges+diagonal, edges+diagonals+second, "
-                                        "edges (2-D); edges+face+body, edges+face, edges+body (3-D)"),
-    "n_points": Field("int", None, min=4, doc="number of points for random / lloyd placement"),
-    "n_boundary": Field("int", None, min=0, doc="random points on the boundary (2-D; default: matched spacing)"),
-    "lloyd_iterations": Field("int", 0, min=0, doc="Lloyd (iterated Voronoi) steps for placement = 'lloyd'"),
-    "seed": Field("int", 0, doc="seed of the random placement (added to the run's seed)"),
-    "masses": Field("str", "moments", choices=MASS_RULES),
-    "stiffness": Field("strs", ("deussen",), choices=STIFFNESS_RULES,
-                       doc="initial spring-constant rule(s); the first one starts the optimiser"),
-    "grouped": Field("bool", False, doc="optimise one constant per spring group (Fig. 8: horizontal, "
-                                        "vertical, diagonal) instead of one per spring"),
-    "min_quality": Field("float", 1e-3, min=0, max=1, doc="Delaunay simplices below this quality are dropped"),
-    "mesh": Field("str", None, doc="placement = 'mesh': a mesh file (relative to the case file) whose nodes and "
-                                   "edges form the network; default: the body's own mesh"),
-    "mesh_format": Field("str", None, doc="meshio format name or 'bc2000' for model.mesh; guessed if absent"),
-}
 
 
 def _spec(spec) -> dict:

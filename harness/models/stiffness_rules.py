@@ -81,7 +81,7 @@ def _cell_measure(points, c, ctype) -> np.ndarray:
     p = points[c]
     if ctype in ("triangle", "tetra"):
         return np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / (2 if ctype == "triangle" else 6)
-    from harness.models.masses import _quadrature
+    from harness.geometry.moments import _quadrature
     q, w = _quadrature(points, {ctype: c})
     per = {"quad": 6, "hexahedron": 24}[ctype]  # quadrature points per cell
     return w.reshape(len(c), per).sum(1)

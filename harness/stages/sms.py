@@ -27,6 +27,7 @@ import time
 import numpy as np
 import pandas as pd
 
+from harness.case_loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
 
 NAME = "sms"
@@ -155,7 +156,7 @@ def run(case, ctx) -> list[dict]:
         rows.append(row)
 
     optimize = _optimizer()
-    fem_f = _fem_frequencies(ref, n_modes)
+    fem_f = _fem_frequencies(ref, n_modes, modal_load(case).name)
     opt_nets, traces = {}, []
     start_row, start = rows[0], base
     if opt.get("start", "first") == "best" and u_ref is not None:
@@ -240,8 +241,20 @@ def check(case):
                                             and all(isinstance(g, int) and g >= 2 for g in grid)):
         raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=_file(case),
                         field="model.grid", fix=f"e.g. grid = {[5] * case.dim}")
+    if spec["placement"] == "grid" and spec.get("structure") is not None:
+        from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
+        known = STRUCTURES_2D if case.dim == 2 else STRUCTURES_3D
+        if ALIASES.get(spec["structure"], spec["structure"]) not in known:
+            raise CaseError(f"unknown {case.dim}-D grid structure '{spec['structure']}'", file=_file(case),
+                            field="model.structure", fix=f"one of {', '.join(known)}")
     opt = case.section("optimizer") or {}
-    optimiser_runs(case, opt)
+    from harness.optimize import check_method_options
+    for run_ in optimiser_runs(case, opt):
+        try:
+            check_method_options(run_["method"], run_["options"])
+        except SpringbenchError as exc:   # named by the case field the options came from
+            field = (exc.field or "optimizer.options").replace("optimizer.options", run_["where"], 1)
+            raise CaseError(exc.message, file=_file(case), field=field, fix=exc.fix) from None
     _check_modes(case, opt)
 
 
@@ -334,7 +347,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
         if np.any(base.masses <= 0):
             raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies", file=file,
                              field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
-        modal_free = ~statics.fixed_mask(base.points, case, case.loads[0]).ravel()
+        modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
         freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
                        freq_weight=run_["weight"], modal_free=modal_free)
     problem = FitProblem.from_network(base.points, base.springs, base.k, free, forces,
@@ -430,12 +443,13 @@ def _trace_frame(trace, name):
         return None
 
 
-def _fem_frequencies(ref, n):
-    """The reference's first n natural frequencies (Hz), or None when it has none."""
+def _fem_frequencies(ref, n, load):
+    """The reference's first n natural frequencies (Hz) with the constraints of ``load``,
+    or None when it has none."""
     if ref is None or n <= 0:
         return None
     try:
-        f = np.asarray(ref.frequencies(n), float)
+        f = np.asarray(ref.frequencies(n, load=load), float)
     except Exception:  # noqa: BLE001 - the reference's modal solve is optional here
         return None
     return f if len(f) else None
