@@ -271,7 +271,7 @@ def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_p
     traction times the area of the user's boundary facets in the slab (an independent
     sum of triangle areas), and the clamp holds exactly the points of the user's
     clamped entities."""
-    gmsh = pytest.importorskip("gmsh")   # noqa: F841
+    pytest.importorskip("gmsh")
     import meshes
     f = meshes.cylinder(tmp_path, size=0.08)
     loads = """
