@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import numpy as np
+
 from harness.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "deformed", "case"
@@ -98,11 +100,11 @@ def _one(src: Path, folder: Path) -> Path | None:
     return save(fig, folder / f"fig-deformed{suffix}.png", tight=False)
 
 
-def _lines(ax, p, springs, dim, **kw):
+def _lines(ax, p, springs, dim, colors, linewidths):
     seg = p[springs]
-    if dim == 3:
-        from mpl_toolkits.mplot3d.art3d import Line3DCollection
-        ax.add_collection3d(Line3DCollection(seg, **kw))
+    if dim == 3:   # one polyline, the springs separated by NaN gaps (plain matplotlib, no mpl_toolkits)
+        gaps = np.concatenate([seg, np.full((len(seg), 1, 3), np.nan)], axis=1).reshape(-1, 3)
+        ax.plot(gaps[:, 0], gaps[:, 1], gaps[:, 2], color=colors, linewidth=linewidths)
     else:
         from matplotlib.collections import LineCollection
-        ax.add_collection(LineCollection(seg, **kw))
+        ax.add_collection(LineCollection(seg, colors=colors, linewidths=linewidths))
