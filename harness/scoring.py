@@ -79,8 +79,8 @@ def case_weights(case, weights=None) -> tuple[float, float, float]:
 def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
     """G of a spring network on a case against a ``ReferenceSolution`` (``weights``
     default to the case's [score] weights). ``statics``: an already solved
-    ``harness.statics.StaticsResult`` to reuse."""
-    from harness import statics as st
+    ``harness.mechanics.statics.StaticsResult`` to reuse."""
+    from harness.mechanics import statics as st
     res = statics or st.solve(network, case)
     u_ref = reference_displacements(ref, network.points, res.names)
     return g_arrays(u_ref, res.u, network.classes, case_weights(case, weights), res.names)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.elasticity import densities, element_stiffness
+from harness.case.elasticity import densities, element_stiffness
 from reference.estimator import doerfler, indicators
 from reference.extrapolate import ORDER_RANGE, SAFETY
 from reference.fem import Discretisation

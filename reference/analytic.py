@@ -1,7 +1,7 @@
 """Closed-form solutions the reference is checked against.
 
 - ``stretch_closed_form``: the standard stretches of a homogeneous isotropic box (plane
-  stress in 2-D), from harness.loadsets.
+  stress in 2-D), from harness.case.loadsets.
 - ``uniform_stress_displacement``: any homogeneous anisotropic body under a uniform
   uniaxial stress s along axis a, with the standard stretch constraints: strain
   e = S sigma (engineering shears) and the rigid rotation that the rollers and the
@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.loadsets import stretch_closed_form  # noqa: F401  (re-exported)
+from harness.case.loadsets import stretch_closed_form  # noqa: F401  (re-exported)
 
 VOIGT_2D = [(0, 0), (1, 1), (0, 1)]
 VOIGT_3D = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import skfem
 
-from harness.loadsets import stress_tensor
+from harness.case.loadsets import stress_tensor
 from reference.fem import VOIGT, Discretisation
 from reference.problem import predicate
 

@@ -5,7 +5,7 @@ Everything is built on the *scalar* Lagrange basis; the displacement has ``dim``
 components per scalar dof, interleaved: global dof = dim * scalar_dof + component
 (the same order as scikit-fem's ElementVector). The stiffness is the bilinear form
 a(u, v) = sum_e int_e eps(v)^T C_e eps(u) dx with engineering-shear Voigt strains
-(harness.elasticity order), evaluated for all elements of a chunk with one matmul
+(harness.case.elasticity order), evaluated for all elements of a chunk with one matmul
 instead of scikit-fem's per-basis-pair Python form (the same integral, see the test).
 """
 
@@ -136,7 +136,7 @@ class Discretisation:
 
     def twist_load(self, facets: np.ndarray, w) -> np.ndarray:
         """Load vector of the traction w x (x - c) on ``facets`` (3-D), c their area
-        centroid: a torque without resultant (harness.loadsets.Traction)."""
+        centroid: a torque without resultant (harness.case.loadsets.Traction)."""
         fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=facets, intorder=self.q_mass,
                               dofs=self.dofs)
         xq, dx = np.asarray(fb.global_coordinates()), fb.dx

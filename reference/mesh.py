@@ -1,5 +1,5 @@
 """Meshes and elements for the reference: tensor meshes of rectangles/boxes, a Delaunay
-triangulation of polygons, and mesh files (harness.meshfile) turned into scikit-fem meshes."""
+triangulation of polygons, and mesh files (harness.io.meshfile) turned into scikit-fem meshes."""
 
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def file_mesh(body, cell: str) -> skfem.Mesh:
     """A mesh file as a scikit-fem mesh of the requested cell type (via skfem.io)."""
     import meshio
     from skfem.io.meshio import from_meshio
-    from harness.meshfile import read_mesh
+    from harness.io.meshfile import read_mesh
     m = read_mesh(body.file, body.format)
     kind = MESHIO_TYPES[cell]
     if kind not in m.cells:

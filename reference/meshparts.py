@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.parts import part_predicate
+from harness.case.parts import part_predicate
 from reference.locate import Locator
 
 BARY = 1e-9          # a barycentric coordinate below this is zero (the point lies on a face)
@@ -26,7 +26,7 @@ BARY = 1e-9          # a barycentric coordinate below this is zero (the point li
 
 class UserMeshParts:
     """``parts(name, bbox)`` -> point predicate (x (dim, n) -> (n,) bool), the
-    replacement of harness.parts.part_predicate that reference/problem.py accepts."""
+    replacement of harness.case.parts.part_predicate that reference/problem.py accepts."""
 
     def __init__(self, case, mesh):
         self.case = case

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.elasticity import densities, element_stiffness
+from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
-from harness.loadsets import homogeneous_closed_form, stress_tensor
-from harness.parts import part_predicate
+from harness.case.loadsets import homogeneous_closed_form, stress_tensor
+from harness.case.parts import part_predicate
 from reference import solvers
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs
@@ -21,7 +21,7 @@ def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def predicate(case, name: str, bbox, parts=None):
-    """The part's point predicate: harness.parts', or ``parts(name, bbox)`` when given
+    """The part's point predicate: harness.case.parts', or ``parts(name, bbox)`` when given
     (reference/meshparts.py: a mesh body's parts resolved on the user's mesh)."""
     return part_predicate(name, bbox, case.body.parts) if parts is None else parts(name, bbox)
 
@@ -118,7 +118,7 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
     factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
     case's box cut at these mid-planes, and every load named has that parity
     (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
-    ``parts``: part predicates in place of harness.parts' (see :func:`predicate`)."""
+    ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`)."""
     d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
     C = element_stiffness(case.material, cent)
@@ -138,7 +138,7 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:
     """The dof vector of a homogeneous stress load (``load.stress``, constraints at point
     parts) on a body of one elastic tensor: its exact solution is linear
-    (harness.loadsets.homogeneous_closed_form), which the mesh represents exactly, so the
+    (harness.case.loadsets.homogeneous_closed_form), which the mesh represents exactly, so the
     FEM would return it to rounding (tests/test_any_shape.py checks that it does).
     None when the load or the material does not allow it: then it is solved."""
     if load.stress is None or not np.allclose(C, C[0], rtol=1e-12, atol=1e-12 * np.abs(C[0]).max()):

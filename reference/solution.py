@@ -19,7 +19,7 @@ from functools import cached_property
 import numpy as np
 import skfem
 
-from harness.elasticity import densities, element_stiffness
+from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from reference import cache as _cache
 from reference.adaptive import Changes, applies, solve_adaptive
@@ -201,7 +201,7 @@ class ReferenceSolution:
 # -- solve ----------------------------------------------------------------------------
 
 def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolution:
-    """The reference solution of every load case of ``case`` (harness.cases.Case)."""
+    """The reference solution of every load case of ``case`` (harness.case.reader.Case)."""
     if not case.loads:
         raise ModelError("the case has no load cases", file=str(case.path), field="loads",
                          fix="add loads.set or [[loads.case]]")

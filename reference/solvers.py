@@ -16,7 +16,7 @@ non-finite system is one ModelError line.
 Measured (``/tmp`` script, the project's Discretisation as the bench uses it: a cube
 [0, 1]^3 clamped at x = 0, traction on x = 1, E = 1e3, nu = 0.3, two right-hand sides;
 CPU seconds of one process, the machine was shared and 2-core, wall times were 1-4x
-these; * = wall only). Cholesky = harness.optimize.multifrontal (single-threaded
+these; * = wall only). Cholesky = harness.linalg.multifrontal (single-threaded
 BLAS), AMG = pyamg SA + CG to RTOL (its = iterations):
 
     mesh          dofs     SuperLU   Cholesky (Gflop, peak RSS)   AMG (its, peak RSS)
@@ -243,7 +243,7 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
 # -- direct ------------------------------------------------------------------------------
 
 def _symbolic(As, coords):
-    from harness.optimize.multifrontal import Symbolic
+    from harness.linalg.multifrontal import Symbolic
     return Symbolic(As, coords)
 
 
@@ -261,7 +261,7 @@ def _factor(As, method, sym):
     """Factorise As (Cholesky on the Symbolic ``sym``); returns the solve function for
     (n, m) right-hand sides."""
     if method == "cholesky":
-        from harness.optimize.multifrontal import MultifrontalCholesky
+        from harness.linalg.multifrontal import MultifrontalCholesky
         f = MultifrontalCholesky(As, sym)
         return lambda r: f.solve(np.ascontiguousarray(r)).reshape(r.shape)
     try:

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.elasticity import element_stiffness
-from harness.parts import parse_face_name
+from harness.case.elasticity import element_stiffness
+from harness.case.parts import parse_face_name
 from reference.fem import VOIGT
 from reference.gridvalues import GridField
 

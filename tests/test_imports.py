@@ -1,6 +1,7 @@
 """The house rules the layout promises: no import circles among the modules of harness/
-and reference/ (imports inside functions count), read from the source with ``ast``, and
-no hand-written module over 500 lines (generated ones say so on their first line)."""
+and reference/ (imports inside functions count), read from the source with ``ast``; every
+folder imports only from folders before it in the pipeline (LAYERS); and no hand-written
+module over 500 lines (generated ones say so on their first line)."""
 
 from __future__ import annotations
 
@@ -122,6 +123,51 @@ def test_the_checker_reads_function_level_and_relative_imports(tmp_path):
 
 def test_no_import_circles():
     assert cycles(graph()) == []
+
+
+# The pipeline, first to last: a module may import its own layer and the layers before it.
+# The base (errors, paths, atomic outputs, sparse linear algebra) is below everything; the
+# report reads stored results and never imports the runner, which calls it.
+LAYERS = ("harness harness.errors harness.paths harness.outputs harness.linalg",
+          "harness.io", "harness.case", "reference", "harness.geometry", "harness.models",
+          "harness.mechanics", "harness.optimize", "harness.scoring", "harness.export",
+          "harness.stages", "harness.report", "harness.run", "harness.bench", "harness.commands",
+          "harness.cli harness.__main__")
+
+
+def layer_of(module: str, layers=LAYERS) -> tuple[int, str] | None:
+    """(rank, prefix) of the longest layer prefix naming ``module`` (None if none)."""
+    hits = [(len(p), i, p) for i, ps in enumerate(layers) for p in ps.split()
+            if module == p or module.startswith(p + ".")]
+    return (max(hits)[1], max(hits)[2]) if hits else None
+
+
+def backward_imports(g: dict[str, set[str]], layers=LAYERS) -> list[str]:
+    """Imports from a later layer (and modules in no layer), as "a (layer) -> b (layer)"."""
+    out = []
+    for name, targets in sorted(g.items()):
+        here = layer_of(name, layers)
+        if here is None:
+            out.append(f"{name}: in no layer")
+            continue
+        for t in sorted(targets):
+            there = layer_of(t, layers)
+            if there is None or there[0] > here[0]:
+                out.append(f"{name} ({here[1]}) -> {t} ({there and there[1]})")
+    return out
+
+
+def test_the_layer_checker_finds_a_backward_import():
+    layers = ("base", "case", "models")
+    g = {"case.a": {"base.x", "case.b"}, "case.b": set(), "models.m": {"case.a"}, "base.x": set()}
+    assert backward_imports(g, layers) == []
+    g["case.b"] = {"models.m"}
+    assert backward_imports(g, layers) == ["case.b (case) -> models.m (models)"]
+    assert backward_imports({"stray": set()}, layers) == ["stray: in no layer"]
+
+
+def test_folders_import_only_earlier_folders():
+    assert backward_imports(graph()) == []
 
 
 MAX_LINES = 500

@@ -47,8 +47,8 @@ def _best_wall_cpu(fn, repeats):
 
 
 def table1(quick: bool) -> list[dict]:
-    from harness.dynamics import PROGRAM_DRAG, Loading, simulate
-    from harness.meshfile import read_mesh
+    from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
+    from harness.io.meshfile import read_mesh
     from harness.models.anisotropic import build_anisotropic
     from harness.models.massspring import build_massspring
     rows = []

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import skfem
 
-from harness.elasticity import isotropic_compliance, plane
+from harness.case.elasticity import isotropic_compliance, plane
 from reference import solvers
 from reference.fem import Discretisation
 from reference.locate import Locator
@@ -129,7 +129,7 @@ def _shear_case(folder: Path, name: str, reference: dict, size=None, nu=None):
     """The sec6 cube (body and material of cases/deussen1995/sec6_box3d.toml; or another
     ``size`` / ``nu``) with the one load shear-xz (z0 clamped, traction s e_x on z1) and
     the given [reference] keys."""
-    from harness.cases import load_case
+    from harness.case.reader import load_case
     raw = tomllib.loads(SEC6.read_text())
     body, mat = dict(raw["body"]), dict(raw["material"])
     body.update({} if size is None else {"size": list(size), "origin": [0.0, 0.0, 0.0]})

@@ -19,7 +19,7 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.bench import BENCHES
-    from harness.runner import DEFAULT_RESULTS
+    from harness.run.runner import DEFAULT_RESULTS
     from harness.outputs import atomic_write, check_out_dir, check_out_file
     out = args.out or DEFAULT_RESULTS / "bench"
     path = out / f"{args.name}.csv"

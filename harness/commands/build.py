@@ -19,9 +19,9 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from harness.cases import load_case
+    from harness.case.reader import load_case
     from harness.errors import CaseError, SpringbenchError
-    from harness.io_vtu import write_vtu
+    from harness.export.vtu import write_vtu
     from harness.models.sms import build_network
     from harness.outputs import check_out_file
     case = load_case(args.case, args.mode)
@@ -35,7 +35,7 @@ def main(args) -> int:
     net = build_network(case, seed=args.seed, stiffness=args.stiffness)
     disp = None
     if args.displacements:
-        from harness import statics
+        from harness.mechanics import statics
         res = statics.solve(net, case)
         disp = dict(zip(res.names, res.u))
     write_vtu(args.out, net, disp)

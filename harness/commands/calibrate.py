@@ -15,7 +15,7 @@ whole surface with minimal constraints, which every shape has and which probe th
 elastic tensor; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
 Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (gravity),
 ``tip`` (an end traction) and, in 3-D, ``torsion`` (a twist of the same end), the low end
-of the longest axis clamped (harness/default_loads.py; printed when chosen); ``--clamp``
+of the longest axis clamped (harness/case/default_loads.py; printed when chosen); ``--clamp``
 and ``--load-region`` name mesh groups to clamp and to load instead. Tractions have
 magnitude ``--magnitude`` (default 1e-3 E: small strains).
 
@@ -30,7 +30,7 @@ Writes (and prints the table and a one-sentence verdict):
   ``spring_indices`` (e, 2), ``spring_rest_length`` (e) m, ``spring_stiffness`` (e) N/m
   (f = ke (l - l0): NVIDIA Newton's ``ModelBuilder.add_spring(i, j, ke, kd, control)`` ``ke``,
   Taichi-style ``ke``), ``spring_damping`` (e) N s/m (``kd``: ``--damping-ratio`` of each
-  spring's critical damping, harness/engine_export.py), ``spring_stiffness_times_length``
+  spring's critical damping, harness/export/engine.py), ``spring_stiffness_times_length``
   (e) N = k l0 (SOFA's MeshSpringForceField divides its stiffness by the rest length;
   SOFA's SpringForceField takes k itself, ``springs="i j k kd l0"``), ``dt_stable`` and
   ``dt_stable_float32`` (s: explicit symplectic Euler limit with that damping, and with a
@@ -155,7 +155,7 @@ def _check(args):
         bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
     if args.seed < 0:
         bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
-    from harness.schema import LARGEST, SMALLEST     # what the case-file numbers may be
+    from harness.case.schema import LARGEST, SMALLEST     # what the case-file numbers may be
     # E's lower end leaves room for the default traction, 1e-3 E
     for flag, v, lo in (("--E", args.E, 1e3 * SMALLEST), ("--density", args.density, SMALLEST),
                         ("--magnitude", args.magnitude, SMALLEST)):
@@ -213,8 +213,8 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
 
 def main(args) -> int:
     _check(args)
-    from harness.mesh_checks import check_mesh
-    from harness.meshfile import read_mesh
+    from harness.case.mesh_checks import check_mesh
+    from harness.io.meshfile import read_mesh
     mesh = read_mesh(args.mesh, args.format)
     check_mesh(mesh, str(args.mesh))          # the mesh's mistakes first, before anything is built on it
     with tempfile.TemporaryDirectory(prefix="springbench-calibrate-") as tmp:
@@ -231,12 +231,12 @@ def main(args) -> int:
 
 def _run(args, mesh, tmp: Path):
     """(rows, the exported network, the case) of one calibration in the folder tmp."""
-    from harness.cases import load_case
-    from harness.default_loads import end_loads
-    from harness.io_vtu import read_vtu
+    from harness.case.reader import load_case
+    from harness.case.default_loads import end_loads
+    from harness.export.vtu import read_vtu
     from harness.stages import StageContext
     from harness.stages import sms as stage
-    from harness.mesh_groups import require_group, scaled_copy
+    from harness.io.mesh_groups import require_group, scaled_copy
     for flag, group in (("--clamp", args.clamp), ("--load-region", args.load_region)):
         if group is not None and args.heldout == "none":
             raise SpringbenchError("--heldout none has no held-out loads", field=flag, fix="drop it, or --heldout ends")
@@ -293,8 +293,8 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     (fitted and held-out loads), with the stable step of both (what the cap gains)."""
     import numpy as np
     import reference
-    from harness import statics
-    from harness.engine_export import spring_damping, stable_step
+    from harness.mechanics import statics
+    from harness.export.engine import spring_damping, stable_step
     from harness.scoring import case_weights, g_arrays, reference_displacements
     k = np.asarray(net.k, float)
     capped = net.with_k(np.minimum(k, ratio * np.median(k)))
@@ -363,8 +363,8 @@ def _report(args, rows, net, case):
 def export(net, out: Path, meta: dict | None = None) -> dict:
     """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
     import numpy as np
-    from harness.engine_export import spring_damping, stable_step
-    from harness.io_vtu import write_vtu
+    from harness.export.engine import spring_damping, stable_step
+    from harness.export.vtu import write_vtu
     meta = dict(meta or {})
     out.parent.mkdir(parents=True, exist_ok=True)
     write_vtu(out, net)

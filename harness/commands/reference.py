@@ -20,7 +20,7 @@ def main(args) -> int:
     import pandas as pd
 
     import reference
-    from harness.cases import load_case
+    from harness.case.reader import load_case
     from harness.errors import SpringbenchError
     from harness.outputs import atomic_write, check_out_file
     case = load_case(args.case, "full" if args.full else "quick")

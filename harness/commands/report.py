@@ -17,7 +17,7 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from harness.report import rebuild
+    from harness.report.build import rebuild
     for out in rebuild(args.paths, args.results, figures=args.figures, redraw=args.redraw):
         print(f"{out['csv']}  ({len(out['table'])} rows, {len(out['figures'])} figures)")
     return 0

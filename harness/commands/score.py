@@ -22,7 +22,7 @@ def score_table(net, case, ref, weights=None):
     """DataFrame: one row per load case and a total row."""
     import pandas as pd
 
-    from harness import statics
+    from harness.mechanics import statics
     from harness.scoring import case_weights, g_arrays, g_ref_arrays, reference_displacements, reference_error
     w = case_weights(case, weights)
     res = statics.solve(net, case)
@@ -47,10 +47,10 @@ def main(args) -> int:
         raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
                                "not all zero", field="--weights", fix="e.g. --weights 1 3 15")
 
-    from harness.cases import load_case
+    from harness.case.reader import load_case
     from harness.errors import ModelError
     from harness.geometry import body_geometry
-    from harness.io_vtu import read_vtu
+    from harness.export.vtu import read_vtu
     from harness.models.sms import node_classes
     case = load_case(args.case, args.mode)
     if args.out:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from harness.cases import MODES, find_cases, load_case
+from harness.case.reader import MODES, find_cases, load_case
 from harness.errors import SpringbenchError, error_lines
 from harness.stages import check_case
 

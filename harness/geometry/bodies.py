@@ -197,7 +197,7 @@ def mesh_body(points, cells) -> BodyGeom:
 
 
 def body_geometry(case) -> BodyGeom:
-    """The :class:`BodyGeom` of a ``harness.cases.Case``."""
+    """The :class:`BodyGeom` of a ``harness.case.reader.Case``."""
     b = case.body
     lo, hi = b.bbox()
     if b.shape == "rectangle":
@@ -206,6 +206,6 @@ def body_geometry(case) -> BodyGeom:
         return box(lo, hi)
     if b.shape == "polygon":
         return polygon(b.vertices)
-    from harness.meshfile import read_mesh
+    from harness.io.meshfile import read_mesh
     m = read_mesh(b.file, b.format)
     return mesh_body(m.points, m.cells)

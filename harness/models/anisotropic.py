@@ -17,7 +17,7 @@ Damping constants here are *physical* (N s/m). The program's are per step: its k
 kd * h in physical units (see :func:`program_damping`).
 
 ``forces`` is plain numpy, vectorised over elements, and complex-safe so that
-:func:`harness.dynamics.jacobian` can differentiate it by the complex step.
+:func:`harness.mechanics.dynamics.jacobian` can differentiate it by the complex step.
 """
 
 from __future__ import annotations
@@ -340,7 +340,7 @@ class AnisotropicBody:
     def tangent_stiffness(self, x=None, h: float = 1e-30) -> sp.csr_matrix:
         """K = -d forces / d x at x (default rest), (3n, 3n): each element's Jacobian by the
         complex step on its own vertices (3 nv evaluations for all elements at once, exact
-        to rounding), assembled. Equals ``harness.dynamics.stiffness`` at a fraction of
+        to rounding), assembled. Equals ``harness.mechanics.dynamics.stiffness`` at a fraction of
         the cost (that one colours the whole mesh)."""
         x = self.points if x is None else np.asarray(x, float)
         X = x[self.cells]

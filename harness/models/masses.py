@@ -30,8 +30,8 @@ from harness.geometry.moments import (_quadrature, _simplices, box_moments, mesh
 RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 
 def density_function(material, dim: int):
-    """rho(points) for a ``harness.cases.Material`` (regions may override the density)."""
-    from harness.elasticity import densities
+    """rho(points) for a ``harness.case.reader.Material`` (regions may override the density)."""
+    from harness.case.elasticity import densities
     return lambda x: densities(material, x)
 
 
@@ -76,7 +76,7 @@ def _scaled_body(body: BodyGeom, c, s) -> BodyGeom:
 
 class _ScaledMaterial:
     def __init__(self, material, c, s):
-        from harness.cases import Region
+        from harness.case.reader import Region
         self.density = material.density if material is not None else 1.0
         self.regions = tuple(Region(tuple((np.asarray(r.lo) - c) / s), tuple((np.asarray(r.hi) - c) / s), r.E,
                                     r.nu, r.density) for r in (material.regions if material is not None else ()))

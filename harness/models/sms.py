@@ -16,7 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
-from harness.case_sections import SMS as MODEL_SPEC   # the [model] keys of kind = "sms"
+from harness.case.sections import SMS as MODEL_SPEC   # the [model] keys of kind = "sms"
 from harness.errors import ModelError
 
 
@@ -60,19 +60,19 @@ class SpringNetwork:
         return dataclasses.replace(self, k=k, info=MappingProxyType({**self.info, **info}))
 
     def incidence(self):
-        from harness.springs import incidence
+        from harness.models.springs import incidence
         return incidence(self.points, self.springs)
 
     def stiffness_matrix(self):
-        from harness.springs import stiffness_matrix
+        from harness.models.springs import stiffness_matrix
         return stiffness_matrix(self.incidence(), self.k)
 
 
 def make_network(points, springs, k=None, masses=None, classes=None, groups=None, group_names=None,
                  cells=None, info=None, bbox=None) -> SpringNetwork:
     """A network from plain arrays; missing classes come from the bounding box
-    (``harness.parts.classify_nodes``), missing masses are 1, groups one per network."""
-    from harness.parts import classify_nodes
+    (``harness.case.parts.classify_nodes``), missing masses are 1, groups one per network."""
+    from harness.case.parts import classify_nodes
     points = np.asarray(points, float)
     springs = np.asarray(springs, int).reshape(-1, 2)
     n, e = len(points), len(springs)
@@ -97,7 +97,7 @@ def make_network(points, springs, k=None, masses=None, classes=None, groups=None
 
 
 def _spec(spec) -> dict:
-    from harness.schema import check
+    from harness.case.schema import check
     spec = {k: list(v) if isinstance(v, tuple) else v for k, v in dict(spec or {}).items()
             if k != "kind" and v is not None}
     return check(spec, MODEL_SPEC, "<model>", "model.")
@@ -105,7 +105,7 @@ def _spec(spec) -> dict:
 
 def node_classes(points: np.ndarray, body) -> np.ndarray:
     """0 inner, 1 border, 2 corner: corners are the body's vertices (rectangle/box/polygon)."""
-    from harness.parts import classify_nodes
+    from harness.case.parts import classify_nodes
     if body.kind == "mesh":
         from harness.geometry.bodies import BodyGeom  # noqa: F401
         return classify_nodes(points, body.bbox(), boundary=_mesh_boundary_nodes(body, len(points)))
@@ -158,7 +158,7 @@ def place_points(case, spec: dict, seed: int, body=None):
             return res.points, res, body
         return pts, None, body
     if spec.get("mesh"):
-        from harness.meshfile import read_mesh
+        from harness.io.meshfile import read_mesh
         path = (case.path.parent if case.path is not None else Path(".")) / spec["mesh"]
         m = read_mesh(path, spec.get("mesh_format"))
         if m.dim != case.dim:

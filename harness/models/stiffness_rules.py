@@ -32,7 +32,7 @@ it is E for isotropic material and follows fibres and regions.
              Anisotropic and inhomogeneous materials enter through the element C.
 "cauchy"     ours: per cell, the constants whose Cauchy-Born (homogenised) stiffness
              (1/|T|) sum k L^2 n n n n best matches the material's C there (least squares,
-             minimum norm; see harness/homogenize.py), summed over the cells sharing a
+             minimum norm; see harness/mechanics/homogenize.py), summed over the cells sharing a
              spring. On a grid this is the best periodic lattice, assembled cell-wise (so
              boundary springs get their cell share): exact for isotropic nu = 1/3 in 2-D
              plane stress and 1/4 in 3-D, the Cauchy floor otherwise.
@@ -43,10 +43,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-from harness.elasticity import element_stiffness
+from harness.case.elasticity import element_stiffness
 from harness.errors import ModelError
 from harness.models.topology import element_pairs
-from harness.springs import spring_directions
+from harness.models.springs import spring_directions
 
 RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 

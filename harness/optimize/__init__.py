@@ -1,5 +1,6 @@
 """Spring-constant optimisers: a registry name -> function(problem, options, seed, status)
-returning the fields of :class:`FitResult`. A new optimiser is one function added here.
+returning the fields of :class:`FitResult`. A new optimiser is one function added here
+and its name in the case file's vocabulary (``harness.case.sections.OPTIMIZER_METHODS``).
 
 - "sa": simulated annealing as in Deussen 1995 Fig. 6, with incremental (rank-1) G.
 - "sa-refactor": the same chain, every proposal re-factorised (the paper's cost; baseline).
@@ -19,6 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from harness.case.sections import OPTIMIZER_METHODS
 from harness.errors import SpringbenchError
 from harness.optimize.problem import FitProblem, LoadBlock, ModalTerm  # noqa: F401
 
@@ -86,6 +88,9 @@ OPTIMIZERS = {
     "equilibrium-gap": _equilibrium_gap,
     "none": _none,
 }
+if set(OPTIMIZERS) != set(OPTIMIZER_METHODS):
+    raise ImportError(f"harness.optimize.OPTIMIZERS {sorted(OPTIMIZERS)} and the case schema's "
+                      f"OPTIMIZER_METHODS {sorted(OPTIMIZER_METHODS)} differ: name a new optimiser in both")
 
 
 def check_method_options(method: str, options: dict) -> dict:
@@ -106,7 +111,7 @@ def optimize(problem: FitProblem, method: str, options: dict | None = None, seed
     if method not in OPTIMIZERS:
         raise SpringbenchError(f"unknown optimizer method '{method}'", field="optimizer.method",
                                fix=f"use one of {sorted(OPTIMIZERS)}")
-    from harness.optimize.linalg import single_thread_blas
+    from harness.linalg.sparse import single_thread_blas
     with single_thread_blas():  # threads oversubscribe the 2 shared cores; chains use processes
         out = OPTIMIZERS[method](problem, dict(options or {}), int(seed), status)
     info = {**out.pop("info"), "method": method, "seed": int(seed)}

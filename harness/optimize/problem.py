@@ -86,7 +86,7 @@ class FitProblem:
         dof = dim*node + component; dof_weights (ndof,). The frequency term is used when
         masses and freq_target are given (modal_free: (ndof,) bool, default the first
         load's free dofs)."""
-        from harness.springs import incidence
+        from harness.models.springs import incidence
         points = np.asarray(points, float)
         B = incidence(points, springs).tocsr()
         ndof = points.size
@@ -223,13 +223,13 @@ class LoadSet:
         (nested-dissection Cholesky, best in 3-D and for many right-hand sides) or
         "superlu" (SuperLU in nested-dissection order, best for single solves in 2-D).
         "auto" picks multifrontal in 3-D, SuperLU in 2-D."""
-        from harness.optimize.linalg import DenseFactor, Factor
+        from harness.linalg.sparse import DenseFactor, Factor
         if self.B.shape[0] <= DENSE_FACTOR_MAX:
             return DenseFactor(self.stiffness(k).toarray(), self.name)
         if kind == "auto":
             kind = "multifrontal" if self.coords is not None and self.coords.shape[1] == 3 else "superlu"
         if kind == "multifrontal" and self.coords is not None and self.B.shape[0] > 2000:
-            from harness.optimize.multifrontal import MultifrontalCholesky, Symbolic
+            from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             K = self.stiffness(k)
             if self.__dict__.get("_sym") is None:
                 self._sym = Symbolic(K, self.coords)
@@ -271,7 +271,7 @@ def _key(B: sp.csc_matrix):
 
 
 def load_sets(problem: FitProblem) -> list[LoadSet]:
-    from harness.optimize.linalg import nested_dissection
+    from harness.linalg.sparse import nested_dissection
     groups: dict = {}
     for i, b in enumerate(problem.blocks):
         key = id(b.B)

@@ -12,7 +12,7 @@ import itertools
 
 import numpy as np
 
-from harness.springs import incidence, stiffness_matrix
+from harness.models.springs import incidence, stiffness_matrix
 
 AXES = "xyz"
 

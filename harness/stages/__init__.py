@@ -12,7 +12,7 @@ Rules for stages (the runner relies on them):
 - write data files only inside ``ctx.out_dir`` (``ctx.file(name)`` gives a path there);
   the runner moves them into ``results/<suite>/<case>/`` once the case has finished,
   so a killed run never leaves half a result. Formats the report draws figures from are
-  defined in :mod:`harness.report` (trace.csv, lloyd.csv, volume.csv, frequencies.csv,
+  defined in :mod:`harness.report.build` (trace.csv, lloyd.csv, volume.csv, frequencies.csv,
   anisotropy.csv, deformed*.npz).
 - draw randomness only from ``ctx.seed`` (``ctx.rng()``), so the same seed gives the
   same table bit for bit;

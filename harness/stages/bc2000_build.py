@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.dynamics import Loading
+from harness.mechanics.dynamics import Loading
 from harness.errors import CaseError, SpringbenchError
-from harness.fibres import named_field_angles
-from harness.meshfile import read_mesh
+from harness.case.fibres import named_field_angles
+from harness.io.meshfile import read_mesh
 from harness.models.anisotropic import angles_of, build_anisotropic
 from harness.models.massspring import build_massspring
 

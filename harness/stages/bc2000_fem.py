@@ -16,15 +16,15 @@ def _fem(case, ctx, model, dyn):
     """Static G of MS / MT0 / MT against the FEM reference under the case's loads (small:
     the models are linearised at rest), first with the case's constants scaled by the best
     single factor, then calibrated (all constants, least squares); also the anisotropy
-    measures: the six clamped face pulls and the direction pulls (harness.anisotropy) of
+    measures: the six clamped face pulls and the direction pulls (harness.mechanics.anisotropy) of
     the calibrated model beside the FEM's. Rows per model: G_initial/G_final (+
     normalised), ``G_ref`` / ``ref_error_max`` (the reference's own error at the same nodes;
     status "ref-coarse" above 10 % of the final normalised G or when the reference missed
     its tol), the fitted constants, the pull columns; anisotropy.csv per direction. Loads
     held out (``[loads] heldout``) are neither scaled to nor fitted: ``G_heldout``
     (``_initial``: with the scaled constants), ``G_ref_heldout``, ``ref_error_heldout``."""
-    from harness.models.bc2000 import linear
-    from harness.parts import classify_nodes
+    from harness.stages import bc2000_linear as linear
+    from harness.case.parts import classify_nodes
     from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
     from reference import solve as reference_solve
     path, mesh = _meshes(case, dyn)[0]
@@ -49,7 +49,7 @@ def _fem(case, ctx, model, dyn):
     rows, aniso = [], []
     ctx.status("FEM direction pulls")
     bbox = (P.min(axis=0), P.max(axis=0))
-    from harness import anisotropy as an
+    from harness.mechanics import anisotropy as an
     try:                                 # before the FEM solves: the mesh must reach the corners
         an.pull_arrays(P, bbox, an.pull_load((1.0, 0.0, 0.0)))
     except SpringbenchError as exc:
@@ -108,7 +108,7 @@ def _fem(case, ctx, model, dyn):
         k = np.array([r["stiffness"] for r in pulls])
         row.update({"stiffness_spread": float((k.max() - k.min()) / k.mean()),
                     "drift_max": float(max(r["drift"] for r in pulls))})
-        # (2): uniaxial stress along directions in the x-y plane (harness.anisotropy)
+        # (2): uniaxial stress along directions in the x-y plane (harness.mechanics.anisotropy)
         K1 = sum(t * K for t, K in zip(theta1, Ks))
         row.update(_direction_columns(name, K1, P, bbox, pull_loads, fem_dir, aniso, ""))
         if name != "MS" and case.material.fibre is None:   # frame turned with the pull: the mesh's share
@@ -137,7 +137,7 @@ def _direction_columns(name, K, P, bbox, loads, fem_dir, aniso, suffix) -> dict:
     """Columns of the direction pulls of one model (K one matrix, or one per direction):
     spread (max/min), coefficient of variation, largest drift, and the largest deviation of
     the stiffness per direction from the FEM's; rows of anisotropy.csv."""
-    from harness import anisotropy as an
+    from harness.mechanics import anisotropy as an
     Ks = K if isinstance(K, list) else [K] * len(loads)
     res = []
     for ang, load, Kd in zip(ANGLES, loads, Ks):
@@ -159,7 +159,7 @@ def _fem_directions(case, ref_solve, P):
     """The FEM reference under the direction pulls (one reference solve of a copy of the
     case whose loads are the pulls), measured at the model's nodes."""
     import dataclasses
-    from harness import anisotropy as an
+    from harness.mechanics import anisotropy as an
     loads = tuple(an.pull_load(d, name=f"pull-{a}") for a, d in zip(ANGLES, an.directions_xy(ANGLES)))
     sub = dataclasses.replace(case, loads=loads)
     ref = ref_solve(sub)

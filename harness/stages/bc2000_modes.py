@@ -1,6 +1,6 @@
 """Held-out natural frequencies of the bc2000 ``fem`` stage: the first modes of each
 linearised model (lumped masses rho V) against the FEM reference's ``frequencies()``,
-both with the constraints of harness.case_loads.modal_load (the B&C cases: the held-out
+both with the constraints of harness.case.loads.modal_load (the B&C cases: the held-out
 ``sag``, x0 clamped). No fit uses the modes,
 so they show whether constants calibrated on static loads also give the body's dynamics:
 ``freq_error_heldout`` (fitted constants), ``freq_error_heldout_initial`` (the scaled
@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
-from harness.case_loads import modal_load
-from harness.modal_sms import matrix_frequencies
+from harness.case.loads import modal_load
+from harness.mechanics.modal import matrix_frequencies
 
 
 def rms_error(f, f_fem) -> float:
@@ -24,7 +24,7 @@ def rms_error(f, f_fem) -> float:
 
 def heldout_modes(ref, case, masses, loads, Ks, theta_initial, theta_final) -> dict:
     """The columns of one model with stiffness sum_i theta_i Ks[i]: ``loads``
-    (harness.models.bc2000.linear.Loads) gives the free dofs of the modes' load;
+    (harness.stages.bc2000_linear.Loads) gives the free dofs of the modes' load;
     ``masses`` (n,) are the stage's lumped element masses (rho V shared by the vertices)."""
     n = case.reference.modes
     if not n:

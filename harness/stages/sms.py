@@ -12,7 +12,7 @@ fitted: G_* and G_ref are on the fitted loads, ``G_heldout`` (normalised, the sa
 ``G_ref_heldout`` and ``ref_error_heldout`` on the held-out ones, ``freq_error_heldout`` on
 the natural frequencies no fit used.
 
-Files (in ctx.out_dir, formats of harness/report.py): ``model-<tag>.vtu`` (the network
+Files (in ctx.out_dir, formats of harness/report/build.py): ``model-<tag>.vtu`` (the network
 with its displacements; tag = rule, or rule-method[-freq]), ``deformed-<tag>.npz``
 (reference vs model), ``lloyd.csv`` (Lloyd statistics), ``frequencies.csv`` (SMS vs FEM
 natural frequencies, one column per rule and optimised model), and ``trace.csv`` (G
@@ -27,7 +27,7 @@ import time
 import numpy as np
 import pandas as pd
 
-from harness.case_loads import modal_load
+from harness.case.loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
 
 NAME = "sms"
@@ -80,8 +80,8 @@ def model_label(spec, case) -> str:
 
 
 def run(case, ctx) -> list[dict]:
-    from harness import statics
-    from harness.homogenize import case_report
+    from harness.mechanics import statics
+    from harness.mechanics.homogenize import case_report
     from harness.models.sms import build_network, model_spec
     from harness.models.stiffness_rules import spring_constants
     from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
@@ -128,7 +128,7 @@ def run(case, ctx) -> list[dict]:
         return res, sc, sh
 
     def write(net, res, tag):
-        from harness.io_vtu import write_vtu
+        from harness.export.vtu import write_vtu
         write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
         if u_ref is not None:
             arrays = {"points": net.points, "springs": net.springs}
@@ -328,7 +328,7 @@ def budget_label(options: dict) -> str:
 def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label, common, first, evaluate, write,
               fem_f):
     """One optimiser run on the fitted loads (indices ``fit`` of ``names``) and its row."""
-    from harness import statics
+    from harness.mechanics import statics
     from harness.optimize.diagnostics import fit_diagnostics
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
@@ -460,7 +460,7 @@ def _frequencies(case, ctx, fem_f, nets, n):
     returns {column: frequencies}: 'fem' and one per rule or optimised model."""
     if n <= 0:
         return {}
-    from harness.modal_sms import frequencies
+    from harness.mechanics.modal import frequencies
     cols = {"mode": np.arange(1, n + 1)}
     if fem_f is not None:
         cols["fem"] = np.pad(fem_f, (0, max(n - len(fem_f), 0)), constant_values=np.nan)[:n]

@@ -1,0 +1,1 @@
+"""The case: schema, case files, materials, load sets, boundary parts, fibre fields. Imports no model, stage or report code."""

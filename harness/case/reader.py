@@ -1,0 +1,454 @@
+"""Case files (TOML) -> frozen ``Case``. Every mistake is a one-line ``CaseError``.
+
+The schema of the core sections (body, material, loads, reference) lives here; the
+sections that later stages own (model, optimizer, score, expect, dynamics, ...) are
+registered in :mod:`harness.case.sections`. ``[quick]`` and ``[full]`` hold partial
+cases merged over the base for ``--quick`` / ``--full`` runs. Schema: cases/README.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
+
+import numpy as np
+
+from harness.case import sections as case_sections
+from harness.errors import CaseError, SpringbenchError, raise_all
+from harness.case.fibres import NAMED_FIELDS
+from harness.case.loads import parse_heldout, parse_loads, with_anchors
+from harness.case.loadsets import LOAD_SETS, LoadCase
+from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
+from harness.io.mesh_groups import GroupPart, require_group
+from harness.case.schema import Field, check, did_you_mean
+
+MODES = ("quick", "full")
+
+# -- schema ---------------------------------------------------------------------------
+
+BODY = {
+    "shape": Field("str", choices=("rectangle", "box", "polygon", "mesh"),
+                   doc="rectangle (2-D), box (3-D), polygon (2-D) or mesh"),
+    "origin": Field("floats", None, length=(2, 3)),
+    "size": Field("floats", None, length=(2, 3), min=0, min_exclusive=True,
+                  doc="positive extents"),
+    "vertices": Field("matrix", None, doc="polygon vertices [[x, y], ...] in order"),
+    "file": Field("str", None, doc="mesh file, relative to the case file"),
+    "format": Field("str", None, doc="meshio format name or 'bc2000'; guessed if absent"),
+    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}, or mesh groups: "
+                                  "name = {group = \"physical group\"}"),
+}
+
+FIBRE = {
+    "E_fibre": Field("float", min=0, min_exclusive=True, doc="Young's modulus along the fibre"),
+    "E_cross": Field("float", min=0, min_exclusive=True, doc="Young's modulus across the fibre"),
+    "nu_fibre": Field("float", None, min=-1, max=0.5, min_exclusive=True,
+                      doc="major Poisson ratio nu_LT (strain across / strain along); default nu"),
+    "nu_cross": Field("float", None, min=-1, max=1, min_exclusive=True, max_exclusive=True,
+                      doc="Poisson ratio in the isotropic cross plane nu_TT; default nu"),
+    "G_fibre": Field("float", None, min=0, min_exclusive=True,
+                     doc="shear modulus G_LT; default E_fibre E_cross / (E_fibre + E_cross (1 + 2 nu_fibre))"),
+    "direction": Field("floats", None, length=(2, 3)),
+    "azimuth_deg": Field("float", None),
+    "elevation_deg": Field("float", None),
+    "field": Field("str", None, choices=NAMED_FIELDS),
+    "seed": Field("int", 0, min=0, doc="seed of a random fibre field (>= 0)"),
+}
+
+REGION = {
+    "box": Field("matrix", doc="[[lo...], [hi...]]"),
+    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
+    "nu": Field("float", None, min=-1, max=0.5, min_exclusive=True, max_exclusive=True),
+    "density": Field("float", None, min=0, min_exclusive=True),
+}
+
+MATERIAL = {
+    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
+    "nu": Field("float", min=-1, max=0.5, min_exclusive=True, max_exclusive=True,
+                doc="Poisson ratio in (-1, 0.5)"),
+    "density": Field("float", 1.0, min=0, min_exclusive=True),
+    "plane": Field("str", "stress", choices=("stress", "strain")),
+    "fibre": Field("table", None, spec=FIBRE),
+    "regions": Field("tables", (), spec=REGION),
+}
+
+COMPONENTS = ("x", "y", "z", "all")
+CONSTRAINT = {
+    "part": Field("str"),
+    "components": Field("strs", ("all",), choices=COMPONENTS),
+}
+TRACTION = {"part": Field("str"), "vector": Field("floats", None, length=(2, 3)),
+            "twist": Field("floats", None, length=3, doc="w: adds w x (x - c), c the part's centroid (torsion)")}
+USER_LOAD = {
+    "name": Field("str"),
+    "constraint": Field("tables", (), spec=CONSTRAINT),
+    "traction": Field("tables", (), spec=TRACTION),
+    "gravity": Field("floats", None, length=(2, 3), doc="acceleration, e.g. [0, -9.81]"),
+    "body_force": Field("floats", None, length=(2, 3), doc="force per volume"),
+}
+LOADS = {
+    "set": Field("str", None, choices=tuple(LOAD_SETS)),
+    "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units), not 0",
+                       check=lambda v: "a zero traction moves nothing (G would be 0/0)" if v == 0 else None),
+    "case": Field("tables", (), spec=USER_LOAD),
+    "fit": Field("strs", None, doc="the load cases a fit may use (default: all that are not held out)"),
+    "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
+}
+
+GRADED_LEVELS = 6   # default max_refine of the graded method: n = 2..8 cells per end zone, where a
+# cube's shears reach 7e-5 (tests/test_graded_vs_independent.py); the dof budget stops thin boxes earlier
+
+REFERENCE = {
+    "element": Field("str", "P2", choices=("P1", "P2")),
+    "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
+    "divisions": Field("int", None, min=1, max=4096, doc="initial elements along the shortest side"),
+    "tol": Field("float", 1e-4, min=0, min_exclusive=True),
+    "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 6, "
+                                                "within a 64k-dof system in 3-D)"),
+    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg")),
+    "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
+    "method": Field("str", "auto", choices=("auto", "graded", "refine"),
+                    doc="graded: Q2 hexes/quads graded towards the faces, levels extrapolated "
+                        "(boxes, rectangles); refine: uniform/adaptive refinement of the cell's mesh; "
+                        "auto: graded for a box unless cell or element say otherwise, else refine"),
+}
+
+TOP = {
+    "name": Field("str", doc="a short identifier"),
+    "dim": Field("int", choices=(2, 3), doc="2 or 3"),
+    "description": Field("str", ""),
+    "tags": Field("strs", ()),
+    "body": Field("table", spec=BODY),
+    "material": Field("table", spec=MATERIAL),
+    "loads": Field("table", {}, spec=LOADS),
+    "reference": Field("table", {}, spec=REFERENCE),
+}
+
+
+# -- dataclasses ----------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Body:
+    shape: str
+    origin: tuple[float, ...] | None = None
+    size: tuple[float, ...] | None = None
+    vertices: tuple[tuple[float, ...], ...] | None = None
+    file: Path | None = None
+    format: str | None = None
+    parts: Mapping[str, tuple] = field(default_factory=dict)
+
+    def bbox(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) of the body."""
+        if self.shape in ("rectangle", "box"):
+            lo = np.asarray(self.origin, float)
+            return lo, lo + np.asarray(self.size, float)
+        if self.shape == "polygon":
+            v = np.asarray(self.vertices, float)
+            return v.min(0), v.max(0)
+        from harness.io.meshfile import read_mesh
+        p = read_mesh(self.file, self.format).points
+        return p.min(0), p.max(0)
+
+
+@dataclass(frozen=True)
+class Fibre:
+    E_fibre: float
+    E_cross: float
+    nu_fibre: float
+    nu_cross: float
+    G_fibre: float
+    direction: tuple[float, ...] | None = None
+    azimuth_deg: float | None = None
+    elevation_deg: float | None = None
+    field: str | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Region:
+    lo: tuple[float, ...]
+    hi: tuple[float, ...]
+    E: float
+    nu: float | None = None
+    density: float | None = None
+
+
+@dataclass(frozen=True)
+class Material:
+    E: float
+    nu: float
+    density: float = 1.0
+    plane: str = "stress"
+    fibre: Fibre | None = None
+    regions: tuple[Region, ...] = ()
+
+
+@dataclass(frozen=True)
+class ReferenceSpec:
+    element: str = "P2"
+    cell: str = "tri"
+    divisions: int | None = None
+    tol: float = 1e-4
+    max_refine: int = 3
+    solver: str = "auto"
+    modes: int = 6
+    method: str = "refine"   # resolved: "graded" or "refine"
+
+
+@dataclass(frozen=True)
+class Case:
+    """A validated case. ``sections`` holds the stage-owned sections (read-only dicts)."""
+    path: Path
+    name: str
+    dim: int
+    body: Body
+    material: Material
+    loads: tuple[LoadCase, ...]
+    reference: ReferenceSpec
+    load_set: str | None = None
+    magnitude: float = 1.0
+    description: str = ""
+    tags: tuple[str, ...] = ()
+    mode: str = "quick"
+    sections: Mapping[str, Mapping] = field(default_factory=dict)
+    digest: str = ""
+    heldout: tuple[str, ...] = ()
+
+    def section(self, name: str) -> Mapping | None:
+        return self.sections.get(name)
+
+    @property
+    def fit_loads(self) -> tuple[str, ...]:
+        """The load cases a fit uses: every one that is not held out."""
+        return tuple(l.name for l in self.loads if l.name not in self.heldout)
+
+    @property
+    def suite(self) -> str:
+        """The folder the case lives in, under cases/ (e.g. 'deussen1995')."""
+        return self.path.parent.name
+
+
+# -- loading --------------------------------------------------------------------------
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def load_case(path, mode: str = "quick") -> Case:
+    """Read and validate a case file; ``mode`` merges its ``[quick]``/``[full]`` table."""
+    path = Path(path)
+    file = str(path)
+    try:
+        raw = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise CaseError("file not found", file=file, fix="check the path")
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"not valid TOML ({exc})", file=file, fix="fix the syntax at that line")
+    except UnicodeDecodeError:
+        raise CaseError("not a text file", file=file, fix="case files are UTF-8 TOML")
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    for m in MODES:
+        if m in raw and not isinstance(raw[m], dict):
+            raise CaseError("expected a table", file=file, field=m)
+    raw = _merge({k: v for k, v in raw.items() if k not in MODES}, raw.get(mode, {}))
+    core = {k: v for k, v in raw.items() if k in TOP}
+    rest = {k: v for k, v in raw.items() if k not in TOP}
+    errors, sections = [], {}     # the schema's mistakes in every section, one line each
+    try:
+        d = check(core, TOP, file)
+    except CaseError as exc:
+        errors.append(exc)
+    for key, value in rest.items():
+        try:
+            sections[key] = MappingProxyType(_section(key, value, file))
+        except CaseError as exc:
+            errors.append(exc)
+    raise_all(errors)
+    dim = d["dim"]
+    body = _body(d["body"], dim, path, file)
+    material = _material(d["material"], dim, file)
+    body = with_anchors(d["loads"], body, file)
+    loads, load_set = parse_loads(d["loads"], dim, body, file)
+    heldout = parse_heldout(d["loads"], loads, file)
+    reference = _reference(d["reference"], dim, body, file)
+    return Case(path=path, name=d["name"], dim=dim, body=body, material=material, loads=loads,
+                reference=reference, load_set=load_set, magnitude=d["loads"]["magnitude"],
+                description=d["description"], tags=d["tags"], mode=mode,
+                sections=MappingProxyType(sections), digest=digest, heldout=heldout)
+
+
+def _section(key: str, value, file: str) -> dict:
+    """A stage-owned section checked against its spec ([model]: the spec of its kind)."""
+    if key not in case_sections.SECTIONS:
+        raise CaseError("unknown section", file=file, field=key,
+                        fix=did_you_mean(key, set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
+    spec = case_sections.SECTIONS[key]
+    if spec == "model":
+        kinds = case_sections.MODEL_KINDS
+        kind = value.get("kind") if isinstance(value, dict) else None
+        if kind not in kinds:
+            raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
+                            fix=f"one of {', '.join(kinds)}")
+        spec = {"kind": Field("str"), **kinds[kind]}
+    return check(value, spec, file, key + ".")
+
+
+def _body(b: dict, dim: int, path: Path, file: str) -> Body:
+    def fail(fld, msg, fix=None):
+        raise CaseError(msg, file=file, field="body." + fld, fix=fix)
+
+    shape = b["shape"]
+    if shape in ("rectangle", "box"):
+        want = 2 if shape == "rectangle" else 3
+        if dim != want:
+            fail("shape", f"a {shape} needs dim = {want}", f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}")
+        if b["size"] is None:
+            fail("size", "missing required field", f"give {dim} positive extents")
+        if len(b["size"]) != dim:
+            fail("size", f"expected {dim} entries, got {len(b['size'])}")
+        origin = b["origin"] or (0.0,) * dim
+        if len(origin) != dim:
+            fail("origin", f"expected {dim} entries, got {len(origin)}")
+        problem = coordinate_problem([origin, np.add(origin, b["size"])])
+        if problem:  # blame the size if it alone is the problem
+            fail("size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin", problem, COORDINATE_FIX)
+        body = Body(shape, origin=origin, size=b["size"])
+    elif shape == "polygon":
+        if dim != 2:
+            fail("shape", "a polygon needs dim = 2")
+        v = b["vertices"]
+        if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
+            fail("vertices", "expected at least 3 points [x, y]")
+        if coordinate_problem(v):
+            fail("vertices", coordinate_problem(v), COORDINATE_FIX)
+        x, y = np.asarray(v, float).T
+        area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+        if abs(area) <= 1e-14:
+            fail("vertices", "the polygon has zero area", "list the vertices in order around the body")
+        body = Body(shape, vertices=v)
+    else:
+        if not b["file"]:
+            fail("file", "missing required field for shape = 'mesh'", "give the mesh path relative to the case file")
+        mpath = (path.parent / b["file"]).resolve()
+        from harness.io.meshfile import read_mesh
+        try:
+            mesh = read_mesh(mpath, b["format"])
+            from harness.case.mesh_checks import check_mesh
+            check_mesh(mesh, str(mpath))
+        except SpringbenchError as exc:
+            fail("file", exc.message, exc.fix)
+        if mesh.dim != dim:
+            fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}", f"set dim = {mesh.dim}")
+        body = Body(shape, file=mpath, format=b["format"])
+    parts = {}
+    if not isinstance(b["parts"], dict):
+        fail("parts", "expected a table of name = {box = [[lo], [hi]]}")
+    for name, spec in b["parts"].items():
+        if isinstance(spec, dict) and set(spec) == {"group"}:     # a named group of the mesh file
+            if shape != "mesh" or not isinstance(spec["group"], str):
+                fail(f"parts.{name}.group", "expected the name of a group of the body's mesh file",
+                     "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}")
+            require_group(mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError)
+            parts[name] = GroupPart(spec["group"], body.file, body.format)
+            continue
+        if not isinstance(spec, dict) or set(spec) != {"box"}:
+            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]} or {group = \"name\"}")
+        box = spec["box"]
+        ok = (isinstance(box, list) and len(box) == 2 and all(
+            isinstance(r, list) and len(r) == dim and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+            for r in box))
+        if not ok:
+            fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
+        if np.isnan(np.asarray(box, float)).any():   # every comparison with nan is false: selects nothing
+            fail(f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)")
+        if any(lo > hi for lo, hi in zip(*box)):
+            fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
+        parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
+    return Body(body.shape, body.origin, body.size, body.vertices, body.file, body.format,
+                MappingProxyType(parts))
+
+
+def _material(m: dict, dim: int, file: str) -> Material:
+    def fail(fld, msg, fix=None):
+        raise CaseError(msg, file=file, field="material." + fld, fix=fix)
+
+    fibre = None
+    if m["fibre"] is not None:
+        f = m["fibre"]
+        given = [k for k in ("direction", "azimuth_deg", "field") if f[k] is not None]
+        if len(given) > 1:
+            fail("fibre", f"both {given[0]} and {given[1]} given", "give one fibre direction")
+        if not given:
+            fail("fibre.direction", "missing", "give direction, azimuth_deg (+ elevation_deg) or field")
+        if f["direction"] is not None:
+            if len(f["direction"]) != dim:
+                fail("fibre.direction", f"expected {dim} entries")
+            if np.linalg.norm(f["direction"]) == 0:
+                fail("fibre.direction", "zero vector", "give a non-zero direction")
+        if f["field"] is not None and dim != 3:
+            fail("fibre.field", "named fields are 3-D", "use direction or azimuth_deg in 2-D")
+        nu_f = f["nu_fibre"] if f["nu_fibre"] is not None else m["nu"]
+        nu_c = f["nu_cross"] if f["nu_cross"] is not None else m["nu"]
+        G = f["G_fibre"] or f["E_fibre"] * f["E_cross"] / (f["E_fibre"] + f["E_cross"] * (1 + 2 * nu_f))
+        fibre = Fibre(f["E_fibre"], f["E_cross"], nu_f, nu_c, G, f["direction"], f["azimuth_deg"],
+                      f["elevation_deg"], f["field"], f["seed"])
+        from harness.case.elasticity import transversely_isotropic_compliance
+        S = transversely_isotropic_compliance(fibre.E_fibre, fibre.E_cross, nu_f, nu_c, G)
+        if np.linalg.eigvalsh(S).min() <= 0:
+            fail("fibre", "the compliance is not positive definite",
+                 "need 1 - nu_cross - 2 nu_fibre^2 E_cross/E_fibre > 0")
+    regions = []
+    for i, r in enumerate(m["regions"]):
+        box = r["box"]
+        if len(box) != 2 or any(len(p) != dim for p in box):
+            fail(f"regions[{i}].box", f"expected [[lo], [hi]] with {dim} numbers each")
+        regions.append(Region(box[0], box[1], r["E"], r["nu"], r["density"]))
+    if m["plane"] == "strain" and dim == 3:
+        pass  # irrelevant in 3-D; accepted for symmetry
+    return Material(m["E"], m["nu"], m["density"], m["plane"], fibre, tuple(regions))
+
+
+def _reference(r: dict, dim: int, body: Body, file: str) -> ReferenceSpec:
+    cell = r["cell"] or ("tri" if dim == 2 else "tet")
+    if (cell in ("tri", "quad")) != (dim == 2):
+        raise CaseError(f"cell '{cell}' does not fit dim = {dim}", file=file, field="reference.cell",
+                        fix="tri/quad in 2-D, tet/hex in 3-D")
+    if body.shape == "polygon" and cell == "quad":
+        raise CaseError("a polygon is meshed with triangles", file=file, field="reference.cell", fix="use tri")
+    method = r["method"]
+    if method == "auto":
+        method = "graded" if (body.shape == "box" and r["cell"] in (None, "hex") and r["element"] == "P2") else "refine"
+    if method == "graded":
+        if body.shape not in ("rectangle", "box"):
+            raise CaseError(f"graded reference meshes need a rectangle or box (the body is a {body.shape})",
+                            file=file, field="reference.method", fix="use method = \"refine\"")
+        if r["cell"] not in (None, "quad", "hex") or r["element"] != "P2":
+            raise CaseError("graded reference meshes are Q2 quadrilaterals/hexahedra", file=file,
+                            field="reference.method", fix="drop reference.cell and element, or use method = \"refine\"")
+        cell = "quad" if dim == 2 else "hex"
+    levels = r["max_refine"] if r["max_refine"] is not None else (GRADED_LEVELS if method == "graded" else 3)
+    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], levels, r["solver"], r["modes"], method)
+
+
+def find_cases(paths) -> list[Path]:
+    """Case files named by ``paths`` (files or folders, searched recursively), sorted."""
+    out = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*.toml") if not q.name.startswith("_"))
+            if not found:   # a wrong folder, not a suite with nothing to do
+                raise SpringbenchError("no case files (*.toml) in this folder", file=str(p),
+                                       fix="give case files or a folder of them, e.g. cases/")
+            out.extend(found)
+        elif p.exists():
+            out.append(p)
+        else:
+            raise SpringbenchError("no such file or folder", file=str(p), fix="check the path")
+    return out

@@ -1,0 +1,1 @@
+"""Sparse linear algebra shared by the reference, the models' statics and the optimisers."""

@@ -1,0 +1,1 @@
+"""Mechanics of the cheap models: statics, dynamics, modes, homogenisation, anisotropy measures."""

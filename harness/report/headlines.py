@@ -1,0 +1,323 @@
+"""The curated headline tables of each suite (README's), built from a stored summary.csv.
+
+``headline_tables(suite, df)`` returns ``[(title, table, note)]``: ``table`` is a DataFrame
+of display strings (numbers already formatted), so the HTML page only escapes and lays it
+out. A suite without a curated builder gets the generic one-line-per-case table of
+:func:`harness.report.frames.headline_frame`. Nothing is recomputed: every number is a column of
+summary.csv, a mean over seeds of one, or a ratio of two shown numbers.
+"""
+
+from __future__ import annotations
+
+import math
+
+from harness.report.frames import REF_COARSE, SCORED, headline_frame, optimizer_frame
+from harness.report.text import case_label
+
+ARROW = " \u2192 "
+DASH = "\u2013"
+METHOD_NAMES = {"sa": "SA", "sa-refactor": "SA (refactor)", "lbfgs": "L-BFGS-B", "gauss-newton": "Gauss-Newton",
+                "nelder-mead": "Nelder-Mead", "equilibrium-gap": "equilibrium gap"}
+BC_MODELS = ("MS", "MT0", "MT")
+
+
+def fmt(v, digits: int = 3) -> str:
+    """A number to ``digits`` significant digits ("0.0230", "5.09", "270"); "" if missing."""
+    if v is None or isinstance(v, str):
+        return v or ""
+    try:
+        v = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    if not math.isfinite(v):
+        return ""
+    if abs(v) >= 10 ** digits:
+        return f"{v:,.0f}"
+    if v == int(v):   # counts: 72, not 72.0
+        return str(int(v))
+    s = f"{v:#.{digits}g}"
+    return s.rstrip(".") if "e" not in s else f"{v:.{digits - 1}e}"
+
+
+def given(v) -> str:
+    """A paper's number as the paper printed it (2.8, not 2.80); "" if missing."""
+    return f"{float(v):g}" if v is not None and math.isfinite(float(v)) else ""
+
+
+def pair(a, b, digits: int = 3) -> str:
+    """``a → b``, or one number when nothing changed, or "" when both are missing."""
+    fa, fb = fmt(a, digits), fmt(b, digits)
+    if not fa or not fb or fa == fb:
+        return fb or fa
+    return f"{fa}{ARROW}{fb}"
+
+
+def _worst(status) -> str:
+    s = set(map(str, status))
+    return "error" if "error" in s else REF_COARSE if REF_COARSE in s else "ok"
+
+
+def _scored(df):
+    return df[df["status"].isin(SCORED)] if "status" in df else df
+
+
+def _col(df, name):
+    """Column ``name`` or an all-NaN one (a quick or foreign run may lack it)."""
+    import pandas as pd
+    return df[name] if name in df else pd.Series(math.nan, index=df.index)
+
+
+def _fits(df, objective: str = "G"):
+    """Optimised rows (an optimiser other than none) with the given objective."""
+    if "optimizer" not in df:
+        return df.iloc[:0]
+    opt = df[df["optimizer"].notna() & (df["optimizer"].astype(str) != "none")]
+    return opt[_col(opt, "objective").fillna("G") == objective]
+
+
+def _mean(g, col):
+    v = _col(g, col)
+    return float(v.mean()) if v.notna().any() else math.nan
+
+
+def _seeds(g) -> int:
+    return int(g["seed"].nunique()) if "seed" in g else 1
+
+
+def _label(case, n_seeds) -> str:
+    return case_label(case) + (f" (mean of {n_seeds} seeds)" if n_seeds > 1 else "")
+
+
+# -- Deussen 1995 -------------------------------------------------------------------------
+
+def deussen_tables(df) -> list:
+    import pandas as pd
+    out = []
+    fits = _fits(_scored(df))
+    rows = []
+    for case, g in fits.groupby("case", sort=False):
+        methods = list(dict.fromkeys(g["optimizer"].astype(str)))
+        m = "sa" if "sa" in methods else methods[0]
+        f = g[g["optimizer"] == m]
+        g0, g1 = _mean(f, "G_initial"), _mean(f, "G_final")
+        p0, p1 = _mean(f, "paper_G_initial"), _mean(f, "paper_G_final")
+        ours = g0 / g1 if g1 > 0 else math.nan
+        paper = p0 / p1 if p1 > 0 else math.nan
+        rows.append({
+            "case": _label(case, _seeds(f)), "weights": next(iter(_col(f, "weights").dropna().astype(str)), ""),
+            "springs": fmt(_mean(f, "n_springs")), "fit": METHOD_NAMES.get(m, m),
+            "G before → after": pair(g0, g1),
+            "paper G before → after": f"{given(p0) or DASH}{ARROW}{given(p1)}" if math.isfinite(p1) else DASH,
+            "improvement ours / paper": " / ".join(f"{fmt(v, 2)}x" if math.isfinite(v) else DASH
+                                                   for v in (ours, paper)),
+            "normalised G before → after": pair(_mean(f, "G_norm_initial"), _mean(f, "G_norm_final")),
+            "held-out G (normalised)": pair(_mean(f, "G_heldout_initial"), _mean(f, "G_heldout")),
+            "G_ref": fmt(_mean(f, "G_ref"), 2), "status": _worst(f["status"]) if "status" in f else ""})
+    if rows:
+        out.append(("Deussen 1995: G before and after the fit, ours beside the paper's", pd.DataFrame(rows),
+                    "G is G_{a:b:c} with the case's weights, ours in metres; the paper's G is in units it does "
+                    "not state, so compare the improvement factors (G before / G after), not the values. "
+                    "Held-out: sag and tip loads never fitted. The fit is SA with the paper's schedule where "
+                    "the case ran it."))
+    for item in (_optimizers_table(df), _heldout_table(df), _rules_table(df), _frequency_table(df)):
+        if item:
+            out.append(item)
+    return out
+
+
+def _optimizers_table(df):
+    import pandas as pd
+    opts = optimizer_frame(df)
+    if opts.empty:
+        return None
+    opts = opts[opts["objective"].fillna("G") == "G"]
+    methods = list(dict.fromkeys(opts["optimizer"].astype(str)))
+    rows = []
+    for case, g in opts.groupby("case", sort=False):
+        g = g[g["model"] == g["model"].iloc[0]]
+        row = {"case": _label(case, int(g["n_seeds"].max())), "constants": fmt(_mean(g, "n_params"))}
+        for m in methods:
+            r = g[g["optimizer"] == m]
+            row[f"{METHOD_NAMES.get(m, m)}: G (s)"] = (
+                f"{fmt(_mean(r, 'G_final'))} ({fmt(_mean(r, 'seconds'), 2)})" if len(r) else "")
+        lb = g[g["optimizer"] == "lbfgs"]
+        if len(lb) and "evals_to_sa_G" in lb:
+            row["L-BFGS-B evaluations to SA's G"] = fmt(_mean(lb, "evals_to_sa_G"))
+        rows.append(row)
+    return ("Optimisers compared on the same initial model (G, wall seconds)", pd.DataFrame(rows).fillna(""),
+            "Same reference, weights and start per case; means over seeds. The seconds are this run's, on a "
+            "busy machine they vary; G does not.")
+
+
+def _heldout_table(df):
+    import pandas as pd
+    sc = _scored(df)
+    if not {"G_heldout", "G_norm_final", "optimizer", "stiffness"} <= set(sc) or not sc["G_heldout"].notna().any():
+        return None
+    rows = []
+    for case, g in sc.groupby("case", sort=False):
+        rules = g[g["optimizer"].astype(str) == "none"].dropna(subset=["G_norm_final"])
+        row = {"case": _label(case, _seeds(g))}
+        if len(rules):
+            means = rules.groupby("stiffness")[["G_norm_final", "G_heldout"]].mean()
+            best = means["G_norm_final"].idxmin()
+            row["best rule, no fit: fitted / held-out"] = (
+                f"{best}: {fmt(means.loc[best, 'G_norm_final'])} / {fmt(means.loc[best, 'G_heldout'])}")
+        fits = _fits(g)
+        for m in dict.fromkeys(fits["optimizer"].astype(str)):
+            f = fits[fits["optimizer"] == m]
+            row[f"{METHOD_NAMES.get(m, m)}: fitted / held-out"] = \
+                f"{fmt(_mean(f, 'G_norm_final'))} / {fmt(_mean(f, 'G_heldout'))}"
+        if len(row) > 1:
+            rows.append(row)
+    if not rows:
+        return None
+    return ("Held-out loads: normalised G on the fitted loads / on loads no fit saw", pd.DataFrame(rows).fillna(""),
+            "A model that only memorised its training loads has a small fitted G and a large held-out G.")
+
+
+def _rules_table(df):
+    sc = _scored(df)
+    if not {"G_norm_final", "optimizer", "stiffness"} <= set(sc):
+        return None
+    rules = sc[sc["optimizer"].astype(str) == "none"].dropna(subset=["G_norm_final"])
+    if rules.empty:
+        return None
+    t = rules.pivot_table(index="case", columns="stiffness", values="G_norm_final", aggfunc="mean", sort=False)
+    t = t.map(fmt).reset_index()
+    t["case"] = [case_label(c) for c in t["case"]]
+    t.columns.name = None
+    return ("Stiffness rules before any fit (normalised G on the fitted loads)", t,
+            "Each rule sets every spring constant from the geometry and the material alone (means over seeds).")
+
+
+def _frequency_table(df):
+    import pandas as pd
+    f = _fits(_scored(df), "G+freq")
+    if f.empty:
+        return None
+    rows = [{"case": _label(case, _seeds(g)), "fit": METHOD_NAMES.get(str(g["optimizer"].iloc[0]), ""),
+             "frequency error before → after": pair(_mean(g, "freq_error_initial"), _mean(g, "freq_error_final")),
+             "G after": fmt(_mean(g, "G_final"))} for case, g in f.groupby("case", sort=False)]
+    return ("Fits with the frequency term (Deussen Sec. 8)", pd.DataFrame(rows),
+            "RMS relative error of the first natural frequencies against the FEM's, and G of the same fit.")
+
+
+# -- Bourguignon & Cani 2000 ----------------------------------------------------------------
+
+def _bc_values(df, case, col, mesh=None, initial=None, digits=3, scale=1.0, suffix=""):
+    g = df[df["case"] == case]
+    if mesh is not None and "mesh" in g:
+        g = g[g["mesh"].astype(str).str.startswith(mesh)]
+    out = {}
+    for m in BC_MODELS:
+        r = g[g["model"] == m]
+        v = _mean(r, col) * scale
+        v0 = _mean(r, initial) * scale if initial else math.nan
+        text = pair(v0, v, digits) if initial else fmt(v, digits)
+        out[m] = text + suffix if text else ""
+    return out
+
+
+def bc2000_tables(df) -> list:
+    import pandas as pd
+    cases = set(df["case"])
+    rows = []
+
+    def add(label, case, col, paper="", **kw):
+        if case in cases and col in df:
+            vals = _bc_values(df, case, col, **kw)
+            if any(vals.values()):
+                rows.append({"experiment": label, **vals, "paper / original program": paper})
+
+    v = df[df["case"] == "volume_cube343"]
+    limit = _mean(v, "paper_peak_abs_dV_percent")
+    dev = _col(v, "max_dev_vs_original_percent").max()
+    add("Fig. 3 peak |dV/V| (%), tetra cube_343", "volume_cube343", "peak_abs_dV_percent",
+        (f"MT < {given(limit)} %" if math.isfinite(limit) else "") +
+        (f"; curves match the program to {fmt(dev, 1)} %" if math.isfinite(dev) else ""))
+    b = df[df["case"] == "volume_beam336"]
+    add("peak |dV/V| (%), tetra beam_336", "volume_beam336", "peak_abs_dV_percent",
+        f"the program's vol.txt, matched to {fmt(_col(b, 'max_dev_vs_original_percent').max(), 1)} %"
+        if len(b) else "")
+    add("normalised G vs FEM, tetra cube_333 (program constants scaled → fitted)", "fem_cube333_tetra",
+        "G_norm_final", "(the paper did not compare with FEM)", initial="G_norm_initial")
+    add("held-out sag + tip, normalised G, tetra cube_333 (scaled → fitted)", "fem_cube333_tetra", "G_heldout",
+        "never fitted", initial="G_heldout_initial")
+    add("normalised G vs FEM, hexa cube_333 (scaled → fitted)", "fem_cube333_hexa", "G_norm_final",
+        initial="G_norm_initial")
+    add("held-out sag + tip, hexa cube_333 (scaled → fitted)", "fem_cube333_hexa", "G_heldout",
+        initial="G_heldout_initial")
+    add("normalised G vs transversely isotropic FEM, uniform fibre (scaled → fitted)", "fem_cube333_tetra_fibre",
+        "G_norm_final", initial="G_norm_initial")
+    add("normalised G vs transversely isotropic FEM, helicoidal fibres (scaled → fitted)",
+        "fem_cube333_tetra_helicoidal", "G_norm_final", initial="G_norm_initial")
+    add("face-pull stiffness spread (%), tetra cube_333", "fem_cube333_tetra", "stiffness_spread",
+        "undesired anisotropy (Fig. 1a vs 5a)", scale=100.0, digits=2)
+    fem = _mean(df[df["case"] == "fem_cube333_tetra"], "pull_stiffness_spread_fem")
+    add("pull stiffness spread max/min over 12 directions, tetra cube_333", "fem_cube333_tetra",
+        "pull_stiffness_spread", f"FEM {fmt(fem, 4)}" if math.isfinite(fem) else "")
+    t = df[df["case"] == "timing_cube555"]
+    for mesh in ("tetra", "hexa"):
+        pr = _mean(t[_col(t, "mesh").astype(str).str.startswith(mesh)], "paper_model_MS_ratio")
+        add(f"Table 1: model / MS time per simulated second, {mesh} cube_555", "timing_cube555",
+            "model_MS_ratio_per_second", f"{given(pr)}x" if math.isfinite(pr) else "", mesh=mesh, digits=2,
+            suffix="x")
+    for mesh in ("tetra", "hexa"):
+        add(f"cantilever beam_336 {mesh}: tip deflection / FEM (linear, small strain)", "cantilever_beam336",
+            "tip_ratio", "(the paper did not compare)", mesh=mesh)
+    if not rows:
+        return []
+    return [("Bourguignon & Cani 2000: MS, MT0 and MT", pd.DataFrame(rows),
+             "MS: classic springs on the mesh edges; MT0: the element model; MT: with volume forces. "
+             "Normalised G is dimensionless (the paper reports none); fitted: ks1..ks6 (and kvs) calibrated "
+             "against the FEM on the basic loads. Timings are this run's.")]
+
+
+# -- verification ---------------------------------------------------------------------------
+
+def verification_tables(df) -> list:
+    import pandas as pd
+    rows = []
+    for case, g in df.groupby("case", sort=False):
+        est = _col(g, "error_estimate")
+        tol = _mean(g, "ref_tol")
+        f1 = _mean(g, "f1_eb_ratio")
+        rows.append({"case": case_label(case), "method": str(_col(g, "ref_method").dropna().iloc[0])
+                     if _col(g, "ref_method").notna().any() else "",
+                     "dofs": fmt(_col(g, "n_dofs").max()), "loads": str(len(g)),
+                     "closed-form error (max)": fmt(_col(g, "closed_form_error").max(), 2),
+                     "error estimate (max)": fmt(est.max(), 2),
+                     "loads within tol": f"{int((est <= tol).sum())} / {len(g)}" if math.isfinite(tol) else "",
+                     "f1 / Euler-Bernoulli": fmt(f1, 4), "status": _worst(g["status"]) if "status" in g else ""})
+    if not rows:
+        return []
+    return [("The FEM reference against closed forms and its own error estimate", pd.DataFrame(rows),
+             "Errors relative to the largest displacement. The stretches have a linear exact solution that "
+             "the FEM must meet to rounding; the other loads are only as good as the estimate, and loads above "
+             "tol are ref-coarse. f1: first frequency over Euler-Bernoulli's beam formula.")]
+
+
+def generic_tables(df) -> list:
+    h = headline_frame(df)
+    if h.empty:
+        return []
+    t = h.copy()
+    for c in t.columns:
+        if t[c].dtype.kind == "f":
+            t[c] = t[c].map(fmt)
+    t["case"] = [case_label(c) for c in t["case"]]
+    return [("One line per case", t.fillna(""),
+             "Best stiffness rule and best fit by normalised G on the fitted loads; G_heldout of that fit; "
+             "G_ref the reference's own error.")]
+
+
+BUILDERS = {"deussen1995": deussen_tables, "bourguignon2000": bc2000_tables, "verification": verification_tables}
+
+
+def headline_tables(suite: str, df) -> list:
+    """[(title, DataFrame of strings, note)] for the suite folder named ``suite``."""
+    if df.empty or "case" not in df:
+        return []
+    tables = BUILDERS.get(suite, generic_tables)(df)
+    return tables or generic_tables(df)

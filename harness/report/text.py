@@ -1,0 +1,146 @@
+"""The words of the results page: what each suite reproduces, short case labels, figure
+captions, the glossary of columns. Text only (no numbers: those come from the stored
+results), so the page builder (:mod:`harness.report.page`) stays about layout."""
+
+from __future__ import annotations
+
+import re
+
+UNITS = ("Units: our G is G_{a:b:c} in the case's length unit (metres); the normalised G divides it by "
+         "the reference's own weighted norm, so 0.05 is a 5 % RMS displacement error. The papers' G is in "
+         "units they do not state: compare improvement factors and trends, never the absolute values.")
+
+SUITES = {
+    "deussen1995": (
+        "Deussen, Kobbelt & Tücke 1995: spring/mass systems fitted by simulated annealing",
+        "Deussen, Kobbelt and Tücke (1995) place springs and masses in a plate (grids, rectangular cells, an "
+        "inhomogeneous plate, random points after Lloyd iterations) and a 3-D box, and tune the spring "
+        "constants by simulated annealing until the network's displacements under the basic loads match "
+        "linear elasticity. We reproduce Figs. 8-12 and Section 6 against a converged FEM reference, run "
+        "gradient fits beside SA on the same models, and score every fit on loads it never saw."),
+    "bourguignon2000": (
+        "Bourguignon & Cani 2000: controlling anisotropy in mass-spring systems",
+        "Bourguignon and Cani (2000) replace the mesh-edge springs by springs along three axes of interest "
+        "per element (MT0) plus volume forces (MT). We run their model on the original program's meshes, "
+        "reproduce the program's volume curves (Fig. 3) and timing (Table 1), and go where the paper did "
+        "not: MS, MT0 and MT scored against isotropic and transversely isotropic FEM, calibrated, and "
+        "tested for undesired anisotropy by pulls in 12 directions."),
+    "verification": (
+        "Verification of the FEM reference",
+        "Every score above is only as good as the reference. These cases check the scikit-fem reference "
+        "against closed forms, its own error estimate and Euler-Bernoulli's cantilever frequency, on every "
+        "element type and method the suites use."),
+}
+
+CASES = {
+    "fig08_grid25_grouped": "Fig. 8: 5x5 grid, grouped h/v/diag",
+    "fig09_grid25_separate": "Fig. 9: 5x5 grid, all separate",
+    "fig10_rectangular_anisotropic": "Fig. 10: rectangular cells, orthotropic",
+    "fig11_inhomogeneous": "Fig. 11: left third twice as stiff",
+    "sec6_box3d": "Sec. 6: box 4x4x4, nine loads",
+    "volume_cube343": "Fig. 3 volume, cube_343",
+    "volume_beam336": "volume, beam_336",
+}
+
+
+def case_label(case: str) -> str:
+    """A short label for a table row: ``fig12_lloyd05`` -> "Fig. 12: 5 Lloyd iterations"."""
+    m = re.fullmatch(r"fig12_lloyd(\d+)", str(case))
+    if m:
+        return f"Fig. 12: 36 random points, {int(m.group(1))} Lloyd it."
+    return CASES.get(str(case), str(case))
+
+
+# (path under the suite folder, caption): shown full width, in this order, when present
+KEY_FIGURES = {
+    "deussen1995": [
+        ("fig-lloyd-bars.png", "Deussen Fig. 12: left, G before and after each fit per Lloyd iteration count "
+                               "(log axis; mean and standard deviation over 3 seeds); right, the trend "
+                               "G_final / G_final at 0 iterations, ours beside the paper's."),
+        ("fig08_grid25_grouped/fig-deformed-deussen-sa.png",
+         "Deussen Fig. 8: the 5x5 grid with grouped constants after SA, deformed under each load "
+         "(magnified): the network (blue) against the FEM displacement of the same nodes (red)."),
+        ("fig09_grid25_separate/fig-trace.png",
+         "Fig. 9: G against optimiser steps, SA and the gradient fits from the same start (log axes)."),
+        ("sec6_box3d/fig-deformed-deussen-sa.png",
+         "Section 6: the 4x4x4 box after SA, every load in a 3-D view of the surface springs (magnified): "
+         "network (blue) against the FEM at the same nodes (red), rest shape grey."),
+        ("fig12_lloyd50/seed0/fig-lloyd.png",
+         "Deussen Fig. 2: Lloyd iterations even out the random points (seed 0): spread of neighbour "
+         "distances and of region sizes."),
+        ("fig09_grid25_separate/fig-spectrum.png",
+         "Fig. 9: natural frequencies of each model against the FEM's."),
+    ],
+    "bourguignon2000": [
+        ("volume_cube343/fig-volume.png",
+         "Bourguignon & Cani Fig. 3: relative volume variation of MS, MT0 and MT on cube_343 under gravity; "
+         "ours solid, the original program's recorded curves dashed; below, the difference."),
+        ("volume_beam336/fig-volume.png",
+         "beam_336, MT0: our volume curve against the program's own record vol.txt."),
+        ("fem_cube333_tetra/fig-anisotropy.png",
+         "Undesired anisotropy: effective Young's modulus of each model under a uniaxial pull along 12 "
+         "directions in the x-y plane (isotropic FEM dashed: a circle)."),
+        ("fem_cube333_tetra_fibre/fig-anisotropy.png",
+         "The same with a transversely isotropic material (uniform fibre): the FEM's own anisotropy dashed."),
+        ("fibres_cube353/fig-fibres-helicoidal.png",
+         "Bourguignon & Cani Fig. 6: the helicoidal fibre field of cube_353 after the pull."),
+    ],
+}
+
+KINDS = [  # (file name pattern, caption of any figure of that kind)
+    (r"fig-trace\.png", "G against optimiser steps (log axes)."),
+    (r"fig-lloyd\.png", "Lloyd statistics against iterations (Deussen Fig. 2)."),
+    (r"fig-lloyd-bars\.png", "G per Lloyd iteration count (Deussen Fig. 12), ours and the paper's trend."),
+    (r"fig-volume\.png", "Relative volume variation against time (Bourguignon & Cani Fig. 3)."),
+    (r"fig-spectrum\.png", "Natural frequencies of the models against the FEM."),
+    (r"fig-anisotropy\.png", "Effective Young's modulus against pull direction (polar)."),
+    (r"fig-deformed-?(.*)\.png", "Deformed shapes, model {0} (blue) against the FEM (red)."),
+    (r"fig-fibres-?(.*)\.png", "Fibre directions {0} (Bourguignon & Cani Fig. 6)."),
+]
+
+
+def figure_caption(name: str) -> str:
+    """A generic caption from a figure's file name."""
+    for pattern, text in KINDS:
+        m = re.fullmatch(pattern, name)
+        if m:
+            return text.format(*(g or "" for g in m.groups())).replace("  ", " ").replace(" )", ")")
+    return name
+
+
+BENCH = {
+    "sa": "incremental SA against the refactorising SA: steps per second, same chain",
+    "fit": "G / G0 reached in 60 s on recoverable networks, with and without noise",
+    "dynamics": "ms per simulated second against the original C++ program; spring updates per second",
+    "calibrate": "a user's mesh end to end: seconds, memory, G before and after",
+    "reference": "the FEM reference's true error and cost against an independent solve",
+}
+
+GLOSSARY = [
+    ("G_initial, G_final", "G_{a:b:c} = sqrt(sum over loads and nodes of w_p |u_ref - u|^2), with the case's "
+                           "weights a:b:c for inner, border and corner nodes (Deussen 1995 eq. 12), before and "
+                           "after the fit; in the case's length unit (m)."),
+    ("G_norm_initial, G_norm_final (G_norm)", "G divided by sqrt(sum w_p |u_ref|^2): dimensionless and "
+                                              "comparable across cases (0.05 = 5 % RMS error)."),
+    ("G_heldout", "normalised G on the held-out loads (sag, tip), which no fit ever used; G_heldout_initial "
+                  "before the fit."),
+    ("G_ref", "the reference's own estimated error as a normalised G at the row's nodes: a G below a few "
+              "times G_ref says more about the reference than about the model."),
+    ("ref_error_max", "the reference's largest estimated point error, relative to its largest displacement."),
+    ("status", "ok; ref-coarse: scored, but G_ref is above 10 % of the row's G or the reference missed its "
+               "tol (kept in every table, flagged); error: the row failed (its message is in summary.csv)."),
+    ("improvement, paper_improvement", "G_initial / G_final, ours and the paper's: comparable although the "
+                                       "paper's G is in unstated units."),
+    ("paper_<col>, ratio_<col>", "the paper's number for <col> and ours / paper."),
+    ("weights", "a:b:c of G_{a:b:c} (inner, border, corner)."),
+    ("n_params", "constants the fit varies (3 when grouped, else one per spring)."),
+    ("evals_to_sa_G", "G evaluations a fit needed to reach SA's final G."),
+    ("freq_error", "RMS relative error of the first natural frequencies against the FEM's."),
+    ("peak_abs_dV_percent", "largest |V - V0| / V0 over the run, in percent."),
+    ("pull_stiffness_spread", "max / min of the effective Young's modulus over 12 pull directions (1 = "
+                              "isotropic)."),
+    ("tip_ratio", "model tip deflection / FEM tip deflection, linearised at rest."),
+    ("error_estimate, closed_form_error", "the reference's estimated and (where a closed form exists) true "
+                                          "error, relative to its largest displacement."),
+    ("mode", "quick or full: the budgets the row ran with (the published results are full)."),
+]

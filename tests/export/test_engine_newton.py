@@ -1,0 +1,95 @@
+"""Engine round trip (issue 12): the JSON of a calibrated tet mesh and of a triangle mesh
+loaded into NVIDIA Newton (``ModelBuilder.add_particle`` / ``add_spring``, float32, CPU; constants by the best rule, which
+is deterministic where a wall-time fit budget is not),
+run with ``SolverSemiImplicit`` at the exported ``dt_stable_float32`` and ``spring_damping``
+to static equilibrium under the held-out loads, against springbench's own statics of the
+same network and the FEM."""
+
+import argparse
+import json
+
+import numpy as np
+import pytest
+
+from harness import cli
+from harness.mechanics import statics
+from harness.case.reader import load_case
+from harness.commands import calibrate as cal
+from harness.case.default_loads import end_loads
+from harness.export.vtu import read_vtu
+from harness.io.meshfile import read_mesh
+
+import meshes
+
+pytest.importorskip("gmsh")
+newton = pytest.importorskip("newton")
+wp = pytest.importorskip("warp")
+
+E, NU, RHO, S = 1e7, 0.3, 1000.0, 1e3      # S: the tip traction, 1e-4 E (small rotations)
+
+
+def calibrated(tmp_path, mesh):
+    out = tmp_path / "m.vtu"
+    assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
+                     "--magnitude", str(S), "--method", "rule", "--max-refine", "0",   # deterministic: no wall-time budget
+                     "--out", str(out)]) == 0
+    m = read_mesh(mesh)
+    args = argparse.Namespace(mesh=mesh, format=None, E=E, nu=NU, density=RHO, plane="stress", magnitude=S,
+                              rule="lloyd", method="rule", init="none", budget=1.0, loads="homogeneous",
+                              masses="lumped", tol=1e-3, max_refine=0, solver="auto")
+    (tmp_path / "c.toml").write_text(cal.case_text(args, m.dim, m.cells, ends=end_loads(m.points, m.cells)))
+    net, _ = read_vtu(out)
+    return json.loads(out.with_suffix(".json").read_text()), load_case(tmp_path / "c.toml"), net
+
+
+def newton_equilibrium(data, fixed, force, max_steps=150_000):
+    """Particles and springs exactly as the JSON says (clamped particles get mass 0),
+    the load as external particle forces, a little extra velocity damping to settle."""
+    b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
+    q = np.asarray(data["particle_q"], float)
+    for i, (x, m) in enumerate(zip(q, data["particle_mass"])):
+        b.add_particle(wp.vec3(*x), wp.vec3(0.0, 0.0, 0.0), 0.0 if fixed[i] else float(m), radius=0.0)
+    for (i, j), ke, kd in zip(data["spring_indices"], data["spring_stiffness"], data["spring_damping"]):
+        b.add_spring(int(i), int(j), float(ke), float(kd), 0.0)
+    model = b.finalize(device="cpu")
+    solver = newton.solvers.SolverSemiImplicit(model)
+    s0, s1, control = model.state(), model.state(), model.control()
+    f3 = np.zeros((len(q), 3), np.float32)
+    f3[:, :force.shape[1]] = force
+    fext = wp.array(f3, dtype=wp.vec3, device="cpu")
+    dt = float(data["dt_stable_float32"])
+    prev = None
+    for step in range(max_steps):
+        s0.clear_forces()
+        wp.copy(s0.particle_f, fext)
+        solver.step(s0, s1, control, None, dt)
+        s0, s1 = s1, s0
+        if step % 20 == 0:
+            s0.particle_qd.assign(0.97 * s0.particle_qd.numpy())
+        if step % 2000 == 1999:
+            u = s0.particle_q.numpy().astype(float) - q
+            if prev is not None and np.abs(u - prev).max() < 1e-4 * np.abs(u).max():   # float32 positions
+                return u[:, :force.shape[1]], step
+            prev = u
+    raise AssertionError("Newton did not settle")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("which", ["cylinder", "holed_plate"])
+def test_newton_reproduces_springbench_statics_and_the_fem(tmp_path, which):
+    import reference
+    mesh = meshes.cylinder(tmp_path) if which == "cylinder" else meshes.holed_plate(tmp_path)
+    data, case, net = calibrated(tmp_path, mesh)
+    assert data["dt_stable_float32"] > 0 and min(data["particle_mass"]) > 0
+    res = statics.solve(net, case)
+    fem = reference.solve(case, cache=False)
+    for name in ("sag", "tip"):
+        load = next(l for l in case.loads if l.name == name)
+        fixed = statics.fixed_mask(net.points, case, load).any(axis=1)
+        u_sb = res.u[res.names.index(name)]
+        u_nt, steps = newton_equilibrium(data, fixed, statics.force_vector(net, case, load))
+        scale = np.abs(u_sb).max()
+        assert np.abs(u_nt - u_sb).max() <= 0.01 * scale, (name, steps)        # the engine runs our model
+        u_fem = fem.displacement(net.points, name)
+        e_nt, e_sb = (np.sqrt(np.mean(np.sum((u - u_fem) ** 2, axis=1))) for u in (u_nt, u_sb))
+        assert abs(e_nt - e_sb) <= 0.01 * np.abs(u_fem).max(), name           # and is as good against the FEM
