@@ -145,6 +145,19 @@ def reference_met_tol(ref) -> bool | None:
     return None if m is None else bool(m)
 
 
+def met_tol_at(u_ref: np.ndarray, e: np.ndarray, tol: float) -> bool:
+    """Whether the reference met ``tol`` at these points: for every load, the largest
+    estimated error e (L, n) there is below tol times the largest |u_ref| (L, n, dim)
+    there (a load that does not move them needs a zero estimate). A NaN estimate
+    (none) never meets it."""
+    e = np.asarray(e, float)
+    if not e.size or np.isnan(e).any():
+        return False
+    umax = np.linalg.norm(np.asarray(u_ref, float), axis=-1).max(axis=1)
+    emax = e.max(axis=1)
+    return bool(np.all((emax < tol * umax) | (emax == 0.0)))
+
+
 def ref_status(g_ref: float, g_norm: float, met_tol: bool | None) -> str:
     """"ref-coarse" if the reference missed its tol or its own error G_ref exceeds
     REF_COARSE_FRACTION of the row's normalised G (a NaN G_ref alone is not enough:
@@ -158,12 +171,18 @@ def ref_status(g_ref: float, g_norm: float, met_tol: bool | None) -> str:
 
 def ref_columns(ref, points: np.ndarray, names, u_ref: np.ndarray, classes: np.ndarray, weights) -> dict:
     """The row columns of the reference's own error at a model's nodes for loads
-    ``names``: ``G_ref``, ``ref_error_max`` and ``ref_met_tol`` (the last only when the
-    reference says). Pair with :func:`ref_status` for the row's status."""
+    ``names``: ``G_ref``, ``ref_error_max``, ``ref_met_tol`` and ``ref_met_tol_body`` (the
+    last two only when the reference says whether it met its tol). ``ref_met_tol`` is
+    decided at the row's own points (:func:`met_tol_at` with the case's reference tol):
+    what a score needs, while the whole-body verdict ``ref.met_tol`` (over the probe
+    grid of the body: its largest estimate sits at clamped edges no model node may be
+    near) is ``ref_met_tol_body``. Pair with :func:`ref_status` for the row's status."""
     e = reference_error(ref, points, names)
     g, _ = g_ref_arrays(u_ref, e, classes, weights)
     out = {"G_ref": g, "ref_error_max": ref_error_max(u_ref, e)}
     met = reference_met_tol(ref)
     if met is not None:
-        out["ref_met_tol"] = met
+        tol = getattr(getattr(getattr(ref, "case", None), "reference", None), "tol", None)
+        out["ref_met_tol"] = met if tol is None else met_tol_at(u_ref, e, float(tol))
+        out["ref_met_tol_body"] = met
     return out
