@@ -74,6 +74,9 @@ class Discretisation:
         """K for per-element Voigt stiffness C (ne, nv, nv)."""
         nbf, dim = len(self.basis.basis), self.dim
         nl = nbf * dim
+        boxes = self._box_cells()
+        if boxes is not None:
+            return self._box_stiffness(C, boxes)
         K = sp.csr_matrix((self.ndof, self.ndof))
         for elems in self._chunks(nl):
             b = self._cell_basis(elems, self.q_stiff)
@@ -84,6 +87,48 @@ class Discretisation:
             Bw = B * b.dx[:, :, None, None]
             Ke = Bw.reshape(ne, nq * nv, nl).transpose(0, 2, 1) @ CB.reshape(ne, nq * nv, nl)
             K = K + _scatter(Ke, self.vector_dofs(b.element_dofs), self.ndof)
+        return K
+
+    def _box_cells(self) -> np.ndarray | None:
+        """Cell sizes (ne, dim) if every cell is an axis-aligned box whose vertices come
+        in the same order as cell 0's (a tensor mesh's quads or hexes), else None."""
+        if SIMPLEX[self.cell]:
+            return None
+        p = self.mesh.p[:, self.mesh.t]                       # dim, nv, ne
+        lo, hi = p.min(axis=1), p.max(axis=1)
+        h = (hi - lo).T
+        if not np.all(h > 0):
+            return None
+        tol = 1e-12 * h.T[:, None, :]
+        upper = np.abs(p - hi[:, None, :]) <= tol
+        if not np.all(upper | (np.abs(p - lo[:, None, :]) <= tol)) or not np.all(upper == upper[:, :, :1]):
+            return None
+        return h
+
+    def _box_stiffness(self, C: np.ndarray, h: np.ndarray) -> sp.csr_matrix:
+        """K on box cells: the gradient products G_pq[i, j] = int d_p phi_i d_q phi_j of
+        cell 0 scale to any other box as vol / (h_p h_q) (the same quadrature, so the same
+        matrix as the general loop to rounding, ~30x fewer flops), and
+        Ke[(i, a), (j, b)] = sum_pq Ct[a, p, b, q] G_pq[i, j] with Ct = S^T C S, S the
+        Voigt selector (eps_v = S[v, a, p] d_p u_a)."""
+        nbf, dim = len(self.basis.basis), self.dim
+        nl = nbf * dim
+        b = self._cell_basis(np.array([0]), self.q_stiff)
+        grad = np.stack([np.asarray(b.basis[a][0].grad)[:, 0] for a in range(nbf)])   # nbf, dim, nq
+        G0 = np.einsum("ipk,jqk,k->pqij", grad, grad, b.dx[0])
+        S = np.zeros((len(VOIGT[dim]), dim, dim))
+        for v, (i, j) in enumerate(VOIGT[dim]):
+            S[v, i, j] += 1.0
+            if i != j:
+                S[v, j, i] += 1.0
+        vol = np.prod(h, axis=1)
+        scale = (vol / vol[0])[:, None, None] * (h[0][:, None] * h[0][None, :]) / (h[:, :, None] * h[:, None, :])
+        K = sp.csr_matrix((self.ndof, self.ndof))
+        for elems in self._chunks(nl):
+            Ct = np.einsum("vap,evw,wbq->eabpq", S, C[elems], S) * scale[elems][:, None, None]
+            Ke = (Ct.reshape(-1, dim * dim) @ G0.reshape(dim * dim, nbf * nbf)).reshape(len(elems), dim, dim, nbf, nbf)
+            Ke = Ke.transpose(0, 3, 1, 4, 2).reshape(len(elems), nl, nl)
+            K = K + _scatter(Ke, self.vector_dofs(self.dofs.element_dofs[:, elems]), self.ndof)
         return K
 
     def scalar_mass(self, rho: np.ndarray) -> sp.csr_matrix:
