@@ -4,7 +4,10 @@ both with the constraints of harness.case.loads.modal_load (the B&C cases: the h
 ``sag``, x0 clamped). No fit uses the modes,
 so they show whether constants calibrated on static loads also give the body's dynamics:
 ``freq_error_heldout`` (fitted constants), ``freq_error_heldout_initial`` (the scaled
-ones), RMS relative error as in the sms stage, and ``f1_ratio``."""
+ones), RMS relative error as in the sms stage, ``f1_ratio``, and ``modes_unstable``: how
+many of the fitted model's first modes do not oscillate steadily (eigenvalue of M^-1 K
+non-real or <= 0; the element model is not conservative, so its K is not symmetric and
+that can happen; frequency Re sqrt(lambda) / 2 pi, 0 for lambda <= 0)."""
 
 from __future__ import annotations
 
@@ -13,7 +16,7 @@ import math
 import numpy as np
 
 from harness.case.loads import modal_load
-from harness.mechanics.modal import matrix_frequencies
+from harness.mechanics.modal import matrix_eigenvalues
 
 
 def rms_error(f, f_fem) -> float:
@@ -32,7 +35,10 @@ def heldout_modes(ref, case, masses, loads, Ks, theta_initial, theta_final) -> d
     first = modal_load(case).name
     f_fem = np.asarray(ref.frequencies(n, load=first), float)
     free = loads.free[loads.names.index(first)]
-    f0, f1 = (matrix_frequencies(sum(t * K for t, K in zip(theta, Ks)), masses, free, len(f_fem))
-              for theta in (theta_initial, theta_final))
+    lam0, lam1 = (matrix_eigenvalues(sum(t * K for t, K in zip(theta, Ks)), masses, free, len(f_fem))
+                  for theta in (theta_initial, theta_final))
+    f0, f1 = (np.sqrt(lam.astype(complex)).real / (2 * np.pi) for lam in (lam0, lam1))
+    lam1 = lam1.astype(complex)
+    unstable = int(np.sum((lam1.real <= 0) | (np.abs(lam1.imag) > 1e-8 * np.abs(lam1))))
     return {"freq_error_heldout_initial": rms_error(f0, f_fem), "freq_error_heldout": rms_error(f1, f_fem),
-            "f1_ratio": float(f1[0] / f_fem[0])}
+            "f1_ratio": float(f1[0] / f_fem[0]), "modes_unstable": unstable}
