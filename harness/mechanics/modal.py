@@ -69,4 +69,8 @@ def frequencies(network, case, n_modes: int = 6, load: str | None = None) -> np.
     from harness.mechanics.statics import fixed_mask
     lc = modal_load(case) if load is None else next(l for l in case.loads if l.name == load)
     free = ~fixed_mask(network.points, case, lc).ravel()
+    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
+        if np.any(np.asarray(network.masses) <= 0):
+            return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)
+        return matrix_frequencies(network.stiffness_matrix(), network.masses, free, n_modes)
     return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)

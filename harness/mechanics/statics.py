@@ -332,6 +332,8 @@ def _solve(network, case, loads=None) -> StaticsResult:
         raise ModelError("no load cases to solve", field="loads", fix="add [loads] set = 'basic2d' or [[loads.case]]")
     B = incidence(network.points, network.springs)
     K = stiffness_matrix(B, network.k)
+    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
+        K = (K + network.volume.stiffness_matrix(network.points)).tocsc()
     n, dim = network.points.shape
     us, fs, facs = [], [], {}
     for load in loads:

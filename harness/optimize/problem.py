@@ -81,14 +81,17 @@ class FitProblem:
     @classmethod
     def from_network(cls, points, springs, k0, free_masks, forces, u_ref, dof_weights, names,
                      groups=None, bounds=(1e-3, 1e3), masses=None, freq_target=None,
-                     freq_weight: float = 0.0, modal_free=None) -> "FitProblem":
+                     freq_weight: float = 0.0, modal_free=None, extra_columns=None) -> "FitProblem":
         """Build the blocks from a network: free_masks, forces, u_ref are (L, ndof) with
         dof = dim*node + component; dof_weights (ndof,). The frequency term is used when
         masses and freq_target are given (modal_free: (ndof,) bool, default the first
-        load's free dofs)."""
+        load's free dofs). ``extra_columns`` (ndof, m): more rank-one stiffness terms beside
+        the springs' (e.g. harness/models/volume.py's), their constants after the springs' in k0."""
         from harness.models.springs import incidence
         points = np.asarray(points, float)
         B = incidence(points, springs).tocsr()
+        if extra_columns is not None:
+            B = sp.hstack([B, sp.csr_matrix(extra_columns)]).tocsr()
         ndof = points.size
         free_masks = np.asarray(free_masks, bool).reshape(-1, ndof)
         forces = np.asarray(forces, float).reshape(-1, ndof)
