@@ -38,6 +38,13 @@ SMS = {
     "mesh": Field("str", None, doc="placement = 'mesh': a mesh file (relative to the case file) whose nodes and "
                                    "edges form the network; default: the body's own mesh"),
     "mesh_format": Field("str", None, doc="meshio format name or 'bc2000' for model.mesh; guessed if absent"),
+    "volume": Field("str", "none", choices=("none", "element", "shared"),
+                    doc="springs + volume (harness/models/volume.py): a volume energy (kv/2)(V - V0)^2/V0 per "
+                        "tetrahedron (2-D: triangle) of the model's cells, kv fitted with the springs, one per "
+                        "element or shared by the body; needs cells (placement mesh, random or lloyd)"),
+    "kv": Field("float", None, min=0, min_exclusive=True,
+                doc="initial volume constant (Pa; 2-D N/m); default: the material's bulk modulus beyond its "
+                    "Cauchy-ratio value, at least 5 % of it"),
 }
 
 # [model] kind = "bc2000": Bourguignon & Cani 2000 (harness/models/anisotropic.py,

@@ -39,6 +39,13 @@ Writes (and prints the table and a one-sentence verdict):
   error relative to the FEM's, fitted / held-out loads), ``reference_error`` (the FEM's
   own estimated error, relative), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
+  ``--model springs+volume`` (one kv per element) or ``springs+volume-shared`` (one kv for
+  the body) adds a volume energy E = kv/2 (V - V0)^2 / V0 per tetrahedron (2-D: triangle;
+  hexahedra and quads split, harness/models/volume.py), fitted with the springs, and the
+  JSON keys ``volume_indices`` (m, 4) (2-D: (m, 3)) node ids ordered so V0 > 0,
+  ``volume_rest`` (m) V0 in m^3 (2-D: m^2), ``volume_stiffness`` (m) kv in Pa = N/m^2
+  (2-D: N/m, unit thickness), ``volume_shared``; forces f = -kv (V - V0) / V0 dV/dx.
+  ``dt_stable`` then includes the (undamped) volume term.
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
   the rest length from the particle positions, so add the particles at ``particle_q``.
@@ -66,7 +73,8 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
               density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
               displacement error / RMS FEM displacement), reference_error (FEM's own, relative),
-              mass_residual, masses, units
+              mass_residual, masses, units; --model springs+volume adds volume_indices,
+              volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads), G_heldout, ref_error_max and ref_error_heldout (the
@@ -76,6 +84,8 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
+MODELS = ("springs", "springs+volume", "springs+volume-shared")     # [model] volume = none, element, shared
+VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -89,6 +99,9 @@ def add_arguments(p):
     p.add_argument("--method", choices=tuple(METHODS), default="lbfgs",
                    help="rule: initial constants only; sa: simulated annealing; lbfgs: adjoint gradient "
                         "(default); gauss-newton; equilibrium-gap: one linear least-squares solve")
+    p.add_argument("--model", choices=MODELS, default="springs",
+                   help="springs (default); springs+volume: plus a volume energy per tetrahedron (2-D: triangle) "
+                        "with its own fitted constant kv; springs+volume-shared: one kv for the whole body")
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
@@ -208,6 +221,7 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
             f'[reference]\nmodes = 0\ntol = {float(args.tol)!r}\nmax_refine = {int(args.max_refine)}\n'
             f'solver = "{args.solver}"\n{cell}'
             f'[model]\nkind = "sms"\nplacement = "mesh"\nmasses = "{args.masses}"\nstiffness = {json.dumps(rules)}\n'
+            f'volume = "{VOLUME[getattr(args, "model", "springs")]}"\n'
             f'[optimizer]\nmethod = "{method}"\n{opt}')
 
 
@@ -279,6 +293,9 @@ def _run(args, mesh, tmp: Path):
     tag = exported["stiffness"] if exported.get("optimizer", "none") == "none" else \
         f"{exported['stiffness']}-{exported['optimizer']}"
     net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
+    if (ctx.out_dir / f"volume-{tag}.npz").exists():       # springs + volume: the term beside the VTU
+        from harness.models.volume import load
+        net = load(ctx.out_dir / f"volume-{tag}.npz", net)
     if args.k_ratio is not None:
         capped = _capped_row(net, case, exported, args.k_ratio, args.damping_ratio)
         rows.append(capped)
@@ -315,7 +332,8 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     if np.all(net.masses > 0):
         for r, n in ((row, net), (out, capped)):
             kd = spring_damping(n.springs, n.k, n.masses, zeta)
-            r["dt_stable"] = stable_step(n.points, n.springs, n.k, n.masses, kd)["dt_stable"]
+            r["dt_stable"] = stable_step(n.points, n.springs, n.k, n.masses, kd,
+                                         volume=getattr(n, "volume", None))["dt_stable"]
     row["k_ratio"] = float(k.max() / np.median(k))
     return out
 
@@ -374,7 +392,8 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
     zeta = float(meta.pop("damping_ratio", 0.0))
     positive = bool(np.all(np.asarray(net.masses) > 0))
     kd = spring_damping(net.springs, k, net.masses, zeta) if positive else np.full(len(k), np.nan)
-    step = stable_step(net.points, net.springs, k, net.masses, kd) if positive else {}
+    vol = getattr(net, "volume", None)
+    step = stable_step(net.points, net.springs, k, net.masses, kd, volume=vol) if positive else {}
     data = {
         "units": {"length": "m", "mass": "kg", "time": "s", "spring_stiffness": "N/m (f = k (l - l0))",
                   "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
@@ -394,6 +413,12 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
         **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
     }
+    if vol is not None:     # springs + volume (harness/models/volume.py)
+        data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
+                             volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
+                                              "f = -kv (V - V0) / V0 dV/dx")
+        data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
+                    volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
     data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
     if not positive:
         data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"

@@ -36,16 +36,20 @@ def spring_damping(springs: np.ndarray, k: np.ndarray, masses: np.ndarray, zeta:
     return 2.0 * zeta * np.sqrt(np.asarray(k, float) * mu)
 
 
-def stable_step(points, springs, k, masses, kd=None) -> dict:
+def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
     """{"omega_max" (rad/s), "zeta_top", "dt_stable" (s), "dt_stable_float32" (s)} of the
-    free network (no constraints: the largest eigenvalue is a local, high mode)."""
+    free network (no constraints: the largest eigenvalue is a local, high mode); ``volume``:
+    a springs + volume model's VolumeTerm (harness/models/volume.py), undamped, adds to K."""
     points = np.asarray(points, float)
     m = np.repeat(np.asarray(masses, float), points.shape[1])
     if np.any(m <= 0):
         raise ModelError("the stable step needs positive masses", field="masses", fix="use --masses lumped")
     B = incidence(points, springs)
     s = sp.diags(1.0 / np.sqrt(m))
-    A = (s @ stiffness_matrix(B, k) @ s).tocsr()
+    K = stiffness_matrix(B, k)
+    if volume is not None:
+        K = K + volume.stiffness_matrix(points)
+    A = (s @ K @ s).tocsr()
     if A.shape[0] <= 300:
         lam, vec = np.linalg.eigh(A.toarray())
         lam, v = lam[-1], vec[:, -1]

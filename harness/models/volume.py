@@ -34,7 +34,7 @@ import scipy.sparse as sp
 from harness.errors import ModelError
 from harness.models.sms import SpringNetwork
 
-MODES = ("none", "element", "shared")     # [model] volume: no term, one kv per element, one per body
+MODES = ("none", "element", "shared")     # [model] volume (harness/case_sections.py): none, per element, per body
 
 
 def volumes(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -173,8 +173,8 @@ def simplices(cells, dim: int) -> np.ndarray:
             raise ModelError(f"volume term: cells of type '{ctype}' in a {dim}-D model", field="model.volume",
                              fix="use triangle/quad (2-D) or tetra/hexahedron (3-D) cells")
     if not out:
-        raise ModelError("volume term: the model has no cells (grid structures have none)", field="model.volume",
-                         fix="use placement = 'mesh', 'random' or 'lloyd' (Delaunay), or volume = 'none'")
+        raise ModelError("volume term: the model has no cells", field="model.volume",
+                         fix="use a placement with cells (grid, mesh, random, lloyd), or volume = 'none'")
     return np.concatenate(out)
 
 
@@ -210,4 +210,34 @@ def with_volume(net: SpringNetwork, mode: str, kv, elements=None) -> SpringNetwo
     vol = VolumeTerm.build(net.points, el, kv, shared=(mode == "shared"))
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     fields["info"] = MappingProxyType({**net.info, "volume": mode})
+    return SpringVolumeNetwork(**fields, volume=vol)
+
+
+def case_volume(net: SpringNetwork, case, spec: dict) -> SpringNetwork:
+    """The [model] table's volume term (``volume``, ``kv``) on a built network; errors name
+    the case file."""
+    if spec.get("volume", "none") == "none":
+        return net
+    kv = spec.get("kv") or initial_kv(case.material, case.dim)
+    try:
+        return with_volume(net, spec["volume"], kv)
+    except ModelError as exc:
+        if exc.file is None and getattr(case, "path", None) is not None:
+            exc.file = str(case.path)
+            exc.args = (str(exc),)
+        raise
+
+
+def save(path, net) -> None:
+    """The volume term of ``net`` as .npz (elements, V0, kv, shared) beside its VTU."""
+    v = net.volume
+    np.savez(path, elements=v.elements, V0=v.V0, kv=v.kv, shared=np.array(v.shared))
+
+
+def load(path, net: SpringNetwork) -> SpringNetwork:
+    """``net`` (read from a VTU) with the volume term saved by ``save``."""
+    d = np.load(path)
+    el = np.asarray(d["elements"], int)
+    vol = VolumeTerm(el, volumes(net.points, el), np.asarray(d["kv"], float), bool(d["shared"]))
+    fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     return SpringVolumeNetwork(**fields, volume=vol)

@@ -96,6 +96,10 @@ def run(case, ctx) -> list[dict]:
     t0 = time.perf_counter()
     ctx.status("building the spring/mass system")
     base = build_network(case, spec, seed=ctx.seed)
+    if spec["volume"] != "none":        # springs + volume (harness/models/volume.py)
+        from harness.models.volume import case_volume
+        base = case_volume(base, case, spec)
+        label += f"+volume-{spec['volume']}"
     build_seconds = time.perf_counter() - t0
     ctx.status("reference solve")
     ref, why = _reference(case, ctx)
@@ -106,6 +110,8 @@ def run(case, ctx) -> list[dict]:
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
+    if spec["volume"] != "none":
+        common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
     cauchy = case_report(case, spec)
@@ -136,6 +142,9 @@ def run(case, ctx) -> list[dict]:
                 arrays[f"u_ref_{n}"] = u_ref[i]
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
+        if getattr(net, "volume", None) is not None:    # the VTU holds the springs only
+            from harness.models.volume import save
+            save(ctx.file(f"volume-{tag}.npz"), net)
 
     rows, nets = [], {}
     for rule in spec["stiffness"]:
@@ -350,9 +359,12 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
         modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
         freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
                        freq_weight=run_["weight"], modal_free=modal_free)
-    problem = FitProblem.from_network(base.points, base.springs, base.k, free, forces,
+    k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
+    if getattr(base, "volume", None) is not None:    # springs + volume: [k, kv], columns beside B
+        k0, groups, extra = base.params(), base.param_groups(spec["grouped"]), base.volume.columns(base.points)
+    problem = FitProblem.from_network(base.points, base.springs, k0, free, forces,
                                       u_fit.reshape(len(names), -1), wdof, list(names),
-                                      groups=base.groups if spec["grouped"] else None, **freq_kw)
+                                      groups=groups, extra_columns=extra, **freq_kw)
     t0 = time.perf_counter()
     ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
     seed = int(base.info["seed"])
