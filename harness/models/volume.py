@@ -241,3 +241,12 @@ def load(path, net: SpringNetwork) -> SpringNetwork:
     vol = VolumeTerm(el, volumes(net.points, el), np.asarray(d["kv"], float), bool(d["shared"]))
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     return SpringVolumeNetwork(**fields, volume=vol)
+
+
+def effective_bulk_modulus(points, elements, u, p: float) -> float:
+    """p / (dV / V): the bulk modulus a body shows under a hydrostatic traction p n on its
+    whole surface (u (n, dim) its response; 2-D: the area modulus), with dV the linearised
+    change of the elements' total volume, sum_e grad V_e . u."""
+    e = oriented(points, elements)
+    dV = float(np.einsum("eid,eid->", volume_gradients(np.asarray(points, float), e), np.asarray(u, float)[e]))
+    return p / (dV / float(volumes(np.asarray(points, float), e).sum()))
