@@ -14,7 +14,7 @@ the 2-D spring constants).
 Forces f = -dE/dx = -kv (V - V0) / V0 grad V. The stiffness at x is
 kv / V0 (grad V grad V^T + (V - V0) hess V); at rest the second term vanishes, so the
 linearised term is rank one per element: K_v = C diag(kv) C^T with the column
-c_e = grad V_e / sqrt(V0_e) (dof = dim*node + component, as ``harness.springs``). The
+c_e = grad V_e / sqrt(V0_e) (dof = dim*node + component, as ``harness.models.springs``). The
 columns sit beside the spring incidence B, so statics and every optimiser (which only see
 K = B diag(k) B^T) take [B C] and [k, kv] unchanged: the adjoint gradient of G^2 is
 2 (c_e . lambda)(c_e . u) per load, SA's rank-one updates apply per element.
@@ -34,7 +34,7 @@ import scipy.sparse as sp
 from harness.errors import ModelError
 from harness.models.sms import SpringNetwork
 
-MODES = ("none", "element", "shared")     # [model] volume (harness/case_sections.py): none, per element, per body
+MODES = ("none", "element", "shared")     # [model] volume (harness/case/sections.py): none, per element, per body
 
 
 def volumes(x: np.ndarray, elements: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
 from harness.stages import bc2000_linear as linear
 from harness.stages.bc2000 import build
-from harness.modal_sms import matrix_eigenvalues, matrix_frequencies
+from harness.mechanics.modal import matrix_eigenvalues, matrix_frequencies
 from harness.stages.bc2000_modes import heldout_modes
 
 ROOT = Path(__file__).resolve().parents[2]

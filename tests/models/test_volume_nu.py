@@ -7,9 +7,9 @@ the closed form E / (3 (1 - 2 nu)) (its homogeneous solution is exact at the nod
 import numpy as np
 import pytest
 
-from harness import statics
-from harness.cases import load_case
-from harness.io_vtu import read_vtu
+from harness.mechanics import statics
+from harness.case.reader import load_case
+from harness.export.vtu import read_vtu
 from harness.models.volume import effective_bulk_modulus, load
 from harness.stages import StageContext
 from harness.stages import sms as stage

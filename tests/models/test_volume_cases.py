@@ -9,8 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from harness import cli, statics
-from harness.cases import load_case
+from harness import cli
+from harness.mechanics import statics
+from harness.case.reader import load_case
 from harness.errors import CaseError
 from harness.models.sms import build_network, model_spec
 from harness.models.volume import case_volume, volume_gradients
