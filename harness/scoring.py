@@ -182,7 +182,15 @@ def ref_columns(ref, points: np.ndarray, names, u_ref: np.ndarray, classes: np.n
     out = {"G_ref": g, "ref_error_max": ref_error_max(u_ref, e)}
     met = reference_met_tol(ref)
     if met is not None:
-        tol = getattr(getattr(getattr(ref, "case", None), "reference", None), "tol", None)
-        out["ref_met_tol"] = met if tol is None else met_tol_at(u_ref, e, float(tol))
+        out["ref_met_tol"] = met_tol_here(ref, u_ref, e)
         out["ref_met_tol_body"] = met
     return out
+
+
+def met_tol_here(ref, u_ref: np.ndarray, e: np.ndarray) -> bool | None:
+    """``ref_met_tol`` at the points of u_ref (L, n, dim) with estimates e (L, n):
+    :func:`met_tol_at` with the case's reference tol (the whole-body verdict if the
+    reference names no tol; None if it says nothing)."""
+    met = reference_met_tol(ref)
+    tol = getattr(getattr(getattr(ref, "case", None), "reference", None), "tol", None)
+    return met if met is None or tol is None else met_tol_at(u_ref, e, float(tol))

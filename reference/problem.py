@@ -8,7 +8,7 @@ import numpy as np
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from harness.case.loadsets import homogeneous_closed_form, stress_tensor
-from harness.case.parts import part_predicate
+from harness.case.parts import geometric_tol, part_predicate
 from reference import solvers
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs
@@ -29,7 +29,7 @@ def predicate(case, name: str, bbox, parts=None):
 def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), parts=None) -> np.ndarray:
     """The load's constrained dofs (and, on a cut box, the cut planes' dofs). A part may
     miss a cut box when its mirror image is in it."""
-    out = [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, _tol(bbox))] if mirror else []
+    out = [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, geometric_tol(bbox))] if mirror else []
     for c in load.constraints:
         dofs = d.part_dofs(predicate(case, c.part, bbox, parts), c.components)
         if len(dofs) == 0 and mirror:
@@ -44,10 +44,6 @@ def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), p
     except ModelError as exc:
         raise ModelError(exc.message, file=str(case.path), fix=exc.fix) from None
     return fixed
-
-
-def _tol(bbox) -> float:
-    return 1e-8 * float(np.linalg.norm(np.asarray(bbox[1]) - np.asarray(bbox[0])))
 
 
 def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror(),

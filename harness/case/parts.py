@@ -33,12 +33,21 @@ def parse_face_name(name: str, dim: int) -> list[tuple[int, int]] | None:
     return out
 
 
+RTOL = 1e-8   # a point is on a face or in a part within RTOL times the body's diagonal
+
+
+def geometric_tol(bbox, rtol: float = RTOL) -> float:
+    """The absolute distance within which a point counts as on a face or in a part."""
+    lo, hi = (np.asarray(b, float) for b in bbox)
+    return rtol * float(np.linalg.norm(hi - lo))
+
+
 def part_predicate(name: str, bbox: tuple[np.ndarray, np.ndarray],
                    user_parts: Mapping[str, tuple] | None = None,
-                   rtol: float = 1e-8) -> Callable[[np.ndarray], np.ndarray]:
+                   rtol: float = RTOL) -> Callable[[np.ndarray], np.ndarray]:
     """Predicate for the named part; raises KeyError for an unknown name."""
     lo, hi = (np.asarray(b, float) for b in bbox)
-    tol = rtol * float(np.linalg.norm(hi - lo))
+    tol = geometric_tol(bbox, rtol)
     if user_parts and isinstance(user_parts.get(name), GroupPart):
         return group_predicate(user_parts[name], tol)
     if user_parts and name in user_parts:
@@ -66,7 +75,7 @@ def part_exists(name: str, dim: int, user_parts: Mapping | None = None) -> bool:
 
 
 def classify_nodes(points: np.ndarray, bbox, boundary: np.ndarray | None = None,
-                   rtol: float = 1e-8) -> np.ndarray:
+                   rtol: float = RTOL) -> np.ndarray:
     """Node classes for the G weights: 0 inner, 1 border, 2 corner (DESIGN.md).
 
     ``points`` is (n, dim). A corner is a vertex of the bounding box; a border node
@@ -75,7 +84,7 @@ def classify_nodes(points: np.ndarray, bbox, boundary: np.ndarray | None = None,
     """
     points = np.asarray(points, float)
     lo, hi = (np.asarray(b, float) for b in bbox)
-    tol = rtol * float(np.linalg.norm(hi - lo))
+    tol = geometric_tol(bbox, rtol)
     on = (np.abs(points - lo) <= tol) | (np.abs(points - hi) <= tol)
     n_on = on.sum(axis=1)
     cls = np.zeros(len(points), int)
