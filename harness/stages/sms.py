@@ -29,6 +29,7 @@ import pandas as pd
 
 from harness.case.loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
+from harness.stages.sms_measures import engine_columns, error_modes, fem_frequencies, freq_error, model_frequencies
 
 NAME = "sms"
 
@@ -80,26 +81,45 @@ def model_label(spec, case) -> str:
 
 
 def run(case, ctx) -> list[dict]:
+    """The case's rows; with ``[model] classes``, each class's rows in turn (its files in
+    the sub-folder named after it)."""
+    import dataclasses
+    from harness.models.classes import class_spec
+    from harness.models.sms import model_spec
+    spec = model_spec(case)
+    classes = list(spec.get("classes") or ())
+    if not classes:
+        return _run(case, ctx, spec)
+    rows = []
+    for name in classes:
+        sub = dataclasses.replace(ctx, out_dir=ctx.out_dir / name)
+        rows += _run(case, sub, class_spec(spec, name))
+    return rows
+
+
+def _run(case, ctx, spec) -> list[dict]:
     from harness.mechanics import statics
     from harness.mechanics.homogenize import case_report
-    from harness.models.sms import build_network, model_spec
+    from harness.models.classes import build, class_of
     from harness.models.stiffness_rules import spring_constants
     from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
 
-    spec = model_spec(case)
+    p1 = bool(spec.get("p1"))
     opt = case.section("optimizer") or {}
     runs = optimiser_runs(case, opt)        # case mistakes first, before any solve
+    runs = [] if p1 else runs               # P1 has no constants to fit
     n_modes = _check_modes(case, opt)
     weights = case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
     label = model_label(spec, case)
     t0 = time.perf_counter()
-    ctx.status("building the spring/mass system")
-    base = build_network(case, spec, seed=ctx.seed)
-    if spec["volume"] != "none":        # springs + volume (harness/models/volume.py)
-        from harness.models.volume import case_volume
-        base = case_volume(base, case, spec)
+    ctx.status("building the spring/mass system" if not p1 else "building the P1 model")
+    base = build(case, spec, seed=ctx.seed)     # springs, + volume (harness/models/volume.py), or P1
+    if spec["volume"] != "none":
         label += f"+volume-{spec['volume']}"
+    if p1:
+        label = "p1-" + label
+    rules = ["p1"] if p1 else spec["stiffness"]
     build_seconds = time.perf_counter() - t0
     ctx.status("reference solve")
     ref, why = _reference(case, ctx)
@@ -110,11 +130,12 @@ def run(case, ctx) -> list[dict]:
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
+    common["model_class"] = class_of(spec)
     if spec["volume"] != "none":
         common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
-    cauchy = case_report(case, spec)
+    cauchy = None if p1 else case_report(case, spec)     # the springs' lattice; P1 has none
     if cauchy is not None:
         common.update(cauchy_misfit=cauchy["misfit"], cauchy_reachable=bool(cauchy["reachable"]),
                       cauchy_nu=cauchy["cauchy_nu"])
@@ -135,19 +156,20 @@ def run(case, ctx) -> list[dict]:
 
     def write(net, res, tag):
         from harness.export.vtu import write_vtu
-        write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
+        if not p1:      # a VTU holds springs; P1's are only its connectivity
+            write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
         if u_ref is not None:
             arrays = {"points": net.points, "springs": net.springs}
             for i, n in enumerate(res.names):
                 arrays[f"u_ref_{n}"] = u_ref[i]
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
-        if getattr(net, "volume", None) is not None:    # the VTU holds the springs only
+        if getattr(net, "volume", None) is not None and not p1:    # the VTU holds the springs only
             from harness.models.volume import save
             save(ctx.file(f"volume-{tag}.npz"), net)
 
     rows, nets = [], {}
-    for rule in spec["stiffness"]:
+    for rule in rules:
         t1 = time.perf_counter()
         net = base if rule == base.info["stiffness"] else base.with_k(
             spring_constants(rule, base.points, base.springs, base.cells, case.material), stiffness=rule)
@@ -165,7 +187,7 @@ def run(case, ctx) -> list[dict]:
         rows.append(row)
 
     optimize = _optimizer()
-    fem_f = _fem_frequencies(ref, n_modes, modal_load(case).name)
+    fem_f = fem_frequencies(ref, n_modes, modal_load(case).name)
     opt_nets, traces = {}, []
     start_row, start = rows[0], base
     if opt.get("start", "first") == "best" and u_ref is not None:
@@ -198,18 +220,21 @@ def run(case, ctx) -> list[dict]:
                 if held and ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
                     row["status"] = "ref-coarse"     # the held-out score is the reference's error too
 
-    freqs = _frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
-    m = _error_modes(opt, n_modes)
+    freqs = model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
+    m = error_modes(opt, n_modes)
+    all_nets = {**nets, **opt_nets}
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
+        if tag in all_nets:
+            row.update(engine_columns(all_nets[tag], p1))
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
             row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
-            row["freq_error_final"] = _freq_error(freqs[tag], freqs["fem"], m)
+            row["freq_error_final"] = freq_error(freqs[tag], freqs["fem"], m)
             start = row["stiffness"]         # the rule (an optimised row's start)
-            row["freq_error_initial"] = _freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
+            row["freq_error_initial"] = freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
             fitted = int(row.get("freq_modes", 0) or 0)     # modes the fit saw; the others are held out
             if len(freqs["fem"]) > fitted:
-                row["freq_error_heldout"] = _freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
+                row["freq_error_heldout"] = freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
     return rows
 
 
@@ -314,18 +339,6 @@ def _check_modes(case, opt) -> int:
                         file=_file(case), field="optimizer.frequency.modes",
                         fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes")
     return n
-
-
-def _error_modes(opt, n_modes) -> int:
-    """Modes in freq_error_*: the frequency term's count, else all computed ones."""
-    fq = opt.get("frequency")
-    return int(fq["modes"]) if fq else n_modes
-
-
-def _freq_error(f, f_fem, m) -> float:
-    """RMS relative error of the first m natural frequencies against the FEM ones."""
-    rel = np.asarray(f[:m], float) / np.asarray(f_fem[:m], float) - 1.0
-    return float(np.sqrt(np.mean(rel ** 2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
 
 
 def budget_label(options: dict) -> str:
@@ -453,35 +466,3 @@ def _trace_frame(trace, name):
         return df
     except (ValueError, TypeError):
         return None
-
-
-def _fem_frequencies(ref, n, load):
-    """The reference's first n natural frequencies (Hz) with the constraints of ``load``,
-    or None when it has none."""
-    if ref is None or n <= 0:
-        return None
-    try:
-        f = np.asarray(ref.frequencies(n, load=load), float)
-    except Exception:  # noqa: BLE001 - the reference's modal solve is optional here
-        return None
-    return f if len(f) else None
-
-
-def _frequencies(case, ctx, fem_f, nets, n):
-    """frequencies.csv: the first n SMS frequencies per model next to the FEM ones;
-    returns {column: frequencies}: 'fem' and one per rule or optimised model."""
-    if n <= 0:
-        return {}
-    from harness.mechanics.modal import frequencies
-    cols = {"mode": np.arange(1, n + 1)}
-    if fem_f is not None:
-        cols["fem"] = np.pad(fem_f, (0, max(n - len(fem_f), 0)), constant_values=np.nan)[:n]
-    for tag, net in nets.items():
-        try:
-            f = frequencies(net, case, n)
-            cols[tag] = np.pad(f, (0, n - len(f)), constant_values=np.nan)[:n]
-        except ModelError:
-            continue
-    if len(cols) > 1:
-        pd.DataFrame(cols).to_csv(ctx.file("frequencies.csv"), index=False)
-    return cols

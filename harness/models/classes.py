@@ -1,0 +1,45 @@
+"""Model classes an sms case can score on the same nodes (``[model] classes``, issue #15).
+
+Each class is one entry of CLASSES: the [model] keys it overrides and whether its
+stiffness is the P1 finite element one (harness/models/p1.py) instead of fitted springs.
+A new class is one entry here and its name in ``harness.case.sections.MODEL_CLASSES``.
+"""
+
+from __future__ import annotations
+
+from harness.case.sections import MODEL_CLASSES
+
+CLASSES = {
+    "springs": {"volume": "none"},                          # springs on the model's edges
+    "springs+volume": {"volume": "shared"},                 # + one volume constant per body
+    "springs+volume-element": {"volume": "element"},        # + one volume constant per element
+    "p1": {"volume": "none", "p1": True},                   # linear FEM on the same cells, no constants
+}
+
+if set(CLASSES) != set(MODEL_CLASSES):
+    raise ImportError(f"model classes {sorted(CLASSES)} and MODEL_CLASSES {sorted(MODEL_CLASSES)} differ")
+
+
+def class_spec(spec: dict, name: str) -> dict:
+    """The validated [model] table ``spec`` as model class ``name`` builds it."""
+    return {**spec, "p1": False, **CLASSES[name]}
+
+
+def class_of(spec: dict) -> str:
+    """The class name of a [model] table (its ``volume`` and ``p1``)."""
+    if spec.get("p1"):
+        return "p1"
+    return {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element"}[spec.get("volume", "none")]
+
+
+def build(case, spec: dict, seed: int = 0):
+    """The network of a class spec: springs (+ volume term) or P1 on the same nodes."""
+    from harness.models.sms import build_network
+    net = build_network(case, {k: v for k, v in spec.items() if k != "p1"}, seed=seed)
+    if spec.get("p1"):
+        from harness.models.p1 import with_p1
+        return with_p1(net, case.material)
+    if spec.get("volume", "none") != "none":
+        from harness.models.volume import case_volume
+        return case_volume(net, case, spec)
+    return net

@@ -1,0 +1,71 @@
+"""Measures of the sms stage's models beside G (harness/stages/sms.py): natural
+frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``), and what an
+engine needs to know (``k_spread``, ``dt_stable``)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from harness.errors import ModelError
+
+
+def engine_columns(net, p1: bool) -> dict:
+    """``k_spread`` (max / median spring constant; NaN for P1, which has none) and
+    ``dt_stable`` (s, the symplectic Euler limit of the free, undamped model,
+    harness.export.engine.stable_step; NaN without positive masses)."""
+    from harness.export.engine import stable_step
+    k = np.asarray(net.k, float)
+    out = {"k_spread": float(k.max() / np.median(k)) if not p1 and len(k) and np.median(k) > 0 else math.nan}
+    try:
+        out["dt_stable"] = stable_step(net.points, net.springs, net.k, net.masses,
+                                       volume=getattr(net, "volume", None))["dt_stable"]
+    except ModelError:
+        out["dt_stable"] = math.nan
+    return out
+
+
+def error_modes(opt, n_modes) -> int:
+    """Modes in freq_error_*: the frequency term's count, else all computed ones."""
+    fq = opt.get("frequency")
+    return int(fq["modes"]) if fq else n_modes
+
+
+def freq_error(f, f_fem, m) -> float:
+    """RMS relative error of the first m natural frequencies against the FEM ones."""
+    rel = np.asarray(f[:m], float) / np.asarray(f_fem[:m], float) - 1.0
+    return float(np.sqrt(np.mean(rel ** 2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
+
+
+def fem_frequencies(ref, n, load):
+    """The reference's first n natural frequencies (Hz) with the constraints of ``load``,
+    or None when it has none."""
+    if ref is None or n <= 0:
+        return None
+    try:
+        f = np.asarray(ref.frequencies(n, load=load), float)
+    except Exception:  # noqa: BLE001 - the reference's modal solve is optional here
+        return None
+    return f if len(f) else None
+
+
+def model_frequencies(case, ctx, fem_f, nets, n):
+    """frequencies.csv: the first n SMS frequencies per model next to the FEM ones;
+    returns {column: frequencies}: 'fem' and one per rule or optimised model."""
+    if n <= 0:
+        return {}
+    from harness.mechanics.modal import frequencies
+    cols = {"mode": np.arange(1, n + 1)}
+    if fem_f is not None:
+        cols["fem"] = np.pad(fem_f, (0, max(n - len(fem_f), 0)), constant_values=np.nan)[:n]
+    for tag, net in nets.items():
+        try:
+            f = frequencies(net, case, n)
+            cols[tag] = np.pad(f, (0, n - len(f)), constant_values=np.nan)[:n]
+        except ModelError:
+            continue
+    if len(cols) > 1:
+        pd.DataFrame(cols).to_csv(ctx.file("frequencies.csv"), index=False)
+    return cols
