@@ -295,12 +295,21 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
                "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
                markdown_table(opts)]
+    from harness.report.nu_sweep import sweep_frame, sweep_table
+    sweep = sweep_table(sweep_frame(df))
+    if not sweep.empty:
+        md += ["\n## Model classes against Poisson's ratio\n",
+               "Per body and nu, each model class's fitted row (`p1`: its only row, no constants): "
+               "`G_norm` on the fitted loads, `G_heldout` on the loads no fit saw; the classes share "
+               "nodes, masses, loads and reference. The frequency error, `k_spread` and `dt_stable` per "
+               "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n",
+               markdown_table(sweep)]
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
     atomic_write(md_path, "\n".join(md).encode())
     pngs = []
     if figures:
-        from harness.report.build import figures as figs
+        from harness.report import figures as figs
         for d in data_folders(suite_dir, manifests):
             pngs += figs.make_case_figures(d, redraw=redraw)
         pngs += figs.make_suite_figures(suite_dir)

@@ -59,7 +59,7 @@ def test_report_on_a_folder_without_results_is_one_line(tmp_path, capsys):
 
 
 def test_broken_data_file_is_a_warning_not_a_crash(tmp_path, capsys):
-    from harness.report.build import figures
+    from harness.report import figures
     (tmp_path / "trace.csv").write_text("not,a\ntrace,file\n")
     (tmp_path / "volume.csv").write_text("t,MS\n0,0\n1,-1\n")
     out = figures.make_case_figures(tmp_path)
@@ -101,7 +101,7 @@ def test_expect_ratio_only_for_ok_numeric_rows():
 
 
 def test_figures_are_redrawn_only_when_their_data_change(tmp_path):
-    from harness.report.build import figures
+    from harness.report import figures
     (tmp_path / "volume.csv").write_text("t,MS\n0,0\n1,-1\n")
     png = figures.make_case_figures(tmp_path)[0]
     t0 = png.stat().st_mtime_ns
