@@ -91,6 +91,7 @@ KINDS = [  # (file name pattern, caption of any figure of that kind)
     (r"fig-trace\.png", "G against optimiser steps (log axes)."),
     (r"fig-lloyd\.png", "Lloyd statistics against iterations (Deussen Fig. 2)."),
     (r"fig-lloyd-bars\.png", "G per Lloyd iteration count (Deussen Fig. 12), ours and the paper's trend."),
+    (r"fig-nu-sweep\.png", "Normalised G against Poisson's ratio per model class (fitted and held-out loads), Cauchy ratio marked."),
     (r"fig-volume\.png", "Relative volume variation against time (Bourguignon & Cani Fig. 3)."),
     (r"fig-spectrum\.png", "Natural frequencies of the models against the FEM."),
     (r"fig-anisotropy\.png", "Effective Young's modulus against pull direction (polar)."),

@@ -130,7 +130,7 @@ def _run(case, ctx, spec) -> list[dict]:
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
-    common["model_class"] = class_of(spec)
+    common.update(model_class=class_of(spec), nu=float(case.material.nu), dim=case.dim)
     if spec["volume"] != "none":
         common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
     if spec["placement"] == "lloyd":
