@@ -138,3 +138,39 @@ def test_extrapolation_recovers_a_known_expansion():
     ext, change, p = ie.extrapolate_levels(vals, ns)
     assert p == pytest.approx(2.6, abs=1e-6)
     assert np.abs(ext - u).max() < 1e-9
+
+
+def test_long_axes_grade_the_end_faces_like_the_short_ones():
+    """A 10:1 box: with ``long_axes`` the long axis's cells at its end face are those of the
+    short axes (same power zone, a third of the shortest side), its third is a node of
+    every level, cell sizes stay continuous where the power zone meets the stretch, and
+    axes no longer than the shortest side are unchanged (the cubes' truth is the same)."""
+    size = (10.0, 1.0, 1.0)
+    for n in (4, 8, 12, 16):
+        x, y, z = ie.quarter_mesh(size, n, 2.5, knot=0.75, long_axes=True)
+        assert len(x) - 1 == n + n // 2 and np.all(np.diff(x) > 0) and x[-1] == pytest.approx(5.0)
+        assert np.min(np.abs(x - 10 / 3)) < 1e-13                      # the scored third
+        k = 3 * n // 4
+        np.testing.assert_allclose(x[:k + 1], y[:k + 1], atol=1e-15)    # the face zone of the short axis
+        h = np.diff(x)
+        assert h[k] / h[k - 1] < (h[k - 1] / h[k - 2]) * 1.5            # no jump in cell size at the junction
+        old = ie.quarter_mesh(size, n, 2.5, knot=0.75)
+        assert all(np.array_equal(a, b) for a, b in zip((y, z), old[1:]))
+        assert x[1] < old[0][1] / 5                                     # the old long axis: 2.5x+ coarser
+    cube = (3.0, 3.0, 3.0)
+    assert all(np.array_equal(a, b) for a, b in zip(ie.quarter_mesh(cube, 8, 2.5, 0.75, True),
+                                                    ie.quarter_mesh(cube, 8, 2.5, 0.75)))
+    with pytest.raises(ValueError):
+        ie.quarter_mesh(size, 6, 2.5, knot=0.75, long_axes=True)      # n / 4 not whole: the stretch's end
+
+
+@pytest.mark.slow
+def test_long_axes_and_plain_truths_converge_to_the_same_field():
+    """Two mesh families of the independent solve, extrapolated, agree on a 4:1 box (a
+    Richardson extrapolant that depended on the family would not be the truth)."""
+    size = (4.0, 1.0, 1.0)
+    pts = np.stack(np.meshgrid(*[np.linspace(0, a, 4) for a in size], indexing="ij"), -1).reshape(-1, 3)
+    a, ca, pa = ie.extrapolated_shear(size, E, 0.49, S, pts, levels=(8, 12, 16), knot=0.75, long_axes=True)
+    b, cb, pb = ie.extrapolated_shear(size, E, 0.49, S, pts, levels=(8, 12, 16), knot=0.75)
+    scale = np.linalg.norm(a, axis=1).max()
+    assert np.linalg.norm(a - b, axis=1).max() < 2e-4 * scale
