@@ -25,25 +25,21 @@ lexicographically with x slowest (index = (ix ny + iy) nz + iz) and the three
 components are blocked: dof = component * N + node. The traction s e_x on z = c is
 s (m_x (x) m_y (x) e_last) in the x block, m_d = int X_i.
 
-Each Dirichlet condition fixes a component on a whole plane x, y or z = const, so every
-component's free dofs are a tensor product of per-axis free sets: K restricted to them is
-still a sum of Kronecker products, applied matrix-free for the large solves; its
-diagonal blocks K_aa = sum_d (mu + (lambda + mu) delta_ad) A_d (x) M (x) M (in position d)
-are inverted exactly by fast diagonalisation (A_d V = M_d V diag(l_d) per axis), which
-preconditions CG (block Jacobi over the components) with an iteration count that does
-not grow with the mesh (about 50 for rtol 1e-13; the true residual, checked, stalls near
-1e-10 at a million dofs). The scikit-fem assembly of the first version is kept as a
-cross-check (``quarter_shear_skfem``).
+Each Dirichlet condition fixes a component on a whole plane, so every component's free
+dofs are a tensor product of per-axis sets: K on them is still a sum of Kronecker
+products, applied matrix-free; its diagonal blocks K_aa = sum_d (mu + (lambda + mu)
+delta_ad) A_d (x) M (x) M (A_d in position d) are inverted exactly by fast
+diagonalisation (A_d V = M_d V diag(l_d) per axis): block-Jacobi-preconditioned CG, about
+50 iterations for rtol 1e-13 at any size (true residual, checked, near 1e-10 at a million
+dofs). ``quarter_shear_skfem``: the first version's scikit-fem assembly, a cross-check.
 
 Mesh: power grading (beta = 2.5) towards the faces x = 0, y = 0, z = 0 and z = c only
-(the symmetry planes are not graded; the product grades with beta = 3 towards every
-face). With ``knot = 0.75`` (n a multiple of 4) the points at thirds of the sides are
-nodes of every level, which the Richardson extrapolation of the 4 x 4 x 4 grid needs: on
-the sec6 cube (shear) the observed order is then 2.55-2.57 at n = 12..32 (the edges of
-the loaded face; 3.0-3.1 elsewhere) and the extrapolant of n = 16, 20, 24 is within 1e-6
-of max |u| of that of n = 24, 28, 32. Without the knot the order wanders between 1 and 4.
-``long_axes`` (a 10:1 box): see ``quarter_mesh``. ``extrapolate_levels``' change is blind
-at the point that fixes the order (both extrapolants agree there by construction).
+(the product grades with beta = 3 towards every face). ``knot = 0.75`` puts the thirds of
+the sides on nodes of every level (``extrapolated_shear``): on the sec6 cube's shear the
+order is then 2.55-2.57 at n = 12..32 (edges of the loaded face; 3.0-3.1 elsewhere), the
+extrapolant of n = 16, 20, 24 within 1e-6 of max |u| of that of n = 24, 28, 32.
+``long_axes`` (a 10:1 box): ``quarter_mesh``. ``extrapolate_levels``' change is blind at
+the point that fixes the order (both extrapolants agree there by construction).
 """
 
 from __future__ import annotations
@@ -68,10 +64,7 @@ ELEM_B = [[_F(-3, 6), _F(-4, 6), _F(1, 6)],            # int N_i' N_j dx (h-free
           [_F(-1, 6), _F(4, 6), _F(3, 6)]]
 ELEM_m = [_F(1, 6), _F(4, 6), _F(1, 6)]                 # int N_i dx / h
 
-_M = np.array(ELEM_M, float)
-_A = np.array(ELEM_A, float)
-_B = np.array(ELEM_B, float)
-_m = np.array(ELEM_m, float)
+_M, _A, _B, _m = (np.array(e, float) for e in (ELEM_M, ELEM_A, ELEM_B, ELEM_m))
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:
@@ -81,10 +74,7 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 def q2_nodes(vertices) -> np.ndarray:
     """The Q2 nodes of a 1-D mesh: the vertices and the cell midpoints, in order."""
     v = np.asarray(vertices, float)
-    out = np.empty(2 * len(v) - 1)
-    out[0::2] = v
-    out[1::2] = 0.5 * (v[:-1] + v[1:])
-    return out
+    return np.insert(v, np.arange(1, len(v)), 0.5 * (v[:-1] + v[1:]))
 
 
 def axis_matrices(vertices) -> dict:
@@ -292,9 +282,8 @@ class BoxProblem:
         return u.reshape((3,) + self.shape)
 
     def _E_nu(self):
-        lam, mu = self.lam, self.mu
-        nu = lam / (2 * (lam + mu))
-        return 2 * mu * (1 + nu), nu
+        nu = self.lam / (2 * (self.lam + self.mu))
+        return 2 * self.mu * (1 + nu), nu
 
 
 def basis_1d(nodes_vertices, x):
@@ -407,8 +396,7 @@ def quarter_shear(size, E: float, nu: float, s: float, n: int, points, beta: flo
 def _mirror(points, size):
     a, b, _ = size
     q = points.copy()
-    sx = q[:, 0] > a / 2
-    sy = q[:, 1] > b / 2
+    sx, sy = q[:, 0] > a / 2, q[:, 1] > b / 2
     q[sx, 0] = a - q[sx, 0]
     q[sy, 1] = b - q[sy, 1]
     return q, (sx, sy)
@@ -418,8 +406,7 @@ def _signs(vals, flip):
     sx, sy = flip
     vals = vals.copy()
     vals[sy, 1] *= -1
-    vals[sx, 1] *= -1
-    vals[sx, 2] *= -1
+    vals[sx, 1:] *= -1
     return vals
 
 
@@ -478,11 +465,10 @@ def shear_levels(size, E, nu, s, points, levels, beta: float = 2.5, knot: float 
 def extrapolated_shear(size, E, nu, s, points, levels=(6, 8, 10), beta: float = 2.5, knot: float | None = None,
                        long_axes: bool = False):
     """(extrapolated u (m, 3), its estimate (largest change of the extrapolant between the
-    last two pairs of levels, relative to max |u|), the observed order). With ``knot``
-    (e.g. 0.75, and every n a multiple of 4) the points at thirds of the sides are nodes
-    of every level, which makes the convergence regular (without it the points move
-    within their cells from level to level and the observed order on the 4 x 4 x 4 grid
-    wanders between 1 and 4 on the sec6 cube; with it, 2.56 at n = 12..24)."""
+    last two pairs of levels, relative to max |u|), the observed order). ``knot`` (e.g.
+    0.75, every n a multiple of 4): the thirds of the sides are nodes of every level, so
+    the convergence is regular (without it the points move within their cells and the
+    order on the sec6 cube's 4 x 4 x 4 grid wanders between 1 and 4; with it, 2.56)."""
     vals = [u for _, u, *_ in shear_levels(size, E, nu, s, points, levels, beta, knot, long_axes=long_axes)]
     return extrapolate_levels(vals, levels)
 
