@@ -64,6 +64,20 @@ def g_arrays(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, nam
                        MappingProxyType(dict(zip(names, per_norm.tolist()))), u.shape[1])
 
 
+def fit_and_heldout(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names, fit, heldout
+                    ) -> tuple[ScoreResult, ScoreResult | None]:
+    """Scores of u against u_ref (L, n, dim) over loads ``names`` kept apart: on the
+    fitted loads ``fit`` and on the held-out ones ``heldout`` (None when there are none),
+    the same weights (DESIGN.md, "Fitted and held-out loads")."""
+    names = list(names)
+    u_ref, u = np.asarray(u_ref, float), np.asarray(u, float)
+
+    def part(which):
+        idx = [names.index(n) for n in which]
+        return g_arrays(u_ref[idx], u[idx], classes, weights, list(which))
+    return part(fit), (part(heldout) if len(heldout) else None)
+
+
 def reference_displacements(ref, points: np.ndarray, names) -> np.ndarray:
     """(L, n, dim): the reference sampled at the node positions."""
     return np.array([ref.displacement(points, name) for name in names])

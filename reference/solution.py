@@ -27,7 +27,7 @@ from reference.fem import Discretisation
 from reference.levels import Levels, solve_graded
 from reference.locate import Locator
 from reference.mesh import MESHES
-from reference.problem import body_bbox, fixed_dofs, load_vector, solve_mesh, solve_system  # noqa: F401 - re-exported
+from reference.problem import body_bbox, fixed_dofs
 from reference.refine import solve_refined
 
 

@@ -8,7 +8,7 @@ dotted field and what is expected. Nothing here evaluates user text.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field as dc_field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 from harness.errors import CaseError, raise_all

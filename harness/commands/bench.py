@@ -5,7 +5,6 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-from harness.errors import SpringbenchError
 
 HELP = "run a benchmark (reference, sa, fit, dynamics, ...) and write results/bench/NAME.csv"
 
@@ -19,7 +18,7 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.bench import BENCHES
-    from harness.run.runner import DEFAULT_RESULTS
+    from harness.paths import DEFAULT_RESULTS
     from harness.outputs import atomic_write, check_out_dir, check_out_file
     out = args.out or DEFAULT_RESULTS / "bench"
     path = out / f"{args.name}.csv"

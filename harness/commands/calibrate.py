@@ -312,23 +312,17 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     import reference
     from harness.mechanics import statics
     from harness.export.engine import spring_damping, stable_step
-    from harness.scoring import case_weights, g_arrays, reference_displacements
+    from harness.scoring import case_weights, fit_and_heldout, reference_displacements
     k = np.asarray(net.k, float)
     capped = net.with_k(np.minimum(k, ratio * np.median(k)))
     ref = reference.solve(case)             # cached by the stage's solve
     res = statics.solve(capped, case)
-    names = list(res.names)
-    u_ref = reference_displacements(ref, capped.points, names)
-    u = np.asarray(res.u)
-    w = case_weights(case)
-
-    def g(load_names):
-        idx = [names.index(n) for n in load_names]
-        return g_arrays(u_ref[idx], u[idx], capped.classes, w, load_names).G_norm if idx else math.nan
+    u_ref = reference_displacements(ref, capped.points, res.names)
+    sc, sh = fit_and_heldout(u_ref, res.u, capped.classes, case_weights(case), res.names, case.fit_loads, case.heldout)
     out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed")}
     out.update(optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}", G_norm_initial=row.get("G_norm_final"),
-               G_norm_final=g(case.fit_loads), G_heldout=g(case.heldout), k_ratio=float(capped.k.max() / np.median(capped.k)),
-               _net=capped)
+               G_norm_final=sc.G_norm, G_heldout=sh.G_norm if sh else math.nan,
+               k_ratio=float(capped.k.max() / np.median(capped.k)), _net=capped)
     if np.all(net.masses > 0):
         for r, n in ((row, net), (out, capped)):
             kd = spring_damping(n.springs, n.k, n.masses, zeta)

@@ -44,7 +44,8 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.errors import SpringbenchError
-    from harness.run.runner import DEFAULT_RESULTS, DEFAULT_RUNS, run_suite
+    from harness.paths import DEFAULT_RESULTS, DEFAULT_RUNS
+    from harness.run.runner import run_suite
     results = args.results or DEFAULT_RUNS
     if args.mode != "full" and Path(results).resolve() == Path(DEFAULT_RESULTS).resolve():
         raise SpringbenchError("results/ holds the published --full run; a quick run would overwrite it",
@@ -53,7 +54,7 @@ def main(args) -> int:
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
                     scheduler=args.scheduler, force=args.force, figures=args.figures)
     import pandas as pd
-    from harness.report.build import headline_frame
+    from harness.report.frames import headline_frame
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from harness.io.meshfile import boundary_facets, read_groups, read_mesh  # noqa: F401  (read_groups re-exported)
+from harness.io.meshfile import boundary_facets, read_mesh
 
 HEX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
 BARY_TOL = 1e-9          # barycentric coordinates may be this far below 0 (rounding)

@@ -107,7 +107,6 @@ def node_classes(points: np.ndarray, body) -> np.ndarray:
     """0 inner, 1 border, 2 corner: corners are the body's vertices (rectangle/box/polygon)."""
     from harness.case.parts import classify_nodes
     if body.kind == "mesh":
-        from harness.geometry.bodies import BodyGeom  # noqa: F401
         return classify_nodes(points, body.bbox(), boundary=_mesh_boundary_nodes(body, len(points)))
     cls = np.where(body.on_boundary(points), 1, 0)
     c = body.corners

@@ -62,8 +62,7 @@ import re
 from pathlib import Path
 
 from harness.errors import SpringbenchError
-from harness.report.frames import (OPTIMIZER_COLUMNS, REF_COARSE, SCORED,  # noqa: F401  (re-exported)
-                                   headline_frame, optimizer_frame)
+from harness.report.frames import REF_COARSE, SCORED, optimizer_frame
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",

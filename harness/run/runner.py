@@ -39,9 +39,9 @@ from pathlib import Path
 from harness.errors import SpringbenchError
 from harness.run.execute import DaskSink, QueueSink, _ignore_sigint, _init_worker, execute
 from harness.run.jobs import Job, JobResult, _error_row, code_unchanged, plan
-from harness.paths import DEFAULT_CASES, DEFAULT_RESULTS, DEFAULT_RUNS, ROOT  # noqa: F401  (re-exported: commands, tests)
+from harness.paths import DEFAULT_RESULTS
 from harness.run.lock import clean_stale_scratch, run_lock
-from harness.run.store import _prune_seeds, atomic_write, read_result, result_path, store  # noqa: F401  (atomic_write re-exported)
+from harness.run.store import _prune_seeds, read_result, result_path, store
 
 DASK_CONNECT_TIMEOUT = "15s"
 

@@ -102,7 +102,7 @@ def _run(case, ctx, spec) -> list[dict]:
     from harness.mechanics.homogenize import case_report
     from harness.models.classes import build, class_of
     from harness.models.stiffness_rules import spring_constants
-    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
+    from harness.scoring import case_weights, fit_and_heldout, ref_columns, ref_status, reference_displacements
 
     p1 = bool(spec.get("p1"))
     opt = case.section("optimizer") or {}
@@ -149,9 +149,7 @@ def _run(case, ctx, spec) -> list[dict]:
         res = statics.solve(net, case)
         if u_ref is None:
             return res, None, None
-        u = np.asarray(res.u)
-        sc = g_arrays(u_ref[fit], u[fit], net.classes, weights, [names[i] for i in fit])
-        sh = g_arrays(u_ref[held], u[held], net.classes, weights, [names[i] for i in held]) if held else None
+        sc, sh = fit_and_heldout(u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout)
         return res, sc, sh
 
     def write(net, res, tag):

@@ -12,7 +12,8 @@ import pytest
 
 from harness import cli
 from harness.case.reader import load_case
-from harness.io.mesh_groups import GroupPart, group_predicate, read_groups
+from harness.io.mesh_groups import GroupPart, group_predicate
+from harness.io.meshfile import read_groups
 from harness.io.meshfile import read_mesh
 from harness.case.parts import part_predicate
 

@@ -3,7 +3,7 @@ module and against the statics of large grids under the standard stretch-x load.
 
 import numpy as np
 import pytest
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay
 
 from harness.mechanics import statics
 from harness.case.reader import Body, Case, Material

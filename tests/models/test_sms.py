@@ -2,7 +2,6 @@
 loads, mechanisms, modal analysis, VTU files, the build/score CLI and the sms stage.
 No FEM reference is needed: a closed-form stand-in replaces it where a test scores."""
 
-import textwrap
 
 import numpy as np
 import pytest

@@ -6,7 +6,6 @@ differences of G, and recovery of known constants from a synthetic reference."""
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
 

@@ -220,7 +220,7 @@ max_refine = 0
 def _manufactured(cell, order, n):
     """Unit square/cube, u_i = prod sin(pi x_k) (zero on the boundary), plane strain /
     3-D isotropic with Lame lam, mu; f = -(lam + mu) grad div u - mu lap u by hand."""
-    from reference.solution import solve_system
+    from reference.problem import solve_system
     lam, mu = 1.2, 0.8
     dim = 2 if cell in ("tri", "quad") else 3
     M = {"tri": skfem.MeshTri, "quad": skfem.MeshQuad, "tet": skfem.MeshTet, "hex": skfem.MeshHex}[cell]

@@ -5,8 +5,8 @@ import math
 import pandas as pd
 
 from harness import cli
-from harness.run import runner
-from harness.report.build import headline_frame
+from harness import paths
+from harness.report.frames import headline_frame
 
 
 def test_headline_picks_the_best_rule_and_fit_by_hand():
@@ -33,7 +33,7 @@ def test_run_prints_one_line_per_case(tmp_path, monkeypatch, capsys):
     import shutil
     from pathlib import Path
     root = Path(__file__).resolve().parents[2]
-    monkeypatch.setattr(runner, "DEFAULT_RUNS", tmp_path / "runs")
+    monkeypatch.setattr(paths, "DEFAULT_RUNS", tmp_path / "runs")
     monkeypatch.setenv("SPRINGBENCH_CACHE", str(tmp_path / "cache"))
     suite = tmp_path / "cases" / "v"
     suite.mkdir(parents=True)

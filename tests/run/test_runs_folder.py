@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from harness import cli
-from harness.run import runner
+from harness import paths
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -17,8 +17,8 @@ def folders(tmp_path, monkeypatch):
     published, runs = tmp_path / "results", tmp_path / "runs"
     published.mkdir()
     (published / "keep.txt").write_text("published")
-    monkeypatch.setattr(runner, "DEFAULT_RESULTS", published)
-    monkeypatch.setattr(runner, "DEFAULT_RUNS", runs)
+    monkeypatch.setattr(paths, "DEFAULT_RESULTS", published)
+    monkeypatch.setattr(paths, "DEFAULT_RUNS", runs)
     monkeypatch.setenv("SPRINGBENCH_CACHE", str(tmp_path / "cache"))
     case = tmp_path / "cases" / "plate_stress_tri.toml"
     case.parent.mkdir()

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from harness.mechanics import statics
 from harness.case.reader import Body, Case, Material
 from harness.geometry import grid_points
 from harness.mechanics.homogenize import boundary_share
