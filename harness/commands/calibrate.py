@@ -136,7 +136,8 @@ def add_arguments(p):
                    help="reference (FEM) error tolerance relative to the displacement scale (default 1e-3)")
     p.add_argument("--max-refine", dest="max_refine", type=int, default=1,
                    help="reference refinements at most (default 1; tri/tet meshes: 2-3 adaptive bisection "
-                        "steps each, within twice the mesh's dofs; quad/hex: uniform, x4-8 dofs; 0: no estimate)")
+                        "steps each, up to 200k dofs in 3-D, a mesh too large for that estimated from coarser meshes "
+                        "of its body; quad/hex: uniform, x4-8 dofs; 0: no estimate)")
     p.add_argument("--solver", choices=("auto", "direct", "amg", "cg"), default="auto",
                    help="FEM linear solver (default auto: sparse Cholesky or AMG, with fallbacks)")
     p.add_argument("--budget", type=float, default=60.0, help="optimiser wall-time budget in seconds (default 60)")
@@ -363,7 +364,7 @@ def _report(args, rows, net, case):
     held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
     fem = meta["reference_error"]
     fem = (f"FEM error <= {pct(fem)}" if fem is not None and math.isfinite(fem) else
-           "FEM error not estimated (no refinement: --max-refine 0, or the next level passes the dof budget)")
+           "FEM error not estimated (--max-refine 0, or no coarser mesh of the body could be made)")
     print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
           f"{fem}; the best stiffness rule ({best['stiffness']}) gave {pct(best.get('G_norm_final'))}.")
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
