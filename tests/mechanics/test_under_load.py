@@ -18,6 +18,7 @@ _WORK = """
 import sys, hashlib
 import numpy as np
 sys.path.insert(0, {tests!r})
+import conftest  # puts the tests' folders on the path
 from test_bc2000 import engines_models
 from test_determinism import _lattice
 from harness.mechanics.dynamics import simulate

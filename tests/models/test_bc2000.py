@@ -153,6 +153,7 @@ _CACHE_HISTORY = """
 import sys, hashlib
 import numpy as np
 sys.path.insert(0, {tests!r})
+import conftest  # puts the tests' folders on the path
 from test_bc2000 import engines_models
 from harness.mechanics.dynamics import simulate
 mesh, ld, dt, models = engines_models("hexa")

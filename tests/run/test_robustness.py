@@ -194,7 +194,7 @@ nu = 0.25
     assert case.name == payload and not marker.exists()
     # the loaders parse with tomllib only; nothing is evaluated or unpickled
     root = HERE.parent / "harness"
-    for f in ("cases.py", "schema.py", "case_sections.py"):
+    for f in ("case/reader.py", "case/schema.py", "case/sections.py"):
         src = (root / f).read_text()
         assert not re.search(r"\b(eval|exec|compile|__import__)\s*\(|pickle|yaml|import_module", src), f
 
