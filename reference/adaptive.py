@@ -24,7 +24,7 @@ happens to vanish), F Roache's factor of safety: 1.25 when three levels give the
 1 / (r^p - 1) amplified their erratic pointwise changes ~10x: on the B&C tetra cube_333
 shears the old estimate was 0.12-0.15 of max |u| where the true error, against an
 independent graded Q2 solve, is 0.012-0.014; over wide steps it is 1.3-2.7x the true
-error at the worst point and above it at every vertex (tests/test_adaptive.py checks a
+error at the worst point and above it at every vertex (tests/reference/test_adaptive.py checks a
 cube body the same way). On nested meshes a coarser level's field lies in the finest
 level's space, so both changes are kept as dof vectors of the finest mesh and the
 estimate is exact to evaluate at any point.
@@ -38,7 +38,7 @@ Galerkin orthogonality makes each the best approximation of the user's solution 
 Only the largest change follows the user's error (the coarse meshes' pointwise errors
 have their own pattern), so the estimate is that bound, uniform over the points
 (``Changes.uniform``). Measured against independent finer solves: a 2-D holed plate,
-1.5-4x the largest true error (tests/test_coarse.py); a 9k-tet cylinder (nu 0.45, sag,
+1.5-4x the largest true error (tests/reference/test_coarse.py); a 9k-tet cylinder (nu 0.45, sag,
 tip, torsion, levels of 1.9k and 4.5k dofs, against the 103k-dof adaptive solve, whose
 own error is not far below): 1.2-1.4x.
 """

@@ -12,7 +12,7 @@ sigma_load . n of a stress load, twists included), h the diameter (h / k for ele
 degree k, Melenk & Wohlmuth 2001) and c_T the smallest eigenvalue of the element's
 elastic tensor (Mandel form; 2 mu when isotropic), which puts eta^2 in energy units:
 sum eta_T^2 bounds the energy norm a(e, e) of the error up to a constant of the mesh
-shape (tests/test_adaptive.py: eta / |e|_a stays in 1..20 and constant under
+shape (tests/reference/test_adaptive.py: eta / |e|_a stays in 1..20 and constant under
 refinement). A component fixed at every vertex of an element or facet carries no
 residual there (the reaction balances it). On affine simplices sigma_h is linear (P2) or constant
 (P1) per element, so div sigma_h is constant: it is taken from sigma_h at the vertices.

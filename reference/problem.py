@@ -135,7 +135,7 @@ def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarra
     """The dof vector of a homogeneous stress load (``load.stress``, constraints at point
     parts) on a body of one elastic tensor: its exact solution is linear
     (harness.case.loadsets.homogeneous_closed_form), which the mesh represents exactly, so the
-    FEM would return it to rounding (tests/test_any_shape.py checks that it does).
+    FEM would return it to rounding (tests/case/test_any_shape.py checks that it does).
     None when the load or the material does not allow it: then it is solved."""
     if load.stress is None or not np.allclose(C, C[0], rtol=1e-12, atol=1e-12 * np.abs(C[0]).max()):
         return None

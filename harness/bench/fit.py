@@ -12,7 +12,7 @@ equilibrium-gap estimate alone, and the output-error optimisers started from it
 (init = "equilibrium-gap"), so the table shows what each part does. On these problems the
 reference comes from the same network, so the equation error has zero residual and the
 equilibrium-gap rows are its best case (one linear solve recovers k); against a FEM
-reference it is a different estimator and only a start point (tests/test_optimize.py,
+reference it is a different estimator and only a start point (tests/optimize/test_optimize.py,
 a noisy reference; calibrate falls back to the rule when it is worse).
 
 Noisy rows (``noise`` > 0): the same networks with the reference perturbed by Gaussian

@@ -100,7 +100,7 @@ LOADS = {
 }
 
 GRADED_LEVELS = 6   # default max_refine of the graded method: n = 2..8 cells per end zone, where a
-# cube's shears reach 7e-5 (tests/test_graded_vs_independent.py); the dof budget stops thin boxes earlier
+# cube's shears reach 7e-5 (tests/reference/test_graded_vs_independent.py); the dof budget stops thin boxes earlier
 
 REFERENCE = {
     "element": Field("str", "P2", choices=("P1", "P2")),
