@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-for folder in [HERE, *sorted(p for p in HERE.iterdir() if p.is_dir() and (p / "__init__.py").exists() is False
-                             and any(p.glob("test_*.py")))]:
+for folder in [HERE, *sorted(p for p in HERE.iterdir() if p.is_dir() and any(p.glob("test_*.py")))]:
     if str(folder) not in sys.path:
         sys.path.insert(0, str(folder))

@@ -28,52 +28,21 @@ description = "{description}, nu = {nu}"
 tags = ["nu_sweep", "{body}"]
 """
 
-HELD_3D = """heldout = ["sag", "tip", "torsion"]     # never fitted: G_heldout
+def held(dim: int, g: float, s: float, w: float = 0.0) -> str:
+    """The held-out loads, never fitted (G_heldout), the x0 end clamped: sag (gravity),
+    tip (an end traction) and, in 3-D, torsion (a twist about x)."""
+    def vec(*v):
+        return ", ".join(repr(x) for x in v[:dim])
+    clamp = '[[loads.case.constraint]]\npart = "x0"\ncomponents = "all"\n'
+    end = '[[loads.case.traction]]\npart = "x1"\n'
+    names = ["sag", "tip", "torsion"][:dim]
+    out = f'heldout = [{", ".join(chr(34) + n + chr(34) for n in names)}]     # never fitted: G_heldout\n'
+    out += f'\n[[loads.case]]\nname = "sag"\ngravity = [{vec(0.0, -g, 0.0)}]\n{clamp}'
+    out += f'\n[[loads.case]]\nname = "tip"\n{clamp}{end}vector = [{vec(0.0, -s, 0.0)}]\n'
+    if dim == 3:
+        out += f'\n[[loads.case]]\nname = "torsion"\n{clamp}{end}twist = [{vec(w, 0.0, 0.0)}]\n'
+    return out
 
-[[loads.case]]
-name = "sag"
-gravity = [0.0, -{g}, 0.0]
-[[loads.case.constraint]]
-part = "x0"
-components = "all"
-
-[[loads.case]]
-name = "tip"
-[[loads.case.constraint]]
-part = "x0"
-components = "all"
-[[loads.case.traction]]
-part = "x1"
-vector = [0.0, -{s}, 0.0]
-
-[[loads.case]]
-name = "torsion"
-[[loads.case.constraint]]
-part = "x0"
-components = "all"
-[[loads.case.traction]]
-part = "x1"
-twist = [{w}, 0.0, 0.0]
-"""
-
-HELD_2D = """heldout = ["sag", "tip"]     # never fitted: G_heldout
-
-[[loads.case]]
-name = "sag"
-gravity = [0.0, -{g}]
-[[loads.case.constraint]]
-part = "x0"
-components = "all"
-
-[[loads.case]]
-name = "tip"
-[[loads.case.constraint]]
-part = "x0"
-components = "all"
-[[loads.case.traction]]
-part = "x1"
-vector = [0.0, -{s}]
-"""
 
 FIT = """
 [optimizer]
@@ -90,20 +59,20 @@ BODIES = {
     "box": dict(dim=3, description="3-D box lattice 2 x 1 x 1, 5 x 3 x 3 grid with edge, face and body diagonals",
                 body='[body]\nshape = "box"\nsize = [2.0, 1.0, 1.0]\n',
                 material="E = 1000.0\ndensity = 1.0\n", loads='set = "homogeneous3d"\nmagnitude = 1.0\n',
-                held=HELD_3D.format(g=1.0, s=1.0, w=2.0),
+                held=held(3, g=1.0, s=1.0, w=2.0),
                 reference=("[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 0     # one graded level, no "
                            "estimate (rows ref-coarse): 5 s instead of 54 s\n\n[full.reference]\nmax_refine = 4\n"),
                 model='placement = "grid"\ngrid = [5, 3, 3]\nstructure = "edges+face+body"\nmasses = "voronoi"\n'),
     "cylinder": dict(dim=3, description="3-D gmsh tetrahedral cylinder r 0.1, length 0.5 (166 nodes, 477 tets)",
                      body='[body]\nshape = "mesh"\nfile = "cylinder.vtu"\n',
                      material="E = 1e5\ndensity = 1000.0\n", loads='set = "homogeneous3d"\nmagnitude = 100.0\n',
-                     held=HELD_3D.format(g=9.81, s=100.0, w=1000.0),
+                     held=held(3, g=9.81, s=100.0, w=1000.0),
                      reference="[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 0\n\n[full.reference]\nmax_refine = 2\n",
                      model='placement = "mesh"\nmasses = "lumped"\n'),
     "plate": dict(dim=2, description="2-D plane-stress plate 2 x 1, 9 x 5 grid with both diagonals (structure1)",
                   body='[body]\nshape = "rectangle"\nsize = [2.0, 1.0]\n',
                   material='E = 1000.0\ndensity = 1.0\nplane = "stress"\n',
-                  loads='set = "homogeneous2d"\nmagnitude = 1.0\n', held=HELD_2D.format(g=1.0, s=1.0),
+                  loads='set = "homogeneous2d"\nmagnitude = 1.0\n', held=held(2, g=1.0, s=1.0),
                   reference="[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 1\n\n[full.reference]\nmax_refine = 4\n",
                   model='placement = "grid"\ngrid = [9, 5]\nstructure = "structure1"\nmasses = "voronoi"\n'),
 }

@@ -93,7 +93,7 @@ def run(quick: bool = False) -> pd.DataFrame:
     try:
         import gmsh  # noqa: F401
     except ImportError:
-        return pd.DataFrame([dict(task="calibrate", note="skipped: gmsh not installed (pip install gmsh)")])
+        return pd.DataFrame([dict(task="calibrate", note="skipped: gmsh not installed (pip install 'springbench[bench]')")])
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
         tmp = Path(tmp)

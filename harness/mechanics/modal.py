@@ -15,12 +15,17 @@ from harness.models.springs import incidence, stiffness_matrix
 
 def frequencies_arrays(points, springs, k, masses, free: np.ndarray, n_modes: int = 6) -> np.ndarray:
     """First ``n_modes`` frequencies (Hz) on the free dofs (plain arrays)."""
+    K = stiffness_matrix(incidence(points, springs), k)
+    return matrix_frequencies(K, _positive(masses), free, n_modes)
+
+
+def _positive(masses) -> np.ndarray:
+    """The node masses, refused (one line) if any is <= 0: M would not be positive definite."""
     masses = np.asarray(masses, float)
     if np.any(masses <= 0):
         raise ModelError(f"{int(np.sum(masses <= 0))} nodes have masses <= 0, so M is not positive definite",
                          field="model.masses", fix="use masses = 'moments-nonneg', 'voronoi' or 'uniform'")
-    K = stiffness_matrix(incidence(points, springs), k)
-    return matrix_frequencies(K, masses, free, n_modes)
+    return masses
 
 
 def matrix_frequencies(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndarray:
@@ -70,7 +75,5 @@ def frequencies(network, case, n_modes: int = 6, load: str | None = None) -> np.
     lc = modal_load(case) if load is None else next(l for l in case.loads if l.name == load)
     free = ~fixed_mask(network.points, case, lc).ravel()
     if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
-        if np.any(np.asarray(network.masses) <= 0):
-            return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)
-        return matrix_frequencies(network.stiffness_matrix(), network.masses, free, n_modes)
+        return matrix_frequencies(network.stiffness_matrix(), _positive(network.masses), free, n_modes)
     return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)
