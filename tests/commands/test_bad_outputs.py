@@ -22,32 +22,24 @@ HERE = Path(__file__).resolve().parents[1]   # tests/
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 from fs_faults import disk_full, read_only  # noqa: E402
+from plate_case import plate_case  # noqa: E402
 from test_runner import fake, write_case  # noqa: E402,F401  (fixture: the fake stage)
 
 from harness import cli  # noqa: E402
 
-CASE = """name = "tiny"
-dim = 2
-[body]
-shape = "rectangle"
-size = [2.0, 1.0]
-[material]
-E = 1000.0
-nu = 0.3
-[loads]
-set = "basic2d"
-[reference]
-cell = "tri"
-divisions = 2
-max_refine = 1
-tol = 0.1
-modes = 0
-[model]
-kind = "sms"
-placement = "grid"
-grid = [3, 3]
-structure = "edges+diagonal"
-"""
+CASE = plate_case("tiny", """
+    [reference]
+    cell = "tri"
+    divisions = 2
+    max_refine = 1
+    tol = 0.1
+    modes = 0
+    [model]
+    kind = "sms"
+    placement = "grid"
+    grid = [3, 3]
+    structure = "edges+diagonal"
+    """)
 
 
 def cube_tets(n: int = 2):

@@ -25,27 +25,13 @@ FAKE = "test_runner_fakestages"
 from harness import cli, stages as stage_registry  # noqa: E402
 from harness.report.build import TIMING  # noqa: E402
 from harness.run.runner import run_suite  # noqa: E402
-
-CASE = """name = "{name}"
-dim = 2
-description = "{desc}"
-tags = {tags}
-[body]
-shape = "rectangle"
-size = [2.0, 1.0]
-[material]
-E = 1000.0
-nu = 0.3
-[loads]
-set = "basic2d"
-{extra}
-"""
+from plate_case import plate_case  # noqa: E402
 
 
 def write_case(folder: Path, name: str, desc: str = "", extra: str = "", tags=(), file=None) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     p = folder / (file or f"{name}.toml")
-    p.write_text(CASE.format(name=name, desc=desc, extra=extra, tags=json.dumps(list(tags))))
+    p.write_text(plate_case(name, top=f'description = "{desc}"\ntags = {json.dumps(list(tags))}', loads=extra))
     return p
 
 

@@ -2,26 +2,14 @@
 reference cache, the second warm and with two workers, write the same summary.csv in
 every column that is not a timing (nor ``cached``, which says which run was cold)."""
 
-import textwrap
-
 import pandas as pd
 import pytest
 
 from harness import cli
 from harness.report.build import TIMING
+from plate_case import plate_case
 
-CASE = """
-name = "{name}"
-dim = 2
-[body]
-shape = "rectangle"
-size = [2.0, 1.0]
-[material]
-E = 1000.0
-nu = 0.3
-[loads]
-set = "basic2d"
-heldout = ["shear-y"]
+TABLES = """
 [reference]
 divisions = 4
 max_refine = 1
@@ -43,14 +31,16 @@ options = {{ maxiter = 60 }}
 """
 
 
+def case(name: str, placement: str, model: str) -> str:
+    return plate_case(name, TABLES.format(placement=placement, model=model), loads='heldout = ["shear-y"]')
+
+
 @pytest.mark.slow
 def test_two_runs_write_the_same_table(tmp_path, monkeypatch):
     suite = tmp_path / "cases" / "tiny"
     suite.mkdir(parents=True)
-    (suite / "grid.toml").write_text(textwrap.dedent(CASE.format(
-        name="grid", placement="grid", model='grid = [5, 3]\nstructure = "structure1"')))
-    (suite / "lloyd.toml").write_text(textwrap.dedent(CASE.format(
-        name="lloyd", placement="lloyd", model="n_points = 14\nlloyd_iterations = 5")))
+    (suite / "grid.toml").write_text(case("grid", "grid", 'grid = [5, 3]\nstructure = "structure1"'))
+    (suite / "lloyd.toml").write_text(case("lloyd", "lloyd", "n_points = 14\nlloyd_iterations = 5"))
     monkeypatch.setenv("SPRINGBENCH_CACHE", str(tmp_path / "cache"))      # empty: the first run is cold
     tables = []
     for out, jobs in (("a", "1"), ("b", "2")):

@@ -2,8 +2,6 @@
 the optimiser, G is on the fitted loads and G_heldout on the held-out ones, both
 recomputed here from the stored displacements."""
 
-import textwrap
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -13,24 +11,14 @@ from harness.export.vtu import read_vtu
 from harness.optimize import problem as fit_problem
 from harness.stages import StageContext
 from harness.stages import sms as stage
+from plate_case import plate_case
 
 WEIGHTS = (1.0, 3.0, 15.0)
 
 
 def case(tmp_path):
     p = tmp_path / "h.toml"
-    p.write_text(textwrap.dedent(f"""
-        name = "held"
-        dim = 2
-        [body]
-        shape = "rectangle"
-        size = [2.0, 1.0]
-        [material]
-        E = 1000.0
-        nu = 0.3
-        [loads]
-        set = "basic2d"
-        heldout = ["shear-y", "stretch-y"]
+    p.write_text(plate_case("held", f"""
         [reference]
         divisions = 4
         max_refine = 1
@@ -46,7 +34,7 @@ def case(tmp_path):
         [optimizer]
         method = "lbfgs"
         options = {{ maxiter = 40 }}
-        """))
+        """, loads='heldout = ["shear-y", "stretch-y"]'))
     return load_case(p)
 
 
