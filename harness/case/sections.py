@@ -17,7 +17,7 @@ MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 # [model] classes: the model classes one sms case scores on the same nodes (issue #15);
 # harness/models/classes.py implements each (its CLASSES must hold exactly these names)
-MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1")
+MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt")
 
 SMS = {
     "placement": Field("str", "grid", choices=PLACEMENTS,
@@ -48,7 +48,8 @@ SMS = {
     "classes": Field("strs", (), choices=MODEL_CLASSES,
                      doc="score several model classes on the same nodes, one after the other: springs, "
                          "springs+volume (volume = 'shared'), springs+volume-element, p1 (linear FEM on the "
-                         "model's cells, no free constants); overrides volume; rows carry model_class"),
+                         "model's cells, no free constants), mt (Bourguignon & Cani's element model on the "
+                         "model's cells, 3-D); overrides volume; rows carry model_class"),
     "kv": Field("float", None, min=0, min_exclusive=True,
                 doc="initial volume constant (Pa; 2-D N/m); default: the material's bulk modulus beyond its "
                     "Cauchy-ratio value, at least 5 % of it"),

@@ -39,7 +39,8 @@ def spring_damping(springs: np.ndarray, k: np.ndarray, masses: np.ndarray, zeta:
 def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
     """{"omega_max" (rad/s), "zeta_top", "dt_stable" (s), "dt_stable_float32" (s)} of the
     free network (no constraints: the largest eigenvalue is a local, high mode); ``volume``:
-    a springs + volume model's VolumeTerm (harness/models/volume.py), undamped, adds to K."""
+    a springs + volume model's VolumeTerm (harness/models/volume.py), undamped, adds to K
+    (a non-symmetric term by its symmetric part)."""
     points = np.asarray(points, float)
     m = np.repeat(np.asarray(masses, float), points.shape[1])
     if np.any(m <= 0):
@@ -49,6 +50,8 @@ def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
     K = stiffness_matrix(B, k)
     if volume is not None:
         K = K + volume.stiffness_matrix(points)
+        if not getattr(volume, "symmetric", True):    # B&C's elements (harness/models/mt.py): the
+            K = 0.5 * (K + K.T)                       # symmetric part, as mechanics.dynamics.stable_step
     A = (s @ K @ s).tocsr()
     if A.shape[0] <= 300:
         lam, vec = np.linalg.eigh(A.toarray())

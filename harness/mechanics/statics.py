@@ -259,6 +259,11 @@ MULTIFRONTAL_MIN = 20_000   # free dofs from which a 3-D network is factorised b
 # Cholesky (harness/linalg/multifrontal.py): SuperLU took 15 s per load set on a 50k-tet mesh
 
 
+def _symmetric(K, rtol: float = 1e-12) -> bool:
+    """K equals K^T to rounding (a Cholesky reads one triangle: harness/models/mt.py's K is not symmetric)."""
+    return abs(K - K.T).max() <= rtol * max(abs(K).max(), 1e-300)
+
+
 class _Factor:
     def __init__(self, K, free_dofs, points, name):
         self.K = K
@@ -266,7 +271,7 @@ class _Factor:
         if np.any(d <= 0):
             _mechanism(K, free_dofs, points, name)
         self.lu = None
-        if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN:
+        if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K):   # else LU (B&C's MT)
             from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
             try:

@@ -1,7 +1,8 @@
 """Model classes an sms case can score on the same nodes (``[model] classes``, issue #15).
 
 Each class is one entry of CLASSES: the [model] keys it overrides and whether its
-stiffness is the P1 finite element one (harness/models/p1.py) instead of fitted springs.
+stiffness is the P1 finite element one (harness/models/p1.py) or Bourguignon & Cani's
+element model (harness/models/mt.py) instead of fitted springs.
 A new class is one entry here and its name in ``harness.case.sections.MODEL_CLASSES``.
 """
 
@@ -14,6 +15,7 @@ CLASSES = {
     "springs+volume": {"volume": "shared"},                 # + one volume constant per body
     "springs+volume-element": {"volume": "element"},        # + one volume constant per element
     "p1": {"volume": "none", "p1": True},                   # linear FEM on the same cells, no constants
+    "mt": {"volume": "none", "mt": True},                   # Bourguignon & Cani's elements (harness/models/mt.py)
 }
 
 if set(CLASSES) != set(MODEL_CLASSES):
@@ -22,23 +24,35 @@ if set(CLASSES) != set(MODEL_CLASSES):
 
 def class_spec(spec: dict, name: str) -> dict:
     """The validated [model] table ``spec`` as model class ``name`` builds it."""
-    return {**spec, "p1": False, **CLASSES[name]}
+    return {**spec, "p1": False, "mt": False, **CLASSES[name]}
 
 
 def class_of(spec: dict) -> str:
     """The class name of a [model] table (its ``volume`` and ``p1``)."""
     if spec.get("p1"):
         return "p1"
+    if spec.get("mt"):
+        return "mt"
     return {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element"}[spec.get("volume", "none")]
 
 
 def build(case, spec: dict, seed: int = 0):
-    """The network of a class spec: springs (+ volume term) or P1 on the same nodes."""
+    """The network of a class spec: springs (+ volume term), P1 or MT on the same nodes."""
     from harness.models.sms import build_network
-    net = build_network(case, {k: v for k, v in spec.items() if k != "p1"}, seed=seed)
+    net = build_network(case, {k: v for k, v in spec.items() if k not in ("p1", "mt")}, seed=seed)
     if spec.get("p1"):
         from harness.models.p1 import with_p1
         return with_p1(net, case.material)
+    if spec.get("mt"):
+        from harness.errors import ModelError
+        from harness.models.mt import with_mt
+        try:
+            return with_mt(net, case.material)
+        except ModelError as exc:      # name the case file
+            if exc.file is None and getattr(case, "path", None) is not None:
+                exc.file = str(case.path)
+                exc.args = (str(exc),)
+            raise
     if spec.get("volume", "none") != "none":
         from harness.models.volume import case_volume
         return case_volume(net, case, spec)

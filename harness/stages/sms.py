@@ -104,22 +104,26 @@ def _run(case, ctx, spec) -> list[dict]:
     from harness.models.stiffness_rules import spring_constants
     from harness.scoring import case_weights, fit_and_heldout, ref_columns, ref_status, reference_displacements
 
-    p1 = bool(spec.get("p1"))
+    from harness.stages import sms_mt
+    p1, mt = bool(spec.get("p1")), bool(spec.get("mt"))
     opt = case.section("optimizer") or {}
     runs = optimiser_runs(case, opt)        # case mistakes first, before any solve
-    runs = [] if p1 else runs               # P1 has no constants to fit
+    runs = [] if p1 else sms_mt.runs(runs) if mt else runs     # P1 has no constants; MT: its own fit
+    skip = sms_mt.skip_row(case, model_label(spec, case)) if mt else None
+    if skip:
+        return [skip]                       # 2-D: B&C have no element
     n_modes = _check_modes(case, opt)
     weights = case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
     label = model_label(spec, case)
     t0 = time.perf_counter()
-    ctx.status("building the spring/mass system" if not p1 else "building the P1 model")
-    base = build(case, spec, seed=ctx.seed)     # springs, + volume (harness/models/volume.py), or P1
+    ctx.status("building the P1 model" if p1 else "building the MT model" if mt else "building the spring/mass system")
+    base = build(case, spec, seed=ctx.seed)     # springs, + volume (harness/models/volume.py), P1 or MT
     if spec["volume"] != "none":
         label += f"+volume-{spec['volume']}"
-    if p1:
-        label = "p1-" + label
-    rules = ["p1"] if p1 else spec["stiffness"]
+    if p1 or mt:
+        label = ("p1-" if p1 else "mt-") + label
+    rules = ["p1"] if p1 else ["mt"] if mt else spec["stiffness"]
     build_seconds = time.perf_counter() - t0
     ctx.status("reference solve")
     ref, why = _reference(case, ctx)
@@ -135,7 +139,7 @@ def _run(case, ctx, spec) -> list[dict]:
         common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
-    cauchy = None if p1 else case_report(case, spec)     # the springs' lattice; P1 has none
+    cauchy = None if p1 or mt else case_report(case, spec)     # the springs' lattice; P1 and MT have none
     if cauchy is not None:
         common.update(cauchy_misfit=cauchy["misfit"], cauchy_reachable=bool(cauchy["reachable"]),
                       cauchy_nu=cauchy["cauchy_nu"])
@@ -154,7 +158,9 @@ def _run(case, ctx, spec) -> list[dict]:
 
     def write(net, res, tag):
         from harness.export.vtu import write_vtu
-        if not p1:      # a VTU holds springs; P1's are only its connectivity
+        if mt:          # theta and the element constants; the springs are only its connectivity
+            sms_mt.save(ctx.file(f"mt-{tag}.npz"), net)
+        elif not p1:    # a VTU holds springs; P1's are only its connectivity
             write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
         if u_ref is not None:
             arrays = {"points": net.points, "springs": net.springs}
@@ -162,7 +168,7 @@ def _run(case, ctx, spec) -> list[dict]:
                 arrays[f"u_ref_{n}"] = u_ref[i]
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
-        if getattr(net, "volume", None) is not None and not p1:    # the VTU holds the springs only
+        if getattr(net, "volume", None) is not None and not p1 and not mt:    # the VTU holds the springs only
             from harness.models.volume import save
             save(ctx.file(f"volume-{tag}.npz"), net)
 
@@ -175,7 +181,7 @@ def _run(case, ctx, spec) -> list[dict]:
         res, sc, sh = evaluate(net)
         write(net, res, rule)
         row = {**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
-               "seconds": build_seconds + time.perf_counter() - t1}
+               "seconds": build_seconds + time.perf_counter() - t1, **(sms_mt.constants(net) if mt else {})}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
                        G_s_initial=sc.G_s, G_s_final=sc.G_s, **_per_load(sc, sh), **_heldout(sh))
@@ -193,8 +199,9 @@ def _run(case, ctx, spec) -> list[dict]:
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
-            row, net, trace = _optimise(case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label,
-                                        common, start_row, evaluate, write, fem_f)
+            row, net, trace = (sms_mt.optimise if mt else _optimise)(
+                case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label, common, start_row,
+                evaluate, write, fem_f)
             rows.append(row)
             opt_nets[row["_tag"]] = net
             if trace is not None:

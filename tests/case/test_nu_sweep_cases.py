@@ -2,6 +2,7 @@
 _generate.py writes (no hand edits drift), one per body and nu, and each is a valid case."""
 
 import importlib.util
+import json
 
 from harness.case.reader import load_case
 from harness.paths import ROOT
@@ -26,4 +27,5 @@ def test_case_files_are_the_generators_output_and_valid():
             assert p.read_text() == gen.case_text(body, nu), p.name
             case = load_case(p)
             assert case.material.nu == nu and case.heldout and set(case.fit_loads).isdisjoint(case.heldout)
-            assert list(case.section("model")["classes"]) == ["springs", "springs+volume", "p1"]
+            assert list(case.section("model")["classes"]) == json.loads(gen.CLASSES)
+    assert json.loads(gen.CLASSES) == ["springs", "springs+volume", "p1", "mt"]

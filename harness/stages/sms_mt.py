@@ -1,0 +1,84 @@
+"""The sms stage's rows of model class "mt" (Bourguignon & Cani's element model,
+harness/models/mt.py): its three constants theta (axial, angular, volume; Pa) fitted on
+the case's fitted loads by the B&C suite's own least squares in log theta
+(harness/stages/bc2000_linear.fit: scipy trf, finite-difference Jacobian), because its
+linearised stiffness is not symmetric and the optimisers of harness/optimize assume
+K = B diag(k) B^T. The case's [optimizer] runs with the G objective become this one fit
+(``optimizer`` = "least-squares"); frequency-objective runs have no MT counterpart. A 2-D
+case gets one row with status "skip" and the reason in ``note``."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from harness.models.mt import PARAMS, unsupported
+
+METHOD = "least-squares"
+BUDGET = "max_nfev=200"          # bc2000_linear.fit's budget
+
+
+def skip_row(case, label: str) -> dict | None:
+    """The row of a case the class has no model for (2-D), or None."""
+    why = unsupported(case.dim)
+    if why is None:
+        return None
+    return {"case": case.name, "model": f"mt-{label}", "model_class": "mt", "nu": float(case.material.nu),
+            "dim": case.dim, "stiffness": "mt", "optimizer": "none", "status": "skip", "note": why}
+
+
+def runs(case_runs: list) -> list:
+    """The class's fit runs: one least-squares fit if the case fits G at all."""
+    if not any(r["objective"] == "G" for r in case_runs):
+        return []
+    return [dict(method=METHOD, options={}, objective="G", where="optimizer.method")]
+
+
+def fit_theta(base, case, u_ref, names, fit, weights):
+    """theta fitted on the loads ``fit`` (indices of ``names``) and the fit's G before/after."""
+    from harness.mechanics import statics
+    from harness.scoring import node_weights
+    from harness.stages import bc2000_linear as linear
+    _, free, forces = statics.all_load_arrays(base, case)
+    loads = linear.Loads([names[i] for i in fit], free[fit], forces[fit])
+    term = base.volume
+    return linear.fit(list(term.units), term.kv, u_ref[fit], loads, node_weights(base.classes, weights))
+
+
+def optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label, common, first, evaluate,
+             write, fem_f):
+    """The fitted row (the signature of harness.stages.sms._optimise)."""
+    ctx.status(f"mt: fitting {', '.join(PARAMS)} ({METHOD})")
+    t0 = time.perf_counter()
+    theta, g0, g1 = fit_theta(base, case, u_ref, names, fit, weights)
+    seconds = time.perf_counter() - t0
+    net = base.with_k(np.concatenate([base.k, theta]), stiffness=f"mt+{METHOD}")
+    res, sc, sh = evaluate(net)
+    tag = f"mt-{METHOD}"
+    write(net, res, tag)
+    row = {**common, "model": f"{label}[mt]", "stiffness": "mt", "optimizer": METHOD, "grouped": False,
+           "seconds": seconds, "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
+           "G_s_initial": first.get("G_s_initial", math.nan), "G_final": sc.G, "G_norm_final": sc.G_norm,
+           "G_s_final": sc.G_s, "G_final_optimizer": g1, "objective": "G", "budget": BUDGET,
+           "n_params": len(theta), "_tag": tag}
+    row.update({f"G_{k}": v for k, v in sc.per_load.items()})
+    if sh is not None:
+        row.update({f"G_{k}": v for k, v in sh.per_load.items()}, G_heldout=sh.G_norm,
+                   G_heldout_initial=first.get("G_heldout", math.nan))
+    row.update({f"mt_{k}": float(v) for k, v in zip(PARAMS, theta)})
+    return row, net, None
+
+
+def constants(net) -> dict:
+    """Columns of a row: theta (mt_axial, mt_angular, mt_volume, Pa)."""
+    return {f"mt_{k}": float(v) for k, v in zip(PARAMS, net.volume.kv)}
+
+
+def save(path, net) -> None:
+    """The model as .npz: theta, cells, the per-element constants (ks1..ks6, kvs) and the
+    axes (faces' node ids and weights), enough to rebuild the nonlinear model."""
+    m = net.volume.model()
+    np.savez(path, theta=net.volume.kv, params=np.array(PARAMS), cells=m.cells, ks=m.ks, kvs=m.kvs,
+             L0=m.L0, cos0=m.cos0, D0=m.D0, axis_nodes=m.axes.nodes, axis_weights=m.axes.weights)
