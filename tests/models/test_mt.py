@@ -174,3 +174,18 @@ def test_hexahedra_without_rectangular_faces_are_a_one_line_error():
     with pytest.raises(ModelError) as exc:
         MTTerm.build(sheared, cells, 1.0)
     assert "rectangular" in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_statics_of_the_class_never_take_the_cholesky_path(tmp_path, monkeypatch):
+    """With every system above the multifrontal threshold, the class's statics still equal
+    a dense solve of its (non-symmetric) K: a Cholesky would read one triangle."""
+    case = _case(tmp_path, "box")
+    net = build(case, class_spec(model_spec(case), "mt"))
+    monkeypatch.setattr(statics, "MULTIFRONTAL_MIN", 1)
+    res = statics.solve(net, case)
+    K = net.stiffness_matrix().toarray()
+    for load in case.loads:
+        free, f = statics.load_arrays(net, case, load)
+        u = np.zeros(f.size)
+        u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
+        assert np.allclose(res.displacement(load.name).ravel(), u, rtol=0, atol=1e-9 * np.abs(u).max())
