@@ -294,7 +294,7 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
                "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
                markdown_table(opts)]
-    from harness.report.nu_sweep import sweep_frame, sweep_table
+    from harness.report.nu_sweep import skipped_lines, sweep_frame, sweep_table
     sweep = sweep_table(sweep_frame(df))
     if not sweep.empty:
         md += ["\n## Model classes against Poisson's ratio\n",
@@ -303,6 +303,9 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "nodes, masses, loads and reference. The frequency error, `k_spread` and `dt_stable` per "
                "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n",
                markdown_table(sweep)]
+        skipped = skipped_lines(df)
+        if skipped:
+            md += ["\nNo rows (status `skip`):\n"] + skipped
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
     atomic_write(md_path, "\n".join(md).encode())

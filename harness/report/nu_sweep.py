@@ -41,3 +41,16 @@ def sweep_table(frame):
                              values=[c for c in ("G_norm_final", "G_heldout") if c in frame])
     wide.columns = [f"{cls}: {'G_norm' if v == 'G_norm_final' else 'G_heldout'}" for v, cls in wide.columns]
     return wide[sorted(wide.columns)].reset_index()
+
+
+def skipped_lines(df) -> list[str]:
+    """One Markdown line per (body, model class) the sweep skipped, with its reason (a
+    2-D body has no Bourguignon & Cani element: status "skip", ``note``)."""
+    if df.empty or not {"case", "model_class", "status"} <= set(df.columns):
+        return []
+    d = df[df["status"] == "skip"]
+    out = {}
+    for case, cls, note in zip(d["case"], d["model_class"], d["note"] if "note" in d else [""] * len(d)):
+        body = re.sub(r"_nu[0-9.]+$", "", str(case))
+        out.setdefault((body, str(cls)), str(note) if isinstance(note, str) else "")
+    return [f"- `{cls}` on `{body}`: skipped ({note or 'no reason given'})" for (body, cls), note in sorted(out.items())]

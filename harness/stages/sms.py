@@ -137,6 +137,8 @@ def _run(case, ctx, spec) -> list[dict]:
     common.update(model_class=class_of(spec), nu=float(case.material.nu), dim=case.dim)
     if spec["volume"] != "none":
         common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
+    if mt:
+        common["n_elements"] = len(base.volume.body.cells)      # B&C's elements (the springs: connectivity)
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
     cauchy = None if p1 or mt else case_report(case, spec)     # the springs' lattice; P1 and MT have none

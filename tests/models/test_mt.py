@@ -118,6 +118,7 @@ def test_stage_rows_on_the_nu_sweep_box(tmp_path):
     start, fitted = rows
     for r in rows:
         assert np.isfinite(r["G_norm_final"]) and np.isfinite(r["G_heldout"]) and r["n_nodes"] == 45
+        assert r["n_elements"] == 16                              # the 4 x 2 x 2 grid's hexahedra
         assert np.isfinite(r["freq_error_final"]) and np.isfinite(r["dt_stable"]) and np.isnan(r["k_spread"])
         assert "cauchy_misfit" not in r
     assert fitted["G_final"] <= start["G_final"] * (1 + 1e-9) and fitted["n_params"] == 3

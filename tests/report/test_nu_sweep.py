@@ -47,3 +47,15 @@ def test_figure_is_drawn_from_the_summary_and_not_without_sweep_rows(tmp_path):
     other.mkdir()
     pd.DataFrame([dict(case="a", model="m", G_norm_final=0.1)]).to_csv(other / "summary.csv", index=False)
     assert fig.make(other) == [] and sweep_frame(pd.read_csv(other / "summary.csv")).empty
+
+
+def test_skipped_classes_are_listed_with_their_reason_and_never_in_the_map():
+    """A 2-D body's mt rows (status "skip", no G) stay out of the map and are named once per
+    body and class, with the note, under the table."""
+    from harness.report.nu_sweep import skipped_lines
+    skip = [dict(case=f"plate_nu{nu:.2f}", dim=2, nu=nu, model_class="mt", status="skip", optimizer="none",
+                 note="no 2-D element") for nu in (0.0, 0.3)]
+    df = pd.concat([rows(), pd.DataFrame(skip)], ignore_index=True)
+    assert "mt" not in set(sweep_frame(df)["model_class"])
+    assert skipped_lines(df) == ["- `mt` on `plate`: skipped (no 2-D element)"]
+    assert skipped_lines(rows()) == []
