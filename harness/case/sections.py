@@ -17,7 +17,7 @@ MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 # [model] classes: the model classes one sms case scores on the same nodes (issue #15);
 # harness/models/classes.py implements each (its CLASSES must hold exactly these names)
-MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt")
+MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt", "springs+kn")
 
 SMS = {
     "placement": Field("str", "grid", choices=PLACEMENTS,
@@ -45,11 +45,16 @@ SMS = {
                     doc="springs + volume (harness/models/volume.py): a volume energy (kv/2)(V - V0)^2/V0 per "
                         "tetrahedron (2-D: triangle) of the model's cells, kv fitted with the springs, one per "
                         "element or shared by the body; needs cells (placement mesh, random or lloyd)"),
+    "kn": Field("str", "none", choices=("none", "node", "shared"),
+                doc="springs + the adjustable-Poisson term of Kot & Nagahashi 2015 (harness/models/kn.py): per "
+                    "node (kn/2) V d^2 s^2, s the node's mean spring strain, kn (Pa; 2-D N/m) fitted with the "
+                    "springs, one per node or shared by the body; needs cells; not with volume"),
     "classes": Field("strs", (), choices=MODEL_CLASSES,
                      doc="score several model classes on the same nodes, one after the other: springs, "
                          "springs+volume (volume = 'shared'), springs+volume-element, p1 (linear FEM on the "
                          "model's cells, no free constants), mt (Bourguignon & Cani's element model on the "
-                         "model's cells, 3-D); overrides volume; rows carry model_class"),
+                         "model's cells, 3-D), springs+kn (kn = 'shared'); overrides volume and kn; rows "
+                         "carry model_class"),
     "kv": Field("float", None, min=0, min_exclusive=True,
                 doc="initial volume constant (Pa; 2-D N/m); default: the material's bulk modulus beyond its "
                     "Cauchy-ratio value, at least 5 % of it"),

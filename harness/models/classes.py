@@ -3,6 +3,7 @@
 Each class is one entry of CLASSES: the [model] keys it overrides and whether its
 stiffness is the P1 finite element one (harness/models/p1.py) or Bourguignon & Cani's
 element model (harness/models/mt.py) instead of fitted springs.
+springs+kn: harness/models/kn.py (Kot & Nagahashi 2015).
 A new class is one entry here and its name in ``harness.case.sections.MODEL_CLASSES``.
 """
 
@@ -11,11 +12,12 @@ from __future__ import annotations
 from harness.case.sections import MODEL_CLASSES
 
 CLASSES = {
-    "springs": {"volume": "none"},                          # springs on the model's edges
-    "springs+volume": {"volume": "shared"},                 # + one volume constant per body
-    "springs+volume-element": {"volume": "element"},        # + one volume constant per element
-    "p1": {"volume": "none", "p1": True},                   # linear FEM on the same cells, no constants
-    "mt": {"volume": "none", "mt": True},                   # Bourguignon & Cani's elements (harness/models/mt.py)
+    "springs": {"volume": "none", "kn": "none"},                    # springs on the model's edges
+    "springs+volume": {"volume": "shared", "kn": "none"},           # + one volume constant per body
+    "springs+volume-element": {"volume": "element", "kn": "none"},  # + one volume constant per element
+    "p1": {"volume": "none", "kn": "none", "p1": True},             # linear FEM on the same cells, no constants
+    "mt": {"volume": "none", "kn": "none", "mt": True},             # Bourguignon & Cani's elements (harness/models/mt.py)
+    "springs+kn": {"volume": "none", "kn": "shared"},               # + Kot & Nagahashi 2015, one kn per body
 }
 
 if set(CLASSES) != set(MODEL_CLASSES):
@@ -28,16 +30,18 @@ def class_spec(spec: dict, name: str) -> dict:
 
 
 def class_of(spec: dict) -> str:
-    """The class name of a [model] table (its ``volume`` and ``p1``)."""
+    """The class name of a [model] table (its ``volume``, ``kn`` and ``p1``)."""
     if spec.get("p1"):
         return "p1"
     if spec.get("mt"):
         return "mt"
+    if spec.get("kn", "none") != "none":
+        return "springs+kn" if spec["kn"] == "shared" else "springs+kn-node"
     return {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element"}[spec.get("volume", "none")]
 
 
 def build(case, spec: dict, seed: int = 0):
-    """The network of a class spec: springs (+ volume term), P1 or MT on the same nodes."""
+    """The network of a class spec: springs (+ volume or kn term), P1 or MT on the same nodes."""
     from harness.models.sms import build_network
     net = build_network(case, {k: v for k, v in spec.items() if k not in ("p1", "mt")}, seed=seed)
     if spec.get("p1"):
@@ -56,4 +60,7 @@ def build(case, spec: dict, seed: int = 0):
     if spec.get("volume", "none") != "none":
         from harness.models.volume import case_volume
         return case_volume(net, case, spec)
+    if spec.get("kn", "none") != "none":
+        from harness.models.kn import case_kn
+        return case_kn(net, case, spec)
     return net

@@ -118,9 +118,11 @@ def _run(case, ctx, spec) -> list[dict]:
     label = model_label(spec, case)
     t0 = time.perf_counter()
     ctx.status("building the P1 model" if p1 else "building the MT model" if mt else "building the spring/mass system")
-    base = build(case, spec, seed=ctx.seed)     # springs, + volume (harness/models/volume.py), P1 or MT
+    base = build(case, spec, seed=ctx.seed)     # springs, + volume (models/volume.py) or kn (models/kn.py), P1 or MT
     if spec["volume"] != "none":
         label += f"+volume-{spec['volume']}"
+    if spec.get("kn", "none") != "none":
+        label += f"+kn-{spec['kn']}"
     if p1 or mt:
         label = ("p1-" if p1 else "mt-") + label
     rules = ["p1"] if p1 else ["mt"] if mt else spec["stiffness"]
@@ -139,6 +141,8 @@ def _run(case, ctx, spec) -> list[dict]:
         common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
     if mt:
         common["n_elements"] = len(base.volume.body.cells)      # B&C's elements (the springs: connectivity)
+    if spec.get("kn", "none") != "none":
+        common.update(kn=spec["kn"], n_kn=base.volume.n_elements)
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
     cauchy = None if p1 or mt else case_report(case, spec)     # the springs' lattice; P1 and MT have none
@@ -171,8 +175,12 @@ def _run(case, ctx, spec) -> list[dict]:
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
         if getattr(net, "volume", None) is not None and not p1 and not mt:    # the VTU holds the springs only
-            from harness.models.volume import save
-            save(ctx.file(f"volume-{tag}.npz"), net)
+            if spec.get("kn", "none") != "none":
+                from harness.models.kn import save as save_kn
+                save_kn(ctx.file(f"kn-{tag}.npz"), net)
+            else:
+                from harness.models.volume import save
+                save(ctx.file(f"volume-{tag}.npz"), net)
 
     rows, nets = [], {}
     for rule in rules:
@@ -380,7 +388,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
         freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
                        freq_weight=run_["weight"], modal_free=modal_free)
     k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
-    if getattr(base, "volume", None) is not None:    # springs + volume: [k, kv], columns beside B
+    if getattr(base, "volume", None) is not None:    # springs + volume / kn: [k, kv], columns beside B
         k0, groups, extra = base.params(), base.param_groups(spec["grouped"]), base.volume.columns(base.points)
     problem = FitProblem.from_network(base.points, base.springs, k0, free, forces,
                                       u_fit.reshape(len(names), -1), wdof, list(names),
