@@ -28,4 +28,4 @@ def test_case_files_are_the_generators_output_and_valid():
             case = load_case(p)
             assert case.material.nu == nu and case.heldout and set(case.fit_loads).isdisjoint(case.heldout)
             assert list(case.section("model")["classes"]) == json.loads(gen.CLASSES)
-    assert json.loads(gen.CLASSES) == ["springs", "springs+volume", "p1", "mt"]
+    assert json.loads(gen.CLASSES) == ["springs", "springs+volume", "springs+kn", "mt", "p1"]
