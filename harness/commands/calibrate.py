@@ -46,6 +46,13 @@ Writes (and prints the table and a one-sentence verdict):
   ``volume_rest`` (m) V0 in m^3 (2-D: m^2), ``volume_stiffness`` (m) kv in Pa = N/m^2
   (2-D: N/m, unit thickness), ``volume_shared``; forces f = -kv (V - V0) / V0 dV/dx.
   ``dt_stable`` then includes the (undamped) volume term.
+  ``--model springs+kn`` (one kn for the body) or ``springs+kn-node`` (one per node) adds the
+  adjustable-Poisson term of Kot & Nagahashi 2015 (harness/models/kn.py): per node a,
+  E_a = kn_a/2 V_a d^2 s_a^2 with s_a the mean strain (l - l0)/l0 of the springs at a, and
+  the JSON keys ``kn_nodes`` (m) node ids, ``kn_node_volume`` (m) V_a in m^3 (2-D: m^2, the
+  node's lumped share of the cells), ``kn_spring_count`` (m) N_a, ``kn_stiffness`` (m) kn in
+  Pa (2-D: N/m), ``kn_shared``; forces: each spring carries the extra tension
+  T = sum over its ends a of kn_a V_a d^2 s_a / (N_a l0). ``dt_stable`` includes the term.
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
   the rest length from the particle positions, so add the particles at ``particle_q``.
@@ -74,7 +81,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
               displacement error / RMS FEM displacement), reference_error (FEM's own, relative),
               mass_residual, masses, units; --model springs+volume adds volume_indices,
-              volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared
+              volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
+              --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
+              kn_stiffness (kn, Pa; 2-D N/m), kn_shared
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads), G_heldout, ref_error_max and ref_error_heldout (the
@@ -84,8 +93,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
-MODELS = ("springs", "springs+volume", "springs+volume-shared")     # [model] volume = none, element, shared
-VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}
+MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "springs+kn-node")
+VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
+KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -101,7 +111,9 @@ def add_arguments(p):
                         "(default); gauss-newton; equilibrium-gap: one linear least-squares solve")
     p.add_argument("--model", choices=MODELS, default="springs",
                    help="springs (default); springs+volume: plus a volume energy per tetrahedron (2-D: triangle) "
-                        "with its own fitted constant kv; springs+volume-shared: one kv for the whole body")
+                        "with its own fitted constant kv; springs+volume-shared: one kv for the whole body; "
+                        "springs+kn: plus the adjustable-Poisson term of Kot & Nagahashi 2015, one constant kn "
+                        "for the body (springs+kn-node: one per node)")
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
@@ -222,7 +234,8 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
             f'[reference]\nmodes = 0\ntol = {float(args.tol)!r}\nmax_refine = {int(args.max_refine)}\n'
             f'solver = "{args.solver}"\n{cell}'
             f'[model]\nkind = "sms"\nplacement = "mesh"\nmasses = "{args.masses}"\nstiffness = {json.dumps(rules)}\n'
-            f'volume = "{VOLUME[getattr(args, "model", "springs")]}"\n'
+            f'volume = "{VOLUME.get(getattr(args, "model", "springs"), "none")}"\n'
+            f'kn = "{KN.get(getattr(args, "model", "springs"), "none")}"\n'
             f'[optimizer]\nmethod = "{method}"\n{opt}')
 
 
@@ -297,6 +310,9 @@ def _run(args, mesh, tmp: Path):
     if (ctx.out_dir / f"volume-{tag}.npz").exists():       # springs + volume: the term beside the VTU
         from harness.models.volume import load
         net = load(ctx.out_dir / f"volume-{tag}.npz", net)
+    if (ctx.out_dir / f"kn-{tag}.npz").exists():           # springs + kn (harness/models/kn.py)
+        from harness.models.kn import load as load_kn
+        net = load_kn(ctx.out_dir / f"kn-{tag}.npz", net)
     if args.k_ratio is not None:
         capped = _capped_row(net, case, exported, args.k_ratio, args.damping_ratio)
         rows.append(capped)
@@ -408,7 +424,16 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
         **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
     }
-    if vol is not None:     # springs + volume (harness/models/volume.py)
+    if vol is not None and hasattr(vol, "nodes"):      # springs + kn (harness/models/kn.py)
+        data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
+                             kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
+                                          "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
+                                          "d = dim; each spring's tension T = sum over its two ends a of "
+                                          "kn_a V_a d^2 s_a / (N_a l0), f_i = T (x_j - x_i)/l, f_j = -f_i")
+        data.update(kn_nodes=vol.nodes.tolist(), kn_node_volume=vol.V.tolist(),
+                    kn_spring_count=vol.N.astype(int).tolist(), kn_stiffness=vol.kv.tolist(),
+                    kn_shared=bool(vol.shared))
+    elif vol is not None:     # springs + volume (harness/models/volume.py)
         data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
                              volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
                                               "f = -kv (V - V0) / V0 dV/dx")

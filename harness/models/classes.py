@@ -59,8 +59,8 @@ def build(case, spec: dict, seed: int = 0):
             raise
     if spec.get("volume", "none") != "none":
         from harness.models.volume import case_volume
-        return case_volume(net, case, spec)
-    if spec.get("kn", "none") != "none":
+        net = case_volume(net, case, spec)
+    if spec.get("kn", "none") != "none":       # a ModelError if the volume term is there too
         from harness.models.kn import case_kn
-        return case_kn(net, case, spec)
+        net = case_kn(net, case, spec)
     return net
