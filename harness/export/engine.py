@@ -39,8 +39,9 @@ def spring_damping(springs: np.ndarray, k: np.ndarray, masses: np.ndarray, zeta:
 def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
     """{"omega_max" (rad/s), "zeta_top", "dt_stable" (s), "dt_stable_float32" (s)} of the
     free network (no constraints: the largest eigenvalue is a local, high mode); ``volume``:
-    a springs + volume model's VolumeTerm (harness/models/volume.py), undamped, adds to K
-    (a non-symmetric term by its symmetric part)."""
+    a springs + volume model's VolumeTerm (harness/models/volume.py) or a springs+kn model's
+    KNTerm (harness/models/kn.py), undamped, adds to K (a non-symmetric term by its symmetric
+    part)."""
     points = np.asarray(points, float)
     m = np.repeat(np.asarray(masses, float), points.shape[1])
     if np.any(m <= 0):

@@ -47,7 +47,7 @@ def _dense_kn_K(q, springs, nodes, V, kn):
     return K
 
 
-@pytest.mark.parametrize("text, grid, size", [(TINY, "[3, 4]", 4.0), (BOX, "[3, 3, 3]", 2.0)])
+@pytest.mark.parametrize("text, grid, size", [(TINY, "[3, 4]", 4.0), (BOX, "[3, 3, 3]", 2.0)], ids=["2d", "3d"])
 def test_case_kn_term_and_statics_match_a_dense_solve(tmp_path, text, grid, size):
     case = _case(tmp_path, text, f"grid = {grid}")
     spec = class_spec(model_spec(case), "springs+kn")
