@@ -203,7 +203,8 @@ def dense_K(pts, spr, t, k, kn):
 
 @pytest.mark.parametrize("shape, shared, method", [((4, 3), False, "gauss-newton"),
                                                    ((3, 3, 3), True, "lbfgs"),
-                                                   ((4, 3), True, "gauss-newton")])
+                                                   ((4, 3), True, "gauss-newton"),
+                                                   ((4, 3), False, "equilibrium-gap")])
 def test_known_springs_and_kn_constants_are_recovered(shape, shared, method):
     pts, spr, _ = grid_network(shape, diagonals="face")
     t = KNTerm.build(pts, spr, node_volumes(pts, grid_simplices(shape)), 1.0, shared=shared)
