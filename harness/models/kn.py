@@ -5,7 +5,7 @@ Kot & Nagahashi ("Second degree of freedom of elastic objects - adjustable Poiss
 for mass spring models", GRAPP 2015) keep the springs and let the force a spring brings to
 a node be dispersed uniformly to all the springs connected with that node, scaled by their
 length; the redistribution is isotropic and frees nu from the Cauchy value (their Fig. 8:
-nu = -1, 0, 0.25, 0.47 on one lattice). Only the abstract, the introduction and the
+a block compressed at nu = -1, 0, 0.25, 0.47). Only the abstract, the introduction and the
 conclusion of the paper were readable here, which state that rule in words but not its
 equations, so this module implements the closest energy-consistent form of it (force =
 -gradient of an energy, hence a symmetric stiffness, and the adjoint gradient of the fit
@@ -36,7 +36,9 @@ k1 = k2 = k it is isotropic at nu = 1/4 and the term gives
     lambda = k / h + kn,  mu = k / h,  nu = (k / h + kn) / (4 k / h + 2 kn),
 
 nu from 1/4 (kn = 0) to 1/2 (kn -> inf), and down to -1 for kn -> -5 k / (3 h) (bulk
-modulus 0), the paper's range; the tests check this against the model's own energy.
+modulus 0), the paper's range. 2-D, the square lattice with edges 2k and both diagonals k
+(per unit thickness): lambda = k + kn, mu = k, plane-stress nu = (k + kn) / (3 k + kn),
+1/3 at kn = 0. The tests check both against the model's own energy (tests/models/test_kn.py).
 Approximations: on boundary nodes and irregular stars mean(u u^T) != I / d, so s_a mixes
 in deviatoric strain; the energy is quadratic in the spring strains (not in volume).
 Linearised at rest (statics, modes) the term is rank one per node: K = C diag(kn) C^T
