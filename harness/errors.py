@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 
 class SpringbenchError(Exception):
     """Bad input. ``str(err)`` is one line: ``file: field: problem (fix)``.
@@ -64,3 +66,16 @@ def raise_all(errors) -> None:
 def error_lines(exc: SpringbenchError) -> list[str]:
     """One line per mistake of ``exc``."""
     return [SpringbenchError.__str__(e) for e in getattr(exc, "errors", [exc])]
+
+
+@contextmanager
+def naming(case):
+    """Within it, a ModelError that names no file gets the case's file (``case.path``):
+    the user's file, never an internal one."""
+    try:
+        yield
+    except ModelError as exc:
+        if exc.file is None and getattr(case, "path", None) is not None:
+            exc.file = str(case.path)
+            exc.args = (str(exc),)
+        raise

@@ -26,7 +26,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, cKDTree
 
-from harness.errors import ModelError
+from harness.errors import ModelError, naming
 from harness.case.facet_loads import facet_forces, needs_facets, part_facets
 from harness.case.parts import part_predicate
 from harness.models.springs import incidence, stiffness_matrix
@@ -322,13 +322,8 @@ class StaticsResult:
 def solve(network, case, loads=None) -> StaticsResult:
     """Equilibrium displacements of every load case (or the named ones); load cases with
     the same constraints share one factorisation. Errors name the case file."""
-    try:
+    with naming(case):
         return _solve(network, case, loads)
-    except ModelError as exc:
-        if exc.file is None and getattr(case, "path", None) is not None:
-            exc.file = str(case.path)
-            exc.args = (str(exc),)
-        raise
 
 
 def _solve(network, case, loads=None) -> StaticsResult:

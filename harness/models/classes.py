@@ -48,15 +48,10 @@ def build(case, spec: dict, seed: int = 0):
         from harness.models.p1 import with_p1
         return with_p1(net, case.material)
     if spec.get("mt"):
-        from harness.errors import ModelError
+        from harness.errors import naming
         from harness.models.mt import with_mt
-        try:
+        with naming(case):
             return with_mt(net, case.material)
-        except ModelError as exc:      # name the case file
-            if exc.file is None and getattr(case, "path", None) is not None:
-                exc.file = str(case.path)
-                exc.args = (str(exc),)
-            raise
     if spec.get("volume", "none") != "none":
         from harness.models.volume import case_volume
         net = case_volume(net, case, spec)

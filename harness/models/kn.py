@@ -57,7 +57,7 @@ from types import MappingProxyType
 import numpy as np
 import scipy.sparse as sp
 
-from harness.errors import ModelError
+from harness.errors import ModelError, naming
 from harness.models.sms import SpringNetwork
 from harness.models.volume import SpringVolumeNetwork, initial_kv, oriented, simplices, volumes
 
@@ -186,13 +186,8 @@ def case_kn(net: SpringNetwork, case, spec: dict) -> SpringNetwork:
     kn to the bulk modulus of a regular lattice); errors name the case file."""
     if spec.get("kn", "none") == "none":
         return net
-    try:
+    with naming(case):
         return with_kn(net, spec["kn"], initial_kv(case.material, case.dim))
-    except ModelError as exc:
-        if exc.file is None and getattr(case, "path", None) is not None:
-            exc.file = str(case.path)
-            exc.args = (str(exc),)
-        raise
 
 
 def save(path, net) -> None:

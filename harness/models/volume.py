@@ -31,7 +31,7 @@ from types import MappingProxyType
 import numpy as np
 import scipy.sparse as sp
 
-from harness.errors import ModelError
+from harness.errors import ModelError, naming
 from harness.models.sms import SpringNetwork
 
 MODES = ("none", "element", "shared")     # [model] volume (harness/case/sections.py): none, per element, per body
@@ -219,13 +219,8 @@ def case_volume(net: SpringNetwork, case, spec: dict) -> SpringNetwork:
     if spec.get("volume", "none") == "none":
         return net
     kv = spec.get("kv") or initial_kv(case.material, case.dim)
-    try:
+    with naming(case):
         return with_volume(net, spec["volume"], kv)
-    except ModelError as exc:
-        if exc.file is None and getattr(case, "path", None) is not None:
-            exc.file = str(case.path)
-            exc.args = (str(exc),)
-        raise
 
 
 def save(path, net) -> None:
