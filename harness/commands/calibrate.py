@@ -97,6 +97,7 @@ MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "s
 VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
 KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
+PRIOR_WEIGHT = 1.0      # lbfgs's default prior weight (README, calibrate: how it was chosen)
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
@@ -114,6 +115,10 @@ def add_arguments(p):
                         "with its own fitted constant kv; springs+volume-shared: one kv for the whole body; "
                         "springs+kn: plus the adjustable-Poisson term of Kot & Nagahashi 2015, one constant kn "
                         "for the body (springs+kn-node: one per node)")
+    p.add_argument("--prior-weight", dest="prior_weight", type=float, default=None,
+                   help=f"lbfgs: weight a of the pull of every constant towards the start rule's, Phi = G^2/G0^2 + "
+                        f"a mean(log(k/k_rule)^2) (default {PRIOR_WEIGHT:g}, see README 'calibrate'; 0: no pull, the "
+                        f"fit before it, which memorises the fitted loads: held-out loads get worse)")
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
@@ -171,6 +176,10 @@ def _check(args):
         bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
     if not (math.isfinite(args.damping_ratio) and 0 <= args.damping_ratio < 1):
         bad("--damping-ratio", f"{args.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
+    if args.prior_weight is not None and not (math.isfinite(args.prior_weight) and args.prior_weight >= 0):
+        bad("--prior-weight", f"{args.prior_weight} is not a number >= 0", f"e.g. --prior-weight {PRIOR_WEIGHT:g}, or 0 for none")
+    if args.prior_weight is not None and args.method != "lbfgs":
+        bad("--prior-weight", f"--method {args.method} has no prior", "use --prior-weight with --method lbfgs")
     if args.init != "none" and args.method not in ("lbfgs", "gauss-newton"):
         bad("--init", f"--method {args.method} has no start point to set", "use --init with --method lbfgs or gauss-newton")
     if not (args.budget > 0):
@@ -205,6 +214,12 @@ def magnitude(args) -> float:
     return args.magnitude if args.magnitude is not None else 1e-3 * args.E
 
 
+def prior_weight(args) -> float:
+    """The lbfgs prior weight: --prior-weight, else the default."""
+    w = getattr(args, "prior_weight", None)
+    return float(PRIOR_WEIGHT if w is None else w)
+
+
 def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rules=None, ends=None) -> str:
     """The in-memory case that calibrate runs: the mesh body, the material, the fitted
     load set and the held-out end loads, an SMS on the mesh's nodes and edges."""
@@ -218,6 +233,8 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
     cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
     init = f', init = "{args.init}"' if method in ("lbfgs", "gauss-newton") and args.init != "none" else ""
     budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"  # one solve
+    if method == "lbfgs":
+        init += f", prior = {prior_weight(args)!r}"
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
     if args.rule == "best" and method != "none":
         opt += 'start = "best"\n'
@@ -362,10 +379,11 @@ def _report(args, rows, net, case):
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
                 G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
                 reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
-                mass_residual=exported.get("mass_residual", math.nan), masses=args.masses)
+                mass_residual=exported.get("mass_residual", math.nan), masses=args.masses,
+                prior_weight=prior_weight(args) if args.method == "lbfgs" else math.nan)
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_heldout", "ref_error_max", "ref_error_heldout", "status",
-                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop")
+                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_prior")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     from harness.outputs import staged

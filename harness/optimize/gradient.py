@@ -16,6 +16,14 @@ df/dk_e = (phi.b_e)^2 / (8 pi^2 f). The term is weight * sum_j (f_j / f*_j - 1)^
 The objective minimised is Phi = G^2 / G(k0)^2 (+ the frequency term), over log factors of
 k0 (per spring, or per group in grouped mode), so it is unit-free and k stays positive.
 
+Prior (option ``prior``, weight a >= 0). Phi += a * mean_e log(k_e / k0_e)^2: a pull of
+every constant towards its start (the stiffness rule's). Displacements of a few loads do
+not determine tens of thousands of constants; unregularised, L-BFGS-B drifts along the
+nearly flat directions of G and the constants memorise the fitted loads (issue 12: held-out
+loads got worse while the fitted ones improved). Both terms are dimensionless and
+intensive (a mean over springs, G relative to its start), so a weight carries across
+meshes: a = 1 prices an RMS log-deviation of 1 (a factor e) like the whole initial misfit.
+
 Conditioning. A change of k with wavelength lambda changes the nodal forces like
 1/lambda (a divergence) and the displacements like lambda (K^-1 smooths twice), so the
 Gauss-Newton matrix J^T J acts like an inverse Laplacian on k: its condition number grows
@@ -47,6 +55,7 @@ LBFGS_DEFAULTS = dict(
     ftol=0.0,           # relative decrease tolerance of Phi
     init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
     scale=0.5,          # diagonal scaling of log k by (spring tension^2 at k0)^-scale; 0: none
+    prior=0.0,          # weight a of the prior a * mean_e log(k_e/k0_e)^2 (see above); 0: none
 )
 
 NM_DEFAULTS = dict(
@@ -55,6 +64,7 @@ NM_DEFAULTS = dict(
     xatol=1e-10,        # simplex size in log k
     fatol=0.0,          # objective spread (on Phi)
     target=0.0,
+    prior=0.0,          # as lbfgs's
 )
 
 
@@ -109,8 +119,9 @@ class Objective:
     """Phi(x) = G^2/G0^2 (+ frequency term) over x = log(k/k0) per parameter, with its
     gradient; remembers the best point and stops at a target or a time budget."""
 
-    def __init__(self, problem: FitProblem, target: float = 0.0, max_seconds=None):
+    def __init__(self, problem: FitProblem, target: float = 0.0, max_seconds=None, prior: float = 0.0):
         self.p = problem
+        self.prior = float(prior)
         self.tension2 = np.zeros(problem.n_springs)     # squared spring tensions at k0 (for scalings)
         self.G0sq, _ = value_and_grad(problem, problem.k0, grad=False, tension2=self.tension2)
         if self.G0sq <= 0:
@@ -137,6 +148,9 @@ class Objective:
             phi += fv
             if grad:
                 gk = gk + fg
+        if self.prior > 0:
+            pv, pg = prior_term(self.p, x, self.prior)
+            phi += pv
         self.n_eval += 1
         G = float(np.sqrt(max(G2, 0.0)))
         self.trace.append((self.n_eval, G))
@@ -145,6 +159,8 @@ class Objective:
         if not grad:
             return phi
         gx = gk * k
+        if self.prior > 0:
+            gx = gx + pg
         if self.p.groups is not None:
             gx = np.bincount(self.p.groups, weights=gx, minlength=self.p.n_params)
         return phi, gx
@@ -155,6 +171,14 @@ class Objective:
         if self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
             return "max_seconds"
         return None
+
+
+def prior_term(problem: FitProblem, x: np.ndarray, weight: float):
+    """weight * mean over springs of log(k/k0)^2 and its gradient per spring (e,) in x =
+    log(k/k0) (grouped mode: x per group, each spring counted; summed per group later)."""
+    xe = np.asarray(x, float) if problem.groups is None else np.asarray(x, float)[problem.groups]
+    n = problem.n_springs
+    return weight * float(xe @ xe) / n, (2.0 * weight / n) * xe
 
 
 def _result(obj: Objective, t0: float, stop: str, nit: int, extra: dict) -> dict:
@@ -179,7 +203,7 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
     spring tensions at k0 (option ``scale``, see tension_scaling); deterministic (seed unused)."""
     opts = check_options(options, LBFGS_DEFAULTS, "lbfgs")
     t0 = time.perf_counter()
-    obj = Objective(problem, opts["target"], opts["max_seconds"])
+    obj = Objective(problem, opts["target"], opts["max_seconds"], opts["prior"])
     obj.t0 = t0
     x0, init_info = start_point(problem, opts["init"])
     lo, hi = problem.bounds
@@ -223,7 +247,7 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
         stop = f"scipy: {res.message}"
     except _Stop:
         stop = obj.done()
-    return _result(obj, t0, stop, nit[0], {"init": opts["init"], **init_info})
+    return _result(obj, t0, stop, nit[0], {"init": opts["init"], "prior": float(opts["prior"]), **init_info})
 
 
 def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
@@ -234,7 +258,7 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
         raise SpringbenchError(f"nelder-mead with {problem.n_params} parameters is hopeless", field="optimizer.method",
                                fix="use grouped mode (groups) or method = 'lbfgs'")
     t0 = time.perf_counter()
-    obj = Objective(problem, opts["target"], opts["max_seconds"])
+    obj = Objective(problem, opts["target"], opts["max_seconds"], opts["prior"])
     lo, hi = problem.bounds
     n = problem.n_params
 
@@ -257,7 +281,7 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
         stop = f"scipy: {res.message}"
     except _Stop:
         stop = obj.done()
-    return _result(obj, t0, stop, nit[0], {})
+    return _result(obj, t0, stop, nit[0], {"prior": float(opts["prior"])})
 
 
 INITS = ("none", "equilibrium-gap")

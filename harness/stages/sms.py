@@ -432,6 +432,8 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
         row["opt_stop"] = str(info["stop"])
     if info.get("init", "none") != "none":
         row["opt_init"] = str(info["init"]) + (" (rejected: worse than k0)" if info.get("init_rejected") else "")
+    if "prior" in info:     # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
+        row["opt_prior"] = float(info["prior"])
     row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:
         row["opt_iterations"] = int(info["iterations"])
