@@ -23,6 +23,8 @@ BASE = "MESH --E 1e5 --nu 0.3 --method rule --out OUT"
 FLAG_CASES = [  # (extra argv, text the line must hold)
     ("--seed -1", "--seed"), ("--seed x", "--seed"),
     ("--k-ratio 0.5", "--k-ratio"), ("--k-ratio nan", "--k-ratio"), ("--k-ratio inf", "--k-ratio"),
+    ("--prior-weight -1", "--prior-weight"), ("--prior-weight nan", "--prior-weight"),
+    ("--prior-weight inf", "--prior-weight"), ("--prior-weight 0.1", "--prior-weight"),   # --method rule: no prior
     ("--damping-ratio 1", "--damping-ratio"), ("--damping-ratio -0.1", "--damping-ratio"),
     ("--damping-ratio nan", "--damping-ratio"),
     ("--E nan", "--E"), ("--E -1", "--E"), ("--E 0", "--E"), ("--E abc", "--E"), ("--E 1e308", "--E"),
