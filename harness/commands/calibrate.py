@@ -105,7 +105,7 @@ MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "s
 VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
 KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
 RULES = ("deussen", "vangelder", "lloyd", "uniform")
-PRIOR_WEIGHT = 0.1      # lbfgs's default prior weight (README, calibrate: how it was chosen)
+PRIOR_WEIGHT = 10.0     # lbfgs's default prior weight (README, calibrate: how it was chosen)
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
