@@ -10,7 +10,7 @@ constants fitted (``--method``) so the network's statics match a FEM reference o
 same body and material on the fitted loads, and scored on held-out loads it never saw.
 
 Fit (``--method lbfgs``, the default): G^2/G0^2 + a mean_e log(k_e/k_rule,e)^2 is minimised,
-a = ``--prior-weight`` (default 0.1, README "Your own mesh" says how it was chosen; 0: the fit
+a = ``--prior-weight`` (default 10, README "Your own mesh" says how it was chosen; 0: the fit
 without the pull, which memorised the six fitted loads and made the held-out ones worse).
 
 Loads (DESIGN.md). Fitted (``--loads homogeneous``, the default): the homogeneous stress
@@ -95,7 +95,7 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
               dt_stable (s) with --k-ratio, seconds, seed, opt_stop
 2-D meshes: unit thickness (k and masses per unit thickness).
-the fit (lbfgs) minimises G^2/G0^2 + a mean(log(k/k_rule)^2), a = --prior-weight (default 0.1): the
+the fit (lbfgs) minimises G^2/G0^2 + a mean(log(k/k_rule)^2), a = --prior-weight (default 10): the
 pull towards the rule keeps per-spring constants from memorising the six fitted loads, which made
 held-out loads worse (--prior-weight 0, the fit before); MODEL.csv's opt_prior is a."""
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
