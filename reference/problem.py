@@ -9,7 +9,7 @@ from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from harness.case.loadsets import homogeneous_closed_form, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
-from reference import solvers
+from reference import solvers, twolevel
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs
 
@@ -71,11 +71,16 @@ def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mi
     return F
 
 
+TWO_LEVEL_MIN = 20_000   # dofs: below, 'auto' always factorises (reference/solvers.py)
+
+
 def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
                  prescribed: dict | None = None, info: list | None = None) -> dict:
     """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
     Loads sharing a constraint set share one factorisation; ``info`` (a list) gets the
-    solver's record of each (method, residual, fallbacks, seconds) with the loads named."""
+    solver's record of each (method, residual, fallbacks, seconds) with the loads named.
+    A P2/Q2 system of at least TWO_LEVEL_MIN dofs (or ``method`` 'two-level') hands the
+    solver its P1/Q1 subspace for the two-level method (reference/twolevel.py)."""
     out = {}
     groups: dict[bytes, list[str]] = {}
     for name in loads:
@@ -94,8 +99,10 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
         if R is None:
             R = d.rigid_modes()
             coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
+            P = twolevel.prolongation(d) if d.ndof >= TWO_LEVEL_MIN or method == "two-level" else None
         rec: dict = {}
-        x = solvers.solve(A, np.column_stack(rhs), method, R[free], info=rec, coords=coords[free])
+        x = solvers.solve(A, np.column_stack(rhs), method, R[free], info=rec, coords=coords[free],
+                          coarse=None if P is None else P[free])
         if info is not None:
             info.append(dict(rec, loads=list(names), n=len(free)))
         for i, n in enumerate(names):

@@ -40,6 +40,11 @@ The same box in units of 100 with E = 1e5 (nu = 0.45): Cholesky 1.4 s, AMG 7.2 s
 (28 s), AMG-strong is skipped (Cholesky estimated 32 s), Cholesky: 56 s CPU in all,
 2.6 GB (before the skip rule: AMG-strong 88 its, 142 s).
 
+P2/Q2 systems handed their P1/Q1 subspace (reference/twolevel.py) take 'two-level' where
+'auto' would take AMG: the 50k-tet cylinder of ``bench calibrate`` (nu = 0.45, 202,869 free
+dofs, 1,730 Gflop for the Cholesky, three loads): AMG 15 s setup + 99 iterations and
+~59 s CPU per load; two-level 23 iterations, 33 s CPU for all three (setup included).
+
 Crossovers: the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and
 always in 2-D and on thin or nearly incompressible bodies (where AMG needs its strong
 setup); 'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at
@@ -94,7 +99,8 @@ CG_MAXITER = 20_000
 SECONDS_PER_GFLOP = 0.1
 CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
-METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg")
+METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level")
+TWO_LEVEL_MAXITER = 300
 
 
 def choose(method: str, n: int, dim: int) -> str:
@@ -111,7 +117,8 @@ def _singular() -> ModelError:
 
 
 def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.ndarray | None = None, *,
-          coords: np.ndarray | None = None, info: dict | None = None) -> np.ndarray:
+          coords: np.ndarray | None = None, info: dict | None = None,
+          coarse: sp.spmatrix | None = None) -> np.ndarray:
     """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
     hierarchy) for symmetric positive definite A; returns x shaped like b.
 
@@ -121,10 +128,15 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     rigid-body modes of the free dofs) or 'cg'. An iterative method that does not reach
     :data:`RTOL` falls back to a stronger AMG and then to the Cholesky. ``info``, when
     given, is filled with ``method`` (what solved it: 'cholesky', 'superlu', 'amg',
-    'amg-strong' or 'cg'), ``fallbacks`` (what was tried before, each
+    'amg-strong', 'cg' or 'two-level'), ``fallbacks`` (what was tried before, each
     ``{'method', 'residual', 'reason', 'seconds'}``), ``residual`` (max over the columns of
     ||b - A x|| / ||b||), ``rtol`` (the tolerance it was accepted at, see :data:`FLOOR`),
-    ``iterations`` (iterative methods) and ``seconds``."""
+    ``iterations`` (iterative methods) and ``seconds``.
+
+    ``coarse`` (n, nc): the P1/Q1 fields of a P2/Q2 system's mesh in its free dofs
+    (reference/twolevel.py ``prolongation``, rows of the free dofs); with it (and
+    ``coords``) 'two-level' (CG, Gauss-Seidel and an exact P1 solve) replaces 'amg' as
+    the iterative method of 'auto' and can be asked for by name."""
     t0 = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
@@ -187,8 +199,13 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
         first = {"direct": "cholesky"}.get(method, method)
     if first == "cholesky" and coords is None:
         first = "superlu"
+    two = coarse is not None and coords is not None
+    if method == "auto" and first == "amg" and two:
+        first = "two-level"
+    if first == "two-level" and not two:
+        first = "amg"
     plan = {"cholesky": ["cholesky"], "superlu": ["superlu"], "cg": ["cg", "amg", "amg-strong", "cholesky"],
-            "amg": ["amg", "amg-strong", "cholesky"]}[first]
+            "amg": ["amg", "amg-strong", "cholesky"], "two-level": ["two-level", "amg-strong", "cholesky"]}[first]
     if plan[-1] == "cholesky" and coords is None:
         plan[-1] = "superlu"
     Bs = None if near_null is None else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
@@ -212,6 +229,8 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
                     sym = _symbolic(As, coords)
                 f = _factor(As, m, sym)
                 y, its, why = f(bs[:, live]), 0, ""
+            elif m == "two-level":
+                y, its, why = _two_level(As, bs[:, live], s, coarse, coords, Bs, normA, bnorm[live])
             else:
                 y, its, why = _iterative(As, bs[:, live], m, Bs, budget)
         except ModelError:
@@ -248,13 +267,8 @@ def _symbolic(As, coords):
 
 
 def _estimate(sym) -> dict:
-    """Work (Gflop) and peak memory (GB: the factor, plus the largest front and its
-    Schur complement and product, measured ~3 of them) of the multifrontal Cholesky."""
-    nv = np.array([nd["nv"] for nd in sym.nodes], float)
-    nu = np.array([len(nd["U"]) for nd in sym.nodes], float)
-    flop = np.sum(nv ** 3 / 3 + nv ** 2 * nu + nv * nu ** 2)
-    mem = 8 * (np.sum(nv * (nv + nu)) + 3 * np.max((nv + nu) ** 2))
-    return {"gflop": float(flop / 1e9), "gbytes": float(mem / 1e9)}
+    """Work (Gflop) and peak memory (GB) of the multifrontal Cholesky (``Symbolic.estimate``)."""
+    return sym.estimate()
 
 
 def _factor(As, method, sym):
@@ -330,6 +344,21 @@ def _coords_from_modes(A, near_null):
 
 
 # -- iterative ---------------------------------------------------------------------------
+
+def _two_level(As, bs, s, coarse, coords, Bs, normA, bnorm):
+    """reference/twolevel.py's CG on every column at once, each to the residual
+    ``solve`` accepts (RTOL, or the floor of the column's solution, halved for margin)."""
+    from reference import twolevel
+    try:
+        M = twolevel.TwoLevel(As, s, coarse, coords, Bs)
+    except Exception as exc:   # noqa: BLE001 - a failed setup is a failed attempt
+        return np.full_like(bs, np.nan), 0, f"two-level setup failed: {exc}"
+
+    def target(Y):
+        xn = np.linalg.norm(Y * s[:, None], axis=0)
+        return 0.5 * np.clip(FLOOR * np.finfo(float).eps * normA * xn / bnorm, RTOL, DIRECT_RTOL) * bnorm
+    return twolevel.pcg(As, bs, M, 1.0 / s, target, TWO_LEVEL_MAXITER)
+
 
 def _hierarchy(As, Bs, strong: bool):
     import pyamg

@@ -109,7 +109,7 @@ REFERENCE = {
     "tol": Field("float", 1e-4, min=0, min_exclusive=True),
     "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 6, "
                                                 "within a 64k-dof system in 3-D)"),
-    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg")),
+    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg", "two-level")),
     "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
     "method": Field("str", "auto", choices=("auto", "graded", "refine"),
                     doc="graded: Q2 hexes/quads graded towards the faces, levels extrapolated "

@@ -83,6 +83,15 @@ class Symbolic:
         self.parent = parent
         self.order = order
 
+    def estimate(self) -> dict:
+        """Work (Gflop) and peak memory (GB: the factor, plus the largest front and its
+        Schur complement and product, measured ~3 of them) of the factorisation."""
+        nv = np.array([nd["nv"] for nd in self.nodes], float)
+        nu = np.array([len(nd["U"]) for nd in self.nodes], float)
+        flop = np.sum(nv ** 3 / 3 + nv ** 2 * nu + nv * nu ** 2)
+        mem = 8 * (np.sum(nv * (nv + nu)) + 3 * np.max((nv + nu) ** 2, initial=0.0))
+        return {"gflop": float(flop / 1e9), "gbytes": float(mem / 1e9)}
+
 
 class MultifrontalCholesky:
     """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m)."""

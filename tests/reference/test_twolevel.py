@@ -1,0 +1,143 @@
+"""reference/twolevel.py (the two-level method of reference/solvers.py) against
+independent truths: the P1/Q1 prolongation reproduces the lower-order fields it claims
+to (evaluated from their formula at the P2/Q2 dof locations), and the two-level solves
+match dense numpy solves of small systems (several right-hand sides, a zero one, the
+coarse solve by Cholesky or by AMG), with the residual checked from A, b and x here."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import skfem
+
+from reference import solvers, twolevel
+from reference.fem import Discretisation
+from test_solvers import elasticity
+
+CELLS = {"tet": skfem.MeshTet, "hex": skfem.MeshHex, "tri": skfem.MeshTri, "quad": skfem.MeshQuad}
+
+
+def _low_order_field(cell, x):
+    """A field of the P1 (simplices) or Q1 (tensor cells on axis-aligned boxes) space."""
+    if cell in ("tet", "tri"):
+        return 1.0 + 2.0 * x[0] - 3.0 * x[1] + (0.5 * x[2] if len(x) == 3 else 0.0)
+    if cell == "quad":
+        return 1.0 + x[0] - 2.0 * x[1] + 3.0 * x[0] * x[1]
+    return 1.0 + x[0] - 2.0 * x[1] + 0.5 * x[2] + x[0] * x[1] - x[1] * x[2] + 3.0 * x[0] * x[1] * x[2]
+
+
+@pytest.mark.parametrize("cell", ["tet", "hex", "tri", "quad"])
+def test_prolongation_reproduces_the_lower_order_fields(cell):
+    dim = 3 if cell in ("tet", "hex") else 2
+    rng = np.random.default_rng(0)
+    axes = [np.sort(np.r_[0.0, rng.uniform(0.1, 0.9, 2), 1.0]) * (1.0 + i) for i in range(dim)]  # uneven cells
+    mesh = CELLS[cell].init_tensor(*axes)
+    d = Discretisation(mesh, cell, "P2")
+    P = twolevel.prolongation(d)
+    nv = mesh.p.shape[1]
+    assert P.shape == (d.ndof, dim * nv)
+    for c in range(dim):           # component c of the vector field, the others zero
+        coarse = np.zeros((nv, dim))
+        coarse[:, c] = _low_order_field(cell, mesh.p)
+        fine = (P @ coarse.ravel()).reshape(-1, dim)
+        np.testing.assert_allclose(fine[:, c], _low_order_field(cell, d.doflocs), rtol=0, atol=1e-12)
+        assert not np.any(np.delete(fine, c, axis=1))
+    assert twolevel.prolongation(Discretisation(mesh, cell, "P1")) is None
+
+
+def _system(**kw):
+    A, b, R, X, d, free = elasticity(**kw)
+    return A, b, R, X, twolevel.prolongation(d)[free]
+
+
+@pytest.mark.parametrize("coarse_solver", ["cholesky", "amg"])
+def test_two_level_matches_dense_solve(monkeypatch, coarse_solver):
+    """A clamped 2 x 1 x 1 box, nu = 0.45, P2: three right-hand sides (one zero) against
+    numpy's dense solve; the coarse system factorised or, forced, by AMG."""
+    if coarse_solver == "amg":
+        monkeypatch.setattr(twolevel, "COARSE_GBYTES", 0.0)
+    A, b, R, X, P = _system(size=(2.0, 1.0, 1.0), divs=(4, 2, 2), E=1e5, nu=0.45)
+    B = np.column_stack([b, np.zeros_like(b), np.random.default_rng(1).standard_normal(len(b))])
+    truth = np.linalg.solve(A.toarray(), B)
+    info = {}
+    x = solvers.solve(A, B, "two-level", R, coords=X, info=info, coarse=P)
+    assert info["method"] == "two-level" and info["fallbacks"] == [] and info["iterations"] > 0
+    assert not np.any(x[:, 1])
+    res = np.linalg.norm(B[:, [0, 2]] - A @ x[:, [0, 2]], axis=0) / np.linalg.norm(B[:, [0, 2]], axis=0)
+    assert res.max() <= info["rtol"] and info["residual"] == pytest.approx(res.max(), rel=1e-6)
+    assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
+
+
+def test_preconditioner_is_symmetric_positive_definite():
+    """CG needs M symmetric positive definite: checked on the dense matrix of M."""
+    A, b, R, X, P = _system(size=(1.0, 1.0, 1.0), divs=(2, 2, 2), nu=0.3)
+    s = 1.0 / np.sqrt(A.diagonal())
+    As = sp.csr_matrix(A.multiply(s[:, None]).multiply(s[None, :]))
+    M = twolevel.TwoLevel(As, s, P, X, R)(np.eye(A.shape[0]))
+    assert np.abs(M - M.T).max() <= 1e-10 * np.abs(M).max()
+    assert np.linalg.eigvalsh(0.5 * (M + M.T)).min() > 0
+
+
+def test_auto_takes_two_level_where_it_took_amg(small_estimate_limit):
+    A, b, R, X, P = _system(size=(2.0, 1.0, 1.0), divs=(4, 2, 2), nu=0.3)
+    truth = np.linalg.solve(A.toarray(), b)
+    info = {}
+    x = solvers.solve(A, b, "auto", R, coords=X, info=info, coarse=P)
+    assert info["method"] == "two-level"
+    assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
+    solvers.solve(A, b, "auto", R, coords=X, info=info)          # no coarse space: AMG as before
+    assert info["method"] == "amg"
+
+
+@pytest.fixture
+def small_estimate_limit(monkeypatch):
+    monkeypatch.setattr(solvers, "CHOLESKY_GFLOP", 0.0)
+
+
+def test_two_level_that_fails_falls_back(monkeypatch):
+    """Too few iterations allowed: recorded as a fallback, the answer from the Cholesky."""
+    A, b, R, X, P = _system(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
+    truth = np.linalg.solve(A.toarray(), b)
+    monkeypatch.setattr(solvers, "TWO_LEVEL_MAXITER", 2)
+    monkeypatch.setattr(solvers, "SECONDS_PER_GFLOP", 0.0)      # skip the strong AMG
+    monkeypatch.setattr(solvers, "CHOLESKY_OVERHEAD", -1.0)
+    info = {}
+    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=P)
+    assert info["method"] == "cholesky" and [f["method"] for f in info["fallbacks"]] == ["two-level"]
+    assert info["fallbacks"][0]["residual"] > solvers.RTOL
+    assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
+
+
+def test_thin_nearly_incompressible_bar_closed_form():
+    """The 10:1 bar of test_solvers (nu = 0.49, symmetry planes, stretched): the linear
+    closed form, whichever method ends up solving it."""
+    E, nu, sig = 2.0e3, 0.49, 3.0
+    A, b, R, X, d, free = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), E=E, nu=nu, clamp="symmetry",
+                                     traction=(sig, 0.0, 0.0))
+    info = {}
+    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=twolevel.prolongation(d)[free])
+    p = d.doflocs
+    exact = (np.stack([sig * p[0], -nu * sig * p[1], -nu * sig * p[2]]) / E).T.ravel()[free]
+    assert np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
+    assert info["method"] == "two-level"
+
+
+def test_solve_system_hands_the_coarse_space_over():
+    """reference.problem.solve_system with 'two-level' on a Discretisation: the same
+    displacements as with the Cholesky."""
+    from reference.problem import solve_system
+    from harness.case.elasticity import isotropic_compliance
+    mesh = skfem.MeshTet.init_tensor(*[np.linspace(0, L, k + 1) for L, k in zip((2.0, 1.0, 1.0), (4, 2, 2))])
+    d = Discretisation(mesh, "tet", "P2")
+    K = d.stiffness(np.tile(np.linalg.inv(isotropic_compliance(1e5, 0.45)), (d.nelems, 1, 1)))
+    fixed = d.part_dofs(lambda x: x[0] < 1e-9, range(3))
+    F = {"tip": d.traction_load(d.part_facets(lambda x: x[0] > 2 - 1e-9), (0.0, -1.0, 0.0)),
+         "sag": d.body_load(np.tile([0.0, 0.0, -9.81], (d.nelems, 1)))}
+    fx = {n: fixed for n in F}
+    info: list = []
+    U = solve_system(K, F, fx, "two-level", d, info=info)
+    V = solve_system(K, F, fx, "cholesky", d)
+    assert info[0]["method"] == "two-level" and info[0]["loads"] == ["tip", "sag"]
+    for n in F:
+        assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
