@@ -31,14 +31,14 @@ def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
     body = case.body
     if body.shape != "mesh":
         return [_planar_triangles(points, on_part)]
-    from harness.io.meshfile import boundary_facets, read_mesh
-    m = read_mesh(body.file, body.format)
-    tol = 1e-8 * float(np.ptp(m.points, axis=0).max())
-    dist, node = cKDTree(points).query(m.points)
+    from harness.io.meshfile import mesh_surface
+    mpoints, facets, _ = mesh_surface(body.file, body.format)
+    tol = 1e-8 * float(np.ptp(mpoints, axis=0).max())
+    dist, node = cKDTree(points).query(mpoints)
     out = []
-    for fac in boundary_facets(m.cells):
-        ok = on_part(m.points[fac.ravel()].T).reshape(fac.shape).all(axis=1)
-        ok[ok] = on_part(m.points[fac[ok]].mean(axis=1).T)
+    for fac in facets:
+        ok = on_part(mpoints[fac.ravel()].T).reshape(fac.shape).all(axis=1)
+        ok[ok] = on_part(mpoints[fac[ok]].mean(axis=1).T)
         if np.any(dist[fac[ok]] > tol):
             raise ModelError("a traction on a mesh group or a twist needs a node at every vertex of its facets",
                              field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")

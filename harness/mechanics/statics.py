@@ -126,7 +126,7 @@ def stress_forces(points: np.ndarray, case, voigt) -> np.ndarray:
     body's whole boundary: each boundary facet (a polygon's edges, a mesh body's boundary
     faces) gives sigma . n times its size equally to its vertices, which must be nodes."""
     from harness.case.loadsets import stress_tensor
-    from harness.io.meshfile import boundary_facets, read_mesh
+    from harness.io.meshfile import mesh_surface
     body = case.body
     if body.shape == "polygon":
         v = np.asarray(body.vertices, float)
@@ -135,9 +135,7 @@ def stress_forces(points: np.ndarray, case, voigt) -> np.ndarray:
         facets = [np.stack([np.arange(len(v)), (np.arange(len(v)) + 1) % len(v)], axis=1)]
         corners, inside = v, [None]          # counter-clockwise: (dy, -dx) points out
     elif body.shape == "mesh":
-        m = read_mesh(body.file, body.format)
-        corners = m.points
-        facets, inside = boundary_facets(m.cells, m.points)
+        corners, facets, inside = mesh_surface(body.file, body.format)
     else:
         raise ModelError("a homogeneous stress on the whole boundary needs a polygon or mesh body", field="loads",
                          fix="boxes get the homogeneous sets as face tractions")
@@ -275,7 +273,7 @@ class _Factor:
             from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
             try:
-                self.chol = MultifrontalCholesky(K, Symbolic(K, coords), name)
+                self.chol = MultifrontalCholesky(K, _symbolic(K, coords), name)
                 return
             except ModelError:          # not positive definite: a mechanism; name its nodes
                 _mechanism(K, free_dofs, points, name)
@@ -348,3 +346,25 @@ def _solve(network, case, loads=None) -> StaticsResult:
         us.append(u.reshape(n, dim))
         fs.append(f.reshape(n, dim))
     return StaticsResult(tuple(l.name for l in loads), np.array(us), np.array(fs))
+
+
+_SYMBOLIC: dict = {}        # the multifrontal Cholesky's symbolic factorisations by pattern and dof
+# locations: the networks of one mesh under different stiffness rules share them (50k-tet mesh:
+# ~1.5 s CPU each, 10 a calibration)
+
+
+def _symbolic(K, coords):
+    """The multifrontal Symbolic of K's pattern with these dof locations (cached, see _SYMBOLIC)."""
+    import hashlib
+    from harness.linalg.multifrontal import Symbolic
+    A = sp.csr_matrix(K)
+    A.sort_indices()
+    h = hashlib.sha1()
+    for a in (np.asarray(A.shape), A.indptr, A.indices, coords):
+        h.update(np.ascontiguousarray(a).tobytes())
+    key = h.hexdigest()
+    if key not in _SYMBOLIC:
+        if len(_SYMBOLIC) >= 4:
+            _SYMBOLIC.pop(next(iter(_SYMBOLIC)))
+        _SYMBOLIC[key] = Symbolic(A, coords)
+    return _SYMBOLIC[key]
