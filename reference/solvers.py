@@ -101,6 +101,17 @@ CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
 METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level")
 TWO_LEVEL_MAXITER = 300
+# with a P1/Q1 subspace (two-level), 'auto' factorises only while the Cholesky's estimate is
+# at most this many Gflop per nonzero of A: the two-level takes ~7e-8 s per nonzero and
+# iteration for three loads and 25-45 iterations, the Cholesky ~0.1 s per Gflop (measured,
+# three loads, CPU s, two-level / Cholesky: P2 cubes nu = 0.45 13.9k dofs 1.8 / 1.4, 45k
+# 6.8 / 11.8, 70.6k 9.6 / 25.7, 104.5k 14 / 47; 10:1 bars nu = 0.49 61k 13.2 / 7.9, 139k
+# 27 / 35: the rule picks the faster of each)
+TWO_LEVEL_GFLOP_PER_NONZERO = 2.8e-5
+# ... and from these many free dofs it takes the two-level without the symbolic estimate
+# (9 s at 203k dofs, where the Cholesky needs 1,730 Gflop; at 150k dofs only a thin bar's
+# Cholesky comes near the rule's limit, and there the two are close)
+TWO_LEVEL_FIRST = {2: 10 ** 12, 3: 150_000}
 
 
 def choose(method: str, n: int, dim: int) -> str:
@@ -185,21 +196,22 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     if coords is None and method in ("auto", "direct", "cholesky", "amg", "cg"):
         coords = _coords_from_modes(As, near_null)
     sym = None
+    two = coarse is not None and coords is not None
     if method == "auto":
         if coords is None:
             first = "superlu" if n <= SUPERLU_MAX[dim] else "amg"
-        elif n > SYMBOLIC_MAX[dim]:
+        elif n > SYMBOLIC_MAX[dim] or (two and n >= TWO_LEVEL_FIRST[dim]):
             first = "amg"
         else:   # the Cholesky's cost is known from its symbolic factorisation (reused)
             sym = _symbolic(As, coords)
             est = _estimate(sym)
             rec["estimate"] = est
-            first = "cholesky" if est["gflop"] <= CHOLESKY_GFLOP and est["gbytes"] <= CHOLESKY_GBYTES else "amg"
+            limit = min(CHOLESKY_GFLOP, TWO_LEVEL_GFLOP_PER_NONZERO * A.nnz) if two else CHOLESKY_GFLOP
+            first = "cholesky" if est["gflop"] <= limit and est["gbytes"] <= CHOLESKY_GBYTES else "amg"
     else:
         first = {"direct": "cholesky"}.get(method, method)
     if first == "cholesky" and coords is None:
         first = "superlu"
-    two = coarse is not None and coords is not None
     if method == "auto" and first == "amg" and two:
         first = "two-level"
     if first == "two-level" and not two:

@@ -141,3 +141,19 @@ def test_solve_system_hands_the_coarse_space_over():
     assert info[0]["method"] == "two-level" and info[0]["loads"] == ["tip", "sag"]
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
+
+
+def test_auto_weighs_the_cholesky_against_the_two_level(monkeypatch):
+    """'auto' with a coarse space: the Cholesky while its estimate is at most
+    TWO_LEVEL_GFLOP_PER_NONZERO * nnz, else the two-level; from TWO_LEVEL_FIRST dofs the
+    two-level without an estimate. Every answer matches the dense solve."""
+    A, b, R, X, P = _system(size=(2.0, 1.0, 1.0), divs=(4, 2, 2), nu=0.45)
+    truth = np.linalg.solve(A.toarray(), b)
+    for per_nonzero, first, expected in ((1.0, 10 ** 9, "cholesky"), (0.0, 10 ** 9, "two-level"),
+                                         (1.0, 1, "two-level")):
+        monkeypatch.setattr(solvers, "TWO_LEVEL_GFLOP_PER_NONZERO", per_nonzero)
+        monkeypatch.setattr(solvers, "TWO_LEVEL_FIRST", {2: first, 3: first})
+        info = {}
+        x = solvers.solve(A, b, "auto", R, coords=X, info=info, coarse=P)
+        assert info["method"] == expected and ("estimate" in info) == (first > 1)
+        assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
