@@ -149,8 +149,8 @@ class Body:
         if self.shape == "polygon":
             v = np.asarray(self.vertices, float)
             return v.min(0), v.max(0)
-        from harness.io.meshfile import read_mesh
-        p = read_mesh(self.file, self.format).points
+        from harness.io.meshfile import mesh_points
+        p = mesh_points(self.file, self.format)       # read once per version of the file
         return p.min(0), p.max(0)
 
 

@@ -69,3 +69,23 @@ def test_mesh_surface_is_cached_read_only_and_renewed(tmp_path):
     os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))    # a new version even within one tick
     b = meshfile.mesh_surface(path)
     assert b is not a and {tuple(f) for f in b[1][0]} == _by_dict(t2)
+
+
+def test_mesh_points_cached_and_renewed(tmp_path):
+    p, t = _cloud()
+    path = tmp_path / "m.vtu"
+    meshio.write(path, meshio.Mesh(p, [("tetra", t)]))
+    a = meshfile.mesh_points(path)
+    assert meshfile.mesh_points(path) is a and not a.flags.writeable
+    np.testing.assert_allclose(a, p)
+    meshio.write(path, meshio.Mesh(2 * p, [("tetra", t)]))
+    st = path.stat()
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+    np.testing.assert_allclose(meshfile.mesh_points(path), 2 * p)
+
+
+def test_missing_file_is_the_readers_one_line_error(tmp_path):
+    from harness.errors import SpringbenchError
+    for f in (meshfile.mesh_points, meshfile.mesh_surface):
+        with pytest.raises(SpringbenchError, match="no such mesh file"):
+            f(tmp_path / "nope.vtu")
