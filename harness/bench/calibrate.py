@@ -11,8 +11,15 @@ ratio of seconds to the 1k mesh's (the baseline run in the same benchmark). The
 reference's error: the 1k and 10k meshes are refined adaptively (up to 200k dofs); the
 50k mesh (214k P2 dofs) is too large to refine and is estimated from coarse levels of
 its body (reference/coarse.py: ~1/30 and ~1/10 of its dofs, its own system solved in
-their subspaces), so its row has an estimate too. Its time is dominated by the one
-solve on the mesh itself (214k dofs: ~6 min on the loaded 2-core machine it was measured on).
+their subspaces), so its row has an estimate too. The solve on the mesh itself (203k free
+P2 dofs, three held-out loads) takes the two-level method (reference/twolevel.py: 23 CG
+iterations, ~30 s CPU; pyamg's AMG took ~190 s CPU, ~6 min on the loaded machine). The
+50k calibration by stage, before (cProfile wall seconds of a run that got 56 % of a CPU:
+328 s CPU in all) -> after (cProfile CPU seconds: 142 s CPU in all, 162 s wall at 97 %):
+reference 365 -> 56 (the mesh's solve 276 -> 29, coarse levels 71 -> 18), the rules'
+statics (5 networks; the mesh surface read 44 times, the symbolic factorisation 10 times)
+125 -> 23, spring/mass build (Lloyd's per-element least squares batched) 12 -> 4, the fit
+63 -> 61 (its 60 s wall budget); peak memory 2.7 -> 1.9 GB.
 """
 
 from __future__ import annotations

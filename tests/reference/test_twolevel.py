@@ -157,3 +157,14 @@ def test_auto_weighs_the_cholesky_against_the_two_level(monkeypatch):
         x = solvers.solve(A, b, "auto", R, coords=X, info=info, coarse=P)
         assert info["method"] == expected and ("estimate" in info) == (first > 1)
         assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
+
+
+@pytest.mark.parametrize("cell,size,divs", [("hex", (2.0, 1.0, 1.0), (4, 2, 2)), ("quad", (4.0, 1.0), (8, 2)),
+                                            ("tri", (4.0, 1.0), (8, 2))])
+def test_two_level_on_q2_and_2d_matches_dense_solve(cell, size, divs):
+    A, b, R, X, P = _system(cell=cell, size=size, divs=divs, nu=0.45)
+    truth = np.linalg.solve(A.toarray(), b)
+    info = {}
+    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=P)
+    assert info["method"] == "two-level" and info["residual"] <= info["rtol"]
+    assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
