@@ -163,8 +163,9 @@ def add_arguments(p):
                    help="reference refinements at most (default 1; tri/tet meshes: 2-3 adaptive bisection "
                         "steps each, up to 200k dofs in 3-D, a mesh too large for that estimated from coarser meshes "
                         "of its body; quad/hex: uniform, x4-8 dofs; 0: no estimate)")
-    p.add_argument("--solver", choices=("auto", "direct", "amg", "cg"), default="auto",
-                   help="FEM linear solver (default auto: sparse Cholesky or AMG, with fallbacks)")
+    p.add_argument("--solver", choices=("auto", "direct", "amg", "cg", "two-level"), default="auto",
+                   help="FEM linear solver (default auto: sparse Cholesky, or for large P2 systems CG with a "
+                        "two-level P1 preconditioner (two-level); AMG and Cholesky as fallbacks)")
     p.add_argument("--budget", type=float, default=60.0, help="optimiser wall-time budget in seconds (default 60)")
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell (meshio name or bc2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa; >= 0)")

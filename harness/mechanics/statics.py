@@ -270,7 +270,7 @@ class _Factor:
             _mechanism(K, free_dofs, points, name)
         self.lu = None
         if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K):   # else LU (B&C's MT)
-            from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+            from harness.linalg.multifrontal import MultifrontalCholesky
             coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
             try:
                 self.chol = MultifrontalCholesky(K, _symbolic(K, coords), name)
