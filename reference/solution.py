@@ -166,7 +166,9 @@ class ReferenceSolution:
         else:
             from scipy.sparse.linalg import LinearOperator, eigsh
             from reference.solvers import inverse
-            solve = inverse(Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free])
+            from reference.twolevel import prolongation
+            P = prolongation(d)
+            solve = inverse(Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free], None if P is None else P[free])
             opinv = None if solve is None else LinearOperator(Kf.shape, matvec=solve, dtype=float)
             lam, vec = eigsh(Kf.tocsc(), k=k, M=Mf.tocsc(), sigma=0.0, which="LM", OPinv=opinv,
                              v0=np.random.default_rng(0).standard_normal(Kf.shape[0]))  # seeded: same bits

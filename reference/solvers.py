@@ -300,21 +300,42 @@ def _factor(As, method, sym):
     return lambda r: lu.solve(np.ascontiguousarray(r)).reshape(r.shape)
 
 
-INVERSE_GBYTES = 6.0     # memory the shift-invert Cholesky may take (its only alternative is SuperLU)
+INVERSE_GBYTES = 6.0     # memory the shift-invert Cholesky may take (beyond it: the two-level CG below)
+INVERSE_RTOL = 1e-11     # relative residual of each shift-invert solve by the two-level CG
 
 
-def inverse(A: sp.spmatrix, coords: np.ndarray):
-    """A solve function r -> A^-1 r by the multifrontal Cholesky when its symbolic estimate
-    fits in INVERSE_GBYTES (the shift-invert operator of the modal solves: SuperLU, eigsh's
-    own, took over 10 minutes on a 108k-dof Q2 box), else None."""
+def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = None):
+    """A solve function r -> A^-1 r: the shift-invert operator of the modal solves. The
+    multifrontal Cholesky when its symbolic estimate fits in INVERSE_GBYTES; else, given
+    the P1/Q1 subspace ``coarse`` of a P2/Q2 system, CG with the two-level preconditioner
+    (reference/twolevel.py, set up once) to INVERSE_RTOL; else None (eigsh's own SuperLU:
+    over 10 minutes on a 108k-dof Q2 box, past 12 GB on a 152k-dof one)."""
     As = sp.csr_matrix(A)
     sym = _symbolic(As, coords)
-    if _estimate(sym)["gbytes"] > INVERSE_GBYTES:
-        return None
-    try:
-        return _factor(As, "cholesky", sym)
-    except ModelError:         # not positive definite: leave it to eigsh's own factorisation
-        return None
+    if _estimate(sym)["gbytes"] <= INVERSE_GBYTES:
+        try:
+            return _factor(As, "cholesky", sym)
+        except ModelError:     # not positive definite: leave it to eigsh's own factorisation
+            return None
+    return None if coarse is None else _two_level_inverse(As, coords, coarse)
+
+
+def _two_level_inverse(As, coords, coarse):
+    from reference import twolevel
+    s = 1.0 / np.sqrt(As.diagonal())
+    Ass = sp.csr_matrix(As.multiply(s[:, None]).multiply(s[None, :]))
+    M = twolevel.TwoLevel(Ass, s, coarse, coords)
+
+    def solve(r):
+        r = np.asarray(r, float)
+        b = (s * r.reshape(len(s), -1).T).T
+        bn = np.linalg.norm(r.reshape(len(s), -1), axis=0)
+        y, _, why = twolevel.pcg(Ass, b, M, 1.0 / s, lambda Y: INVERSE_RTOL * bn, TWO_LEVEL_MAXITER)
+        if why:
+            raise ModelError(f"the modal solve's shift-invert CG failed: {why}", field="reference.modes",
+                             fix="fewer reference levels (max_refine) or modes = 0")
+        return (s[:, None] * y).reshape(r.shape)
+    return solve
 
 
 def _coords_from_modes(A, near_null):

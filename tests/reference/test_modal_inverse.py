@@ -1,5 +1,6 @@
-"""The reference's natural frequencies through the multifrontal shift-invert operator
-(reference.solvers.inverse) equal a dense generalised eigen-solve of the same K and M."""
+"""The reference's natural frequencies through the shift-invert operator
+(reference.solvers.inverse: the multifrontal Cholesky, or the two-level CG where the
+Cholesky would not fit) equal a dense generalised eigen-solve of the same K and M."""
 
 import textwrap
 
@@ -13,8 +14,7 @@ from reference import solvers
 from reference.problem import body_bbox, fixed_dofs
 
 
-@pytest.mark.slow
-def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch):
+def _case(tmp_path):
     p = tmp_path / "m.toml"
     p.write_text(textwrap.dedent("""
         name = "m"
@@ -32,13 +32,24 @@ def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch):
         max_refine = 0
         modes = 5
         """))
-    case = load_case(p)
+    return load_case(p)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("operator", ["cholesky", "two-level"])
+def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch, operator):
+    """Cholesky: as measured; two-level: the Cholesky's memory bound set to 0, so the
+    operator is the CG on the P1 subspace (the large-mesh path), set up once."""
+    case = _case(tmp_path)
+    if operator == "two-level":
+        monkeypatch.setattr(solvers, "INVERSE_GBYTES", 0.0)
     used = []
     real = solvers.inverse
-    monkeypatch.setattr(solvers, "inverse", lambda *a: used.append(1) or real(*a))
+    monkeypatch.setattr(solvers, "inverse", lambda *a: used.append(real(*a)) or used[-1])
     sol = reference.solve(case, cache=False)
     f = sol.frequencies(5)
-    assert used and real(*_system(sol, case)[2:]) is not None        # the Cholesky operator was used
+    assert len(used) == 1 and used[0] is not None                    # eigsh never fell back to SuperLU
+    assert (operator == "two-level") == (used[0].__name__ == "solve")  # the CG's closure, not the factor's
     K, M, _, _ = _system(sol, case)
     lam = sl.eigh(K.toarray(), M.toarray(), eigvals_only=True, subset_by_index=[0, 4])
     np.testing.assert_allclose(f, np.sqrt(lam) / (2 * np.pi), rtol=1e-9)
