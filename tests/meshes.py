@@ -5,13 +5,23 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import signal
+
 import meshio
 import numpy as np
 
 
+def gmsh_start(gmsh) -> None:
+    """gmsh.initialize, then SIGPIPE back to ignored: gmsh's C++ start resets it to the
+    default, and a later write to a closed pipe or socket (a Dask test's) then killed the
+    whole pytest run with exit 141 instead of raising EPIPE."""
+    gmsh.initialize(["-noenv"])
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+
+
 def _mesh(path: Path, build, size: float, dim: int, scale: float = 1.0) -> Path:
     import gmsh
-    gmsh.initialize(["-noenv"])
+    gmsh_start(gmsh)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)
@@ -87,7 +97,7 @@ def cylinder_groups(folder: Path, radius=0.1, length=0.5, size=0.05, name="cylin
     (x = 0), ``tip`` (x = length) and ``side``, the volume ``body``."""
     import gmsh
     path = Path(folder) / name
-    gmsh.initialize(["-noenv"])
+    gmsh_start(gmsh)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)

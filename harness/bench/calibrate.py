@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import resource
+import signal
 import subprocess
 import sys
 import tempfile
@@ -48,6 +49,7 @@ def cylinder(path: Path, n_tets: int) -> int:
     h = (8.5 * np.pi * RADIUS ** 2 * LENGTH / n_tets) ** (1 / 3)
     for _ in range(2):
         gmsh.initialize(["-noenv"])
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)   # gmsh's start resets it: a closed pipe would kill us
         try:
             gmsh.option.setNumber("General.Terminal", 0)
             gmsh.option.setNumber("General.NumThreads", 1)

@@ -2,7 +2,9 @@
 states on gmsh meshes (cylinder, ellipsoid, holed block, holed plate), their closed
 form, their nodal forces, lumped masses, the held-out end loads."""
 
+import signal
 import textwrap
+from pathlib import Path
 
 import meshio
 import numpy as np
@@ -213,3 +215,17 @@ def test_a_mesh_written_in_2d_reads_back(tmp_path, bodies):
     m = read_mesh(bodies["holed_plate"])
     assert m.dim == 2 and "triangle" in m.cells
     assert isinstance(meshio.read(bodies["holed_plate"]), meshio.Mesh)
+
+
+def test_gmsh_meshes_leave_sigpipe_ignored(tmp_path):
+    """gmsh's start resets SIGPIPE to the default (the kernel's disposition, not Python's
+    cached one); tests/meshes.py puts Python's ignore back, else a later write to a closed
+    pipe or socket kills the test run (exit 141)."""
+    def ignored():
+        with open("/proc/self/status") as fh:
+            mask = next(int(l.split()[1], 16) for l in fh if l.startswith("SigIgn"))
+        return bool(mask & (1 << (signal.SIGPIPE - 1)))
+    if not Path("/proc/self/status").exists():
+        pytest.skip("no /proc: the disposition cannot be read here")
+    meshes.cylinder(tmp_path, size=0.08)
+    assert ignored()
