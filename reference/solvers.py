@@ -328,9 +328,9 @@ def _two_level_inverse(As, coords, coarse):
 
     def solve(r):
         r = np.asarray(r, float)
-        b = (s * r.reshape(len(s), -1).T).T
-        bn = np.linalg.norm(r.reshape(len(s), -1), axis=0)
-        y, _, why = twolevel.pcg(Ass, b, M, 1.0 / s, lambda Y: INVERSE_RTOL * bn, TWO_LEVEL_MAXITER)
+        r2 = r.reshape(len(s), -1)
+        bn = np.linalg.norm(r2, axis=0)
+        y, _, why = twolevel.pcg(Ass, s[:, None] * r2, M, 1.0 / s, lambda Y: INVERSE_RTOL * bn, TWO_LEVEL_MAXITER)
         if why:
             raise ModelError(f"the modal solve's shift-invert CG failed: {why}", field="reference.modes",
                              fix="fewer reference levels (max_refine) or modes = 0")

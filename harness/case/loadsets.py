@@ -111,7 +111,7 @@ def stress_tensor(voigt) -> "np.ndarray":
 def anchor_points(points) -> np.ndarray:
     """Three (2-D: two) well-separated points of a body's boundary vertices (m, dim) for
     the minimal constraints: A farthest from the centroid, B farthest from A, C farthest
-    from the line AB. Near-ties (symmetric bodies have many) go to the lexicographically
+    off the line AB. Near-ties (symmetric bodies have many) go to the lexicographically
     smallest point, so rounding the coordinates cannot change the choice."""
     p = np.asarray(points, float)
     tol = 1e-9 * float(np.ptp(p, axis=0).max())

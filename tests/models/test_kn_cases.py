@@ -17,6 +17,7 @@ from harness.models.classes import build, class_of, class_spec
 from harness.models.kn import KNTerm
 from harness.models.sms import build_network, model_spec
 
+import meshes
 from test_sms import TINY, ClosedFormRef, _dense_K
 
 BOX = TINY.replace('dim = 2', 'dim = 3').replace('shape = "rectangle"\nsize = [2.0, 2.0]',
@@ -96,15 +97,7 @@ def test_bad_kn_keys_are_one_line_errors(tmp_path):
 
 
 def test_calibrate_exports_the_kn_term(tmp_path):
-    import meshio
-    from harness.geometry import grid_points
-    from harness.models.anisotropic import hex_to_tets
-    from harness.models.topology import grid_structure
-    shape = (4, 3, 3)
-    pts = grid_points(np.zeros(3), np.array([3.0, 1.0, 1.0]), shape)
-    tets = hex_to_tets(grid_structure(shape, "edges").cells["hexahedron"])
-    mesh = tmp_path / "bar.vtu"
-    meshio.write(mesh, meshio.Mesh(pts, [("tetra", tets)]))
+    mesh, tets = meshes.grid_bar(tmp_path)
     out = tmp_path / "bar-kn.vtu"
     assert cli.main(["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45", "--model", "springs+kn",
                      "--method", "gauss-newton", "--max-refine", "0", "--rule", "lloyd", "--out", str(out)]) == 0

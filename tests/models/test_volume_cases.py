@@ -16,6 +16,7 @@ from harness.errors import CaseError
 from harness.models.sms import build_network, model_spec
 from harness.models.volume import case_volume, volume_gradients
 
+import meshes
 from test_sms import TINY, ClosedFormRef, _dense_K
 
 BOX = TINY.replace('dim = 2', 'dim = 3').replace('shape = "rectangle"\nsize = [2.0, 2.0]',
@@ -84,15 +85,7 @@ def test_bad_volume_keys_are_one_line_errors(tmp_path, extra, field):
 
 
 def test_calibrate_exports_the_volume_term(tmp_path):
-    import meshio
-    from harness.models.anisotropic import hex_to_tets
-    from harness.models.topology import grid_structure
-    from harness.geometry import grid_points
-    shape = (4, 3, 3)
-    pts = grid_points(np.zeros(3), np.array([3.0, 1.0, 1.0]), shape)
-    tets = hex_to_tets(grid_structure(shape, "edges").cells["hexahedron"])
-    mesh = tmp_path / "bar.vtu"
-    meshio.write(mesh, meshio.Mesh(pts, [("tetra", tets)]))
+    mesh, tets = meshes.grid_bar(tmp_path)
     out = tmp_path / "bar-sv.vtu"
     assert cli.main(["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45", "--model", "springs+volume",
                      "--method", "gauss-newton", "--max-refine", "0", "--rule", "lloyd", "--out", str(out)]) == 0
