@@ -124,6 +124,15 @@ def tensor_mesh(axes) -> skfem.Mesh:
     return MESHES[len(axes)].init_tensor(*axes)
 
 
+def q2_doflocs(mesh: skfem.Mesh) -> np.ndarray:
+    """The Q2 dof locations (dim, ns) of a quadrilateral or hexahedral mesh in
+    scikit-fem's numbering (vertices, then edge (3-D), facet and cell midpoints), without
+    building a basis: a CellBasis of a million-dof level holds ~1 GB of quadrature data."""
+    p = mesh.p
+    parts = [p] + ([p[:, mesh.edges].mean(axis=1)] if p.shape[0] == 3 else [])
+    return np.concatenate(parts + [p[:, mesh.facets].mean(axis=1), p[:, mesh.t].mean(axis=1)], axis=1)
+
+
 def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> skfem.Mesh:
     """Quadrilateral (2-D) or hexahedral (3-D) tensor mesh of [origin, origin + size]
     graded towards every face, ``n`` cells per end zone."""

@@ -18,7 +18,8 @@ import numpy as np
 
 from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import axis_maps, graded_axes, graded_mesh, level_divisions, probe_points, tensor_mesh
+from reference.graded import (axis_maps, graded_axes, graded_mesh, level_divisions, probe_points, q2_doflocs,
+                              tensor_mesh)
 from reference.gridvalues import GridField
 from reference.problem import solve_mesh
 from reference.symmetry import Mirror, lower_half, mirror_of, unfold
@@ -26,7 +27,14 @@ from reference.symmetry import Mirror, lower_half, mirror_of, unfold
 FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
 # (divisions counts cells along the shortest side: two end zones)
 MAX_DOFS = {2: 400_000, 3: 64_000}     # the largest system one level may solve (3-D: ~15 s a factorisation)
-EXACT = 1e-9                    # relative change between two levels below which a field is exact
+# ... with the fast-diagonalisation CG (solver 'auto' or 'tensor', reference/tensorpre.py): no
+# factorisation, memory ~ the assembled K (~1 GB at 400k dofs), ~120 iterations at nu = 0.49
+TENSOR_MAX_DOFS = {2: 2_000_000, 3: 400_000}
+EXACT = 1e-6                    # relative change between two levels below which a field is exact
+# (its levels differ by the solves' rounding only): the 10:1 box's stretch-x at nu = 0.49, a
+# linear field, changes by 1.2e-9 and then 1.7e-7 from level to level (Cholesky residuals ~1e-8 on
+# that ill-conditioned system); at 1e-9 it stayed active and its full-box solves took most of the
+# time. Fields that converge change by 1e-4..1e-2 between levels
 
 
 def n_dofs(mesh, dim: int) -> int:
@@ -61,7 +69,7 @@ class Levels:
 
     def _evaluator(self, k: int) -> GridField:
         if k not in self._eval:
-            self._eval[k] = GridField(self.disc(self.meshes[k]).doflocs)
+            self._eval[k] = GridField(q2_doflocs(self.meshes[k]))
         return self._eval[k]
 
     def solve(self, case, k: int, axes: list, mirrors: dict, info=None) -> dict:
@@ -72,13 +80,18 @@ class Levels:
         for name, mirror in mirrors.items():
             groups.setdefault(mirror, []).append(name)
         out = {}
+        cuts: dict = {}         # one discretisation, grid and stiffness per set of cut axes
+        stiffness: dict = {}
         for mirror, names in groups.items():
             if not mirror:
                 out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
                 continue
-            d = self.disc(tensor_mesh(lower_half(axes, mirror)))
-            U = solve_mesh(case, d.mesh, loads=set(names), info=info, mirror=mirror, disc=d)
-            half = GridField(d.doflocs)
+            cut = tuple(sorted(mirror.axes))
+            if cut not in cuts:
+                d = self.disc(tensor_mesh(lower_half(axes, mirror)))
+                cuts[cut] = (d, GridField(d.doflocs))
+            d, half = cuts[cut]
+            U = solve_mesh(case, d.mesh, loads=set(names), info=info, mirror=mirror, disc=d, stiffness=stiffness)
             out.update({n: unfold(self._evaluator(k), half, U[n], mirror) for n in names})
         return out
 
@@ -115,13 +128,13 @@ class Levels:
         vals, h = self.values(np.asarray(points, float), load)
         return extrapolate(vals, h, self.orders.get(load, float("nan")))
 
-    def finest_field(self, load: str, disc: Discretisation) -> np.ndarray:
+    def finest_field(self, load: str) -> np.ndarray:
         """The load's dof vector on the finest mesh: its own if solved there, else its
         (exactly represented) last field interpolated at the finest dof locations."""
         k, u = self.fields[load][-1]
         if k == len(self.meshes) - 1:
             return u
-        return self.at(disc.doflocs.T, k, u).ravel()
+        return self.at(q2_doflocs(self.meshes[-1]).T, k, u).ravel()
 
     def to_arrays(self, names) -> dict:
         out = {"ns": np.asarray(self.ns, np.int64),
@@ -158,13 +171,14 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
     mirrors = {l.name: mirror_of(case, l) for l in case.loads}
     history = []
     first = -(-spec.divisions // 2) if spec.divisions else FIRST    # divisions: cells along the shortest side
+    cap = (TENSOR_MAX_DOFS if spec.solver in ("auto", "tensor") else MAX_DOFS)[case.dim]
     for k, n in enumerate(level_divisions(first, spec.max_refine)):
         axes = graded_axes(lo, size, n)
         mesh = tensor_mesh(axes)
         dofs = n_dofs(mesh, case.dim)
         largest = max(_dofs(lower_half(axes, mirrors[name]), case.dim) for name in active)
-        if k > 0 and largest > MAX_DOFS[case.dim]:
-            status(f"FEM: the next graded level (a system of {largest} dofs) would exceed {MAX_DOFS[case.dim]}; stopping")
+        if k > 0 and largest > cap:
+            status(f"FEM: the next graded level (a system of {largest} dofs) would exceed {cap}; stopping")
             break
         status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest}, "
                f"{len(active)} loads)")

@@ -9,7 +9,7 @@ from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from harness.case.loadsets import homogeneous_closed_form, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
-from reference import solvers, twolevel
+from reference import solvers, tensorpre, twolevel
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs
 
@@ -75,12 +75,14 @@ TWO_LEVEL_MIN = 20_000   # dofs: below, 'auto' always factorises (reference/solv
 
 
 def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
-                 prescribed: dict | None = None, info: list | None = None) -> dict:
+                 prescribed: dict | None = None, info: list | None = None, C: np.ndarray | None = None) -> dict:
     """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
     Loads sharing a constraint set share one factorisation; ``info`` (a list) gets the
     solver's record of each (method, residual, fallbacks, seconds) with the loads named.
     A P2/Q2 system of at least TWO_LEVEL_MIN dofs (or ``method`` 'two-level') hands the
-    solver its P1/Q1 subspace for the two-level method (reference/twolevel.py)."""
+    solver its P1/Q1 subspace for the two-level method (reference/twolevel.py). A Q2
+    system on a tensor mesh with its Voigt stiffness ``C`` per element (method 'auto' or
+    'tensor') hands it the fast-diagonalisation preconditioner (reference/tensorpre.py)."""
     out = {}
     groups: dict[bytes, list[str]] = {}
     for name in loads:
@@ -101,8 +103,11 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
             coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
             P = twolevel.prolongation(d) if d.ndof >= TWO_LEVEL_MIN or method == "two-level" else None
         rec: dict = {}
+        tensor = None
+        if C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex"):
+            tensor = tensorpre.preconditioner(d.doflocs, free, C)
         x = solvers.solve(A, np.column_stack(rhs), method, R[free], info=rec, coords=coords[free],
-                          coarse=None if P is None else P[free])
+                          coarse=None if P is None else P[free], tensor=tensor)
         if info is not None:
             info.append(dict(rec, loads=list(names), n=len(free)))
         for i, n in enumerate(names):
@@ -115,16 +120,19 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
 
 
 def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror = Mirror(),
-               disc: Discretisation | None = None, parts=None) -> dict:
+               disc: Discretisation | None = None, parts=None, stiffness: dict | None = None) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
     those named in ``loads``). ``info``: a list that gets one solver record per
     factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
     case's box cut at these mid-planes, and every load named has that parity
     (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
-    ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`)."""
+    ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`).
+    ``stiffness``: a dict that keeps K (and C) under the key ``disc`` for the next call
+    on the same discretisation (the graded levels' shears cut the box alike in pairs)."""
     d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
-    C = element_stiffness(case.material, cent)
+    kept = (stiffness or {}).get(id(d))
+    C = element_stiffness(case.material, cent) if kept is None else kept[1]
     rho = densities(case.material, cent)
     bbox = body_bbox(case, mesh)
     chosen = [l for l in case.loads if loads is None or l.name in loads]
@@ -134,8 +142,10 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
         return exact
     fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror, parts) for l in chosen}
     F = {l.name: load_vector(d, case, l, bbox, rho, mirror, parts) for l in chosen}
-    K = d.stiffness(C)
-    return {**solve_system(K, F, fixed, case.reference.solver, d, info=info), **exact}
+    K = d.stiffness(C) if kept is None else kept[0]
+    if stiffness is not None:
+        stiffness[id(d)] = (K, C)
+    return {**solve_system(K, F, fixed, case.reference.solver, d, info=info, C=C), **exact}
 
 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:

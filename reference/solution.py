@@ -24,11 +24,16 @@ from harness.errors import ModelError
 from reference import cache as _cache
 from reference.adaptive import Changes, applies, solve_adaptive
 from reference.fem import Discretisation
-from reference.levels import Levels, solve_graded
+from reference.levels import Levels, n_dofs, solve_graded
 from reference.locate import Locator
 from reference.mesh import MESHES
 from reference.problem import body_bbox, fixed_dofs
 from reference.refine import solve_refined
+
+MODAL_DOFS = {2: 400_000, 3: 120_000}   # graded: the modes come from the finest level at most this
+# large (the Sec. 6 cube's 108k-dof level factorises in ~3 GB; its 152k one would pass 6 GB, and its
+# shift-invert CG took > 15 min). Frequencies converge like h^(2p), far faster than the scored
+# displacements that need the finer levels.
 
 
 # -- the solution --------------------------------------------------------------------
@@ -61,8 +66,7 @@ class ReferenceSolution:
 
     def __init__(self, case, mesh, U: dict, estimates: dict, history: list, key: str,
                  from_cache: bool = False, seconds: float = 0.0, solver: list | None = None,
-                 levels: Levels | None = None, disc: Discretisation | None = None,
-                 changes: Changes | None = None):
+                 levels: Levels | None = None, changes: Changes | None = None):
         self.case = case
         self.mesh = mesh
         self.dim = case.dim
@@ -70,8 +74,6 @@ class ReferenceSolution:
         self._U = U
         self.loads = tuple(U)
         self.levels = levels
-        if disc is not None:
-            self.__dict__["disc"] = disc   # already built (graded: the finest level's)
         self.solver = list(solver or [])
         self.changes = changes
         point = self._level_estimate if levels is not None else (
@@ -92,6 +94,21 @@ class ReferenceSolution:
     @property
     def basis(self) -> skfem.CellBasis:
         return self.disc.basis
+
+    @cached_property
+    def modal_disc(self) -> Discretisation:
+        """The discretisation of the modal solves: the finest mesh, or for the graded
+        method the finest level with at most MODAL_DOFS dofs (the coarsest if none is)."""
+        if self.levels is None:
+            return self.disc
+        sizes = [n_dofs(m, self.dim) for m in self.levels.meshes]
+        k = max([i for i, n in enumerate(sizes) if n <= MODAL_DOFS[self.dim]], default=0)
+        return self.disc if k == len(sizes) - 1 else self.levels.disc(self.levels.meshes[k])
+
+    @property
+    def modal_mesh(self):
+        """The mesh the mode shapes live on (``modes`` gives them at its vertices)."""
+        return self.modal_disc.mesh
 
     @cached_property
     def vector_basis(self) -> skfem.CellBasis:
@@ -149,13 +166,13 @@ class ReferenceSolution:
         hit = _cache.load(name) if self.key else None
         if hit is not None:
             return hit["freqs"], hit["modes"]
-        d = self.disc
+        d = self.modal_disc
         case = self.case
         C = element_stiffness(case.material, d.centroids())
         rho = densities(case.material, d.centroids())
         K, M = d.stiffness(C), d.mass(rho)
         lc = next(l for l in case.loads if l.name == load)
-        fx = fixed_dofs(d, case, lc, body_bbox(case, self.mesh))
+        fx = fixed_dofs(d, case, lc, body_bbox(case, d.mesh))
         free = np.setdiff1d(np.arange(d.ndof), fx)
         Kf, Mf = K[free][:, free], M[free][:, free]
         k = min(k, len(free))
@@ -189,15 +206,17 @@ class ReferenceSolution:
         return self._modal_solve(k, self._check_load(load or self.loads[0]))[0]
 
     def modes(self, k: int | None = None, load: str | None = None) -> np.ndarray:
-        """Mode shapes (k, n_vertices, dim) at the mesh vertices, M-orthonormal."""
+        """Mode shapes (k, n_vertices, dim) at the vertices of ``modal_mesh``, M-orthonormal."""
         k = k or self.case.reference.modes or 6
-        return self._modal_solve(k, self._check_load(load or self.loads[0]))[1][:, : self.mesh.p.shape[1]]
+        return self._modal_solve(k, self._check_load(load or self.loads[0]))[1][:, : self.modal_mesh.p.shape[1]]
 
     def mode_displacement(self, points, i: int, k: int | None = None, load: str | None = None) -> np.ndarray:
         """Mode i evaluated at points (n, dim)."""
         k = max(k or self.case.reference.modes or 6, i + 1)
         shapes = self._modal_solve(k, self._check_load(load or self.loads[0]))[1]
-        return self.locator.evaluate(self.basis, shapes[i], points)
+        d = self.modal_disc
+        locator = self.locator if d.mesh is self.mesh else Locator(d.mesh)
+        return locator.evaluate(d.basis, shapes[i], points)
 
 
 # -- solve ----------------------------------------------------------------------------
@@ -250,8 +269,6 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
 
 
 def _graded_solution(case, levels: Levels, est, history, key, seconds, solver, from_cache):
-    mesh = levels.meshes[-1]
-    disc = Discretisation(mesh, case.reference.cell, case.reference.element)
-    U = {n: levels.finest_field(n, disc) for n in levels.fields}
-    return ReferenceSolution(case, mesh, U, est, history, key, from_cache=from_cache, seconds=seconds,
-                             solver=solver, levels=levels, disc=disc)
+    U = {n: levels.finest_field(n) for n in levels.fields}
+    return ReferenceSolution(case, levels.meshes[-1], U, est, history, key, from_cache=from_cache,
+                             seconds=seconds, solver=solver, levels=levels)

@@ -99,7 +99,11 @@ CG_MAXITER = 20_000
 SECONDS_PER_GFLOP = 0.1
 CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
-METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level")
+METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level", "tensor")
+TENSOR_MAXITER = 2000    # fast-diagonalisation PCG (reference/tensorpre.py): 100-300 iterations measured
+# 'auto' takes it from these many dofs (3-D, the graded boxes' quarters, nu = 0.49, CPU s, tensor /
+# the former choice: 18.8k dofs 0.7 / 1.9, 55k 2.4 / 8, 249k 13.7 / -); in 2-D the Cholesky stays
+TENSOR_MIN = {2: 10 ** 12, 3: 20_000}
 TWO_LEVEL_MAXITER = 300
 # with a P1/Q1 subspace (two-level), 'auto' factorises only while the Cholesky's estimate is
 # at most this many Gflop per nonzero of A: the two-level takes ~7e-8 s per nonzero and
@@ -129,7 +133,7 @@ def _singular() -> ModelError:
 
 def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.ndarray | None = None, *,
           coords: np.ndarray | None = None, info: dict | None = None,
-          coarse: sp.spmatrix | None = None) -> np.ndarray:
+          coarse: sp.spmatrix | None = None, tensor=None) -> np.ndarray:
     """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
     hierarchy) for symmetric positive definite A; returns x shaped like b.
 
@@ -147,7 +151,12 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     ``coarse`` (n, nc): the P1/Q1 fields of a P2/Q2 system's mesh in its free dofs
     (reference/twolevel.py ``prolongation``, rows of the free dofs); with it (and
     ``coords``) 'two-level' (CG, Gauss-Seidel and an exact P1 solve) replaces 'amg' as
-    the iterative method of 'auto' and can be asked for by name."""
+    the iterative method of 'auto' and can be asked for by name.
+
+    ``tensor``: z = P r, the fast-diagonalisation preconditioner of a Q2 system on a
+    tensor mesh (reference/tensorpre.py); with it 'tensor' (and 'auto' from
+    :data:`TENSOR_MIN` dofs) first tries CG with it, then falls back as 'auto' would
+    without it."""
     t0 = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
@@ -198,7 +207,9 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     sym = None
     two = coarse is not None and coords is not None
     if method == "auto":
-        if coords is None:
+        if tensor is not None and n >= TENSOR_MIN[dim]:
+            first = "tensor"
+        elif coords is None:
             first = "superlu" if n <= SUPERLU_MAX[dim] else "amg"
         elif n > SYMBOLIC_MAX[dim] or (two and n >= TWO_LEVEL_FIRST[dim]):
             first = "amg"
@@ -216,8 +227,12 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
         first = "two-level"
     if first == "two-level" and not two:
         first = "amg"
-    plan = {"cholesky": ["cholesky"], "superlu": ["superlu"], "cg": ["cg", "amg", "amg-strong", "cholesky"],
-            "amg": ["amg", "amg-strong", "cholesky"], "two-level": ["two-level", "amg-strong", "cholesky"]}[first]
+    plan = []
+    if first == "tensor":    # then what 'auto' would do without it
+        first = "two-level" if two else "amg"
+        plan = ["tensor"] if tensor is not None else []
+    plan += {"cholesky": ["cholesky"], "superlu": ["superlu"], "cg": ["cg", "amg", "amg-strong", "cholesky"],
+             "amg": ["amg", "amg-strong", "cholesky"], "two-level": ["two-level", "amg-strong", "cholesky"]}[first]
     if plan[-1] == "cholesky" and coords is None:
         plan[-1] = "superlu"
     Bs = None if near_null is None else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
@@ -243,6 +258,8 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
                 y, its, why = f(bs[:, live]), 0, ""
             elif m == "two-level":
                 y, its, why = _two_level(As, bs[:, live], s, coarse, coords, Bs, normA, bnorm[live])
+            elif m == "tensor":
+                y, its, why = _tensor(As, bs[:, live], s, tensor)
             else:
                 y, its, why = _iterative(As, bs[:, live], m, Bs, budget)
         except ModelError:
@@ -423,6 +440,18 @@ def _iterative(As, bs, method, Bs, budget=None):
     for j in range(bs.shape[1]):
         left = None if budget is None else budget - (time.process_time() - c0)
         Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, maxiter, 20 if M is not None else 200, left)
+        its, why = max(its, k), why or w
+    return Y, its, why
+
+
+def _tensor(As, bs, s, tensor):
+    """CG on the equilibrated system with the tensor preconditioner P ~ A^-1 turned into
+    one of As = S A S: S^-1 P S^-1."""
+    M = spla.LinearOperator(As.shape, matvec=lambda r: tensor(np.ravel(r) / s) / s, dtype=float)
+    Y = np.zeros_like(bs)
+    its, why = 0, ""
+    for j in range(bs.shape[1]):
+        Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, TENSOR_MAXITER, 50)
         its, why = max(its, k), why or w
     return Y, its, why
 

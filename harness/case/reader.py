@@ -99,17 +99,19 @@ LOADS = {
     "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
 }
 
-GRADED_LEVELS = 6   # default max_refine of the graded method: n = 2..8 cells per end zone, where a
-# cube's shears reach 7e-5 (tests/reference/test_graded_vs_independent.py); the dof budget stops thin boxes earlier
+GRADED_LEVELS = 8   # default max_refine of the graded method: n = 2..10 cells per end zone. A cube's
+# shears reach 7e-5 at n = 8 (tests/reference/test_graded_vs_independent.py) and stop there (tol);
+# a 10:1 box at nu = 0.49 reaches 6.6e-5 at n = 10 against the independent truth (2.5e-4 at n = 6);
+# the dof budget (reference/levels.py) stops earlier where a level would not fit
 
 REFERENCE = {
     "element": Field("str", "P2", choices=("P1", "P2")),
     "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
     "divisions": Field("int", None, min=1, max=4096, doc="initial elements along the shortest side"),
     "tol": Field("float", 1e-4, min=0, min_exclusive=True),
-    "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 6, "
-                                                "within a 64k-dof system in 3-D)"),
-    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg", "two-level")),
+    "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 8, "
+                                                "within a 400k-dof system in 3-D with the default solver, 64k with a factorising one)"),
+    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg", "two-level", "tensor")),
     "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
     "method": Field("str", "auto", choices=("auto", "graded", "refine"),
                     doc="graded: Q2 hexes/quads graded towards the faces, levels extrapolated "

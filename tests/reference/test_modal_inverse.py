@@ -64,3 +64,51 @@ def _system(sol, case):
     free = np.setdiff1d(np.arange(d.ndof), fx)
     Kf = K[free][:, free]
     return Kf, M[free][:, free], Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free]
+
+
+@pytest.mark.slow
+def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch):
+    """A graded reference whose finest level is past MODAL_DOFS takes its modes from the
+    finest level within it (the Sec. 6 cube at 9 cells per end zone: the finest level's
+    shift-invert would not fit). Its frequencies equal a dense eigen-solve of that level
+    assembled here with scikit-fem's own forms, and converge fast over the levels
+    (h^(2p): the next level's change is a fraction of this one's)."""
+    import dataclasses
+    import skfem
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+    from reference import solution
+
+    case = _case(tmp_path)
+    case = dataclasses.replace(case, reference=dataclasses.replace(case.reference, max_refine=2))
+    load = "shear-xy"                                   # face y0 clamped
+    sol = reference.solve(case, cache=False)
+    sizes = [sol.levels.disc(m).ndof for m in sol.levels.meshes]
+    assert sizes[0] < sizes[1] < sizes[2] == sol.disc.ndof
+
+    def modal_with(budget):
+        monkeypatch.setattr(solution, "MODAL_DOFS", {3: budget})
+        sol.__dict__.pop("modal_disc", None)
+        sol._modal.clear()
+        return sol.frequencies(5, load=load)
+
+    f = []
+    for k in (0, 1, 2):
+        f.append(modal_with(int(sizes[k])))
+        assert sol.modal_mesh is (sol.levels.meshes[k] if k < 2 else sol.mesh)
+    assert sol.modal_disc is sol.disc                                  # the finest fits: its own
+    assert sol.modes(5, load=load).shape == (5, sol.mesh.p.shape[1], 3)
+    change = [np.abs(f[i] / f[2] - 1).max() for i in (0, 1)]
+    assert change[1] < change[0] / 2 and change[0] < 0.01, change
+
+    f0 = modal_with(1)                                                 # none fits: the coarsest
+    mesh = sol.levels.meshes[0]
+    assert sol.modal_mesh is mesh and sol.modes(5, load=load).shape == (5, mesh.p.shape[1], 3)
+    np.testing.assert_allclose(f0, f[0], rtol=1e-12)
+    basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementHex2()), intorder=5)
+    K = skfem.asm(linear_elasticity(*lame_parameters(1000.0, 0.3)), basis)
+    M = skfem.asm(skfem.BilinearForm(lambda u, v, w: 1.5 * skfem.helpers.dot(u, v)), basis)
+    clamped = basis.get_dofs(lambda x: np.isclose(x[1], 0.0)).all()
+    free = np.setdiff1d(np.arange(basis.N), clamped)
+    lam = sl.eigh(K[free][:, free].toarray(), M[free][:, free].toarray(), eigvals_only=True,
+                  subset_by_index=[0, 4])
+    np.testing.assert_allclose(f0, np.sqrt(lam) / (2 * np.pi), rtol=1e-9)

@@ -1,0 +1,163 @@
+"""A fast-diagonalisation preconditioner for Q2 systems on tensor meshes (the graded
+boxes and rectangles of reference/graded.py).
+
+On a tensor mesh of axis-aligned cells the Q2 basis is a product of 1-D quadratic
+Lagrange functions, phi_I = X_i(x) Y_j(y) Z_k(z), so for a homogeneous material the
+stiffness block of displacement component c with itself keeps, of its terms
+sum_pq C_cpcq int d_p phi_I d_q phi_J, the ones with p = q as a sum of Kronecker
+products: B_c = sum_d C_cdcd (M (x) .. A_d .. (x) M), with the 1-D stiffness A_d in
+position d and 1-D masses M elsewhere. With per-axis generalised eigenvectors
+(A_d V_d = M_d V_d L_d, V_d^T M_d V_d = I), B_c^-1 = W diag(1 / sum_d C_cdcd L_d) W^T,
+W = V_x (x) V_y (x) V_z: applied by dense matrix products along each axis, O(N n) for
+N nodes and n nodes per axis, nothing factorised. The preconditioner is block-Jacobi
+over the components (the cross-component coupling, lambda's, is left to CG).
+
+Constraints: a component's plane at an end of an axis that is fixed as a whole (a clamped
+face, a roller, a mirror's cut plane) is a Dirichlet end of that axis in B_c; fixed dofs
+off such planes (corner or edge points, part of a face) are masked out, P = R B^-1 R^T,
+still symmetric positive definite. A component with no Dirichlet end on any axis (the
+stretches' rollers and corner points) has no preconditioner here: its B_c is singular,
+and shifted it took 200+ iterations where the Cholesky is quick and exact (the stretches'
+linear fields are recognised by two levels agreeing to 1e-9). A piecewise or anisotropic material is preconditioned by
+its mean elastic tensor's diagonal moduli (the CG solves the true system). Measured in
+reference/solvers.py's table (method 'tensor').
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+
+from reference.gridvalues import GridField
+
+GAUSS = np.polynomial.legendre.leggauss(3)    # exact for the 1-D Q2 mass (degree 4)
+_PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}   # Voigt index of a shear pair
+
+
+def axis_matrices(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """1-D global mass M and stiffness A (dense, (n, n)) of the quadratic Lagrange basis
+    on an axis's Q2 nodes (vertices and cell midpoints alternating, n odd)."""
+    nodes = np.asarray(nodes, float)
+    n = len(nodes)
+    xg, wg = GAUSS
+    t = 0.5 * (xg + 1.0)
+    N = np.stack([2 * (1 - t) * (0.5 - t), 4 * t * (1 - t), 2 * t * (t - 0.5)])        # basis at t
+    dN = np.stack([4 * t - 3, 4 - 8 * t, 4 * t - 1])                                  # d/dt
+    Me = 0.5 * np.einsum("iq,jq,q->ij", N, N, wg)
+    Ae = 0.5 * np.einsum("iq,jq,q->ij", dN, dN, wg)
+    M, A = np.zeros((n, n)), np.zeros((n, n))
+    for c in range(n // 2):
+        s = slice(2 * c, 2 * c + 3)
+        h = nodes[2 * c + 2] - nodes[2 * c]
+        M[s, s] += h * Me
+        A[s, s] += Ae / h
+    return M, A
+
+
+def lattice(doflocs: np.ndarray):
+    """(per-axis node coordinates, flat lattice index of every scalar dof (x slowest)) when
+    the dof locations (dim, ns) are the Q2 nodes of a tensor mesh (a grid,
+    reference/gridvalues.py, whose odd nodes are midway), else None. The locations alone:
+    P2 on a tensor mesh's tetrahedra fills the same lattice, so the caller checks the
+    element."""
+    try:
+        grid = GridField(doflocs)
+    except ValueError:
+        return None
+    for x in grid.axes:
+        tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
+        if len(x) % 2 == 0 or len(x) < 3 or np.abs(x[1:-1:2] - 0.5 * (x[:-2:2] + x[2::2])).max() > tol:
+            return None
+    return grid.axes, grid.index
+
+
+def moduli(C: np.ndarray, dim: int) -> np.ndarray:
+    """(dim, dim): k[c, d] = C_cdcd of the mean Voigt stiffness (engineering shear)."""
+    Cm = np.asarray(C, float).reshape(-1, *C.shape[-2:]).mean(axis=0)
+    k = np.empty((dim, dim))
+    for c in range(dim):
+        for d in range(dim):
+            v = c if c == d else _PAIRS[dim][tuple(sorted((c, d)))]
+            k[c, d] = Cm[v, v]
+    return k
+
+
+@dataclass(frozen=True)
+class _Block:
+    """B_c^-1 of one component on its Dirichlet-reduced lattice."""
+    keep: tuple       # per axis: the lattice indices that are not Dirichlet ends
+    V: tuple          # per axis: M-orthonormal eigenvectors on ``keep``
+    inv: np.ndarray   # 1 / eigenvalue sums, shaped like the reduced lattice
+
+    def apply(self, r: np.ndarray) -> np.ndarray:
+        t = r[np.ix_(*self.keep)]
+        for a, V in enumerate(self.V):            # W^T r
+            t = np.moveaxis(np.tensordot(V, t, axes=([0], [a])), 0, a)
+        t *= self.inv
+        for a, V in enumerate(self.V):            # W t
+            t = np.moveaxis(np.tensordot(V, t, axes=([1], [a])), 0, a)
+        out = np.zeros_like(r)
+        out[np.ix_(*self.keep)] = t
+        return out
+
+
+def _block(axes, mats, free: np.ndarray, k: np.ndarray) -> _Block | None:
+    """The component's block: ``free`` (lattice-shaped bool) its free nodes, k its moduli;
+    None when no end plane of any axis is fixed as a whole."""
+    dim = len(axes)
+    keep, V, lam = [], [], []
+    for a in range(dim):
+        ends = [0, len(axes[a]) - 1]
+        plane = lambda i: np.take(free, i, axis=a)   # noqa: E731
+        kept = np.array([i for i in range(len(axes[a])) if not (i in ends and not plane(i).any())])
+        M, A = mats[a]
+        l, v = sla.eigh(A[np.ix_(kept, kept)], M[np.ix_(kept, kept)])
+        keep.append(kept)
+        V.append(v)
+        lam.append(np.maximum(l, 0.0))
+    if all(len(kept) == len(x) for kept, x in zip(keep, axes)):
+        return None
+    total = sum(k[a] * lam[a].reshape([-1 if b == a else 1 for b in range(dim)]) for a in range(dim))
+    return _Block(tuple(keep), tuple(V), 1.0 / total)
+
+
+def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
+    """z = P r for the free interleaved dofs ``free`` (global dof = dim * node + component)
+    of a Q2 system whose dof locations (dim, ns) form a tensor lattice, C its per-element
+    Voigt stiffness; None if the dofs are not such a lattice or a component has no
+    plane fixed as a whole."""
+    dim, ns = doflocs.shape
+    found = lattice(doflocs)
+    if found is None:
+        return None
+    axes, index = found
+    shape = tuple(len(x) for x in axes)
+    mats = [axis_matrices(x) for x in axes]
+    k = moduli(C, dim)
+    node, comp = np.divmod(np.asarray(free), dim)
+    cell = index[node]                              # lattice index of each free dof's node
+    blocks = []
+    for c in range(dim):
+        mask = np.zeros(int(np.prod(shape)), bool)
+        mask[cell[comp == c]] = True
+        if not mask.any():
+            blocks.append(None)
+            continue
+        blocks.append(_block(axes, mats, mask.reshape(shape), k[c]))
+        if blocks[-1] is None:
+            return None
+
+    def apply(r: np.ndarray) -> np.ndarray:
+        z = np.empty_like(r)
+        for c, B in enumerate(blocks):
+            sel = comp == c
+            if B is None:
+                continue
+            g = np.zeros(int(np.prod(shape)))
+            g[cell[sel]] = r[sel]
+            z[sel] = B.apply(g.reshape(shape)).ravel()[cell[sel]]
+        return z
+
+    return apply
