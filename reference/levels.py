@@ -80,17 +80,16 @@ class Levels:
         for name, mirror in mirrors.items():
             groups.setdefault(mirror, []).append(name)
         out = {}
-        cuts: dict = {}         # one discretisation, grid and stiffness per set of cut axes
-        stiffness: dict = {}
-        for mirror, names in groups.items():
+        current, stiffness = None, {}     # one discretisation, grid and stiffness per set of cut axes,
+        for mirror, names in sorted(groups.items(), key=lambda g: tuple(sorted(g[0].axes))):  # kept while used
             if not mirror:
                 out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
                 continue
             cut = tuple(sorted(mirror.axes))
-            if cut not in cuts:
+            if current is None or current[0] != cut:
                 d = self.disc(tensor_mesh(lower_half(axes, mirror)))
-                cuts[cut] = (d, GridField(d.doflocs))
-            d, half = cuts[cut]
+                current, stiffness = (cut, d, GridField(d.doflocs)), {}
+            _, d, half = current
             U = solve_mesh(case, d.mesh, loads=set(names), info=info, mirror=mirror, disc=d, stiffness=stiffness)
             out.update({n: unfold(self._evaluator(k), half, U[n], mirror) for n in names})
         return out
