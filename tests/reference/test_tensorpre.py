@@ -156,3 +156,23 @@ def test_auto_takes_it_from_tensor_min_dofs(monkeypatch, smallest):
     assert (info[0]["method"] == "tensor") == (smallest == 0)
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
+
+
+def test_a_drifted_cg_is_restarted_from_the_true_residual(monkeypatch):
+    """The first CG returns a solution off by 1e-6 while reporting success (a recursive
+    residual that drifted from the true one): the restart from the true residual brings
+    it to the tolerance, and the solve stays 'tensor'."""
+    real, calls = solvers._pcg, []
+
+    def drifting(A, b, M, rtol, maxiter, window=20, seconds=None):
+        x, k, why = real(A, b, M, rtol, maxiter, window, seconds)
+        calls.append(rtol)
+        return (x * (1 + 1e-6) if len(calls) == 1 else x), k, why
+
+    monkeypatch.setattr(solvers, "_pcg", drifting)
+    d, C, K, F, fx = _shear_problem(nu=0.3)
+    info: list = []
+    U = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "tensor", d, info=info, C=C)
+    V = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "cholesky", d)
+    assert info[0]["method"] == "tensor" and not info[0]["fallbacks"] and len(calls) >= 2
+    assert np.abs(U["shear"] - V["shear"]).max() <= 1e-8 * np.abs(V["shear"]).max()
