@@ -80,8 +80,10 @@ class Levels:
         for name, mirror in mirrors.items():
             groups.setdefault(mirror, []).append(name)
         out = {}
-        current, stiffness = None, {}     # one discretisation, grid and stiffness per set of cut axes,
-        for mirror, names in sorted(groups.items(), key=lambda g: tuple(sorted(g[0].axes))):  # kept while used
+        # groups that cut the box alike (the shears come in pairs) share one discretisation, grid
+        # and stiffness, kept only while they are used
+        current, stiffness = None, {}
+        for mirror, names in sorted(groups.items(), key=lambda g: tuple(sorted(g[0].axes))):
             if not mirror:
                 out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
                 continue

@@ -17,10 +17,10 @@ face, a roller, a mirror's cut plane) is a Dirichlet end of that axis in B_c; fi
 off such planes (corner or edge points, part of a face) are masked out, P = R B^-1 R^T,
 still symmetric positive definite. A component with no Dirichlet end on any axis (the
 stretches' rollers and corner points) has no preconditioner here: its B_c is singular,
-and shifted it took 200+ iterations where the Cholesky is quick and exact (the stretches'
-linear fields are recognised by two levels agreeing to 1e-9). A piecewise or anisotropic material is preconditioned by
-its mean elastic tensor's diagonal moduli (the CG solves the true system). Measured in
-reference/solvers.py's table (method 'tensor').
+and shifted it took 200+ iterations where the Cholesky is quick (and its rounding small
+enough for two levels of a linear field to agree, reference/levels.py EXACT). A piecewise
+or anisotropic material is preconditioned by its mean elastic tensor's diagonal moduli
+(the CG solves the true system). Measured: results/bench/reference.csv (solver 'tensor').
 """
 
 from __future__ import annotations
@@ -137,11 +137,11 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
     mats = [axis_matrices(x) for x in axes]
     k = moduli(C, dim)
     node, comp = np.divmod(np.asarray(free), dim)
-    cell = index[node]                              # lattice index of each free dof's node
+    site = index[node]                              # lattice index of each free dof's node
     blocks = []
     for c in range(dim):
         mask = np.zeros(int(np.prod(shape)), bool)
-        mask[cell[comp == c]] = True
+        mask[site[comp == c]] = True
         if not mask.any():
             blocks.append(None)
             continue
@@ -156,8 +156,8 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
             if B is None:
                 continue
             g = np.zeros(int(np.prod(shape)))
-            g[cell[sel]] = r[sel]
-            z[sel] = B.apply(g.reshape(shape)).ravel()[cell[sel]]
+            g[site[sel]] = r[sel]
+            z[sel] = B.apply(g.reshape(shape)).ravel()[site[sel]]
         return z
 
     return apply
