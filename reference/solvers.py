@@ -62,6 +62,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
+from reference import tensorpre
 
 # relative residual an accepted solve reaches, ||b - A x|| <= RTOL ||b||: the direct
 # solves (with one step of refinement) reach 1e-14..1e-12 on well-conditioned systems
@@ -259,7 +260,7 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
             elif m == "two-level":
                 y, its, why = _two_level(As, bs[:, live], s, coarse, coords, Bs, normA, bnorm[live])
             elif m == "tensor":
-                y, its, why = _tensor(As, bs[:, live], s, tensor)
+                y, its, why = tensorpre.cg(As, bs[:, live], s, tensor, _pcg, RTOL, TENSOR_MAXITER)
             else:
                 y, its, why = _iterative(As, bs[:, live], m, Bs, budget)
         except ModelError:
@@ -440,34 +441,6 @@ def _iterative(As, bs, method, Bs, budget=None):
     for j in range(bs.shape[1]):
         left = None if budget is None else budget - (time.process_time() - c0)
         Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, maxiter, 20 if M is not None else 200, left)
-        its, why = max(its, k), why or w
-    return Y, its, why
-
-
-TENSOR_RESTARTS = 3   # CG restarts from the true residual (its recursive one drifts below it)
-
-
-def _tensor(As, bs, s, tensor):
-    """CG on the equilibrated system with the tensor preconditioner P ~ A^-1 turned into
-    one of As = S A S: S^-1 P S^-1. The recursive residual of a long CG drifts from the
-    true one (measured on the 10:1 box's quarters at nu = 0.49: recursive 2.5e-11, true
-    5e-11 at 55k dofs, ~1.1e-10 at 266k, past RTOL, and the solve fell back to AMG), so
-    while the true residual is above RTOL / 2, CG is restarted on it and its solution added."""
-    M = spla.LinearOperator(As.shape, matvec=lambda r: tensor(np.ravel(r) / s) / s, dtype=float)
-    Y = np.zeros_like(bs)
-    its, why = 0, ""
-    for j in range(bs.shape[1]):
-        b = bs[:, j]
-        nb = np.linalg.norm(b)
-        y, k, w = _pcg(As, b, M, RTOL / 4, TENSOR_MAXITER, 50)
-        for _ in range(TENSOR_RESTARTS):
-            r = b - As @ y
-            nr = np.linalg.norm(r)
-            if w or nr <= RTOL / 2 * nb:
-                break
-            dy, k2, w = _pcg(As, r, M, min(0.5, RTOL / 4 * nb / nr), TENSOR_MAXITER - k, 50)
-            y, k = y + dy, k + k2
-        Y[:, j] = y
         its, why = max(its, k), why or w
     return Y, its, why
 
