@@ -127,8 +127,8 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
     case's box cut at these mid-planes, and every load named has that parity
     (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
     ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`).
-    ``stiffness``: a dict that keeps K (and C) under the key ``disc`` for the next call
-    on the same discretisation (the graded levels' shears cut the box alike in pairs)."""
+    ``stiffness``: a dict that keeps K (and C) under ``id(disc)`` for the next call on
+    the same discretisation (the graded levels' shears cut the box alike in pairs)."""
     d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
     kept = (stiffness or {}).get(id(d))

@@ -102,8 +102,8 @@ CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
 METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level", "tensor")
 TENSOR_MAXITER = 2000    # fast-diagonalisation PCG (reference/tensorpre.py): 100-300 iterations measured
-# 'auto' takes it from these many dofs (3-D, the graded boxes' quarters, nu = 0.49, CPU s, tensor /
-# the former choice: 18.8k dofs 0.7 / 1.9, 55k 2.4 / 8, 249k 13.7 / -); in 2-D the Cholesky stays
+# 'auto' takes it from these many dofs (bench reference, the 10:1 box's quarters at nu = 0.49, s,
+# tensor / Cholesky: 17k dofs 1.7 / 1.3, 55k 6.1 / 11.5, 129k 7.7 / -); in 2-D the Cholesky stays
 TENSOR_MIN = {2: 10 ** 12, 3: 20_000}
 TWO_LEVEL_MAXITER = 300
 # with a P1/Q1 subspace (two-level), 'auto' factorises only while the Cholesky's estimate is
