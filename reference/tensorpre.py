@@ -108,18 +108,18 @@ def _block(axes, mats, free: np.ndarray, k: np.ndarray) -> _Block | None:
     """The component's block: ``free`` (lattice-shaped bool) its free nodes, k its moduli;
     None when no end plane of any axis is fixed as a whole."""
     dim = len(axes)
-    keep, V, lam = [], [], []
+    keep = []
     for a in range(dim):
         ends = [0, len(axes[a]) - 1]
         plane = lambda i: np.take(free, i, axis=a)   # noqa: E731
-        kept = np.array([i for i in range(len(axes[a])) if not (i in ends and not plane(i).any())])
-        M, A = mats[a]
-        l, v = sla.eigh(A[np.ix_(kept, kept)], M[np.ix_(kept, kept)])
-        keep.append(kept)
-        V.append(v)
-        lam.append(np.maximum(l, 0.0))
+        keep.append(np.array([i for i in range(len(axes[a])) if not (i in ends and not plane(i).any())]))
     if all(len(kept) == len(x) for kept, x in zip(keep, axes)):
         return None
+    V, lam = [], []
+    for kept, (M, A) in zip(keep, mats):
+        l, v = sla.eigh(A[np.ix_(kept, kept)], M[np.ix_(kept, kept)])
+        V.append(v)
+        lam.append(np.maximum(l, 0.0))
     total = sum(k[a] * lam[a].reshape([-1 if b == a else 1 for b in range(dim)]) for a in range(dim))
     return _Block(tuple(keep), tuple(V), 1.0 / total)
 
@@ -139,26 +139,24 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
     k = moduli(C, dim)
     node, comp = np.divmod(np.asarray(free), dim)
     site = index[node]                              # lattice index of each free dof's node
-    blocks = []
+    blocks = []                                     # (free dofs of the component, their sites, block)
     for c in range(dim):
-        mask = np.zeros(int(np.prod(shape)), bool)
-        mask[site[comp == c]] = True
-        if not mask.any():
-            blocks.append(None)
+        sel = np.flatnonzero(comp == c)
+        if len(sel) == 0:
             continue
-        blocks.append(_block(axes, mats, mask.reshape(shape), k[c]))
-        if blocks[-1] is None:
+        mask = np.zeros(int(np.prod(shape)), bool)
+        mask[site[sel]] = True
+        B = _block(axes, mats, mask.reshape(shape), k[c])
+        if B is None:
             return None
+        blocks.append((sel, site[sel], B))
 
     def apply(r: np.ndarray) -> np.ndarray:
         z = np.empty_like(r)
-        for c, B in enumerate(blocks):
-            sel = comp == c
-            if B is None:
-                continue
+        for sel, at, B in blocks:
             g = np.zeros(int(np.prod(shape)))
-            g[site[sel]] = r[sel]
-            z[sel] = B.apply(g.reshape(shape)).ravel()[site[sel]]
+            g[at] = r[sel]
+            z[sel] = B.apply(g.reshape(shape)).ravel()[at]
         return z
 
     return apply
