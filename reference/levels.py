@@ -12,10 +12,13 @@ eighth of the box it determines and unfolded (reference/symmetry.py).
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from harness.linalg.sparse import single_thread_blas
 from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
 from reference.graded import (axis_maps, graded_axes, graded_mesh, level_divisions, probe_points, q2_doflocs,
@@ -28,8 +31,10 @@ FIRST = 2                       # cells per end zone at level 0 when [reference]
 # (divisions counts cells along the shortest side: two end zones)
 MAX_DOFS = {2: 400_000, 3: 64_000}     # the largest system one level may solve (3-D: ~15 s a factorisation)
 # ... with the fast-diagonalisation CG (solver 'auto' or 'tensor', reference/tensorpre.py): no
-# factorisation, memory ~ the assembled K (~1 GB at 400k dofs), ~120 iterations at nu = 0.49
+# factorisation, K applied without assembly (reference/tensorsolve.py), ~80-110 iterations at
+# nu = 0.49; the limit is time (the 10:1 box's nine loads: 103 s to n = 10, 252k-dof quarters)
 TENSOR_MAX_DOFS = {2: 2_000_000, 3: 400_000}
+WORKERS = min(2, len(os.sched_getaffinity(0)))   # threads solving a cut's load groups side by side
 EXACT = 1e-6                    # relative change between two levels below which a field is exact
 # (its levels differ by the solves' rounding only): the 10:1 box's stretch-x at nu = 0.49, a
 # linear field, changes by 1.2e-9 and then 1.7e-7 from level to level (Cholesky residuals ~1e-8 on
@@ -75,26 +80,49 @@ class Levels:
     def solve(self, case, k: int, axes: list, mirrors: dict, info=None) -> dict:
         """Level k's displacements {load: whole-box dof vector} of the loads in
         ``mirrors`` ({name: Mirror}): each group of loads with the same mirror solved on
-        its cut of the box (reference/symmetry.py) and unfolded."""
+        its cut of the box (reference/symmetry.py) and unfolded. Groups that cut the box
+        alike (the shears come in pairs) share one discretisation, built when their cut
+        comes and dropped after it, and are solved side by side in WORKERS threads (the
+        CG's compiled products and BLAS release the GIL; each keeps its own records, so
+        the results and their order do not depend on the threads)."""
         groups: dict[Mirror, list[str]] = {}
         for name, mirror in mirrors.items():
             groups.setdefault(mirror, []).append(name)
+        cuts: dict[tuple, list] = {}
         out = {}
-        # groups that cut the box alike (the shears come in pairs) share one discretisation, grid
-        # and stiffness, kept only while they are used
-        current, stiffness = None, {}
-        for mirror, names in sorted(groups.items(), key=lambda g: tuple(sorted(g[0].axes))):
+        for mirror, names in groups.items():
             if not mirror:
                 out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
-                continue
-            cut = tuple(sorted(mirror.axes))
-            if current is None or current[0] != cut:
-                d = self.disc(tensor_mesh(lower_half(axes, mirror)))
-                current, stiffness = (cut, d, GridField(d.doflocs)), {}
-            _, d, half = current
-            U = solve_mesh(case, d.mesh, loads=set(names), info=info, mirror=mirror, disc=d, stiffness=stiffness)
-            out.update({n: unfold(self._evaluator(k), half, U[n], mirror) for n in names})
+            else:
+                cuts.setdefault(tuple(sorted(mirror.axes)), []).append((mirror, sorted(names)))
+        for cut in sorted(cuts):
+            members = sorted(cuts[cut], key=lambda m: m[1])
+            d = self.disc(tensor_mesh(lower_half(axes, members[0][0])))
+            half, stiffness = GridField(d.doflocs), {}
+
+            def one(member):
+                mirror, names = member
+                rec: list = []
+                U = solve_mesh(case, d.mesh, loads=set(names), info=rec, mirror=mirror, disc=d,
+                               stiffness=stiffness, guess=self.guess(d.doflocs, names))
+                return {n: unfold(self._evaluator(k), half, U[n], mirror) for n in names}, rec
+
+            self._evaluator(k)
+            if len(members) > 1 and WORKERS > 1:
+                with single_thread_blas(), ThreadPoolExecutor(min(WORKERS, len(members))) as pool:
+                    done = list(pool.map(one, members))
+            else:
+                done = [one(m) for m in members]
+            for U, rec in done:
+                out.update(U)
+                if info is not None:
+                    info.extend(rec)
         return out
+
+    def guess(self, doflocs: np.ndarray, names) -> dict:
+        """{load: its last level's field interpolated at ``doflocs`` (dim, ns)} of the loads
+        solved before: initial guesses of the next level's iterative solves."""
+        return {n: self.at(doflocs.T, k, u).ravel() for n in names for k, u in self.fields.get(n, [])[-1:]}
 
     def at(self, points, k: int, u: np.ndarray, average: np.ndarray | None = None) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values

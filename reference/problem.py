@@ -3,13 +3,15 @@ solves (loads that share constraints share one factorisation)."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from harness.case.loadsets import homogeneous_closed_form, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
-from reference import solvers, tensorpre, twolevel
+from reference import linearfield, solvers, tensorpre, tensorsolve, twolevel
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs
 
@@ -75,39 +77,84 @@ TWO_LEVEL_MIN = 20_000   # dofs: below, 'auto' always factorises (reference/solv
 
 
 def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
-                 prescribed: dict | None = None, info: list | None = None, C: np.ndarray | None = None) -> dict:
+                 prescribed: dict | None = None, info: list | None = None, C: np.ndarray | None = None,
+                 guess: dict | None = None) -> dict:
     """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
     Loads sharing a constraint set share one factorisation; ``info`` (a list) gets the
     solver's record of each (method, residual, fallbacks, seconds) with the loads named.
+    ``K``: the stiffness, or a function that assembles it (called only when needed).
+    A group whose solution is a linear field (a stretch) is found without a solve
+    (reference/linearfield.py, method 'linear').
     A P2/Q2 system of at least TWO_LEVEL_MIN dofs (or ``method`` 'two-level') hands the
     solver its P1/Q1 subspace for the two-level method (reference/twolevel.py). A Q2
     system on a tensor mesh with its Voigt stiffness ``C`` per element (method 'auto' or
-    'tensor') hands it the fast-diagonalisation preconditioner (reference/tensorpre.py)."""
+    'tensor') is solved by the fast-diagonalisation CG (reference/tensorpre.py): without
+    assembling K when C is one tensor (reference/tensorsolve.py, from the initial
+    guesses ``guess`` {load: dof vector} when given), else on the assembled K."""
     out = {}
     groups: dict[bytes, list[str]] = {}
     for name in loads:
         groups.setdefault(fixed[name].tobytes(), []).append(name)
-    R = None
+    R, assembled = None, [K if not callable(K) else None]
+
+    def stiffness():
+        if assembled[0] is None:
+            assembled[0] = K()
+        return assembled[0]
+
+    tensor_mesh = C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex")
+    lat = tensorsolve.lattice_of(d.doflocs) if tensor_mesh and not prescribed else None
+    C0 = None if lat is None else tensorsolve.homogeneous(C)
+    op = None if C0 is None else tensorsolve.operator(lat, C0)
     for names in groups.values():
         fx = fixed[names[0]]
+        nfree = d.ndof - len(fx)
+        tried = None
+        if not prescribed:
+            t0 = time.perf_counter()
+            if op is not None:
+                apply, norm = op.apply_dofs, op.norm_bound()
+            else:
+                apply, norm = stiffness().__matmul__, float(abs(stiffness()).sum(axis=1).max())
+            found = linearfield.solve(apply, d.doflocs, np.column_stack([loads[n] for n in names]), fx, norm)
+            if found is not None:
+                if info is not None:
+                    info.append(dict(method="linear", residual=found[1], rtol=solvers.RTOL, iterations=0,
+                                     fallbacks=[], seconds=time.perf_counter() - t0, loads=list(names), n=nfree))
+                out.update({n: found[0][:, i] for i, n in enumerate(names)})
+                continue
+        if C0 is not None and (method == "tensor" or nfree >= tensorsolve.MIN_DOFS[d.dim]):
+            rec = {}
+            x0 = None if not guess or any(n not in guess for n in names) else \
+                np.column_stack([guess[n] for n in names])
+            x = tensorsolve.solve(op, np.column_stack([loads[n] for n in names]), fx, rec, x0)
+            if x is not None:
+                if info is not None:
+                    info.append(dict(rec, loads=list(names), n=nfree))
+                out.update({n: x[:, i] for i, n in enumerate(names)})
+                continue
+            tried = rec or None
+        Kf = stiffness()
         free = np.setdiff1d(np.arange(d.ndof), fx)
-        A = K[free][:, free]
+        A = Kf[free][:, free]
         rhs = []
         for n in names:
             F = loads[n].copy()
             if prescribed and n in prescribed:
-                F -= K[:, fx] @ prescribed[n]
+                F -= Kf[:, fx] @ prescribed[n]
             rhs.append(F[free])
         if R is None:
             R = d.rigid_modes()
             coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
             P = twolevel.prolongation(d) if d.ndof >= TWO_LEVEL_MIN or method == "two-level" else None
-        rec: dict = {}
+        rec = {}
         tensor = None
-        if C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex"):
+        if tensor_mesh and tried is None:
             tensor = tensorpre.preconditioner(d.doflocs, free, C)
-        x = solvers.solve(A, np.column_stack(rhs), method, R[free], info=rec, coords=coords[free],
-                          coarse=None if P is None else P[free], tensor=tensor)
+        x = solvers.solve(A, np.column_stack(rhs), "auto" if tried else method, R[free], info=rec,
+                          coords=coords[free], coarse=None if P is None else P[free], tensor=tensor)
+        if tried:
+            rec["fallbacks"].insert(0, {k: tried[k] for k in ("method", "residual", "reason", "seconds")})
         if info is not None:
             info.append(dict(rec, loads=list(names), n=len(free)))
         for i, n in enumerate(names):
@@ -120,15 +167,17 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
 
 
 def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror = Mirror(),
-               disc: Discretisation | None = None, parts=None, stiffness: dict | None = None) -> dict:
+               disc: Discretisation | None = None, parts=None, stiffness: dict | None = None,
+               guess: dict | None = None) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
     those named in ``loads``). ``info``: a list that gets one solver record per
     factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
     case's box cut at these mid-planes, and every load named has that parity
     (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
     ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`).
-    ``stiffness``: a dict that keeps K (and C) under ``id(disc)`` for the next call on
-    the same discretisation (the graded levels' shears cut the box alike in pairs)."""
+    ``stiffness``: a dict that keeps K (once assembled) and C under ``id(disc)`` for the
+    next call on the same discretisation (the graded levels' shears cut the box alike in
+    pairs). ``guess``: initial guesses {load: dof vector} for an iterative solve."""
     d = disc or Discretisation(mesh, case.reference.cell, case.reference.element)
     cent = d.centroids()
     kept = (stiffness or {}).get(id(d))
@@ -142,10 +191,16 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
         return exact
     fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror, parts) for l in chosen}
     F = {l.name: load_vector(d, case, l, bbox, rho, mirror, parts) for l in chosen}
-    K = d.stiffness(C) if kept is None else kept[0]
+    held = {} if kept is None else kept[0]       # K, once something asks for it
+
+    def K():
+        if "K" not in held:
+            held["K"] = d.stiffness(C)
+        return held["K"]
+
     if stiffness is not None:
-        stiffness[id(d)] = (K, C)
-    return {**solve_system(K, F, fixed, case.reference.solver, d, info=info, C=C), **exact}
+        stiffness[id(d)] = (held, C)
+    return {**solve_system(K, F, fixed, case.reference.solver, d, info=info, C=C, guess=guess), **exact}
 
 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:

@@ -128,6 +128,11 @@ def choose(method: str, n: int, dim: int) -> str:
     return "direct" if n <= SUPERLU_MAX[dim] else "amg"
 
 
+def accepted_rtol(normA: float, xnorm: np.ndarray, bnorm: np.ndarray) -> np.ndarray:
+    """The relative residual each column is accepted at (see :data:`FLOOR`)."""
+    return np.clip(FLOOR * np.finfo(float).eps * normA * xnorm / bnorm, RTOL, DIRECT_RTOL)
+
+
 def _singular() -> ModelError:
     return ModelError("the stiffness matrix is singular", fix="check the constraints")
 
@@ -157,7 +162,8 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     ``tensor``: z = P r, the fast-diagonalisation preconditioner of a Q2 system on a
     tensor mesh (reference/tensorpre.py); with it 'tensor' (and 'auto' from
     :data:`TENSOR_MIN` dofs) first tries CG with it, then falls back as 'auto' would
-    without it."""
+    without it. (A material of one elastic tensor never gets here on a tensor mesh:
+    reference/tensorsolve.py solves it without assembling A.)"""
     t0 = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
@@ -192,8 +198,7 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
         """(max ||b - A x|| / ||b||, the largest ratio of a column's residual to its
         tolerance, the tolerance of the worst column) over the nonzero columns."""
         r = np.linalg.norm(b2[:, live] - A @ xs[:, live], axis=0) / bnorm[live]
-        tol = np.clip(FLOOR * np.finfo(float).eps * normA * np.linalg.norm(xs[:, live], axis=0) / bnorm[live],
-                      RTOL, DIRECT_RTOL)
+        tol = accepted_rtol(normA, np.linalg.norm(xs[:, live], axis=0), bnorm[live])
         if not np.all(np.isfinite(r)):
             return np.inf, np.inf, RTOL
         return float(r.max()), float(np.max(r / tol)), float(tol[np.argmax(r / tol)])

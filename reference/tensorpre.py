@@ -32,29 +32,9 @@ import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
 from reference.gridvalues import GridField
+from reference.kronecker import axis_matrices
 
-GAUSS = np.polynomial.legendre.leggauss(3)    # exact for the 1-D Q2 mass (degree 4)
 _PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}   # Voigt index of a shear pair
-
-
-def axis_matrices(nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """1-D global mass M and stiffness A (dense, (n, n)) of the quadratic Lagrange basis
-    on an axis's Q2 nodes (vertices and cell midpoints alternating, n odd)."""
-    nodes = np.asarray(nodes, float)
-    n = len(nodes)
-    xg, wg = GAUSS
-    t = 0.5 * (xg + 1.0)
-    N = np.stack([2 * (1 - t) * (0.5 - t), 4 * t * (1 - t), 2 * t * (t - 0.5)])        # basis at t
-    dN = np.stack([4 * t - 3, 4 - 8 * t, 4 * t - 1])                                  # d/dt
-    Me = 0.5 * np.einsum("iq,jq,q->ij", N, N, wg)
-    Ae = 0.5 * np.einsum("iq,jq,q->ij", dN, dN, wg)
-    M, A = np.zeros((n, n)), np.zeros((n, n))
-    for c in range(n // 2):
-        s = slice(2 * c, 2 * c + 3)
-        h = nodes[2 * c + 2] - nodes[2 * c]
-        M[s, s] += h * Me
-        A[s, s] += Ae / h
-    return M, A
 
 
 def lattice(doflocs: np.ndarray):
@@ -116,12 +96,33 @@ def _block(axes, mats, free: np.ndarray, k: np.ndarray) -> _Block | None:
     if all(len(kept) == len(x) for kept, x in zip(keep, axes)):
         return None
     V, lam = [], []
-    for kept, (M, A) in zip(keep, mats):
-        l, v = sla.eigh(A[np.ix_(kept, kept)], M[np.ix_(kept, kept)])
+    for kept, m in zip(keep, mats):
+        l, v = sla.eigh(m["A"][np.ix_(kept, kept)], m["M"][np.ix_(kept, kept)])
         V.append(v)
         lam.append(np.maximum(l, 0.0))
     total = sum(k[a] * lam[a].reshape([-1 if b == a else 1 for b in range(dim)]) for a in range(dim))
     return _Block(tuple(keep), tuple(V), 1.0 / total)
+
+
+def blocks(axes, free: np.ndarray, C: np.ndarray) -> list | None:
+    """Each component's block for the free nodes ``free`` (dim, lattice shape) of the
+    lattice ``axes``, C the Voigt stiffness (one, or per element); None if a component
+    has no plane fixed as a whole."""
+    mats = [axis_matrices(x) for x in axes]
+    k = moduli(C, len(axes))
+    out = []
+    for c in range(len(axes)):
+        out.append(_block(axes, mats, free[c], k[c]))
+        if out[-1] is None:
+            return None
+    return out
+
+
+def lattice_preconditioner(found: list, free: np.ndarray):
+    """z = P r on lattice fields (dim, lattice shape), zero on the fixed nodes."""
+    def apply(r: np.ndarray) -> np.ndarray:
+        return np.stack([B.apply(np.where(f, rc, 0.0)) for B, f, rc in zip(found, free, r)]) * free
+    return apply
 
 
 def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
@@ -135,29 +136,20 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
         return None
     axes, index = found
     shape = tuple(len(x) for x in axes)
-    mats = [axis_matrices(x) for x in axes]
-    k = moduli(C, dim)
     node, comp = np.divmod(np.asarray(free), dim)
-    site = index[node]                              # lattice index of each free dof's node
-    blocks = []                                     # (free dofs of the component, their sites, block)
-    for c in range(dim):
-        sel = np.flatnonzero(comp == c)
-        if len(sel) == 0:
-            continue
-        mask = np.zeros(int(np.prod(shape)), bool)
-        mask[site[sel]] = True
-        B = _block(axes, mats, mask.reshape(shape), k[c])
-        if B is None:
-            return None
-        blocks.append((sel, site[sel], B))
+    at = comp * int(np.prod(shape)) + index[node]      # each free dof's place in a lattice field
+    mask = np.zeros(dim * int(np.prod(shape)), bool)
+    mask[at] = True
+    mask = mask.reshape((dim,) + shape)
+    found = blocks(axes, mask, C)
+    if found is None:
+        return None
+    P = lattice_preconditioner(found, mask)
 
     def apply(r: np.ndarray) -> np.ndarray:
-        z = np.empty_like(r)
-        for sel, at, B in blocks:
-            g = np.zeros(int(np.prod(shape)))
-            g[at] = r[sel]
-            z[sel] = B.apply(g.reshape(shape)).ravel()[at]
-        return z
+        g = np.zeros(mask.size)
+        g[at] = r
+        return P(g.reshape(mask.shape)).ravel()[at]
 
     return apply
 
@@ -165,22 +157,23 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
 RESTARTS = 3   # CG restarts from the true residual (its recursive one drifts below it)
 
 
-def cg(As, bs, s, apply, pcg, rtol: float, maxiter: int):
+def cg(As, bs, s, apply, pcg, rtol: float, maxiter: int, y0=None):
     """(Y, iterations, reason): CG (``pcg``, reference/solvers.py's) on the equilibrated
     system As = S A S, columns bs, with the preconditioner ``apply`` ~ A^-1 turned into one
-    of As: S^-1 P S^-1. The recursive residual of a long CG drifts from the true one
-    (measured on the 10:1 box's quarters at nu = 0.49: recursive 2.5e-11, true 5e-11 at 55k
-    dofs, past 1e-10 at 266k, and the solve fell back to AMG), so while the true residual is
-    above rtol / 2, CG is restarted on it and its solution added."""
+    of As: S^-1 P S^-1, from the initial guesses ``y0`` (columns like bs) or zero. The
+    recursive residual of a long CG drifts from the true one (measured on the 10:1 box's
+    quarters at nu = 0.49: recursive 2.5e-11, true 5e-11 at 55k dofs, past 1e-10 at 266k,
+    and the solve fell back to AMG), so while the true residual is above rtol / 2, CG is
+    restarted on it and its solution added."""
     M = spla.LinearOperator(As.shape, matvec=lambda r: apply(np.ravel(r) / s) / s, dtype=float)
-    Y = np.zeros_like(bs)
+    Y = np.zeros_like(bs) if y0 is None else np.array(y0, float)
     its, why = 0, ""
     for j in range(bs.shape[1]):
-        b = bs[:, j]
+        b, y = bs[:, j], Y[:, j]
         nb = np.linalg.norm(b)
-        y, k, w = pcg(As, b, M, rtol / 4, maxiter, 50)
-        for _ in range(RESTARTS):
-            r = b - As @ y
+        k, w = 0, ""
+        for _ in range(1 + RESTARTS):
+            r = b - As @ y if y.any() else b
             nr = np.linalg.norm(r)
             if w or nr <= rtol / 2 * nb:
                 break

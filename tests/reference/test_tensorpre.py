@@ -1,6 +1,5 @@
 """reference/tensorpre.py (the fast-diagonalisation preconditioner of the graded boxes'
-Q2 systems) against independent truths: the 1-D matrices against the Q2 element
-matrices written out by hand; with whole planes fixed and an orthotropic material the
+Q2 systems) against independent truths: with whole planes fixed and an orthotropic material the
 preconditioner is exactly the inverse of the per-component diagonal blocks of the
 stiffness scikit-fem assembles (a sparse direct solve of those blocks here); with
 point constraints it stays symmetric positive definite (dense eigenvalues); solves
@@ -14,7 +13,7 @@ import scipy.sparse.linalg as spla
 import skfem
 
 from harness.case.elasticity import isotropic_compliance
-from reference import solvers, tensorpre
+from reference import solvers, tensorpre, tensorsolve
 from reference.fem import Discretisation
 from reference.graded import graded_axes, tensor_mesh
 from reference.problem import solve_system
@@ -34,19 +33,6 @@ def _orthotropic(dim: int) -> np.ndarray:
 def _box(size, n, cell):
     mesh = tensor_mesh(graded_axes(np.zeros(len(size)), np.asarray(size, float), n))
     return Discretisation(mesh, cell, "P2")
-
-
-def test_axis_matrices_are_the_q2_element_matrices():
-    nodes = np.array([0.0, 0.15, 0.3, 0.8, 1.3])            # two cells, 0.3 and 1.0 long
-    M, A = tensorpre.axis_matrices(nodes)
-    Me = np.array([[4, 2, -1], [2, 16, 2], [-1, 2, 4]]) / 30.0
-    Ae = np.array([[7, -8, 1], [-8, 16, -8], [1, -8, 7]]) / 3.0
-    M0, A0 = np.zeros((5, 5)), np.zeros((5, 5))
-    for s, h in ((slice(0, 3), 0.3), (slice(2, 5), 1.0)):
-        M0[s, s] += h * Me
-        A0[s, s] += Ae / h
-    np.testing.assert_allclose(M, M0, atol=1e-14)
-    np.testing.assert_allclose(A, A0, atol=1e-13)
 
 
 def test_lattice_recognises_q2_tensor_meshes_only():
@@ -124,6 +110,7 @@ def test_tensor_solves_match_the_cholesky(regions):
     U = solve_system(K, F, fx, "tensor", d, info=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
     assert info[0]["method"] == "tensor" and not info[0]["fallbacks"]
+    assert info[0].get("matrix_free", False) == (not regions)      # one tensor: K never assembled
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -146,14 +133,19 @@ def test_a_failed_tensor_cg_falls_back(monkeypatch, how):
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
 
+@pytest.mark.parametrize("regions", [False, True])
 @pytest.mark.parametrize("smallest", [0, 10 ** 9])
-def test_auto_takes_it_from_tensor_min_dofs(monkeypatch, smallest):
+def test_auto_takes_it_from_its_smallest_size(monkeypatch, smallest, regions):
+    """One tensor: the matrix-free CG from tensorsolve.MIN_DOFS; two: the assembled one
+    from solvers.TENSOR_MIN."""
     monkeypatch.setattr(solvers, "TENSOR_MIN", {3: smallest})
-    d, C, K, F, fx = _shear_problem()
+    monkeypatch.setattr(tensorsolve, "MIN_DOFS", {3: smallest})
+    d, C, K, F, fx = _shear_problem(regions=regions)
     info: list = []
     U = solve_system(K, F, fx, "auto", d, info=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
     assert (info[0]["method"] == "tensor") == (smallest == 0)
+    assert info[0].get("matrix_free", False) == (smallest == 0 and not regions)
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
