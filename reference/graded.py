@@ -145,9 +145,3 @@ def probe_points(origin, size, per_axis: int = 9) -> np.ndarray:
     origin, size = np.asarray(origin, float), np.asarray(size, float)
     axes = [o + np.linspace(0.0, s, per_axis) for o, s in zip(origin, size)]
     return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(size))
-
-
-def level_divisions(first: int, levels: int) -> list[int]:
-    """Cells per end zone of levels 0..levels: first, first + 1, ... (ratios near 1 keep
-    the finest level affordable; extrapolation uses the true ratio n_k+1 / n_k)."""
-    return [first + k for k in range(levels + 1)]

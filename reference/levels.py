@@ -1,7 +1,8 @@
 """The ``graded`` reference of rectangles and boxes: Q2 quadrilaterals/hexahedra graded
-towards every face (reference/graded.py), solved on levels n = divisions, divisions + 1,
-... cells per end zone, and Richardson-extrapolated over the last three levels
-(reference/extrapolate.py). The extrapolant is the reference field; the difference of
+towards every face (reference/graded.py), solved on levels of n = divisions / 2,
++ 1, + 2, ... cells per end zone (every second n skipped between the first three and
+the last three, see :func:`next_divisions`), and Richardson-extrapolated over the last
+three levels (reference/extrapolate.py). The extrapolant is the reference field; the difference of
 the last two extrapolants is its per-point error estimate. A load whose last two levels
 agree to rounding (a field the mesh represents exactly, like the stretches' linear
 closed form) stops refining; the others go on until every estimate at the probe points
@@ -21,8 +22,7 @@ import numpy as np
 from harness.linalg.sparse import single_thread_blas
 from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import (axis_maps, graded_axes, graded_mesh, level_divisions, probe_points, q2_doflocs,
-                              tensor_mesh)
+from reference.graded import axis_maps, graded_axes, graded_mesh, probe_points, q2_doflocs, tensor_mesh
 from reference.gridvalues import GridField
 from reference.problem import solve_mesh
 from reference.symmetry import Mirror, lower_half, mirror_of, unfold
@@ -201,15 +201,20 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
     history = []
     first = -(-spec.divisions // 2) if spec.divisions else FIRST    # divisions: cells along the shortest side
     cap = (TENSOR_MAX_DOFS if spec.solver in ("auto", "tensor") else MAX_DOFS)[case.dim]
-    for k, n in enumerate(level_divisions(first, spec.max_refine)):
+
+    def largest(n: int) -> int:
+        axes = graded_axes(lo, size, n)
+        return max(_dofs(lower_half(axes, mirrors[name]), case.dim) for name in active)
+
+    k, n = 0, first
+    while n <= first + spec.max_refine:
+        if k > 0 and largest(n) > cap:
+            status(f"FEM: the next graded level (a system of {largest(n)} dofs) would exceed {cap}; stopping")
+            break
         axes = graded_axes(lo, size, n)
         mesh = tensor_mesh(axes)
         dofs = n_dofs(mesh, case.dim)
-        largest = max(_dofs(lower_half(axes, mirrors[name]), case.dim) for name in active)
-        if k > 0 and largest > cap:
-            status(f"FEM: the next graded level (a system of {largest} dofs) would exceed {cap}; stopping")
-            break
-        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest}, "
+        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest(n)}, "
                f"{len(active)} loads)")
         lev.add_mesh(n, mesh)
         U = lev.solve(case, k, axes, {name: mirrors[name] for name in active}, info=info)
@@ -231,4 +236,16 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
         history.append(dict(n_dofs=dofs, **est))
         if not active or (k >= 2 and max(est.values()) < spec.tol):
             break
+        last = next((m for m in range(first + spec.max_refine, n, -1) if largest(m) <= cap), n + 1)
+        k, n = k + 1, next_divisions(n, first, last)
     return lev, est, history
+
+
+def next_divisions(n: int, first: int, last: int) -> int:
+    """The level after n cells per end zone, ``last`` the finest one allowed: the first
+    three and the last three levels are consecutive (the extrapolation and its order use
+    the last three), every second n between them is skipped (those levels only decide
+    when to stop; the 10:1 box at nu = 0.49 goes 2, 3, 4, 6, 8, 9, 10)."""
+    if n < first + 2 or n >= last - 3:
+        return n + 1
+    return min(n + 2, last - 2)

@@ -227,3 +227,14 @@ def test_box_cell_stiffness_is_the_general_quadrature(monkeypatch):
     skew = graded_mesh(np.zeros(3), np.ones(3), 1)
     skew = type(skew)(skew.p + 0.1 * skew.p[[1]] * np.array([[1.0], [0.0], [0.0]]), skew.t)
     assert Discretisation(skew, "hex", "P2")._box_cells() is None
+
+
+@pytest.mark.parametrize("first,last,want", [(2, 10, [2, 3, 4, 6, 8, 9, 10]), (2, 9, [2, 3, 4, 6, 7, 8, 9]),
+                                             (2, 8, [2, 3, 4, 6, 7, 8]), (2, 6, [2, 3, 4, 5, 6]),
+                                             (3, 4, [3, 4]), (1, 12, [1, 2, 3, 5, 7, 9, 10, 11, 12])])
+def test_levels_skip_every_second_n_between_the_first_and_last_three(first, last, want):
+    from reference.levels import next_divisions
+    ns = [first]
+    while ns[-1] < last:
+        ns.append(next_divisions(ns[-1], first, last))
+    assert ns == want
