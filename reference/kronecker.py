@@ -94,7 +94,8 @@ def band_apply(B: np.ndarray, u: np.ndarray, axis: int, out: np.ndarray | None =
     n = u.shape[axis]
     shape3 = (int(np.prod(u.shape[:axis])), n, int(np.prod(u.shape[axis + 1:])))
     out = np.zeros(u.shape) if out is None else out
-    assert out.flags.c_contiguous and out.shape == u.shape
+    if not out.flags.c_contiguous or out.shape != u.shape:
+        raise ValueError("band_apply: out must be C-contiguous and shaped like u (it is written in place)")
     v = np.ascontiguousarray(u).reshape(shape3)
     if shape3[2] == 1:
         _band_last(B, v.reshape(shape3[:2]), out.reshape(shape3[:2]), float(coef))

@@ -10,12 +10,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import skfem
-from skfem.helpers import ddot, sym_grad
+from skfem.helpers import sym_grad
 
 from harness.case.elasticity import isotropic_compliance
 from reference.graded import graded_axes, tensor_mesh
 from reference.gridvalues import GridField
 from reference.kronecker import KroneckerStiffness, axis_matrices
+from test_tensorpre import _orthotropic  # noqa: E402
 
 
 def test_axis_matrices_are_the_q2_element_matrices():
@@ -33,15 +34,6 @@ def test_axis_matrices_are_the_q2_element_matrices():
     np.testing.assert_allclose(m["A"], A0, atol=1e-13)
     np.testing.assert_allclose(m["D"], D0, atol=1e-14)
     np.testing.assert_allclose(m["Dt"], D0.T, atol=1e-14)
-
-
-def _orthotropic(dim: int) -> np.ndarray:
-    if dim == 2:
-        return np.array([[30.0, 8.0, 0.0], [8.0, 20.0, 0.0], [0.0, 0.0, 5.0]])
-    C = np.zeros((6, 6))
-    C[:3, :3] = [[30.0, 9.0, 7.0], [9.0, 22.0, 6.0], [7.0, 6.0, 18.0]]
-    C[3:, 3:] = np.diag([4.0, 5.0, 6.5])
-    return C
 
 
 def _skfem_stiffness(mesh, C: np.ndarray):
