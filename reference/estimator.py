@@ -8,8 +8,8 @@ For an element T (Verfürth, "A posteriori error estimation techniques", 2013, S
 
 with f the body force (rho g + body_force), g the prescribed traction (traction parts
 tested at each quadrature point, so a facet a part's box cuts shows its mismatch, and
-sigma_load . n of a stress load, twists included), h the diameter (h / k for elements of
-degree k, Melenk & Wohlmuth 2001) and c_T the smallest eigenvalue of the element's
+sigma_load(x) . n of a stress load, constant or linear, twists included), h the diameter
+(h / k for elements of degree k, Melenk & Wohlmuth 2001) and c_T the smallest eigenvalue of the element's
 elastic tensor (Mandel form; 2 mu when isotropic), which puts eta^2 in energy units:
 sum eta_T^2 bounds the energy norm a(e, e) of the error up to a constant of the mesh
 shape (tests/reference/test_adaptive.py: eta / |e|_a stays in 1..20 and constant under
@@ -25,9 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import skfem
 
-from harness.case.loadsets import stress_tensor
 from reference.fem import VOIGT, Discretisation
-from reference.problem import predicate
+from reference.problem import load_stress, predicate
 
 CHUNK = 50_000      # facets or elements per evaluation (memory: ~ CHUNK * basis * quadrature)
 
@@ -147,7 +146,9 @@ def traction_at(case, load, bbox, x: np.ndarray, n: np.ndarray, parts=None, cent
             tr = tr + np.cross(np.asarray(t.twist, float), (x - centres[i][:, None, None]), axis=0)
         g += inside[None] * tr
     if load.stress is not None:
-        g += np.einsum("ij,jfq->ifq", stress_tensor(load.stress), n)
+        sig = load_stress(load)
+        sig = sig(x) if callable(sig) else sig[:, :, None, None]
+        g += np.einsum("ijfq,jfq->ifq", sig, n)
     return g
 
 

@@ -194,14 +194,24 @@ class Discretisation:
                 lambda v, p: v * (w[a] * (p.x[b] - c[b]) - w[b] * (p.x[a] - c[a]))), fb)
         return out.ravel()
 
-    def stress_load(self, sigma: np.ndarray) -> np.ndarray:
-        """Load vector of the traction sigma . n of a constant stress (dim, dim) on the
-        whole boundary (n the outward normal of each facet)."""
+    def stress_load(self, sigma) -> np.ndarray:
+        """Load vector of the traction sigma . n on the whole boundary (n the outward
+        normal of each facet): a constant stress (dim, dim), or a function of the points
+        x (dim, nf, nq) -> (dim, dim, nf, nq); q_mass integrates a linear one against the
+        basis exactly."""
         fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=self.mesh.boundary_facets(),
                               intorder=self.q_mass, dofs=self.dofs)
+        n = np.asarray(fb.normals)
+        if callable(sigma):
+            sq = np.asarray(sigma(np.asarray(fb.global_coordinates())))
+        else:
+            sq = np.asarray(sigma, float)[:, :, None, None]
+        t = np.einsum("ijfq,jfq->ifq", sq, n) * fb.dx            # traction times the facet weights
         out = np.zeros((self.ns, self.dim))
-        for c in range(self.dim):
-            out[:, c] = skfem.asm(skfem.LinearForm(lambda v, w: v * sum(sigma[c, j] * w.n[j] for j in range(self.dim))), fb)
+        for a in range(len(fb.basis)):
+            val = np.einsum("ifq,fq->fi", t, np.asarray(fb.basis[a][0]))
+            for c in range(self.dim):
+                out[:, c] += np.bincount(fb.element_dofs[a], val[:, c], minlength=self.ns)
         return out.ravel()
 
     def part_dofs(self, predicate, components) -> np.ndarray:

@@ -9,7 +9,8 @@ import numpy as np
 
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
-from harness.case.loadsets import homogeneous_closed_form, stress_tensor
+from harness.case.linear_states import linear_closed_form
+from harness.case.loadsets import stress_field, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
 from reference import linearfield, solvers, tensorpre, tensorsolve, twolevel
 from reference.fem import Discretisation
@@ -48,6 +49,15 @@ def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), p
     return fixed
 
 
+def load_stress(load):
+    """The stress of a stress load as Discretisation.stress_load takes it: a constant
+    tensor (dim, dim), or for a linear field (``load.stress_gradient``) the function
+    x (dim, ...) -> (dim, dim, ...)."""
+    if load.stress_gradient is None:
+        return stress_tensor(load.stress)
+    return lambda x: np.moveaxis(stress_field(load, np.moveaxis(x, 0, -1)), (-2, -1), (0, 1))
+
+
 def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror(),
                 parts=None) -> np.ndarray:
     F = np.zeros(d.ndof)
@@ -62,7 +72,7 @@ def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mi
         if t.twist is not None:
             F += d.twist_load(facets, t.twist)
     if load.stress is not None:
-        F += d.stress_load(stress_tensor(load.stress))
+        F += d.stress_load(load_stress(load))
     f = np.zeros((d.nelems, d.dim))
     if load.gravity is not None:
         f += rho[:, None] * np.asarray(load.gravity, float)
@@ -204,13 +214,18 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
 
 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:
-    """The dof vector of a homogeneous stress load (``load.stress``, constraints at point
-    parts) on a body of one elastic tensor: its exact solution is linear
-    (harness.case.loadsets.homogeneous_closed_form), which the mesh represents exactly, so the
-    FEM would return it to rounding (tests/case/test_any_shape.py checks that it does).
-    None when the load or the material does not allow it: then it is solved."""
+    """The dof vector of a homogeneous or linear stress load (``load.stress``, with or
+    without ``stress_gradient``; constraints at point parts) on a body of one elastic
+    tensor: its exact solution is linear or quadratic
+    (harness.case.linear_states.linear_closed_form), which the element interpolates
+    exactly (a quadratic: P2 on simplices, Q2 on cells mapped by their vertices), so the
+    FEM would return it to rounding (tests/case/test_any_shape.py and
+    tests/case/test_linear_states.py check that it does). None when the load, the element
+    or the material does not allow it: then it is solved."""
     C0 = tensorsolve.homogeneous(C)
     if load.stress is None or C0 is None:
+        return None
+    if load.stress_gradient is not None and not quadratic_exact(d):
         return None
     anchors = []
     for c in load.constraints:
@@ -218,4 +233,10 @@ def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarra
         if box is None or not np.allclose(box[0], box[1]):
             return None
         anchors.append(np.asarray(box[0], float))
-    return homogeneous_closed_form(load, d.doflocs.T, np.linalg.inv(C0), anchors).ravel()
+    return linear_closed_form(load, d.doflocs.T, np.linalg.inv(C0), anchors).ravel()
+
+
+def quadratic_exact(d: Discretisation) -> bool:
+    """Whether the nodal interpolant of every quadratic field is exact: a degree-2
+    element on a mesh of straight (vertex-mapped) cells."""
+    return d.order == "P2" and d.mesh.doflocs.shape[1] == d.mesh.p.shape[1]

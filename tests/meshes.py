@@ -67,6 +67,11 @@ def holed_block(folder: Path, size=0.07) -> Path:
     return _mesh(Path(folder) / "holed_block.vtu", build, size, 3)
 
 
+def ellipse(folder: Path, axes=(0.4, 0.25), size=0.06) -> Path:
+    """A 2-D ellipse centred at the origin: a curved boundary in triangles."""
+    return _mesh(Path(folder) / "ellipse.vtu", lambda occ: occ.addDisk(0, 0, 0, *axes), size, 2)
+
+
 def holed_plate(folder: Path, size=0.06) -> Path:
     def build(occ):
         r = occ.addRectangle(0, 0, 0, 0.8, 0.4)

@@ -2,16 +2,28 @@
 fitting it): the body is clamped at the low end of its longest axis and loaded across
 it, the way a bar, a beam or an organ held at one end is.
 
-- ``sag``: gravity (9.81 m/s^2) along the body's thinnest other axis, the clamp holding;
-- ``tip``: a traction s along the same axis on the high end's surface;
-- ``torsion`` (3-D): the twist t = tau e_axis x (x - c) on the same surface (c its
-  centroid: a torque, no resultant), tau = s / r with r the largest distance of its
-  nodes from the long axis through their centroid, so the peak traction is s.
+- ``sag``: a uniform body force (gravity's form, rho g) along the body's thinnest other
+  axis (``across``), the clamp holding;
+- ``tip``: a traction along ``across`` on the high end's face;
+- ``tip2`` (3-D): a traction along the third axis on the same face;
+- ``torsion`` (3-D): the twist t = w e_axis x (x - c) on the same face (c its area
+  centroid: a torque, no resultant);
+- ``bridge``: the sag's body force with both ends clamped;
+- training states (fitted, never held out): ``train-tip``, ``train-tip2`` and
+  ``train-torsion``, the tip loads and the twist with the ends swapped (the high end
+  clamped, the low end loaded).
 
-The ends are slabs across the longest axis, 5 % of its length thick, thickened (x 1.5 at
-a time) until the clamp holds three non-collinear boundary nodes (two in 2-D) and the tip
-holds a boundary facet; both are boxes in ``[body.parts]`` (``clamp``, ``tip``). Either
-may instead be a named group of the mesh (``calibrate --clamp`` / ``--load-region``).
+The ends are end faces (harness.io.end_faces): the boundary facets within a band of 5 %
+of the length at each end of the axis whose outward normals point along it (cos >= 0.5;
+a pointed end, which has no such face: cos >= 0), the band widened (x 1.5 at a time)
+until the clamp holds three non-collinear nodes (two in 2-D) and the tip a facet. Either may instead be a named group of the mesh (``calibrate
+--clamp`` / ``--load-region``). The FEM and the springs are clamped and loaded on the same
+facets (harness.case.facet_loads).
+
+Magnitudes (:meth:`EndLoads.magnitudes`) give a peak strain of about ``peak_strain``
+(default 1e-3) by beam theory on the body's own section: bending strain M c / (E I) at the
+clamp (tip: M = P L, sag: w L^2 / 2, bridge: w L^2 / 12) and the shear strain of the twist
+w r / (2 G), so the linear answer is the physical one.
 """
 
 from __future__ import annotations
@@ -23,112 +35,229 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.errors import SpringbenchError
-from harness.io.meshfile import boundary_facets
+from harness.io.end_faces import BAND, COS, end_facets, outward_normals
+from harness.io.meshfile import FACETS, boundary_facets
 
-SLAB = 0.05
-GRAVITY = 9.81
+PEAK_STRAIN = 1e-3
+
+
+@dataclass(frozen=True)
+class Section:
+    """What beam theory needs of the body along its axis: length L, mean section area
+    A = V / L, second moments I (dim,) of the section about the centroidal axis
+    (I[b] = int (x_b - xbar_b)^2 dV / L), extreme-fibre distances c (dim,), the tip face's
+    area and its radius about the axis through its area centroid (its farthest node)."""
+    L: float
+    A: float
+    I: tuple[float, ...]
+    c: tuple[float, ...]
+    tip_area: float
+    tip_radius: float
 
 
 @dataclass(frozen=True)
 class EndLoads:
     axis: int                      # the longest axis: clamp at its low end, tip at its high end
-    across: int                    # the load direction (the thinnest other axis)
-    clamp: tuple | str             # (lo, hi) boxes, or the names of mesh groups
-    tip: tuple | str
-    thickness: float
-    radius: float = math.nan       # of the tip about the long axis (the torsion's tau = s / radius)
+    across: int                    # the sag's and tip's direction (the thinnest other axis)
+    clamp: str | None              # a mesh group's name, or None: the low end face
+    tip: str | None                # a mesh group's name, or None: the high end face
+    band: float                    # of the end faces, a fraction of the length
+    section: Section
     dim: int = 3
+    clamp_info: str = ""           # where the clamp is: centroid, normal, node count
+    cos: float = COS               # of the end faces: outward normals n . e >= cos
 
     @property
     def names(self) -> tuple[str, ...]:
-        return ("sag", "tip", "torsion") if self.dim == 3 else ("sag", "tip")
+        return ("sag", "tip", "tip2", "torsion", "bridge") if self.dim == 3 else ("sag", "tip", "bridge")
+
+    @property
+    def training(self) -> tuple[str, ...]:
+        """Clamped training states (the family 'clamped'): the tip loads and the twist with
+        the ends swapped (the high end held, the low end loaded), so a fit sees how a clamp
+        behaves without seeing a held-out load."""
+        return ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
+
+    @property
+    def second(self) -> int:
+        """tip2's direction: the axis neither ``axis`` nor ``across``."""
+        return 3 - self.axis - self.across
+
+    @property
+    def radius(self) -> float:
+        return self.section.tip_radius
 
     def describe(self) -> str:
         a, b = "xyz"[self.axis], "xyz"[self.across]
-        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}-{end} end"   # noqa: E731
-        twist = f" and 'torsion' (a twist about {a}, peak traction = the tip's)" if self.dim == 3 else ""
-        slabs = "" if isinstance(self.clamp, str) and isinstance(self.tip, str) else \
-            f" (slabs {self.thickness:.3g} thick)"
-        return (f"held-out loads: 'sag' (gravity along -{b}), 'tip' (traction along -{b}){twist} on "
-                f"{where(self.tip, 'max')}, {where(self.clamp, 'min')} clamped{slabs}")
+        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"   # noqa: E731
+        extra = (f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' (a twist about {a})"
+                 if self.dim == 3 else "")
+        band = "" if isinstance(self.clamp, str) and isinstance(self.tip, str) else \
+            f" (facets within {self.band:.3g} of the length of each end, normals n . e_{a} >= {self.cos:g})"
+        return (f"held-out loads: 'sag' (body force along -{b}), 'tip' (traction along -{b}){extra} on "
+                f"{where(self.tip, '1')}, 'bridge' (the sag with both ends clamped); {where(self.clamp, '0')} "
+                f"clamped{band}{self.clamp_info}")
 
-    def toml(self, s: float) -> tuple[str, str]:
-        """([body.parts] lines, [[loads.case]] tables) of the loads, tip traction s."""
-        dim = self.dim
-        g = [0.0] * dim
-        g[self.across] = -GRAVITY
-        t = [0.0] * dim
-        t[self.across] = -float(s)
-        part = lambda b: (f"{{ group = {json.dumps(b)} }}" if isinstance(b, str) else      # noqa: E731
-                          f"{{ box = [{list(map(float, b[0]))}, {list(map(float, b[1]))}] }}")
-        clamp = '[[loads.case.constraint]]\npart = "clamp"\ncomponents = "all"\n'
-        cases = (f'[[loads.case]]\nname = "sag"\ngravity = {g}\n{clamp}'
-                 f'[[loads.case]]\nname = "tip"\n{clamp}[[loads.case.traction]]\npart = "tip"\nvector = {t}\n')
+    def magnitudes(self, E: float, nu: float, density: float, peak_strain: float = PEAK_STRAIN) -> dict:
+        """{load: magnitude} for a peak strain of about ``peak_strain`` (module doc): the
+        tip tractions in Pa, the body force's acceleration in m/s^2, the twist w in Pa/m."""
+        s, eps, b, t = self.section, float(peak_strain), self.across, self.second
+        bend = lambda i: eps * E * s.I[i] / s.c[i]      # noqa: E731  the moment M at the peak strain
+        out = {"sag": 2 * bend(b) / (density * s.A * s.L ** 2), "tip": bend(b) / (s.tip_area * s.L),
+               "bridge": 12 * bend(b) / (density * s.A * s.L ** 2)}
+        if self.dim == 3:
+            out["tip2"] = bend(t) / (s.tip_area * s.L)
+            out["torsion"] = 2 * eps * E / (2 * (1 + nu)) / s.tip_radius
+        return out
+
+    def toml(self, magnitudes: dict) -> tuple[str, str]:
+        """([body.parts] lines, [[loads.case]] tables) of the loads with these magnitudes."""
+        dim, m = self.dim, magnitudes
+
+        def vec(axis, value):
+            v = [0.0] * dim
+            v[axis] = float(value)
+            return v
+        part = lambda p, side: (f"{{ group = {json.dumps(p)} }}" if isinstance(p, str) else      # noqa: E731
+                                f'{{ end = "{"xyz"[self.axis]}{side}", band = {float(self.band)!r}, '
+                                f'cos = {float(self.cos)!r} }}')
+        hold = lambda name: f'[[loads.case.constraint]]\npart = "{name}"\ncomponents = "all"\n'   # noqa: E731
+        load = lambda name: f'[[loads.case]]\nname = "{name}"\n'                                    # noqa: E731
+        trac = lambda **kv: "[[loads.case.traction]]\npart = \"tip\"\n" + "".join(                 # noqa: E731
+            f"{k} = {v}\n" for k, v in kv.items())
+        cases = (load("sag") + f"gravity = {vec(self.across, -m['sag'])}\n" + hold("clamp")
+                 + load("tip") + hold("clamp") + trac(vector=vec(self.across, -m["tip"])))
         if dim == 3:
-            w = [0.0] * 3
-            w[self.axis] = float(s) / self.radius
-            cases += f'[[loads.case]]\nname = "torsion"\n{clamp}[[loads.case.traction]]\npart = "tip"\ntwist = {w}\n'
-        return f"clamp = {part(self.clamp)}\ntip = {part(self.tip)}\n", cases
+            cases += load("tip2") + hold("clamp") + trac(vector=vec(self.second, -m["tip2"]))
+            cases += load("torsion") + hold("clamp") + trac(twist=vec(self.axis, m["torsion"]))
+        cases += load("bridge") + f"gravity = {vec(self.across, -m['bridge'])}\n" + hold("clamp") + hold("tip")
+        back = lambda **kv: trac(**kv).replace('part = "tip"', 'part = "clamp"')    # noqa: E731
+        cases += load("train-tip") + hold("tip") + back(vector=vec(self.across, m["tip"]))
+        if dim == 3:
+            cases += load("train-tip2") + hold("tip") + back(vector=vec(self.second, m["tip2"]))
+            cases += load("train-torsion") + hold("tip") + back(twist=vec(self.axis, -m["torsion"]))
+        return f"clamp = {part(self.clamp, 0)}\ntip = {part(self.tip, 1)}\n", cases
 
 
 def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None,
               groups=None) -> EndLoads:
-    """The clamp and tip slabs of a mesh (points (n, dim), meshio-style cells), or the
-    mesh groups named ``clamp`` / ``tip`` (``groups``: harness.io.meshfile.Mesh.groups)."""
+    """The end loads of a mesh (points (n, dim), meshio-style cells): its end faces along
+    the longest axis, or the mesh groups named ``clamp`` / ``tip`` (``groups``:
+    harness.io.meshfile.Mesh.groups)."""
     points = np.asarray(points, float)
     dim = points.shape[1]
     lo, hi = points.min(axis=0), points.max(axis=0)
     size = hi - lo
     axis = int(np.argmax(size))
-    others = [a for a in range(dim) if a != axis]
-    across = min(others, key=lambda a: size[a])
-    facets = boundary_facets(cells)
-    bnodes = np.unique(np.concatenate([f.ravel() for f in facets]))
-    pad = 1e-6 * float(size.max())
+    across = min((a for a in range(dim) if a != axis), key=lambda a: size[a])
+    facets, inside = boundary_facets(cells, points)
 
-    def nodes_of(name):
+    def group_facets(name):
         g = groups[name]
-        return np.unique(np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes]).astype(int))
+        held = np.zeros(len(points), bool)
+        held[np.unique(np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes]).astype(int))] = True
+        return [f[held[f].all(axis=1)] for f in facets]
 
-    def holds(nodes):
+    def holds(fac):
+        nodes = np.unique(np.concatenate([f.ravel() for f in fac]))
         c = points[nodes] - points[nodes].mean(axis=0) if len(nodes) else np.zeros((0, dim))
         return len(nodes) >= dim and np.linalg.matrix_rank(c, tol=1e-9 * size.max()) >= dim - 1
-    if clamp is not None and not holds(nodes_of(clamp)):
-        raise SpringbenchError(f"group '{clamp}' cannot clamp the body ({dim} nodes not on one line needed)",
-                               field="--clamp", fix="name a face group of the mesh")
-    t = SLAB * size[axis]
-    while t <= 0.5 * size[axis]:
-        x = points[:, axis]
-        clamp_ok = clamp is not None or holds(bnodes[x[bnodes] <= lo[axis] + t])
-        tip_ok = tip is not None or any(np.any(np.all(x[f] >= hi[axis] - t, axis=1)) for f in facets)
-        if clamp_ok and tip_ok:
-            clamp_hi, tip_lo = hi + pad, lo - pad
-            clamp_hi[axis] = lo[axis] + t
-            tip_lo[axis] = hi[axis] - t
-            held = nodes_of(tip) if tip is not None else bnodes[x[bnodes] >= hi[axis] - t]
-            return EndLoads(axis, across, clamp if clamp is not None else (tuple(lo - pad), tuple(clamp_hi)),
-                            tip if tip is not None else (tuple(tip_lo), tuple(hi + pad)), t,
-                            _radius(points, facets, held, axis) if dim == 3 else math.nan, dim)
-        t *= 1.5
-    raise SpringbenchError("no end of the mesh's longest axis can be clamped (too few boundary nodes there)",
-                           field="mesh", fix="refine the mesh, or pass --heldout none")
+    if clamp is not None and not holds(group_facets(clamp)):
+        raise SpringbenchError(f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
+                               f"needed)", field="--clamp", fix="name a face group of the mesh")
+    band = BAND
+    while band <= 0.5:
+        for cos in (COS, 0.0):     # a pointed end has no face: then the facets that face that way at all
+            cf = group_facets(clamp) if clamp is not None else end_facets(points, facets, inside, axis, 0, band, cos)
+            tf = group_facets(tip) if tip is not None else end_facets(points, facets, inside, axis, 1, band, cos)
+            if holds(cf) and any(len(f) for f in tf):
+                return EndLoads(axis, across, clamp, tip, band, _section(points, cells, axis, tf), dim,
+                                _where(points, facets, inside, cf), cos)
+        band *= 1.5
+    raise SpringbenchError("no end of the mesh's longest axis can be clamped (no face there whose normals point "
+                           "along the axis)", field="mesh", fix="name a face group with --clamp, or --heldout none")
 
 
-def _radius(points, facets, held, axis: int) -> float:
-    """Largest distance from the long axis through c of the held nodes, c the area
-    centroid of the boundary facets they hold (where the twist's c lies)."""
-    inside = np.zeros(len(points), bool)
-    inside[held] = True
-    area, moment = 0.0, 0.0
-    for f in facets:
-        x = points[f[inside[f].all(axis=1)]]
-        for i in range(1, x.shape[1] - 1):      # fan triangles (x0, xi, xi+1)
-            a = 0.5 * np.linalg.norm(np.cross(x[:, i] - x[:, 0], x[:, i + 1] - x[:, 0]), axis=1)
-            area += a.sum()
-            moment = moment + (a[:, None] * (x[:, 0] + x[:, i] + x[:, i + 1]) / 3).sum(axis=0)
-    if area == 0:
-        raise SpringbenchError("the loaded region holds no boundary facet", field="--load-region",
-                               fix="name a group of the mesh's surface")
-    r = points[held] - moment / area
+def _where(points, facets, inside, fac) -> str:
+    """': centroid (..), normal (..), N nodes' of the clamp's facets."""
+    area, centre, normal = 0.0, 0.0, 0.0
+    for f, cell in zip(facets, inside):
+        keep = _rows(f, fac)
+        if not keep.any():
+            continue
+        a = _areas(points, f[keep])
+        c, n = outward_normals(points, f[keep], cell[keep])
+        area, centre, normal = area + a.sum(), centre + a @ c, normal + a @ n
+    nodes = len(np.unique(np.concatenate([f.ravel() for f in fac])))
+    fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)     # noqa: E731
+    n = normal / max(np.linalg.norm(normal), 1e-300)
+    return f": centroid ({fmt(centre / area)}), normal ({fmt(n)}), {nodes} nodes"
+
+
+def _rows(f: np.ndarray, chosen: list[np.ndarray]) -> np.ndarray:
+    """Mask of the rows of f that are among the chosen facets of the same size."""
+    same = [c for c in chosen if c.shape[1] == f.shape[1] and len(c)]
+    if not same:
+        return np.zeros(len(f), bool)
+    key = lambda a: [tuple(r) for r in np.sort(a, axis=1)]    # noqa: E731
+    want = set(key(np.concatenate(same)))
+    return np.array([r in want for r in key(f)], bool)
+
+
+def _areas(points: np.ndarray, fac: np.ndarray) -> np.ndarray:
+    """Sizes (m,) of facets (m, k): lengths in 2-D, polygon areas in 3-D."""
+    x = points[fac]
+    if x.shape[2] == 2:
+        return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
+    a = np.zeros((len(x), 3))
+    for i in range(1, x.shape[1] - 1):
+        a += np.cross(x[:, i] - x[:, 0], x[:, i + 1] - x[:, 0]) / 2
+    return np.linalg.norm(a, axis=1)
+
+
+def _section(points, cells, axis: int, tip_facets) -> Section:
+    """The body's Section along ``axis`` (exact moments of its cells split into simplices
+    about their centroids; the tip face from ``tip_facets``)."""
+    dim = points.shape[1]
+    V, M1, M2 = 0.0, np.zeros(dim), np.zeros((dim, dim))
+    for ctype, c in cells.items():
+        c = np.asarray(c, int)
+        for x in _cell_simplices(points, ctype, c):          # (m, dim + 1, dim)
+            e = x[:, 1:] - x[:, :1]
+            vol = np.abs(np.linalg.det(e)) / math.factorial(dim)
+            s = x.sum(axis=1)
+            V += vol.sum()
+            M1 += vol @ (s / (dim + 1))
+            M2 += np.einsum("m,mij->ij", vol / ((dim + 1) * (dim + 2)),
+                            np.einsum("mki,mkj->mij", x, x) + np.einsum("mi,mj->mij", s, s))
+    mean = M1 / V
+    L = float(np.ptp(points[:, axis]))
+    I = np.diag(M2 / V - np.outer(mean, mean)) * V / L
+    c = np.abs(points - mean).max(axis=0)
+    tip = [f for f in tip_facets if len(f)]
+    areas = [_areas(points, f) for f in tip]
+    tip_area = float(sum(a.sum() for a in areas))
+    centroid = sum(a @ points[f].mean(axis=1) for a, f in zip(areas, tip)) / tip_area
+    nodes = np.unique(np.concatenate([f.ravel() for f in tip]))
+    r = points[nodes] - centroid
     r[:, axis] = 0.0
-    return float(np.linalg.norm(r, axis=1).max())
+    return Section(L, float(V / L), tuple(map(float, I)), tuple(map(float, c)), tip_area,
+                   float(np.linalg.norm(r, axis=1).max()) if dim == 3 else math.nan)
+
+
+def _cell_simplices(points, ctype: str, cells: np.ndarray):
+    """Coordinate arrays (m, dim + 1, dim) of simplices that tile the cells: simplices as
+    they are, other cells as fans of their faces' fans about the cell's centroid."""
+    x = points[cells]
+    if ctype in ("triangle", "tetra"):
+        yield x
+        return
+    centre = x.mean(axis=1)
+    for face in FACETS[ctype]:
+        f = x[:, list(face)]
+        if f.shape[1] == 2:                                  # a quad's edge
+            yield np.stack([centre, f[:, 0], f[:, 1]], axis=1)
+            continue
+        fc = f.mean(axis=1)
+        for i in range(f.shape[1]):
+            yield np.stack([centre, fc, f[:, i], f[:, (i + 1) % f.shape[1]]], axis=1)

@@ -1,28 +1,23 @@
-"""Nodal forces of a traction on a part's boundary facets, for spring networks: what a
-traction on a mesh group, or a twist (torsion), needs beyond harness.mechanics.statics' tributary
-areas of a flat part.
+"""Nodal forces of a traction on a part's boundary facets: the one path every spring
+network's traction loads take (harness.mechanics.statics), the same facets and the same
+integral as the FEM's load vector (reference.fem.Discretisation.part_facets).
 
-The facets are the body mesh's boundary facets on the part (all vertices and the
-centroid on it, as reference.fem.Discretisation.part_facets selects them), whose
-vertices must be nodes; a box or polygon body's flat parts are triangulated in their
-plane. A traction t(x) = v + w x (x - c) (linear in x; c the facets' area centroid) is
-integrated against linear hats: f_i = |S| / (k (k + 1)) (t_i + sum_j t_j) on a simplex
-of k vertices, which is exact, so the forces have the FEM's resultant and torque
-(quads: fans about their centre).
+A mesh body's facets are the mesh's boundary facets on the part (all vertices and the
+centroid on it, as the FEM selects them), whose vertices must be nodes. A box or polygon
+body's flat parts are the part's nodes tiled in their plane: a tensor grid of nodes in
+rectangles (the bilinear hats' tributary areas), other nodes in a Delaunay triangulation
+(2-D: consecutive segments). A traction t(x) = v + w x (x - c) (linear in x; c the facets'
+area centroid) is integrated against linear hats: f_i = |S| / (k (k + 1)) (t_i + sum_j t_j)
+on a simplex of k vertices, which is exact, so the forces have the FEM's resultant and
+torque (quads: fans about their centre).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from harness.errors import ModelError
-from harness.io.mesh_groups import GroupPart
-
-
-def needs_facets(case, traction) -> bool:
-    """A twist, or a part that is a mesh group (it may be curved)."""
-    return traction.twist is not None or isinstance((case.body.parts or {}).get(traction.part), GroupPart)
 
 
 def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
@@ -40,14 +35,16 @@ def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
         ok = on_part(mpoints[fac.ravel()].T).reshape(fac.shape).all(axis=1)
         ok[ok] = on_part(mpoints[fac[ok]].mean(axis=1).T)
         if np.any(dist[fac[ok]] > tol):
-            raise ModelError("a traction on a mesh group or a twist needs a node at every vertex of its facets",
+            raise ModelError("a traction on a mesh body needs a node at every vertex of its facets",
                              field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")
         out.append(node[fac[ok]])
     return out
 
 
 def _planar_triangles(points: np.ndarray, on_part) -> np.ndarray:
-    """A flat part's nodes triangulated in its plane (2-D: consecutive segments)."""
+    """A flat part's nodes tiled in their plane: (m, 2) consecutive segments in 2-D; in 3-D
+    (m, 4) rectangles when the nodes form a tensor grid in the plane, else (m, 3) Delaunay
+    triangles; only tiles whose centroid is on the part."""
     idx = np.flatnonzero(on_part(points.T))
     dim = points.shape[1]
     if len(idx) < dim:
@@ -58,8 +55,37 @@ def _planar_triangles(points: np.ndarray, on_part) -> np.ndarray:
         order = idx[np.argsort(q @ vt[0])]
         seg = np.stack([order[:-1], order[1:]], axis=1)
         return seg[on_part(points[seg].mean(axis=1).T)]
-    tri = idx[Delaunay(q @ vt[:2].T).simplices]
-    return tri[on_part(points[tri].mean(axis=1).T)]
+    uv = q @ vt[:2].T
+    normal = int(np.argmax(np.abs(vt[2])))
+    if np.isclose(abs(vt[2][normal]), 1.0):     # a face of an axis-aligned box: its own two axes
+        uv = points[idx][:, [a for a in range(3) if a != normal]]
+    tiles = _grid_rectangles(idx, uv)
+    if tiles is None:
+        try:
+            tiles = idx[Delaunay(uv).simplices]
+        except QhullError:                       # the nodes lie on a line: no area to carry
+            return np.zeros((0, 3), int)
+    return tiles[on_part(points[tiles].mean(axis=1).T)]
+
+
+def planar_forces(points: np.ndarray, on_part, vector) -> np.ndarray:
+    """Nodal forces (n, dim) of a constant traction on a flat part given by its predicate
+    (the nodes tiled in their plane, as a box body's faces are)."""
+    return facet_forces(points, [_planar_triangles(points, on_part)], vector)
+
+
+def _grid_rectangles(idx: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
+    """The rectangles (m, 4), in order around each, of nodes ``idx`` whose plane coordinates
+    ``uv`` (n, 2) form a full tensor grid (at least 2 x 2), else None."""
+    ru, iu = np.unique(np.round(uv[:, 0], 12), return_inverse=True)
+    rv, iv = np.unique(np.round(uv[:, 1], 12), return_inverse=True)
+    if len(ru) * len(rv) != len(idx) or len(ru) < 2 or len(rv) < 2:
+        return None
+    grid = np.full((len(ru), len(rv)), -1)
+    grid[iu, iv] = idx
+    if np.any(grid < 0):
+        return None
+    return np.stack([grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]], axis=-1).reshape(-1, 4)
 
 
 def _simplices(facets: np.ndarray):

@@ -1,5 +1,6 @@
 """The [loads] table of a case file: the standard set, the user's load cases, the
-held-out names and, for a homogeneous set on a body that is not a box, its anchor parts.
+held-out names and, for a homogeneous set on a body that is not a box or a linear set on
+any body, its anchor parts and frame.
 Mistakes are CaseErrors naming the file and the field."""
 
 from __future__ import annotations
@@ -11,7 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from harness.errors import CaseError, SpringbenchError
-from harness.case.loadsets import ANCHORS, AXES, LOAD_SETS, Constraint, LoadCase, Traction, anchor_points
+from harness.case.loadsets import (ANCHORED, ANCHORS, AXES, LOAD_SETS, Constraint, Frame, LoadCase, Traction,
+                                   anchor_points)
 from harness.case.parts import parse_face_name, part_exists
 
 if TYPE_CHECKING:
@@ -36,9 +38,10 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
             raise CaseError(f"load set '{l['set']}' is {want}-D but dim = {dim}", file=file,
                             field="loads.set", fix=f"use basic{dim}d")
         anchors = None
-        if body.shape not in ("rectangle", "box") and ANCHORS[0] in body.parts:
+        if anchored(l["set"], body) and ANCHORS[0] in body.parts:
             anchors = np.array([body.parts[a][0] for a in ANCHORS[:dim]])
-        cases.extend(make(l["magnitude"], anchors))
+        frame = body_frame(body) if l["set"].startswith("linear") else None
+        cases.extend(make(l["magnitude"], anchors, frame))
     names = {c.name for c in cases}
     for i, u in enumerate(l["case"]):
         where = f"loads.case[{i}]"
@@ -102,12 +105,41 @@ def parse_heldout(l: dict, loads, file: str) -> tuple[str, ...]:
     return tuple(n for n in names if n in held)
 
 
+def anchored(load_set: str | None, body: Body) -> bool:
+    """Whether the set's loads are held at anchor points: a homogeneous set on a body
+    that is not a box (a box gets face tractions and corner constraints), a linear set
+    on any body."""
+    name = load_set or ""
+    boxed = body.shape in ("rectangle", "box")
+    return any(name.startswith(a) for a in ANCHORED) and not (boxed and name.startswith("homogeneous"))
+
+
+def body_frame(body: Body) -> Frame:
+    """The body's volume (2-D: area) centroid and its largest bounding-box extent."""
+    from harness.geometry.moments import box_moments, mesh_moments, polygon_moments
+    lo, hi = body.bbox()
+    if body.shape in ("rectangle", "box"):
+        m = box_moments(lo, hi)
+    elif body.shape == "polygon":
+        m = polygon_moments(np.asarray(body.vertices, float))
+    else:
+        from harness.io.meshfile import read_mesh
+        mesh = read_mesh(body.file, body.format)
+        m = mesh_moments(mesh.points, mesh.cells)
+    dim = len(lo)
+    return Frame(tuple(float(v) for v in m[1:1 + dim] / m[0]), float(np.max(hi - lo)))
+
+
 def with_anchors(l: dict, body: Body, file: str) -> Body:
-    """A body that is not a box gets the parts anchor-a, -b, -c (points on its boundary,
-    harness.case.loadsets.anchor_points) when its load set is a homogeneous one."""
-    if not (l["set"] or "").startswith("homogeneous") or body.shape in ("rectangle", "box"):
+    """The body gets the parts anchor-a, -b, -c (points on its boundary,
+    harness.case.loadsets.anchor_points; a box's corners) when its load set holds its
+    loads there (:func:`anchored`)."""
+    if not anchored(l["set"], body):
         return body
-    if body.shape == "polygon":
+    if body.shape in ("rectangle", "box"):
+        lo, hi = body.bbox()
+        boundary = np.array(np.meshgrid(*zip(lo, hi), indexing="ij")).reshape(len(lo), -1).T
+    elif body.shape == "polygon":
         boundary = np.asarray(body.vertices, float)
     else:
         from harness.io.meshfile import boundary_facets, read_mesh
@@ -118,7 +150,7 @@ def with_anchors(l: dict, body: Body, file: str) -> Body:
         boundary = m.points[np.unique(np.concatenate([f.ravel() for f in boundary_facets(m.cells)]))]
     taken = [a for a in ANCHORS if a in body.parts]
     if taken:
-        raise CaseError(f"part name '{taken[0]}' is reserved for the homogeneous loads' constraints", file=file,
+        raise CaseError(f"part name '{taken[0]}' is reserved for the {l['set']} loads' constraints", file=file,
                         field=f"body.parts.{taken[0]}", fix="rename that part")
     pts = anchor_points(boundary)
     parts = dict(body.parts, **{a: (tuple(p), tuple(p)) for a, p in zip(ANCHORS, pts)})

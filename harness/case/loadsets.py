@@ -35,21 +35,51 @@ class Traction:
 
 
 @dataclass(frozen=True)
+class Frame:
+    """A body's centroid and size L (its largest bounding-box extent): the scaled
+    coordinates xi = (x - centroid) / L of the linear stress states, |xi| <~ 1."""
+    centroid: tuple[float, ...]
+    size: float
+
+    def xi(self, x) -> np.ndarray:
+        """Scaled coordinates of points x (..., dim)."""
+        return (np.asarray(x, float) - np.asarray(self.centroid, float)) / self.size
+
+
+@dataclass(frozen=True)
 class LoadCase:
     """One static load case. ``gravity`` is an acceleration (force = density * g);
     ``body_force`` a force per volume; both may be None. ``stress`` (Voigt, VOIGT
-    order) is a homogeneous stress state whose traction sigma . n acts on the whole
-    boundary (the ``homogeneous`` sets on bodies that are not boxes)."""
+    order) is a stress state whose traction sigma . n acts on the whole boundary (the
+    ``homogeneous`` sets on bodies that are not boxes, the ``linear`` sets on any): constant, or with
+    ``stress_gradient`` G (dim rows of Voigt entries, G[k] = d sigma / d xi_k in the
+    coordinates of ``frame``) the linear field sigma(x) = stress + sum_k xi_k G[k]
+    (:func:`stress_field`); ``stress`` is then its value at the frame's centroid.
+    ``family`` groups the states of a set (:func:`family`); None for user loads."""
     name: str
     constraints: tuple[Constraint, ...]
     tractions: tuple[Traction, ...] = ()
     gravity: tuple[float, ...] | None = None
     body_force: tuple[float, ...] | None = None
     stress: tuple[float, ...] | None = None
+    stress_gradient: tuple[tuple[float, ...], ...] | None = None
+    frame: Frame | None = None
+    family: str | None = None
+
+    def __post_init__(self):
+        if self.stress_gradient is not None and (self.stress is None or self.frame is None):
+            raise ValueError(f"load '{self.name}': a stress gradient needs its constant part and its frame")
 
     @property
     def parts(self) -> set[str]:
         return {c.part for c in self.constraints} | {t.part for t in self.tractions}
+
+
+def family(load: LoadCase) -> str | None:
+    """The family of a standard set's load case ('constant', 'bending', 'torsion',
+    'shear-gradient', 'gravity'; harness/case/linear_states.py), None for the others:
+    the groups a calibration leaves out one at a time."""
+    return load.family
 
 
 def _unit(dim: int, axis: int, s: float) -> tuple[float, ...]:
@@ -58,7 +88,7 @@ def _unit(dim: int, axis: int, s: float) -> tuple[float, ...]:
     return tuple(v)
 
 
-def basic2d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+def basic2d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     """Deussen Fig. 4: two stretches (rollers + one pinned corner) and two shears."""
     return (
         LoadCase("stretch-x", (Constraint("x0", (0,)), Constraint("x0y0", (1,))),
@@ -70,7 +100,7 @@ def basic2d(s: float, anchors=None) -> tuple[LoadCase, ...]:
     )
 
 
-def basic3d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+def basic3d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     """Deussen Fig. 7: three stretches and six shears on a box.
 
     stretch-a: rollers on face a0, the corner (a0, b0, c0) fixed in b and c, the
@@ -100,12 +130,23 @@ ANCHORS = ("anchor-a", "anchor-b", "anchor-c")   # part names of the minimal con
 
 
 def stress_tensor(voigt) -> "np.ndarray":
-    """Voigt stress (VOIGT order) -> symmetric (dim, dim) tensor."""
-    dim = 2 if len(voigt) == 3 else 3
-    sig = np.zeros((dim, dim))
-    for v, (i, j) in zip(voigt, VOIGT[dim]):
-        sig[i, j] = sig[j, i] = v
+    """Voigt stress (VOIGT order) -> symmetric (dim, dim) tensor; (..., nv) -> (..., dim, dim)."""
+    voigt = np.asarray(voigt, float)
+    dim = 2 if voigt.shape[-1] == 3 else 3
+    sig = np.zeros(voigt.shape[:-1] + (dim, dim))
+    for I, (i, j) in enumerate(VOIGT[dim]):
+        sig[..., i, j] = sig[..., j, i] = voigt[..., I]
     return sig
+
+
+def stress_field(load: LoadCase, x) -> "np.ndarray":
+    """The load's stress (..., dim, dim) at points x (..., dim): ``load.stress``, plus
+    sum_k xi_k G[k] with its gradient (LoadCase)."""
+    x = np.asarray(x, float)
+    voigt = np.broadcast_to(np.asarray(load.stress, float), x.shape[:-1] + (len(load.stress),))
+    if load.stress_gradient is not None:
+        voigt = voigt + load.frame.xi(x) @ np.asarray(load.stress_gradient, float)
+    return stress_tensor(voigt)
 
 
 def anchor_points(points) -> np.ndarray:
@@ -154,7 +195,7 @@ def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
         voigt[I] = s
         name = f"s{AXES[i]}{AXES[j]}"
         if anchors is not None:
-            out.append(LoadCase(name, minimal_constraints(anchors), stress=tuple(voigt)))
+            out.append(LoadCase(name, minimal_constraints(anchors), stress=tuple(voigt), family="constant"))
             continue
         sig = stress_tensor(voigt)
         tracs = []
@@ -165,53 +206,47 @@ def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
                     tracs.append(Traction(f"{AXES[a]}{side}", tuple(float(v) for v in t)))
         corners = [(0,) * dim, (1,) + (0,) * (dim - 1), (0, 1) + (0,) * (dim - 2)]
         names = ["".join(f"{AXES[a]}{c[a]}" for a in range(dim)) for c in corners]
-        out.append(LoadCase(name, minimal_constraints(np.array(corners[:dim], float), names), tuple(tracs)))
+        out.append(LoadCase(name, minimal_constraints(np.array(corners[:dim], float), names), tuple(tracs),
+                            family="constant"))
     return tuple(out)
 
 
-def homogeneous2d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+def homogeneous2d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     return homogeneous(2, s, anchors)
 
 
-def homogeneous3d(s: float, anchors=None) -> tuple[LoadCase, ...]:
+def homogeneous3d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     return homogeneous(3, s, anchors)
 
 
-# name -> (dim, make(s, anchors)): anchors are the body's anchor points (None for a box)
+def linear2d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
+    from harness.case.linear_states import linear_states
+    return linear_states(2, s, anchors, frame)
+
+
+def linear3d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
+    from harness.case.linear_states import linear_states
+    return linear_states(3, s, anchors, frame)
+
+
+# name -> (dim, make(s, anchors, frame)): anchors are the body's anchor points (None for a
+# box under the homogeneous sets), frame its centroid and size (harness/case/loads.py)
 LOAD_SETS: dict[str, tuple[int, Callable[..., tuple[LoadCase, ...]]]] = {
     "basic2d": (2, basic2d),
     "basic3d": (3, basic3d),
     "homogeneous2d": (2, homogeneous2d),
     "homogeneous3d": (3, homogeneous3d),
+    "linear2d": (2, linear2d),
+    "linear3d": (3, linear3d),
 }
+ANCHORED = ("homogeneous", "linear")   # sets whose loads are held at anchor points (boxes: only linear)
 
 
 def homogeneous_closed_form(load: LoadCase, points, compliance, anchors) -> "np.ndarray":
-    """u (n, dim) of a homogeneous stress load on a homogeneous body with Voigt
-    compliance S: u = eps x plus the rigid motion the load's constraints at ``anchors``
-    (one point per constraint) select."""
-    points = np.asarray(points, float)
-    dim = points.shape[1]
-    voigt = load.stress if load.stress is not None else _box_stress(load, dim)
-    e = np.asarray(compliance, float) @ np.asarray(voigt, float)
-    eps = np.zeros((dim, dim))
-    for v, (i, j) in zip(e, VOIGT[dim]):
-        eps[i, j] = eps[j, i] = v if i == j else v / 2
-    # rigid motion a + w x x (2-D: a + w (-y, x)): one equation per constrained component
-    def rigid(x):
-        if dim == 2:
-            return np.hstack([np.eye(2), [[-x[1]], [x[0]]]])
-        return np.hstack([np.eye(3), [[0, x[2], -x[1]], [-x[2], 0, x[0]], [x[1], -x[0], 0]]])
-    rows, rhs = [], []
-    for c, x in zip(load.constraints, np.asarray(anchors, float)):
-        R = rigid(x)
-        for comp in c.components:
-            rows.append(R[comp])
-            rhs.append(-(eps @ np.asarray(x, float))[comp])
-    coef = np.linalg.solve(np.array(rows), np.array(rhs))
-    a, w = coef[:dim], coef[dim:]
-    spin = np.cross(w, points) if dim == 3 else w[0] * np.stack([-points[:, 1], points[:, 0]], axis=1)
-    return points @ eps.T + a + spin
+    """u (n, dim) of a homogeneous (or linear) stress load on a homogeneous body:
+    harness.case.linear_states.linear_closed_form."""
+    from harness.case.linear_states import linear_closed_form
+    return linear_closed_form(load, points, compliance, anchors)
 
 
 def _box_stress(load: LoadCase, dim: int):

@@ -23,6 +23,7 @@ from harness.case.fibres import NAMED_FIELDS
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.loadsets import LOAD_SETS, LoadCase
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
+from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
 from harness.case.schema import Field, check, did_you_mean
 
@@ -39,8 +40,10 @@ BODY = {
     "vertices": Field("matrix", None, doc="polygon vertices [[x, y], ...] in order"),
     "file": Field("str", None, doc="mesh file, relative to the case file"),
     "format": Field("str", None, doc="meshio format name or 'bc2000'; guessed if absent"),
-    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}, or mesh groups: "
-                                  "name = {group = \"physical group\"}"),
+    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}, mesh groups: "
+                                  "name = {group = \"physical group\"}, or a mesh's end faces: name = "
+                                  "{end = \"x1\", band = 0.05, cos = 0.5} (boundary facets within band x the "
+                                  "extent of that end whose outward normals point along the axis, cos >= cos)"),
 }
 
 FIBRE = {
@@ -360,8 +363,11 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
             require_group(mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError)
             parts[name] = GroupPart(spec["group"], body.file, body.format)
             continue
+        if isinstance(spec, dict) and "end" in spec:           # an end face of the mesh along an axis
+            parts[name] = _end_part(spec, name, shape, dim, body, fail)
+            continue
         if not isinstance(spec, dict) or set(spec) != {"box"}:
-            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]} or {group = \"name\"}")
+            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]}, {group = \"name\"} or {end = \"x1\"}")
         box = spec["box"]
         ok = (isinstance(box, list) and len(box) == 2 and all(
             isinstance(r, list) and len(r) == dim and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
@@ -375,6 +381,26 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
     return Body(body.shape, body.origin, body.size, body.vertices, body.file, body.format,
                 MappingProxyType(parts))
+
+
+def _end_part(spec: dict, name: str, shape: str, dim: int, body, fail) -> EndPart:
+    """``{ end = "x1", band = 0.05, cos = 0.5 }`` of a mesh body (harness.io.end_faces)."""
+    where = f"parts.{name}"
+    faces = ("x0", "x1", "y0", "y1", "z0", "z1")[:2 * dim]
+    extra = sorted(set(spec) - {"end", "band", "cos"})
+    if extra:
+        fail(f"{where}.{extra[0]}", "unknown key of an end part", "an end part takes end, band and cos")
+    if shape != "mesh":
+        fail(f"{where}.end", "end faces need shape = 'mesh'", "a box's faces are the parts x0, x1, y0, ... already")
+    if spec["end"] not in faces:
+        fail(f"{where}.end", f"expected one of {', '.join(faces)}, got {spec['end']!r}",
+             "x0 is the low end of the x axis, x1 its high end")
+    band, cos = spec.get("band", BAND), spec.get("cos", COS)
+    for key, v, ok in (("band", band, lambda v: 0 < v <= 1), ("cos", cos, lambda v: -1 <= v < 1)):
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not ok(v):
+            fail(f"{where}.{key}", f"{v!r} is out of range",
+                 "band: a fraction of the body's extent in (0, 1], e.g. 0.05; cos: in [-1, 1), e.g. 0.5")
+    return EndPart("xyz".index(spec["end"][0]), int(spec["end"][1]), body.file, body.format, float(band), float(cos))
 
 
 def _material(m: dict, dim: int, file: str) -> Material:

@@ -17,11 +17,14 @@ Loads (DESIGN.md). Fitted (``--loads homogeneous``, the default): the homogeneou
 states sxx, syy, szz, syz, sxz, sxy (2-D: sxx, syy, sxy) as tractions sigma . n on the
 whole surface with minimal constraints, which every shape has and which probe the whole
 elastic tensor; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
-Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (gravity),
-``tip`` (an end traction) and, in 3-D, ``torsion`` (a twist of the same end), the low end
-of the longest axis clamped (harness/case/default_loads.py; printed when chosen); ``--clamp``
-and ``--load-region`` name mesh groups to clamp and to load instead. Tractions have
-magnitude ``--magnitude`` (default 1e-3 E: small strains).
+Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (a body
+force), ``tip`` and ``tip2`` (end tractions across the axis, 3-D: both directions),
+``torsion`` (3-D: a twist of the same end) with the end face at the low end of the
+longest axis clamped, and ``bridge`` (the sag with both end faces clamped); end faces are
+boundary facets, the same for the FEM and the springs (harness/case/default_loads.py;
+printed when chosen); ``--clamp`` and ``--load-region`` name mesh groups to clamp and to
+load instead. Fitted loads have stress ``--magnitude`` (default 1e-3 E), held-out loads
+a peak strain of about ``--peak-strain`` (default 1e-3): small strains.
 
 Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
 Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
@@ -41,7 +44,9 @@ Writes (and prints the table and a one-sentence verdict):
   float32 margin), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
   ``loads_fitted``, ``loads_heldout``, ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
-  error relative to the FEM's, fitted / held-out loads), ``reference_error`` (the FEM's
+  error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
+  the held-out loads of each one's own relative error) and ``G_heldout_loads`` ({load: its
+  relative error}), ``reference_error`` (the FEM's
   own estimated error, relative), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
   ``--model springs+volume`` (one kv per element) or ``springs+volume-shared`` (one kv for
@@ -73,7 +78,9 @@ import tempfile
 import time
 from pathlib import Path
 
+from harness.case.default_loads import PEAK_STRAIN
 from harness.errors import CaseError, SpringbenchError
+from harness.models.stiffness_rules import RULES as STIFFNESS_RULES
 
 HELP = ("calibrate spring constants for your own mesh against FEM and export them "
         "(VTU, JSON for Newton/Warp/Taichi/SOFA: k, damping, masses, stable step)")
@@ -84,14 +91,15 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               spring_stiffness (N/m), spring_damping (N s/m), spring_stiffness_times_length (N),
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
               density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
-              displacement error / RMS FEM displacement), reference_error (FEM's own, relative),
+              displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out loads
+              of each one's own G_norm), G_heldout_loads ({load: G_norm}), reference_error (FEM's own, relative),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
               kn_stiffness (kn, Pa; 2-D N/m), kn_shared
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
-              G_norm_final (fitted loads), G_heldout, ref_error_max and ref_error_heldout (the
+              G_norm_final (fitted loads), G_heldout, G_heldout_mean, ref_error_max and ref_error_heldout (the
               FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
               dt_stable (s) with --k-ratio, seconds, seed, opt_stop
 2-D meshes: unit thickness (k and masses per unit thickness).
@@ -104,7 +112,7 @@ INITS = ("none", "equilibrium-gap")
 MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "springs+kn-node")
 VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
 KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
-RULES = ("deussen", "vangelder", "lloyd", "uniform")
+RULES = STIFFNESS_RULES     # every rule the harness has (harness/models/stiffness_rules.py)
 PRIOR_WEIGHT = 10.0     # lbfgs's default prior weight (README, calibrate: how it was chosen)
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
@@ -133,17 +141,19 @@ def add_arguments(p):
     p.add_argument("--rule", choices=RULES + ("best",), default="best",
                    help="stiffness rule of the initial constants: best (default: the rule with the lowest G "
                         "on the fitted loads, which the fit then starts from) or one of them")
-    p.add_argument("--loads", choices=("homogeneous", "basic"), default="homogeneous",
-                   help="fitted loads: homogeneous stress states on the whole surface (any shape, default) "
-                        "or the basic loads of the bounding box (boxes)")
+    p.add_argument("--loads", choices=("linear", "homogeneous", "basic"), default="linear",
+                   help="fitted loads: the equilibrated linear stress states (constant, bending, torsion, shear "
+                        "gradient, gravity) on the whole surface, exact for any shape (default); homogeneous: their "
+                        "constant part only; basic: the basic loads of the bounding box (boxes)")
     p.add_argument("--heldout", choices=("ends", "none"), default="ends",
-                   help="held-out loads: sag, tip load and (3-D) torsion with one end clamped (default) or none")
+                   help="held-out loads (default ends): sag, tip load, (3-D) a second tip load across and torsion "
+                        "with one end face clamped, and the sag with both end faces clamped (bridge); or none")
     p.add_argument("--clamp", metavar="GROUP", default=None,
                    help="clamp of the held-out loads: a named group of the mesh (gmsh physical group, cell or "
-                        "node set; default: the low end of the longest axis)")
+                        "node set; default: the end face at the low end of the longest axis)")
     p.add_argument("--load-region", dest="load_region", metavar="GROUP", default=None,
-                   help="where the held-out tip load and torsion act: a named group of the mesh (default: the "
-                        "high end of the longest axis)")
+                   help="where the held-out tip loads and torsion act: a named group of the mesh (default: the "
+                        "end face at the high end of the longest axis)")
     p.add_argument("--masses", choices=MASSES, default="lumped",
                    help="lumped element masses (default, never negative), moments-nonneg, or moments "
                         "(Deussen's moment matching: may be negative, which explicit engines cannot run)")
@@ -156,7 +166,10 @@ def add_arguments(p):
                    help="unit of the mesh's coordinates (default m; exports are in m)")
     p.add_argument("--plane", choices=("stress", "strain"), default="stress", help="2-D meshes: plane stress/strain")
     p.add_argument("--magnitude", type=float, default=None,
-                   help="traction of the loads (Pa; default 1e-3 E: small strains)")
+                   help="stress of the fitted loads (Pa; default 1e-3 E: small strains)")
+    p.add_argument("--peak-strain", dest="peak_strain", type=float, default=PEAK_STRAIN,
+                   help=f"the held-out loads' size: a peak strain of about this by beam theory on the body's "
+                        f"section (default {PEAK_STRAIN:g}: the linear answer is the physical one)")
     p.add_argument("--tol", type=float, default=1e-3,
                    help="reference (FEM) error tolerance relative to the displacement scale (default 1e-3)")
     p.add_argument("--max-refine", dest="max_refine", type=int, default=1,
@@ -183,6 +196,9 @@ def _check(args):
         bad("--density", f"{args.density} is not a positive number", "kg/m^3, e.g. --density 1000")
     if args.magnitude is not None and not (math.isfinite(args.magnitude) and args.magnitude > 0):
         bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
+    peak = getattr(args, "peak_strain", PEAK_STRAIN)
+    if not (math.isfinite(peak) and 0 < peak <= 0.1):
+        bad("--peak-strain", f"{peak} is not in (0, 0.1]", f"a small strain, e.g. --peak-strain {PEAK_STRAIN:g}")
     if not (math.isfinite(args.damping_ratio) and 0 <= args.damping_ratio < 1):
         bad("--damping-ratio", f"{args.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
     if args.prior_weight is not None and not (math.isfinite(args.prior_weight) and args.prior_weight >= 0):
@@ -249,7 +265,8 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
         opt += 'start = "best"\n'
     parts, cases, held = ("", "", "")
     if ends is not None:
-        parts, cases = ends.toml(s)
+        parts, cases = ends.toml(ends.magnitudes(args.E, args.nu, args.density,
+                                                 getattr(args, "peak_strain", PEAK_STRAIN)))
         parts = "[body.parts]\n" + parts
         held = f"heldout = {json.dumps(list(ends.names))}\n"
     return (f'name = "calibrate"\ndim = {dim}\n'
@@ -366,6 +383,9 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     out.update(optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}", G_norm_initial=row.get("G_norm_final"),
                G_norm_final=sc.G_norm, G_heldout=sh.G_norm if sh else math.nan,
                k_ratio=float(capped.k.max() / np.median(capped.k)), _net=capped)
+    if sh is not None:
+        per = {f"G_heldout_{name}": float(v) for name, v in sh.per_load_norm.items()}
+        out.update(G_heldout_mean=float(np.mean(list(per.values()))), **per)
     if np.all(net.masses > 0):
         for r, n in ((row, net), (out, capped)):
             kd = spring_damping(n.springs, n.k, n.masses, zeta)
@@ -373,6 +393,11 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
                                          volume=getattr(n, "volume", None))["dt_stable"]
     row["k_ratio"] = float(k.max() / np.median(k))
     return out
+
+
+def _finite(v):
+    """v as a float, None when missing or not finite (JSON has no NaN)."""
+    return float(v) if v is not None and math.isfinite(v) else None
 
 
 def _worst(*values) -> float:
@@ -387,11 +412,14 @@ def _report(args, rows, net, case):
     meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
                 G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
+                G_heldout_mean=exported.get("G_heldout_mean", math.nan),
+                G_heldout_loads={n: _finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
                 reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
                 mass_residual=exported.get("mass_residual", math.nan), masses=args.masses,
                 prior_weight=prior_weight(args) if args.method == "lbfgs" else math.nan)
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
-                        "G_norm_initial", "G_norm_final", "G_heldout", "ref_error_max", "ref_error_heldout", "status",
+                        "G_norm_initial", "G_norm_final", "G_heldout", "G_heldout_mean", "ref_error_max",
+                        "ref_error_heldout", "status",
                         "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_prior")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]

@@ -33,7 +33,7 @@ class GroupPart:
     format: str | None = None
 
 
-def _simplices(ctype: str, cells: np.ndarray, x: np.ndarray) -> list[np.ndarray]:
+def cell_simplices(ctype: str, cells: np.ndarray, x: np.ndarray) -> list[np.ndarray]:
     """Coordinate arrays (m, k, dim) of simplices covering the cells; quads are fans
     about their centre, hexes pyramids of those fans to theirs, so the centres that
     refinement adds lie on them even when a face is not planar."""
@@ -66,7 +66,7 @@ def group_simplices(mesh, name: str) -> dict[int, np.ndarray]:
         for fac in boundary_facets(mesh.cells):
             cells.append(({2: "line", 3: "triangle", 4: "quad"}[fac.shape[1]], fac[held[fac].all(axis=1)]))
     for ctype, c in cells:
-        for s in _simplices(ctype, np.asarray(c, int), x):
+        for s in cell_simplices(ctype, np.asarray(c, int), x):
             by_k.setdefault(s.shape[1], []).append(s)
     return {k: np.concatenate(v) for k, v in by_k.items()}
 

@@ -49,12 +49,11 @@ def pull_load(d, stress: float = 1.0, name: str = "pull") -> LoadCase:
 
 def pull_arrays(points, bbox, load: LoadCase) -> tuple[np.ndarray, np.ndarray]:
     """(free (3n,) bool, forces (3n,)) of a pull load on nodes ``points`` (n, 3)."""
-    from harness.mechanics.statics import tributary_measure
+    from harness.case.facet_loads import planar_forces
     points = np.asarray(points, float)
     f = np.zeros(points.shape)
     for t in load.tractions:
-        meas = tributary_measure(points, part_predicate(t.part, bbox))
-        f += meas[:, None] * np.asarray(t.vector)[None]
+        f += planar_forces(points, part_predicate(t.part, bbox), t.vector)
     fixed = np.zeros(points.shape, bool)
     for c in load.constraints:
         on = part_predicate(c.part, bbox)(points.T)

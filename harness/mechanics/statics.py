@@ -2,14 +2,10 @@
 
 K = B diag(k) B^T (``harness.models.springs``). A load case fixes the listed displacement
 components of the nodes on its constraint parts (``harness.case.parts.part_predicate``, the
-same predicates the FEM reference uses) and turns tractions into nodal forces:
-
-- 2-D: the part's nodes in order along the part; each segment between neighbours gives
-  half its length times the traction to each end (the integral of a constant traction
-  against piecewise-linear hat functions).
-- 3-D: the part's nodes projected to the face plane; on a tensor grid each node gets the
-  product of its 1-D tributary lengths (bilinear hats), otherwise the nodes are
-  triangulated (Delaunay in the plane) and each triangle gives area/3 to its vertices.
+same predicates the FEM reference uses) and turns tractions into the consistent nodal
+forces of the same traction on the same boundary facets as the FEM's
+(harness.case.facet_loads: a mesh body's own facets; a box's or polygon's faces tiled by
+their nodes).
 
 Gravity gives m_i g, a body force per volume b gives (m_i / rho) b. The arrays for the
 optimiser come from :func:`load_arrays`. A mechanism or a floating node raises
@@ -24,10 +20,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import Delaunay, cKDTree
+from scipy.spatial import cKDTree
 
 from harness.errors import ModelError, naming
-from harness.case.facet_loads import facet_forces, needs_facets, part_facets
+from harness.case.facet_loads import facet_forces, part_facets
 from harness.case.parts import part_predicate
 from harness.models.springs import incidence, stiffness_matrix
 
@@ -49,63 +45,6 @@ def fixed_mask(points: np.ndarray, case, load) -> np.ndarray:
     return fixed
 
 
-def _tributary_1d(s: np.ndarray) -> np.ndarray:
-    """Half the distance to each neighbour along a sorted coordinate."""
-    seg = np.diff(s)
-    t = np.zeros(len(s))
-    t[:-1] += seg / 2
-    t[1:] += seg / 2
-    return t
-
-
-def tributary_measure(points: np.ndarray, on_part) -> np.ndarray:
-    """Per node (n,) length (2-D) or area (3-D) of the part it carries; see the module doc.
-    ``on_part`` maps points (dim, m) to a mask (the part predicate)."""
-    n, dim = points.shape
-    idx = np.flatnonzero(on_part(points.T))
-    out = np.zeros(n)
-    if len(idx) < dim:
-        return out
-    q = points[idx]
-    c = q - q.mean(0)
-    _, _, vt = np.linalg.svd(c, full_matrices=False)
-    if dim == 2:
-        s = c @ vt[0]
-        order = np.argsort(s)
-        seg_mid = (q[order[:-1]] + q[order[1:]]) / 2
-        ok = on_part(seg_mid.T)
-        L = np.diff(s[order]) * ok
-        t = np.zeros(len(idx))
-        t[:-1] += L / 2
-        t[1:] += L / 2
-        out[idx[order]] = t
-        return out
-    uv = c @ vt[:2].T
-    # a face of an axis-aligned box: use the two axes of the plane directly (exact tensor test)
-    normal = np.argmax(np.abs(vt[2]))
-    if np.isclose(abs(vt[2][normal]), 1.0):
-        uv = q[:, [a for a in range(3) if a != normal]]
-    ru = np.unique(np.round(uv[:, 0], 12))
-    rv = np.unique(np.round(uv[:, 1], 12))
-    if len(ru) * len(rv) == len(idx) and len(ru) > 1 and len(rv) > 1:
-        tu, tv = _tributary_1d(ru), _tributary_1d(rv)
-        iu = np.searchsorted(ru, np.round(uv[:, 0], 12))
-        iv = np.searchsorted(rv, np.round(uv[:, 1], 12))
-        out[idx] = tu[iu] * tv[iv]
-        return out
-    try:
-        tri = Delaunay(uv).simplices
-    except Exception:
-        return out
-    cent = q[tri].mean(axis=1)
-    tri = tri[on_part(cent.T)]
-    a = uv[tri]
-    e1, e2 = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0]
-    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    np.add.at(out, idx[tri.ravel()], np.repeat(area / 3, 3))
-    return out
-
-
 def _facet_measure(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(size (m,), unit normal (m, dim) up to sign) of segments (m, 2, 2) or planar
     polygons (m, k, 3) given by their vertices in order."""
@@ -121,13 +60,26 @@ def _facet_measure(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return size, a / size[:, None]
 
 
-def stress_forces(points: np.ndarray, case, voigt) -> np.ndarray:
-    """Nodal forces (n, dim) of the traction sigma . n of a homogeneous stress on the
-    body's whole boundary: each boundary facet (a polygon's edges, a mesh body's boundary
-    faces) gives sigma . n times its size equally to its vertices, which must be nodes."""
-    from harness.case.loadsets import stress_tensor
+def stress_forces(points: np.ndarray, case, stress) -> np.ndarray:
+    """Nodal forces (n, dim) of the traction sigma . n of a stress load on the body's
+    whole boundary. ``stress``: the load case (its constant or linear field,
+    harness.case.loadsets.stress_field) or a constant Voigt stress. Each boundary facet
+    (a polygon's edges, a mesh body's boundary faces, a box's faces tiled by the nodes
+    on them), whose vertices must be nodes, gives them the P1-consistent load
+    of the traction t, linear over it: f_i = |F| / k (t_c + (t_i - t_c) / m), t_i its
+    value at vertex i, t_c their mean, m = k + 1 on a simplex of k vertices (exact), 3
+    on a quadrilateral (bilinear, exact on a parallelogram); a constant t gives each |F| t / k."""
+    from harness.case.loadsets import LoadCase, stress_field, stress_tensor
     from harness.io.meshfile import mesh_surface
     body = case.body
+    if isinstance(stress, LoadCase):
+        field = lambda x: stress_field(stress, x)           # noqa: E731
+    else:
+        if any(l.stress_gradient is not None and tuple(l.stress) == tuple(stress) for l in case.loads):
+            raise ModelError("a linear stress state's nodal forces need its load case, not its constant part",
+                             field="loads", fix="call stress_forces(points, case, load)")
+        sigma = stress_tensor(stress)
+        field = lambda x: np.broadcast_to(sigma, x.shape[:-1] + sigma.shape)   # noqa: E731
     if body.shape == "polygon":
         v = np.asarray(body.vertices, float)
         area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
@@ -137,45 +89,63 @@ def stress_forces(points: np.ndarray, case, voigt) -> np.ndarray:
     elif body.shape == "mesh":
         corners, facets, inside = mesh_surface(body.file, body.format)
     else:
-        raise ModelError("a homogeneous stress on the whole boundary needs a polygon or mesh body", field="loads",
-                         fix="boxes get the homogeneous sets as face tractions")
-    sigma = stress_tensor(voigt)
+        corners = np.asarray(points, float)
+        facets, inside = _box_surface(corners, case)
     tol = 1e-8 * float(np.ptp(corners, axis=0).max())
     dist, node = cKDTree(points).query(corners)
+    dim = points.shape[1]
     f = np.zeros(points.shape)
     for fac, cell_centre in zip(facets, inside):
         x = corners[fac]
         size, n = _facet_measure(x)
-        if body.shape == "mesh":   # outwards, away from the facet's cell (cells may be numbered either way)
+        if cell_centre is not None:   # outwards, away from the facet's cell (cells may be numbered either way)
             n *= np.where(np.einsum("ij,ij->i", n, x.mean(axis=1) - cell_centre) < 0, -1.0, 1.0)[:, None]
-        share = (size / fac.shape[1])[:, None] * (n @ sigma.T)
+        k = fac.shape[1]
+        t = np.einsum("mkab,mb->mka", field(x), n)             # traction at the facet's vertices
+        tc = t.mean(axis=1, keepdims=True)
+        share = (size / k)[:, None, None] * (tc + (t - tc) / (k + 1 if k <= dim else 3))
         used = np.unique(fac)
         if np.any(dist[used] > tol):
-            raise ModelError("the homogeneous loads need a node at every vertex of the body's surface",
+            raise ModelError("the stress loads need a node at every vertex of the body's surface",
                              field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")
-        np.add.at(f, node[fac].ravel(), np.repeat(share, fac.shape[1], axis=0))
+        np.add.at(f, node[fac].ravel(), share.reshape(-1, dim))
     return f
 
 
+def _box_surface(points: np.ndarray, case) -> tuple[list, list]:
+    """([facets (m, k) node indices], [their cells' inside (m, dim)]) of a box's faces,
+    each tiled by its nodes as a face traction's are (harness.case.facet_loads), which
+    must cover it (its corners are nodes)."""
+    lo, hi = case.body.bbox()
+    dim = len(lo)
+    out = []
+    for a in range(dim):
+        face = float(np.prod(np.delete(hi - lo, a)))
+        for side in (0, 1):
+            name = f"{'xyz'[a]}{side}"
+            tiles = [f for f in part_facets(points, case, _predicate(case, name)) if len(f)]
+            covered = sum(_facet_measure(points[f])[0].sum() for f in tiles)
+            if abs(covered - face) > 1e-9 * face:
+                raise ModelError(f"a stress on the whole boundary needs nodes at the corners of face {name}",
+                                 field="model.placement", fix="use a grid placement (its nodes include the corners)")
+            out += tiles
+    return out, [np.broadcast_to((lo + hi) / 2, (len(f), dim)) for f in out]
+
+
 def force_vector(network, case, load) -> np.ndarray:
-    """Nodal forces (n, dim) of a load case."""
+    """Nodal forces (n, dim) of a load case: tractions through the part's facets
+    (harness.case.facet_loads, the FEM's facets and integral), gravity m_i g, a body
+    force (m_i / rho) b."""
     pts = network.points
     f = np.zeros(pts.shape)
     if load.stress is not None:
-        f += stress_forces(pts, case, load.stress)
+        f += stress_forces(pts, case, load)
     for t in load.tractions:
-        if needs_facets(case, t):       # a mesh group or a twist: on the part's facets (harness/case/facet_loads.py)
-            fac = part_facets(pts, case, _predicate(case, t.part))
-            if not any(len(a) for a in fac):
-                raise ModelError(f"load '{load.name}': traction part '{t.part}' has no boundary facets", field="model",
-                                 fix="put tractions on faces (2-D: edges) of the body")
-            f += facet_forces(pts, fac, t.vector, t.twist)
-            continue
-        meas = tributary_measure(pts, _predicate(case, t.part))
-        if not np.any(meas > 0):
-            raise ModelError(f"load '{load.name}': traction part '{t.part}' holds too few nodes to carry a traction",
-                             field="model", fix="place nodes along that boundary")
-        f += meas[:, None] * np.asarray(t.vector, float)[None]
+        fac = part_facets(pts, case, _predicate(case, t.part))
+        if not any(len(a) for a in fac):
+            raise ModelError(f"load '{load.name}': traction part '{t.part}' has no boundary facets", field="model",
+                             fix="put tractions on faces (2-D: edges) of the body, with nodes along them")
+        f += facet_forces(pts, fac, t.vector, t.twist)
     if load.gravity is not None:
         f += network.masses[:, None] * np.asarray(load.gravity, float)[None]
     if load.body_force is not None:

@@ -263,18 +263,22 @@ def cauchy(points, springs, cells, material) -> np.ndarray:
         vol = _cell_measure(points, c, ctype)
         pairs = element_pairs(ctype)
         ids = np.stack([_lookup(index, c[:, i], c[:, j]) for i, j in pairs], 1)
-        for e in range(len(c)):
-            cols = np.flatnonzero(ids[e] >= 0)
+        present = ids >= 0
+        for pattern in np.unique(present, axis=0):        # cells with the same springs present: one batch
+            rows = np.flatnonzero(np.all(present == pattern, axis=1))
+            cols = np.flatnonzero(pattern)
             if len(cols) == 0:
                 continue
-            v = np.array([points[c[e, pairs[q][1]]] - points[c[e, pairs[q][0]]] for q in cols])
-            L = np.linalg.norm(v, axis=1)
-            a = voigt_dyad(v / L[:, None])
-            M = (L[:, None, None] ** 2 * a[:, :, None] * a[:, None, :]).reshape(len(cols), -1).T / vol[e]
-            k = np.linalg.lstsq(M, Cc[e].ravel(), rcond=None)[0]
-            if k.min() < 0:
-                k = nnls(M, Cc[e].ravel())[0]
-            np.add.at(acc, ids[e, cols], k)
+            v = points[c[rows][:, [pairs[q][1] for q in cols]]] - points[c[rows][:, [pairs[q][0] for q in cols]]]
+            L = np.linalg.norm(v, axis=2)
+            a = voigt_dyad((v / L[..., None]).reshape(-1, v.shape[2])).reshape(len(rows), len(cols), -1)
+            M = (L[..., None, None] ** 2 * a[..., :, None] * a[..., None, :]).reshape(len(rows), len(cols), -1)
+            M = M.transpose(0, 2, 1) / vol[rows][:, None, None]
+            target = Cc[rows].reshape(len(rows), -1)
+            k = np.einsum("mij,mj->mi", np.linalg.pinv(M), target)       # least squares, minimum norm
+            for e in np.flatnonzero(k.min(axis=1) < 0):
+                k[e] = nnls(M[e], target[e])[0]
+            np.add.at(acc, ids[rows][:, cols].ravel(), k.ravel())
     floor = 0.01 * np.median(acc[acc > 0]) if np.any(acc > 0) else 1.0
     return np.maximum(acc, floor)
 

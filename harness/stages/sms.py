@@ -9,6 +9,7 @@ and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coar
 G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
 (harness.scoring.ref_status). Loads the case holds out (``[loads] heldout``) are never
 fitted: G_* and G_ref are on the fitted loads, ``G_heldout`` (normalised, the same weights),
+``G_heldout_mean`` (the mean of the loads' own normalised G), ``G_heldout_<load>``,
 ``G_ref_heldout`` and ``ref_error_heldout`` on the held-out ones, ``freq_error_heldout`` on
 the natural frequencies no fit used.
 
@@ -262,12 +263,18 @@ def _per_load(sc, sh) -> dict:
 
 
 def _heldout(sh, first=None) -> dict:
-    """G_heldout (normalised, the same weights) on the held-out loads, and for an
-    optimised row the start's (G_heldout_initial); none without held-out loads."""
+    """On the held-out loads: G_heldout (pooled: normalised by all their displacements
+    together), G_heldout_mean (the mean of each load's own normalised G, so a small load
+    counts as much as a large one) and G_heldout_<load>; for an optimised row also the
+    start's pooled and mean values (``_initial``); none without held-out loads."""
     if sh is None:
         return {}
-    return {"G_heldout": sh.G_norm} if first is None else {"G_heldout": sh.G_norm,
-                                                          "G_heldout_initial": first.get("G_heldout", math.nan)}
+    per = {f"G_heldout_{k}": float(v) for k, v in sh.per_load_norm.items()}
+    out = {"G_heldout": sh.G_norm, "G_heldout_mean": float(np.mean(list(per.values()))), **per}
+    if first is not None:
+        out.update(G_heldout_initial=first.get("G_heldout", math.nan),
+                   G_heldout_mean_initial=first.get("G_heldout_mean", math.nan))
+    return out
 
 
 # -- optimisers -------------------------------------------------------------------------

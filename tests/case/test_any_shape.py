@@ -152,16 +152,17 @@ def test_lumped_masses_are_positive_and_carry_the_body(tmp_path, bodies):
 
 def test_end_loads_clamp_the_low_end_of_the_longest_axis(tmp_path, bodies):
     from harness.case.default_loads import end_loads
+    from harness.io.end_faces import end_facets
     m = read_mesh(bodies["cylinder"])           # along x, length 0.5, radius 0.1
     e = end_loads(m.points, m.cells)
-    assert e.axis == 0 and e.across in (1, 2) and e.thickness == pytest.approx(0.025)
-    m = read_mesh(meshes.wedge(tmp_path))       # a 2-D apex end: the slab grows until it can clamp
+    assert e.axis == 0 and e.across in (1, 2) and e.band == pytest.approx(0.05) and e.cos == 0.5
+    m = read_mesh(meshes.wedge(tmp_path))       # a 2-D apex end: no face looks along -x, so any facet that faces -x
     e = end_loads(m.points, m.cells)
-    assert e.axis == 0 and e.across == 1 and e.thickness == pytest.approx(0.05 * 1.5 ** 2)
-    surface = np.unique(np.concatenate([f.ravel() for f in boundary_facets(m.cells)]))
-    held = surface[m.points[surface, 0] <= e.clamp[1][0]]
-    assert len(held) >= 2                                  # two nodes: no rigid motion left in 2-D
-    assert np.sum(m.points[surface, 0] <= e.thickness / 1.5) == 1   # the thinner slab held the apex only
+    assert e.axis == 0 and e.across == 1 and e.band == pytest.approx(0.05) and e.cos == 0.0
+    facets, inside = boundary_facets(m.cells, m.points)
+    held = np.unique(np.concatenate([f.ravel() for f in end_facets(m.points, facets, inside, 0, 0, e.band, e.cos)]))
+    assert len(held) >= 2 and np.all(m.points[held, 0] <= 0.1 + 1e-12)   # the two sides at the apex
+    assert not any(len(f) for f in end_facets(m.points, facets, inside, 0, 0, 0.5, 0.5))   # and no face
 
 
 def test_heldout_keys_are_checked(tmp_path, bodies):

@@ -164,21 +164,25 @@ def test_fem_torsion_angle_is_saint_venants(tmp_path, cyls):
     assert err[0.035] < 0.02 and err[0.035] < err[0.05]
 
 
-def test_default_end_loads_twist_the_tip_with_peak_traction_s(tmp_path, cyls):
-    """calibrate's torsion: w = s / r along the long axis, r the tip's radius (R: its
-    rim nodes lie on the circle); with groups named, the parts are those groups."""
+def test_default_end_loads_twist_the_tip_about_the_long_axis(tmp_path, cyls):
+    """calibrate's torsion: w e_x, w = 2 G eps / r (the shear strain of the peak strain eps
+    at the tip's radius r; R: its rim nodes lie on the circle); with groups named, the
+    parts are those groups."""
     from harness.case.default_loads import end_loads
     m = read_mesh(cyls[0.05])
     e = end_loads(m.points, m.cells)
-    assert e.names == ("sag", "tip", "torsion") and e.radius == pytest.approx(R, rel=1e-3)   # c: near the axis
-    parts, cases = e.toml(100.0)
-    assert f"twist = [{100.0 / e.radius!r}, 0.0, 0.0]" in cases
+    assert e.names == ("sag", "tip", "tip2", "torsion", "bridge") and e.radius == pytest.approx(R, rel=1e-3)
+    mags = e.magnitudes(E, NU, 1000.0, 1e-3)
+    assert mags["torsion"] == pytest.approx(2 * 1e-3 * E / (2 * (1 + NU)) / e.radius)
+    parts, cases = e.toml(mags)
+    assert f"twist = [{mags['torsion']!r}, 0.0, 0.0]" in cases
+    assert parts.startswith('clamp = { end = "x0", band = 0.05, cos = 0.5 }\ntip = { end = "x1"')
     g = end_loads(m.points, m.cells, "clamp", "tip", m.groups)
-    parts, _ = g.toml(100.0)
+    parts, _ = g.toml(mags)
     assert parts == 'clamp = { group = "clamp" }\ntip = { group = "tip" }\n'
     assert "group 'tip'" in g.describe() and "group 'clamp' clamped" in g.describe()
     flat = read_mesh(meshes.holed_plate(tmp_path))
-    assert end_loads(flat.points, flat.cells).names == ("sag", "tip")        # no torsion in 2-D
+    assert end_loads(flat.points, flat.cells).names == ("sag", "tip", "bridge")        # no torsion in 2-D
 
 
 def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
@@ -197,7 +201,7 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     assert code == 0
     assert "group 'clamp' clamped" in capsys.readouterr().err
     data = json.loads(out.with_suffix(".json").read_text())
-    assert data["loads_heldout"] == ["sag", "tip", "torsion"] and np.isfinite(data["G_norm_heldout"])
+    assert data["loads_heldout"] == ["sag", "tip", "tip2", "torsion", "bridge"] and np.isfinite(data["G_norm_heldout"])
     m = read_mesh(mesh)
     args = cal_args(mesh, out)
     text = cal.case_text(args, 3, m.cells, ends=end_loads(m.points, m.cells, "clamp", "tip", m.groups))

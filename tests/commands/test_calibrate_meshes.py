@@ -74,8 +74,12 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
     assert mass.min() > 0
     assert mass.sum() == pytest.approx(RHO * volume(data["particle_q"], data["spring_indices"], dim, made[name]),
                                        rel=1e-10)
-    assert data["loads_heldout"] == (["sag", "tip", "torsion"] if dim == 3 else ["sag", "tip"])
-    assert len(data["loads_fitted"]) == (6 if dim == 3 else 3)
+    assert data["loads_heldout"] == (["sag", "tip", "tip2", "torsion", "bridge"] if dim == 3 else
+                                     ["sag", "tip", "bridge"])
+    assert len(data["loads_fitted"]) == (24 if dim == 3 else 9)          # the linear states (linear3d / 2d)
+    per = data["G_heldout_loads"]
+    assert list(per) == data["loads_heldout"] and data["G_heldout_mean"] == pytest.approx(np.mean(list(per.values())))
+    assert min(per.values()) <= data["G_norm_heldout"] <= max(per.values())     # pooled: a weighted mean of them
     assert np.isfinite(data["G_norm_heldout"]) and np.isfinite(data["G_norm"])
     if method == "lbfgs":       # one refinement: the FEM's estimate of its own error (none without)
         assert 0 < data["reference_error"] < 0.1
@@ -105,6 +109,20 @@ def test_rule_prints_and_exports_the_same_constants(tmp_path, made, capsys):
     assert f"RMS displacement error {100 * data['G_norm']:.3g} %" in printed
     L = np.asarray(data["spring_rest_length"])
     np.testing.assert_allclose(data["spring_stiffness"], 1e5 * L / 4, rtol=1e-12)   # Deussen: k = E s0 / 4
+
+
+def test_every_rule_of_the_harness_is_a_row_and_can_be_exported(tmp_path, made):
+    """--rule cauchy exports the harness's cauchy constants for the mesh; every rule is a
+    row of the table."""
+    from harness.models.stiffness_rules import RULES, spring_constants
+    from harness.case.reader import Material
+    from harness.io.meshfile import read_mesh
+    data, df = calibrate(made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "cauchy")
+    assert set(df.stiffness) == set(RULES) and df[df.exported].iloc[0].stiffness == "cauchy"
+    m = read_mesh(made["cylinder"])
+    springs = np.asarray(data["spring_indices"])
+    k = spring_constants("cauchy", m.points, springs, m.cells, Material(1e5, 0.3))
+    np.testing.assert_allclose(data["spring_stiffness"], k, rtol=1e-12)
 
 
 def test_a_mesh_in_millimetres_gives_the_same_model(tmp_path, made):

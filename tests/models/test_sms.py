@@ -142,20 +142,34 @@ def test_statics_matches_independent_dense_solve(dim):
             assert np.isclose(f.sum(), 1.0 * np.prod(hi) / hi["xyz".index(load.name[-1])])
 
 
+def _measure(points, on_part):
+    """Per node, the length (2-D) or area (3-D) of a flat part it carries: the forces of a
+    unit traction along x."""
+    from harness.case.facet_loads import planar_forces
+    return planar_forces(points, on_part, [1.0] + [0.0] * (points.shape[1] - 1))[:, 0]
+
+
 def test_tractions_tributary_2d_and_3d():
     p = grid_points([0, 0], [4, 2], (5, 3))
-    t = statics.tributary_measure(p, lambda x: np.isclose(x[0], 4))
+    t = _measure(p, lambda x: np.isclose(x[0], 4))
     assert np.allclose(t[np.isclose(p[:, 0], 4)], [0.5, 1.0, 0.5])
     # 3-D, scattered nodes on the face z = 1 of the unit cube: Delaunay area/3, total = area
     rng = np.random.default_rng(0)
     face = np.column_stack([rng.uniform(size=30), rng.uniform(size=30), np.ones(30)])
     corners = np.array([[0, 0, 1], [1, 0, 1], [0, 1, 1], [1, 1, 1.0]])
     q = np.vstack([corners, face, rng.uniform(size=(10, 3)) * [1, 1, 0.9]])
-    a = statics.tributary_measure(q, lambda x: np.isclose(x[2], 1))
+    a = _measure(q, lambda x: np.isclose(x[2], 1))
     assert np.isclose(a.sum(), 1.0) and np.all(a[-10:] == 0)
+    from scipy.spatial import Delaunay
+    on = np.flatnonzero(np.isclose(q[:, 2], 1))
+    tri = on[Delaunay(q[on, :2]).simplices]             # by hand: each triangle's area / 3 to its corners
+    e1, e2 = q[tri[:, 1], :2] - q[tri[:, 0], :2], q[tri[:, 2], :2] - q[tri[:, 0], :2]
+    hand = np.zeros(len(q))
+    np.add.at(hand, tri.ravel(), np.repeat(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) / 3, 3))
+    assert np.allclose(a, hand, rtol=0, atol=1e-14)
     # tensor grid face: bilinear tributaries (corner 1/4 h^2, edge 1/2, interior 1)
     g = grid_points([0, 0, 0], [2, 2, 1], (3, 3, 2))
-    b = statics.tributary_measure(g, lambda x: np.isclose(x[2], 1))
+    b = _measure(g, lambda x: np.isclose(x[2], 1))
     assert np.allclose(sorted(b[b > 0]), [0.25] * 4 + [0.5] * 4 + [1.0])
 
 
@@ -620,3 +634,37 @@ def test_large_3d_statics_use_the_multifrontal_cholesky_and_still_name_mechanism
     edges = grid_structure(shape, "edges")             # no diagonals: every cell shears freely
     with pytest.raises(ModelError, match="mechanism"):
         statics.solve_arrays(pts, edges.springs, np.ones(len(edges.springs)), free, f)
+
+
+def test_cauchy_rule_on_a_tet_mesh_equals_a_cell_by_cell_least_squares():
+    """The batched rule against the definition written out cell by cell: per tetrahedron
+    the constants k of its six edges minimising |(1/V) sum k L^2 a a^T - C| (minimum norm;
+    NNLS where that is negative), summed over the cells sharing an edge, floored."""
+    from scipy.optimize import nnls
+    from scipy.spatial import Delaunay
+    from harness.case.elasticity import element_stiffness
+    from harness.models.stiffness_rules import voigt_dyad
+    rng = np.random.default_rng(3)
+    p = rng.uniform(size=(40, 3))
+    tets = Delaunay(p).simplices
+    edges = np.unique(np.sort(np.concatenate([tets[:, [i, j]] for i, j in
+                                              ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))]), axis=1), axis=0)
+    mat = Material(1.0, 0.3)
+    k = spring_constants("cauchy", p, edges, {"tetra": tets}, mat)
+    where = {tuple(e): i for i, e in enumerate(edges)}
+    acc = np.zeros(len(edges))
+    C = element_stiffness(mat, p[tets].mean(axis=1))
+    for e, t in enumerate(tets):
+        pairs = [(t[i], t[j]) for i, j in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))]
+        v = np.array([p[b] - p[a] for a, b in pairs])
+        L = np.linalg.norm(v, axis=1)
+        vol = abs(np.linalg.det(p[t[1:]] - p[t[0]])) / 6
+        a = voigt_dyad(v / L[:, None])
+        M = np.stack([(L[q] ** 2 * np.outer(a[q], a[q])).ravel() for q in range(6)], axis=1) / vol
+        kk = np.linalg.lstsq(M, C[e].ravel(), rcond=None)[0]
+        if kk.min() < 0:
+            kk = nnls(M, C[e].ravel())[0]
+        for (a_, b_), kq in zip(pairs, kk):
+            acc[where[tuple(sorted((a_, b_)))]] += kq
+    acc = np.maximum(acc, 0.01 * np.median(acc[acc > 0]))
+    np.testing.assert_allclose(k, acc, rtol=1e-9, atol=1e-12 * acc.max())

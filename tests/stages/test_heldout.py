@@ -64,9 +64,14 @@ def test_heldout_loads_are_scored_not_fitted(tmp_path, monkeypatch):
         net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
         assert row["G_norm_final"] == pytest.approx(g_norm(npz, c.fit_loads, net.classes), rel=1e-10)
         assert row["G_heldout"] == pytest.approx(g_norm(npz, c.heldout, net.classes), rel=1e-10)
+        each = [g_norm(npz, [n], net.classes) for n in c.heldout]      # every held-out load counts alike
+        for n, g in zip(c.heldout, each):
+            assert row[f"G_heldout_{n}"] == pytest.approx(g, rel=1e-10)
+        assert row["G_heldout_mean"] == pytest.approx(np.mean(each), rel=1e-10)
         assert np.isfinite(row["G_ref_heldout"]) and np.isfinite(row["freq_error_heldout"])
     fit = rows[-1]
     assert fit["optimizer"] == "lbfgs" and fit["G_norm_final"] < fit["G_norm_initial"]
     assert fit["G_heldout_initial"] == pytest.approx(rows[0]["G_heldout"], rel=1e-12)
+    assert fit["G_heldout_mean_initial"] == pytest.approx(rows[0]["G_heldout_mean"], rel=1e-12)
     assert fit["freq_error_heldout"] == pytest.approx(fit["freq_error_final"], rel=1e-12)   # no mode was fitted
     assert set(pd.DataFrame(rows).columns) >= {"G_heldout", "G_ref_heldout", "ref_error_heldout"}
