@@ -10,4 +10,5 @@ BENCHES = {
     "fit": "harness.bench.fit",
     "dynamics": "harness.bench.dynamics",
     "calibrate": "harness.bench.calibrate",
+    "heldout": "harness.bench.heldout",
 }

@@ -4,7 +4,7 @@ reference, rules, fit, held-out scoring, export) on gmsh cylinders of about 1k, 
 peak memory is its own) with an empty reference cache. Needs gmsh (``pip install -e
 ".[bench]"``); without it the benchmark writes one row saying so.
 
-Target (issue 12): the 50k-tet mesh calibrated in <= 5 min on 2 cores with <= 6 GB.
+Targets: the 50k-tet mesh calibrated in <= 3 min with <= 4 GB, a 200k-tet mesh in <= 10 min with <= 12 GB (2 cores).
 Columns: mesh size, seconds, peak memory, G_norm before (the start rule, the best on the
 fitted loads) and after the fit, G_heldout of both, the reference's own error and the
 ratio of seconds to the 1k mesh's (the baseline run in the same benchmark). The

@@ -2,7 +2,7 @@
 networks (reference = displacements of the same network with constants perturbed by
 exp(0.1 N(0,1)), so the best G is 0), within a wall-time budget per method.
 
-Targets (issue 4): 10,000-node 2-D network to G/G0 <= 1e-4 in <= 60 s; 8,000-node 3-D
+Targets: 10,000-node 2-D network to G/G0 <= 1e-4 in <= 60 s; 8,000-node 3-D
 network to G/G0 <= 1e-2 in <= 60 s. The table reports what each method reached: G/G0,
 seconds, iterations, and whether the target was met. Setup (building the reference, the
 fill-reducing orderings) is reported separately from the fit.

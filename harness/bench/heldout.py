@@ -23,10 +23,11 @@ along two directions across it, a twist about its normal (t = tau n x (x - c)), 
 and gravity with the load group held too (a second support). Each is scaled so that the
 99th percentile of the truth's strain norm |eps| over its quadrature points is 1e-3.
 
-Truth: P2 on the mesh refined once (skfem's ``refined()`` keeps the original vertices
-first), isotropic linear elasticity, tractions through FacetBasis on the group's facets
-(sub-facets of the refined mesh found through their parent triangle), all dofs of the
-clamp's facets held, one sparse LU per support. Model: K = sum_s k b b^T (unit rest
+Truth: P2 on the mesh itself (~16k dofs, a few seconds for all five loads; ``refine=True``:
+on the mesh refined once, whose ~100k dofs took SuperLU over ten minutes), isotropic linear
+elasticity, tractions through FacetBasis on the group's facets (a refined mesh's sub-facets
+found through their parent triangle), all dofs of the clamp's facets held, one sparse LU
+per support. Model: K = sum_s k b b^T (unit rest
 direction b) plus kv / V0 g g^T per volume element (g = dV/dx at rest) or kn V d^2 h h^T per
 kn node (h = d s / du), P1-consistent nodal forces of the same traction on the same
 facets (exact for linear tractions), gravity m_i g with the exported masses, the clamp
@@ -35,9 +36,13 @@ group's nodes held.
 Metric: err = |u_model - u_truth| / |u_truth| over the mesh's vertices. Per (body, nu) the
 best rule in hindsight minimises the geometric mean over the loads of err, and
 ratio = geomean(err_calibrate) / geomean(err_best_rule); overall the geometric mean of the
-ratios. Acceptance: ratio <= 1 for every (body, nu) and <= 0.75 overall. Rows: one per
-(body, nu, model, load) and a ``geomean`` summary per (body, nu, model); the overall row
-has body ``all``.
+ratios. Acceptance: ratio <= 1 for every (body, nu) and <= 0.75 overall.
+
+Rows: one per (body, nu, model, load) (ratio_to_best_rule: err over the best rule's err on
+that load), a ``geomean`` row per (body, nu, model) and an overall row (body ``all``).
+Columns: body, n_tets, nu, model (calibrate or a rule), choice (the JSON's ``choice``, else
+the exported stiffness-optimizer), rule (the exported row's stiffness rule), load, err,
+best_rule, ratio_to_best_rule, seconds (that calibrate's wall time), truth_seconds.
 """
 
 from __future__ import annotations
@@ -58,13 +63,16 @@ import pandas as pd
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from harness.models.stiffness_rules import RULES        # the rule names calibrate's --rule takes
+
 E, RHO = 1e5, 1000.0
 NUS = (0.3, 0.45)
-RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
 FULL_TETS, QUICK_TETS = 3000, 1000
 BUDGET = 60.0
 PEAK_STRAIN = 1e-3
 ACCEPT_EACH, ACCEPT_ALL = 1.0, 0.75
+COLUMNS = ["body", "n_tets", "nu", "model", "choice", "rule", "load", "err", "best_rule", "ratio_to_best_rule",
+           "seconds", "truth_seconds", "note"]
 
 
 # -- bodies --------------------------------------------------------------------------------
@@ -127,7 +135,6 @@ def make_body(body: Body, path: Path, n_tets: int) -> int:
     """Mesh ``body`` with about n_tets tetrahedra (one size correction) into the gmsh .msh
     ``path`` with physical surfaces clamp and load and the volume body; the tet count."""
     import gmsh
-    occ_volume = None
     h = (8.5 * 0.005 / n_tets) ** (1 / 3)
     for attempt in range(2):
         gmsh.initialize(["-noenv"])
@@ -194,19 +201,25 @@ def face_frame(points, tris):
     return c, n / np.linalg.norm(n), area.sum()
 
 
+def constant(d):
+    """The traction field t(x) = d (x: (3, ...) -> (3, ...))."""
+    d = np.asarray(d, float)
+    return lambda x: np.broadcast_to(d.reshape((3,) + (1,) * (x.ndim - 1)), x.shape)
+
+
+def twisting(axis, centre):
+    """The traction field t(x) = axis x (x - centre)."""
+    a, c = np.asarray(axis, float), np.asarray(centre, float)
+    return lambda x: np.cross(a, x - c.reshape((3,) + (1,) * (x.ndim - 1)), axis=0)
+
+
 def study_loads(body: Body, points, groups) -> list[Load]:
     """The study's loads of a body (unit magnitudes; scaled by the truth later)."""
     c, n, _ = face_frame(points, groups["load"])
-
-    def constant(d):
-        d = np.asarray(d, float)
-        return lambda x: np.broadcast_to(d.reshape((3,) + (1,) * (x.ndim - 1)), x.shape)
-
-    def twist(x):
-        r = x - c.reshape((3,) + (1,) * (x.ndim - 1))
-        return np.cross(n, r, axis=0) if x.ndim > 1 else np.cross(n, r)
-    return [Load("shear_a", ("clamp",), constant(body.across[0])), Load("shear_b", ("clamp",), constant(body.across[1])),
-            Load("twist", ("clamp",), twist), Load("gravity", ("clamp",), gravity=body.gravity),
+    return [Load("shear_a", ("clamp",), constant(body.across[0])),
+            Load("shear_b", ("clamp",), constant(body.across[1])),
+            Load("twist", ("clamp",), twisting(n, c)),
+            Load("gravity", ("clamp",), gravity=body.gravity),
             Load("gravity_2", ("clamp", "load"), gravity=body.gravity)]
 
 
@@ -351,29 +364,29 @@ def model_answers(data: dict, points, groups, loads, scale: dict) -> dict:
 
 # -- the study -----------------------------------------------------------------------------
 
-def calibrate(mesh: Path, out: Path, nu: float, cache: Path, *extra: str) -> tuple[dict, str, float]:
-    """(the JSON export, the exported choice, wall seconds) of one ``springbench calibrate``
-    in its own process with the reference cache ``cache``."""
+def calibrate(mesh: Path, out: Path, nu: float, cache: Path, *extra: str, budget: float = BUDGET):
+    """(the JSON export, its choice (the JSON's, else stiffness-optimizer of the CSV's exported
+    row), that row's rule, wall seconds) of one ``springbench calibrate`` in its own process
+    with the reference cache ``cache``."""
     cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", repr(E), "--nu", repr(nu),
-           "--density", repr(RHO), "--max-refine", "1", "--budget", repr(BUDGET), "--out", str(out), *extra]
+           "--density", repr(RHO), "--max-refine", "1", "--budget", repr(budget), "--out", str(out), *extra]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, SPRINGBENCH_CACHE=str(cache)))
     seconds = time.perf_counter() - t0
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd[3:])}: {(proc.stderr.strip().splitlines() or ['failed'])[-1]}")
     data = json.loads(out.with_suffix(".json").read_text())
-    choice = data.get("choice")
-    if choice is None:
-        row = pd.read_csv(out.with_suffix(".csv")).query("exported").iloc[0]
-        choice = row.stiffness if row.get("optimizer", "none") in ("none", None) else f"{row.stiffness}-{row.optimizer}"
-    return data, str(choice), seconds
+    row = pd.read_csv(out.with_suffix(".csv")).query("exported").iloc[0]
+    choice = data.get("choice") or (row.stiffness if row.get("optimizer", "none") == "none" else
+                                    f"{row.stiffness}-{row.optimizer}")
+    return data, str(choice), str(row.stiffness), seconds
 
 
 def geomean(x) -> float:
     return float(np.exp(np.mean(np.log(np.asarray(x, float)))))
 
 
-def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES) -> list[dict]:
+def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, budget: float = BUDGET) -> list[dict]:
     """The rows of one (body, nu): every model under every study load, and their geomeans."""
     points, tets, groups = read_body(mesh)
     loads = study_loads(body, points, groups)
@@ -385,13 +398,18 @@ def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES) -> l
     runs = [("calibrate", ())] + [(r, ("--method", "rule", "--rule", r)) for r in rules]
     rows = []
     for model, extra in runs:
-        data, choice, seconds = calibrate(mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *extra)
-        u = model_answers(data, points, groups, loads, scale)
+        row = dict(body=body.name, n_tets=len(tets), nu=nu, model=model, choice=None, rule=None, seconds=math.nan,
+                   truth_seconds=truth_seconds, note="")
+        try:
+            data, row["choice"], row["rule"], row["seconds"] = calibrate(
+                mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *extra, budget=budget)
+            u = model_answers(data, points, groups, loads, scale)
+        except (RuntimeError, ValueError) as exc:      # a failed run: its rows say why, the study goes on
+            u, row["note"] = None, str(exc)
         for load in loads:
             ut = scale[load.name] * fem[load.name][0]
-            err = float(np.linalg.norm(u[load.name] - ut) / np.linalg.norm(ut))
-            rows.append(dict(body=body.name, n_tets=len(tets), nu=nu, model=model, choice=choice, load=load.name,
-                             err=err, seconds=seconds, truth_seconds=truth_seconds))
+            err = math.nan if u is None else float(np.linalg.norm(u[load.name] - ut) / np.linalg.norm(ut))
+            rows.append(dict(row, load=load.name, err=err))
     return rows
 
 
@@ -402,12 +420,13 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
     for (body, nu), g in df.groupby(["body", "nu"], sort=False):
         gm = g.groupby("model", sort=False)["err"].apply(geomean)
         rules = gm.drop("calibrate", errors="ignore")
-        best = rules.idxmin()
-        g = g.assign(best_rule=best, ratio_to_best_rule=np.nan)
+        best = rules.idxmin() if rules.notna().any() else None
+        per_load = g[g.model == best].set_index("load").err
+        g = g.assign(best_rule=best, ratio_to_best_rule=g.err.values / g.load.map(per_load).values)
         first = g.groupby("model", sort=False).first()
-        summary = pd.DataFrame(dict(body=body, n_tets=first.n_tets, nu=nu, model=gm.index, choice=first.choice,
-                                    load="geomean", err=gm.values, ratio_to_best_rule=gm.values / rules[best],
-                                    best_rule=best, seconds=first.seconds, truth_seconds=first.truth_seconds))
+        summary = first[["n_tets", "choice", "rule", "seconds", "truth_seconds", "note"]].reset_index().assign(
+            body=body, nu=nu, load="geomean", err=gm.values, best_rule=best,
+            ratio_to_best_rule=gm.values / (rules[best] if best else math.nan))
         out += [g, summary]
     df = pd.concat(out, ignore_index=True)
     mine = df[(df.load == "geomean") & (df.model == "calibrate")]
@@ -415,7 +434,7 @@ def summarise(df: pd.DataFrame) -> pd.DataFrame:
         df = pd.concat([df, pd.DataFrame([dict(body="all", model="calibrate", load="geomean",
                                                ratio_to_best_rule=geomean(mine.ratio_to_best_rule),
                                                seconds=float(mine.seconds.sum()))])], ignore_index=True)
-    return df
+    return df.astype({"n_tets": "Int64"})[COLUMNS]
 
 
 def summary_table(df: pd.DataFrame) -> pd.DataFrame:
@@ -423,8 +442,8 @@ def summary_table(df: pd.DataFrame) -> pd.DataFrame:
     g = df[(df.load == "geomean") & (df.body != "all")]
     mine = g[g.model == "calibrate"].set_index(["body", "nu"])
     best = g[g.model == g.best_rule].set_index(["body", "nu"])
-    return pd.DataFrame(dict(calibrate=mine.err, choice=mine.choice, best_rule=best.model, best_rule_err=best.err,
-                             ratio=mine.ratio_to_best_rule, seconds=mine.seconds)).reset_index()
+    return pd.DataFrame(dict(calibrate=mine.err, choice=mine.choice, rule=mine.rule, best_rule=best.model,
+                             best_rule_err=best.err, ratio=mine.ratio_to_best_rule, seconds=mine.seconds)).reset_index()
 
 
 def verdict(df: pd.DataFrame) -> str:

@@ -276,7 +276,7 @@ def accuracy_rows(quick: bool = False) -> list[dict]:
     return rows
 
 
-# thin and nearly incompressible boxes at default settings (issue 11's second target); the
+# thin and nearly incompressible boxes at default settings; the
 # truth's levels are those at which the independent solver still converges there. The truth
 # grades a long axis like the short ones near its end faces (long_axes): with one power zone
 # over a third of the 10:1 box's length its cells there were 2.5x coarser, the order at the

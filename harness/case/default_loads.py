@@ -36,7 +36,8 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.io.end_faces import BAND, COS, end_facets, outward_normals
-from harness.io.meshfile import FACETS, boundary_facets
+from harness.case.moments import EXPONENTS, mesh_moments
+from harness.io.meshfile import boundary_facets
 
 PEAK_STRAIN = 1e-3
 
@@ -216,23 +217,14 @@ def _areas(points: np.ndarray, fac: np.ndarray) -> np.ndarray:
 
 
 def _section(points, cells, axis: int, tip_facets) -> Section:
-    """The body's Section along ``axis`` (exact moments of its cells split into simplices
-    about their centroids; the tip face from ``tip_facets``)."""
+    """The body's Section along ``axis`` (its exact volume moments, harness.case.moments;
+    the tip face from ``tip_facets``)."""
     dim = points.shape[1]
-    V, M1, M2 = 0.0, np.zeros(dim), np.zeros((dim, dim))
-    for ctype, c in cells.items():
-        c = np.asarray(c, int)
-        for x in _cell_simplices(points, ctype, c):          # (m, dim + 1, dim)
-            e = x[:, 1:] - x[:, :1]
-            vol = np.abs(np.linalg.det(e)) / math.factorial(dim)
-            s = x.sum(axis=1)
-            V += vol.sum()
-            M1 += vol @ (s / (dim + 1))
-            M2 += np.einsum("m,mij->ij", vol / ((dim + 1) * (dim + 2)),
-                            np.einsum("mki,mkj->mij", x, x) + np.einsum("mi,mj->mij", s, s))
-    mean = M1 / V
+    m = mesh_moments(points, cells)                 # int x^e dV for the exponents e of EXPONENTS
+    V, mean = m[0], m[1:1 + dim] / m[0]
+    square = [m[EXPONENTS[dim].index(tuple(2 * int(a == i) for a in range(dim)))] for i in range(dim)]
     L = float(np.ptp(points[:, axis]))
-    I = np.diag(M2 / V - np.outer(mean, mean)) * V / L
+    I = (np.array(square) / V - mean ** 2) * V / L
     c = np.abs(points - mean).max(axis=0)
     tip = [f for f in tip_facets if len(f)]
     areas = [_areas(points, f) for f in tip]
@@ -243,21 +235,3 @@ def _section(points, cells, axis: int, tip_facets) -> Section:
     r[:, axis] = 0.0
     return Section(L, float(V / L), tuple(map(float, I)), tuple(map(float, c)), tip_area,
                    float(np.linalg.norm(r, axis=1).max()) if dim == 3 else math.nan)
-
-
-def _cell_simplices(points, ctype: str, cells: np.ndarray):
-    """Coordinate arrays (m, dim + 1, dim) of simplices that tile the cells: simplices as
-    they are, other cells as fans of their faces' fans about the cell's centroid."""
-    x = points[cells]
-    if ctype in ("triangle", "tetra"):
-        yield x
-        return
-    centre = x.mean(axis=1)
-    for face in FACETS[ctype]:
-        f = x[:, list(face)]
-        if f.shape[1] == 2:                                  # a quad's edge
-            yield np.stack([centre, f[:, 0], f[:, 1]], axis=1)
-            continue
-        fc = f.mean(axis=1)
-        for i in range(f.shape[1]):
-            yield np.stack([centre, fc, f[:, i], f[:, (i + 1) % f.shape[1]]], axis=1)

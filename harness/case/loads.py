@@ -12,8 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from harness.errors import CaseError, SpringbenchError
-from harness.case.loadsets import (ANCHORED, ANCHORS, AXES, LOAD_SETS, Constraint, Frame, LoadCase, Traction,
-                                   anchor_points)
+from harness.case.loadsets import ANCHORS, AXES, Constraint, Frame, LoadCase, Traction, anchor_points
+from harness.case.sets import ANCHORED, LOAD_SETS
 from harness.case.parts import parse_face_name, part_exists
 
 if TYPE_CHECKING:
@@ -116,7 +116,7 @@ def anchored(load_set: str | None, body: Body) -> bool:
 
 def body_frame(body: Body) -> Frame:
     """The body's volume (2-D: area) centroid and its largest bounding-box extent."""
-    from harness.geometry.moments import box_moments, mesh_moments, polygon_moments
+    from harness.case.moments import box_moments, mesh_moments, polygon_moments
     lo, hi = body.bbox()
     if body.shape in ("rectangle", "box"):
         m = box_moments(lo, hi)

@@ -3,13 +3,12 @@
 The standard sets ``basic2d`` (Deussen 1995 Fig. 4) and ``basic3d`` (Fig. 7) are
 defined here once, exactly as ``shared/DESIGN.md`` states, and every consumer (the
 FEM reference, the spring networks, the anisotropic model) applies these objects.
-A new load set is one function registered in ``LOAD_SETS``.
+The registry of the sets by name is harness/case/sets.py.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -217,36 +216,6 @@ def homogeneous2d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
 
 def homogeneous3d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     return homogeneous(3, s, anchors)
-
-
-def linear2d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
-    from harness.case.linear_states import linear_states
-    return linear_states(2, s, anchors, frame)
-
-
-def linear3d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
-    from harness.case.linear_states import linear_states
-    return linear_states(3, s, anchors, frame)
-
-
-# name -> (dim, make(s, anchors, frame)): anchors are the body's anchor points (None for a
-# box under the homogeneous sets), frame its centroid and size (harness/case/loads.py)
-LOAD_SETS: dict[str, tuple[int, Callable[..., tuple[LoadCase, ...]]]] = {
-    "basic2d": (2, basic2d),
-    "basic3d": (3, basic3d),
-    "homogeneous2d": (2, homogeneous2d),
-    "homogeneous3d": (3, homogeneous3d),
-    "linear2d": (2, linear2d),
-    "linear3d": (3, linear3d),
-}
-ANCHORED = ("homogeneous", "linear")   # sets whose loads are held at anchor points (boxes: only linear)
-
-
-def homogeneous_closed_form(load: LoadCase, points, compliance, anchors) -> "np.ndarray":
-    """u (n, dim) of a homogeneous (or linear) stress load on a homogeneous body:
-    harness.case.linear_states.linear_closed_form."""
-    from harness.case.linear_states import linear_closed_form
-    return linear_closed_form(load, points, compliance, anchors)
 
 
 def _box_stress(load: LoadCase, dim: int):

@@ -21,7 +21,8 @@ from harness.case import sections as case_sections
 from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.case.fibres import NAMED_FIELDS
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
-from harness.case.loadsets import LOAD_SETS, LoadCase
+from harness.case.loadsets import LoadCase
+from harness.case.sets import LOAD_SETS
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group

@@ -11,11 +11,17 @@ OPTIMIZER_METHODS = ("sa", "sa-refactor", "lbfgs", "nelder-mead", "gauss-newton"
 _METHODS = OPTIMIZER_METHODS
 _COMPARE = tuple(m for m in OPTIMIZER_METHODS if m != "none")
 
+# [optimizer.select] candidates: the model capacities a validated fit chooses among;
+# harness/optimize/select.py's CANDIDATES must hold exactly these names (it checks at import)
+SELECT_CANDIDATES = ("scale", "groups", "springs-prior10", "springs-prior1", "springs-prior0.1",
+                     "scale+volume", "springs-prior1+volume", "springs-prior0.1+volume")
+SELECT_DEFAULT = ("springs-prior1", "springs-prior0.1", "springs-prior1+volume", "springs-prior0.1+volume")
+
 # [model] kind = "sms": spring/mass systems of Deussen 1995 (harness/models/sms.py)
 PLACEMENTS = ("grid", "random", "lloyd", "mesh")
 MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
-STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
-# [model] classes: the model classes one sms case scores on the same nodes (issue #15);
+STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
+# [model] classes: the model classes one sms case scores on the same nodes;
 # harness/models/classes.py implements each (its CLASSES must hold exactly these names)
 MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt", "springs+kn")
 
@@ -133,6 +139,14 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                              "reference and weights, one row each"),
         "compare_options": Field("any", {}, check=lambda v: _compare_options_problem(v),
                                  doc="options per compared method, e.g. compare_options = { lbfgs = { maxiter = 500 } }"),
+        "select": Field("table", None, spec={
+            "candidates": Field("strs", SELECT_DEFAULT, choices=SELECT_CANDIDATES,
+                                doc="the capacities validated (harness/optimize/select.py), besides the rule"),
+            "maxiter": Field("int", 30, min=1, doc="L-BFGS-B iterations of each validation fit"),
+            "starts": Field("int", 3, min=1, max=10, doc="starts of the final fit (the rule, its best global "
+                                                           "scale, perturbed ones): the spread is reported"),
+        }, doc="choose the fit's capacity by leave-one-family-out validation on the fitted loads (families: "
+               "the linear sets' and 'clamped'); the rule when nothing beats it (method = 'lbfgs' only)"),
         "frequency": Field("table", None, spec={
             "modes": Field("int", 4, min=1, doc="the first k natural frequencies in the objective (<= [reference] modes)"),
             "weight": Field("float", 1.0, min=0, min_exclusive=True,

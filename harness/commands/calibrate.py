@@ -9,14 +9,25 @@ loads, which the fit then starts from), then spring
 constants fitted (``--method``) so the network's statics match a FEM reference of the
 same body and material on the fitted loads, and scored on held-out loads it never saw.
 
-Fit (``--method lbfgs``, the default): G^2/G0^2 + a mean_e log(k_e/k_rule,e)^2 is minimised,
-a = ``--prior-weight`` (default 10, README "Your own mesh" says how it was chosen; 0: the fit
-without the pull, which memorised the six fitted loads and made the held-out ones worse).
+Fit (``--method lbfgs``, the default): the training states' relative misfits (each state
+counts alike) + a mean_e log(k_e/k_rule,e)^2 are minimised by L-BFGS-B with an adjoint
+gradient. Which capacity (per-spring constants with a = 1 or 0.1, or with one volume term
+per element as well) is chosen by leave-one-family-out validation on the training states
+(harness/optimize/select.py: constant, bending, torsion, shear-gradient, gravity, and each
+clamped training state in turn); the held-out loads never choose. A candidate must beat
+the rule on the validation score and be no worse on the clamped states; when none does,
+the rule's constants are exported (JSON ``choice`` = "rule"). The chosen fit starts from
+the rule, its best global scale and a perturbed start (``G_heldout_mean_spread``: the
+spread of their held-out error). ``--prior-weight a`` fixes a per-spring fit with weight
+a instead (no validation).
 
-Loads (DESIGN.md). Fitted (``--loads homogeneous``, the default): the homogeneous stress
-states sxx, syy, szz, syz, sxz, sxy (2-D: sxx, syy, sxy) as tractions sigma . n on the
-whole surface with minimal constraints, which every shape has and which probe the whole
-elastic tensor; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
+Loads (DESIGN.md). Fitted (``--loads linear``, the default): the equilibrated linear
+stress states (harness/case/linear_states.py: the six constant ones, bending, torsion,
+shear gradient and gravity, 24 in 3-D, 9 in 2-D) as tractions sigma(x) . n on the whole
+surface with minimal constraints, exact for any shape (their FEM answer is the closed
+form), and the clamped training states train-tip, train-tip2 and train-torsion (the high
+end face held, the low one loaded); ``--loads homogeneous`` keeps only the constant
+states; ``--loads basic`` uses the basic loads of the bounding box (boxes only).
 Held out (``--heldout ends``, the default; ``none`` turns them off): ``sag`` (a body
 force), ``tip`` and ``tip2`` (end tractions across the axis, 3-D: both directions),
 ``torsion`` (3-D: a twist of the same end) with the end face at the low end of the
@@ -92,20 +103,23 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
               density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
               displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out loads
-              of each one's own G_norm), G_heldout_loads ({load: G_norm}), reference_error (FEM's own, relative),
+              of each one's own G_norm), G_heldout_loads ({load: G_norm}), choice (rule, the validated
+              capacity, or fit), validation (the table that chose: each model's score per left-out
+              family), G_heldout_mean_spread (over the final fit's starts), reference_error (FEM's own, relative),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
               kn_stiffness (kn, Pa; 2-D N/m), kn_shared
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
-              G_norm_final (fitted loads), G_heldout, G_heldout_mean, ref_error_max and ref_error_heldout (the
+              G_norm_final (fitted loads), G_heldout, G_heldout_mean, G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout (the
               FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
               dt_stable (s) with --k-ratio, seconds, seed, opt_stop
 2-D meshes: unit thickness (k and masses per unit thickness).
-the fit (lbfgs) minimises G^2/G0^2 + a mean(log(k/k_rule)^2), a = --prior-weight (default 10): the
-pull towards the rule keeps per-spring constants from memorising the six fitted loads, which made
-held-out loads worse (--prior-weight 0, the fit before); MODEL.csv's opt_prior is a."""
+the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by default
+its capacity (the prior weight a, a volume term per element or none) is chosen by leave-one-family-out
+validation on the training states, and the rule is exported when no candidate beats it there (JSON
+choice, validation); --prior-weight a fixes a per-spring fit instead; MODEL.csv's opt_prior is a."""
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
@@ -113,7 +127,7 @@ MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "s
 VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
 KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
 RULES = STIFFNESS_RULES     # every rule the harness has (harness/models/stiffness_rules.py)
-PRIOR_WEIGHT = 10.0     # lbfgs's default prior weight (README, calibrate: how it was chosen)
+PRIOR_WEIGHT = 10.0     # the prior weight of lbfgs fits that validation does not choose (--model springs+volume, +kn)
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 
@@ -132,9 +146,9 @@ def add_arguments(p):
                         "springs+kn: plus the adjustable-Poisson term of Kot & Nagahashi 2015, one constant kn "
                         "for the body (springs+kn-node: one per node)")
     p.add_argument("--prior-weight", dest="prior_weight", type=float, default=None,
-                   help=f"lbfgs: weight a of the pull of every constant towards the start rule's, Phi = G^2/G0^2 + "
-                        f"a mean(log(k/k_rule)^2) (default {PRIOR_WEIGHT:g}, see README 'calibrate'; 0: no pull, the "
-                        f"fit before it, which memorises the fitted loads: held-out loads get worse)")
+                   help="lbfgs: fit every spring with this weight a of the pull towards the start rule's constants, "
+                        "Phi = G^2/G0^2 + a mean(log(k/k_rule)^2), instead of the capacity chosen by validation "
+                        "(default: chosen; 0: no pull)")
     p.add_argument("--init", choices=INITS, default="none",
                    help="start of lbfgs / gauss-newton: the rule's constants (none, default) or the "
                         "equilibrium-gap estimate (much faster on large meshes)")
@@ -245,6 +259,13 @@ def prior_weight(args) -> float:
     return float(PRIOR_WEIGHT if w is None else w)
 
 
+def selects(args) -> bool:
+    """Whether the fit's capacity is chosen by validation (harness/stages/sms_select.py):
+    the default lbfgs fit of springs, unless --prior-weight fixes it."""
+    return (METHODS[args.method] == "lbfgs" and getattr(args, "prior_weight", None) is None
+            and getattr(args, "model", "springs") == "springs")
+
+
 def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rules=None, ends=None) -> str:
     """The in-memory case that calibrate runs: the mesh body, the material, the fitted
     load set and the held-out end loads, an SMS on the mesh's nodes and edges."""
@@ -258,11 +279,14 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
     cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
     init = f', init = "{args.init}"' if method in ("lbfgs", "gauss-newton") and args.init != "none" else ""
     budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"  # one solve
-    if method == "lbfgs":
+    chosen = selects(args)
+    if method == "lbfgs" and not chosen:
         init += f", prior = {prior_weight(args)!r}"
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
     if args.rule == "best" and method != "none":
         opt += 'start = "best"\n'
+    if chosen:
+        opt += "[optimizer.select]\n"
     parts, cases, held = ("", "", "")
     if ends is not None:
         parts, cases = ends.toml(ends.magnitudes(args.E, args.nu, args.density,
@@ -348,7 +372,7 @@ def _run(args, mesh, tmp: Path):
     else:
         exported = rows[-1]
     tag = exported["stiffness"] if exported.get("optimizer", "none") == "none" else \
-        f"{exported['stiffness']}-{exported['optimizer']}"
+        f"{exported['stiffness']}-select" if "choice" in exported else f"{exported['stiffness']}-{exported['optimizer']}"
     net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
     if (ctx.out_dir / f"volume-{tag}.npz").exists():       # springs + volume: the term beside the VTU
         from harness.models.volume import load
@@ -362,6 +386,10 @@ def _run(args, mesh, tmp: Path):
         net, exported = capped.pop("_net"), capped
     for r in rows:
         r["exported"] = r is exported
+    validation = ctx.out_dir / "validation.csv"
+    if validation.exists():               # the validated fit's table (harness/stages/sms_select.py)
+        import pandas as pd
+        exported["_validation"] = pd.read_csv(validation).to_dict("records")
     return rows, net, case
 
 
@@ -395,9 +423,13 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     return out
 
 
-def _finite(v):
-    """v as a float, None when missing or not finite (JSON has no NaN)."""
-    return float(v) if v is not None and math.isfinite(v) else None
+def _choice(args, row) -> str:
+    """The JSON's ``choice``: 'rule' (the rule's constants exported: --method rule, or no
+    candidate beat the rule on validation), the validated candidate's name, or 'fit'
+    (a fit whose capacity the user fixed)."""
+    if row.get("optimizer", "none") == "none":
+        return "rule"
+    return str(row.get("choice", "fit"))
 
 
 def _worst(*values) -> float:
@@ -408,94 +440,45 @@ def _worst(*values) -> float:
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
+    from harness.commands.calibrate_verdict import finite, heldout_sentence, pct, records, validation_sentence
+    from harness.export.model_json import export
     exported = next(r for r in rows if r["exported"])
     meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
                 G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
                 G_heldout_mean=exported.get("G_heldout_mean", math.nan),
-                G_heldout_loads={n: _finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
+                G_heldout_loads={n: finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
                 reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
+                choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
+                G_heldout_mean_spread=exported.get("G_heldout_mean_spread", math.nan),
                 mass_residual=exported.get("mass_residual", math.nan), masses=args.masses,
-                prior_weight=prior_weight(args) if args.method == "lbfgs" else math.nan)
+                prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
+                              prior_weight(args) if args.method == "lbfgs" else math.nan))
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
-                        "G_norm_initial", "G_norm_final", "G_heldout", "G_heldout_mean", "ref_error_max",
-                        "ref_error_heldout", "status",
+                        "G_norm_initial", "G_norm_final", "G_heldout", "G_heldout_mean", "G_heldout_mean_spread",
+                        "choice", "ref_error_max", "ref_error_heldout", "status",
                         "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_prior")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     from harness.outputs import staged
     out = args.out              # the three files appear together or not at all (disk full: none)
     with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
-        data = export(net, vtu, meta)         # writes vtu and its .json beside it
+        data = export(net, vtu, meta)         # writes vtu and its .json beside it (harness/export/model_json.py)
         df.to_csv(csv, index=False)
     print(df.to_string(index=False))
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
     best = min(rules, key=lambda r: r.get("G_norm_final", math.inf))
-    pct = lambda v: f"{100 * v:.3g} %" if v is not None and math.isfinite(v) else "n/a"   # noqa: E731
     held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
     fem = meta["reference_error"]
     fem = (f"FEM error <= {pct(fem)}" if fem is not None and math.isfinite(fem) else
            "FEM error not estimated (--max-refine 0, or no coarser mesh of the body could be made)")
     print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
           f"{fem}; the best stiffness rule ({best['stiffness']}) gave {pct(best.get('G_norm_final'))}.")
+    if "choice" in exported:
+        print(validation_sentence(exported, meta["validation"] or []))
+    if case.heldout and exported.get("optimizer", "none") != "none":
+        print(heldout_sentence(exported, rules))
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "
           f"k {min(data['spring_stiffness']):.3g}..{max(data['spring_stiffness']):.3g} N/m, {step}")
-
-
-def export(net, out: Path, meta: dict | None = None) -> dict:
-    """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
-    import numpy as np
-    from harness.export.engine import spring_damping, stable_step
-    from harness.export.vtu import write_vtu
-    meta = dict(meta or {})
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_vtu(out, net)
-    L = net.rest_lengths
-    q = np.hstack([net.points, np.zeros((net.n_nodes, 3 - net.dim))]) if net.dim < 3 else net.points
-    k = np.asarray(net.k, float)
-    zeta = float(meta.pop("damping_ratio", 0.0))
-    positive = bool(np.all(np.asarray(net.masses) > 0))
-    kd = spring_damping(net.springs, k, net.masses, zeta) if positive else np.full(len(k), np.nan)
-    vol = getattr(net, "volume", None)
-    step = stable_step(net.points, net.springs, k, net.masses, kd, volume=vol) if positive else {}
-    data = {
-        "units": {"length": "m", "mass": "kg", "time": "s", "spring_stiffness": "N/m (f = k (l - l0))",
-                  "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
-                  "spring_stiffness_times_length": "N (k l0; per-length convention, f = k l0 (l - l0) / l0)",
-                  "E": "Pa", "density": "kg/m^3", "omega_max": "rad/s",
-                  "G_norm": "RMS displacement error / RMS FEM displacement (weighted, fitted loads)",
-                  "note": "2-D models: unit thickness" if net.dim == 2 else ""},
-        "dim": net.dim,
-        "particle_q": q.tolist(),
-        "particle_mass": np.asarray(net.masses, float).tolist(),
-        "spring_indices": np.asarray(net.springs, int).tolist(),
-        "spring_rest_length": L.tolist(),
-        "spring_stiffness": k.tolist(),
-        "spring_damping": kd.tolist(),
-        "damping_ratio": zeta,
-        "spring_stiffness_times_length": (k * L).tolist(),
-        **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
-        **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
-    }
-    if vol is not None and hasattr(vol, "nodes"):      # springs + kn (harness/models/kn.py)
-        data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
-                             kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
-                                          "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
-                                          "d = dim; each spring's tension T = sum over its two ends a of "
-                                          "kn_a V_a d^2 s_a / (N_a l0), f_i = T (x_j - x_i)/l, f_j = -f_i")
-        data.update(kn_nodes=vol.nodes.tolist(), kn_node_volume=vol.V.tolist(),
-                    kn_spring_count=vol.N.astype(int).tolist(), kn_stiffness=vol.kv.tolist(),
-                    kn_shared=bool(vol.shared))
-    elif vol is not None:     # springs + volume (harness/models/volume.py)
-        data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
-                             volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
-                                              "f = -kv (V - V0) / V0 dV/dx")
-        data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
-                    volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
-    data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
-    if not positive:
-        data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"
-    out.with_suffix(".json").write_text(json.dumps(data))
-    return data

@@ -136,7 +136,7 @@ class BodyGeom:
             return polygon_area(self.vertices)
         if self.kind == "box":
             return float(np.prod(self.hi - self.lo))
-        from harness.geometry.moments import mesh_moments
+        from harness.case.moments import mesh_moments
         return float(mesh_moments(self.mesh_points, self.mesh_cells)[0])
 
     def contains(self, x: np.ndarray) -> np.ndarray:

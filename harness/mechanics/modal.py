@@ -41,7 +41,7 @@ def matrix_eigenvalues(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndar
     in that order: real for a symmetric K; complex in general, because the Bourguignon-Cani
     element model is not conservative (its angular couples and volume forces are no
     energy's gradient, so its K is not symmetric and a symmetric solver, which reads one
-    triangle, gives wrong and even negative values: the hexa MT "zero mode" of issue 12)."""
+    triangle, gives wrong and even negative values: the hexa MT "zero mode")."""
     masses = np.asarray(masses, float)
     dim = K.shape[0] // len(masses)
     fd = np.flatnonzero(np.asarray(free, bool))

@@ -1,4 +1,4 @@
-"""Model classes an sms case can score on the same nodes (``[model] classes``, issue #15).
+"""Model classes an sms case can score on the same nodes (``[model] classes``).
 
 Each class is one entry of CLASSES: the [model] keys it overrides and whether its
 stiffness is the P1 finite element one (harness/models/p1.py) or Bourguignon & Cani's

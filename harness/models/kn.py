@@ -1,5 +1,5 @@
 """The adjustable-Poisson correction of Kot & Nagahashi 2015 added to a spring network
-("springs+kn", issue #15).
+("springs+kn").
 
 Kot & Nagahashi ("Second degree of freedom of elastic objects - adjustable Poisson's ratio
 for mass spring models", GRAPP 2015) keep the springs and let the force a spring brings to

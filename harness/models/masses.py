@@ -24,7 +24,7 @@ from scipy.optimize import lsq_linear
 
 from harness.errors import ModelError
 from harness.geometry.bodies import BodyGeom, clip_box, polygon as make_polygon
-from harness.geometry.moments import (_quadrature, _simplices, box_moments, mesh_moments,  # noqa: F401
+from harness.case.moments import (_quadrature, _simplices, box_moments, mesh_moments,  # noqa: F401
                                       monomials, polygon_moments)
 
 RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")

@@ -1,4 +1,4 @@
-"""Bourguignon & Cani's element model (MT) on a spring model's own cells (model class "mt", issue #15).
+"""Bourguignon & Cani's element model (MT) on a spring model's own cells (model class "mt").
 
 The model of harness/models/anisotropic.py (the program's force rule: axial springs,
 angular couples, volume forces; shared/reference-data/bourguignon2000/README.md) on the

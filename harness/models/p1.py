@@ -1,4 +1,4 @@
-"""Linear P1 finite elements on a spring model's own nodes (model class "p1", issue #15).
+"""Linear P1 finite elements on a spring model's own nodes (model class "p1").
 
 The upper bound a cheap model on these nodes can hope for: the same nodes, masses, loads
 and constraints as the spring network, but the stiffness of linear (P1) simplices with

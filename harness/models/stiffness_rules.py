@@ -36,6 +36,16 @@ it is E for isotropic material and follows fibres and regions.
              spring. On a grid this is the best periodic lattice, assembled cell-wise (so
              boundary springs get their cell share): exact for isotropic nu = 1/3 in 2-D
              plane stress and 1/4 in 3-D, the Cauchy floor otherwise.
+"learned"    ours: van Gelder's constants times exp(sum_j c_j phi_j(e, nu)), phi_j cheap
+             unit- and rotation-free features of the spring (1, nu - 0.3, (nu - 0.3)^2, its
+             length relative to its neighbourhood's, on the surface or not, 3-D: the number of
+             cells sharing it, the cells' mean dihedral angle at it (2-D: angle opposite it)
+             and mean quality); c, a few numbers per dimension, fitted once by ``springbench
+             rules fit`` on a corpus of gmsh meshes (cases/rules_corpus) at several nu against
+             the exact linear stress states, shipped in harness/models/learned_rule.json (its
+             record: the corpus's hashes, the command, the objective before and after). No FEM
+             at use time. Quads and hexahedra get the fitted scale only. Details and the
+             features' definitions: harness/models/learned_rule.py.
 """
 
 from __future__ import annotations
@@ -48,7 +58,7 @@ from harness.errors import ModelError
 from harness.models.topology import element_pairs
 from harness.models.springs import spring_directions
 
-RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy")
+RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
 
 
 def voigt_dyad(n: np.ndarray) -> np.ndarray:
@@ -81,7 +91,7 @@ def _cell_measure(points, c, ctype) -> np.ndarray:
     p = points[c]
     if ctype in ("triangle", "tetra"):
         return np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / (2 if ctype == "triangle" else 6)
-    from harness.geometry.moments import _quadrature
+    from harness.case.moments import _quadrature
     q, w = _quadrature(points, {ctype: c})
     per = {"quad": 6, "hexahedron": 24}[ctype]  # quadrature points per cell
     return w.reshape(len(c), per).sum(1)
@@ -283,7 +293,14 @@ def cauchy(points, springs, cells, material) -> np.ndarray:
     return np.maximum(acc, floor)
 
 
-RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform, "cauchy": cauchy}
+def learned(points, springs, cells, material) -> np.ndarray:
+    """The fitted rule of harness/models/learned_rule.py: van Gelder's k times its correction."""
+    from harness.models.learned_rule import learned as rule
+    return rule(points, springs, cells, material, base=vangelder(points, springs, cells, material))
+
+
+RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform, "cauchy": cauchy,
+                  "learned": learned}
 
 
 def spring_constants(rule: str, points, springs, cells, material) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""A volume term per simplex added to a spring network ("springs + volume", issue #15).
+"""A volume term per simplex added to a spring network ("springs + volume").
 
 Each element e (a tetrahedron in 3-D, a triangle in 2-D; nodes in ``elements`` (m, dim+1))
 with signed volume (2-D: area) V_e and rest value V0_e > 0 stores

@@ -19,7 +19,7 @@ k0 (per spring, or per group in grouped mode), so it is unit-free and k stays po
 Prior (option ``prior``, weight a >= 0). Phi += a * mean_e log(k_e / k0_e)^2: a pull of
 every constant towards its start (the stiffness rule's). Displacements of a few loads do
 not determine tens of thousands of constants; unregularised, L-BFGS-B drifts along the
-nearly flat directions of G and the constants memorise the fitted loads (issue 12: held-out
+nearly flat directions of G and the constants memorise the fitted loads (held-out
 loads got worse while the fitted ones improved). Both terms are dimensionless and
 intensive (a mean over springs, G relative to its start), so a weight carries across
 meshes: a = 1 prices an RMS log-deviation of 1 (a factor e) like the whole initial misfit.
@@ -56,6 +56,7 @@ LBFGS_DEFAULTS = dict(
     init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
     scale=0.5,          # diagonal scaling of log k by (spring tension^2 at k0)^-scale; 0: none
     prior=0.0,          # weight a of the prior a * mean_e log(k_e/k0_e)^2 (see above); 0: none
+    x0=None,            # start point log(k/k0) per parameter (a multi-start's other starts); None: by init
 )
 
 NM_DEFAULTS = dict(
@@ -185,7 +186,7 @@ def _result(obj: Objective, t0: float, stop: str, nit: int, extra: dict) -> dict
     x = obj.best[1]
     k = obj.k(x)
     G_final = obj.best[2]                    # evaluated by a fresh factorisation at k
-    info = dict(stop=stop, iterations=nit, evaluations=obj.n_eval, **extra)
+    info = dict(stop=stop, iterations=nit, evaluations=obj.n_eval, phi=float(obj.best[0]), **extra)
     if obj.p.modal is not None:
         f = frequencies(obj.p, k)
         info["frequencies"] = f.tolist()
@@ -208,6 +209,8 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
     x0, init_info = start_point(problem, opts["init"])
     lo, hi = problem.bounds
     n = problem.n_params
+    if opts["x0"] is not None:
+        x0 = np.clip(np.asarray(opts["x0"], float).reshape(n), np.log(lo), np.log(hi))
     nit = [0]
 
     def cb(xk):
@@ -219,7 +222,9 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
 
     d = tension_scaling(problem, obj.tension2, float(opts["scale"]))   # x = d y
     first = None
-    if opts["init"] != "none":
+    if opts["x0"] is not None:
+        first = (x0 / d, *obj(x0))
+    elif opts["init"] != "none":
         first = (x0 / d, *obj(x0))
         if first[1] > obj.phi0:         # the start is worse than k0: start from k0 instead
             x0, first = np.zeros(n), None

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from harness.errors import SpringbenchError
 from harness.optimize.problem import FitProblem
 
@@ -18,6 +20,8 @@ def check_options(options: dict, defaults: dict, method: str) -> dict:
         raise SpringbenchError(f"unknown {method} option(s) {sorted(unknown)}", field="optimizer.options",
                                fix=f"use some of {sorted(defaults)}")
     for key, v in options.items():
+        if key == "x0" and (v is None or isinstance(v, np.ndarray)):     # a start point, set in code
+            continue
         if isinstance(defaults[key], str):
             if not isinstance(v, str):
                 raise SpringbenchError(f"{method} option {key} = {v!r} is not a string", field=f"optimizer.options.{key}",

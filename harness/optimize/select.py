@@ -3,19 +3,25 @@
 
 A fit has choices the data must make: how many constants it may move (one scale for all
 springs, a few groups, every spring with a pull towards the rule, springs plus a volume
-term) and how hard the pull is. Leave-one-family-out validation makes them: for each
-family of training states (constant, bending, torsion, shear-gradient, gravity, clamped),
-every candidate is fitted on the other families and scored on the one left out; the
-candidate with the lowest mean score is refitted on all training states. The rule itself
-(no fit) is scored the same way; if no candidate beats it, the rule is the choice. The
-held-out loads never choose anything: they are not in the problem given here.
+term per element) and how hard the pull is. Leave-one-family-out validation makes them:
+every candidate is fitted without one fold of the training states and scored on it; the
+folds are the free-traction families (constant, bending, torsion, shear-gradient,
+gravity: harness/case/linear_states.py) and each clamped training state on its own. A
+candidate's score is the mean of its free-traction folds' and its clamped folds' means;
+the rule itself (no fit) is scored the same way. A candidate is chosen only if it beats
+the rule's score (by more than MARGIN) and is no worse than the rule on the clamped
+folds (:func:`choose`): free-traction states alone cannot reveal that a fit got worse
+under a clamp, as springs at high nu do. Else the rule is the choice. The chosen
+candidate is refitted on all training states from several starts. The held-out loads
+never choose anything: they are not in the problem given here.
 
 Every training state counts alike: each load's misfit is divided by its own reference
 norm (``balanced``), so the fit and the scores see the relative error of each state, not
 the states with the largest displacements.
 
 The problem holds the springs' columns first and, for the volume candidates, one column
-per element after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T).
+per element after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T); the
+volume candidates fit one kv shared by the elements.
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness.case.sections import SELECT_CANDIDATES
 from harness.optimize.problem import FitProblem
 
 
@@ -49,15 +56,26 @@ CANDIDATES = (Candidate("scale", "one"), Candidate("groups", "direction"),
               Candidate("springs-prior0.1+volume", "spring", 0.1, volume=True))
 
 
+if tuple(c.name for c in CANDIDATES) != SELECT_CANDIDATES:
+    raise ImportError("harness.optimize.select.CANDIDATES and the case schema's SELECT_CANDIDATES differ: "
+                      "name a new candidate in both")
+
+
 @dataclass(frozen=True)
 class Selection:
-    """The choice ('rule' or a candidate's name), its constants over the problem's columns
-    (spring-only choices: the springs' columns only), and the validation table: one row
-    per model (the rule first) with its score on each left-out family and their mean."""
+    """The choice ('rule' or a candidate's name); its constants over the problem's columns
+    (spring-only choices: the springs' columns only) from each start of the final fit
+    (``starts``, the exported one first: the lowest training objective); the validation
+    table: one row per model (the rule first) with its score on each left-out family and
+    the score that chose (``score``)."""
     choice: str
-    k: np.ndarray
+    starts: tuple
     table: tuple
     families: tuple
+
+    @property
+    def k(self) -> np.ndarray:
+        return self.starts[0]
 
     @property
     def volume(self) -> bool:
@@ -112,13 +130,41 @@ def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, gr
     return FitProblem(blocks, k0, g, problem.bounds, None, problem.coords)
 
 
-def fit(problem: FitProblem, cand: Candidate, options: dict) -> np.ndarray:
-    """The candidate's constants fitted on ``problem`` (L-BFGS-B, adjoint gradient)."""
+def fit(problem: FitProblem, cand: Candidate, options: dict, x0=None) -> np.ndarray:
+    """The candidate's constants fitted on ``problem`` (L-BFGS-B, adjoint gradient), from
+    the rule (x0 None) or from log(k/k0) = x0 per parameter."""
+    return fit_result(problem, cand, options, x0)["k"]
+
+
+def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None) -> dict:
+    """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit."""
     from harness.optimize.gradient import lbfgs
     opts = dict(options)
     if cand.groups == "spring":
         opts["prior"] = cand.prior
-    return lbfgs(problem, opts)["k"]
+    if x0 is not None:
+        opts["x0"] = np.asarray(x0, float)
+    return lbfgs(problem, opts)
+
+
+def best_scale(problem: FitProblem) -> float:
+    """The factor s minimising G^2 of s k0 (u scales as 1 / s): 1 / s = sum <u_ref, u0>_w /
+    sum <u0, u0>_w over the blocks."""
+    num = den = 0.0
+    for b, u in zip(problem.blocks, problem.solve(problem.k0)):
+        num += float(b.u_ref @ (b.w * u))
+        den += float(u @ (b.w * u))
+    return den / num if num > 0 else 1.0
+
+
+def starts(problem: FitProblem, n: int, seed: int = 0) -> list:
+    """Start points log(k/k0) per parameter: the rule itself, its best global scale, then
+    perturbations of the rule by factors exp(0.2 N(0, 1)) (seeded)."""
+    npar = problem.n_params
+    out = [np.zeros(npar), np.full(npar, math.log(best_scale(problem)))]
+    rng = np.random.default_rng(seed)
+    out += [0.2 * rng.standard_normal(npar) for _ in range(max(n - 2, 0))]
+    return out[:n]
 
 
 def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
@@ -132,33 +178,81 @@ def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
 
 
 def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np.ndarray,
-           candidates=CANDIDATES, options: dict | None = None, status=lambda msg: None) -> Selection:
-    """Leave-one-family-out choice among ``candidates`` and the rule (module doc).
+           candidates=CANDIDATES, options: dict | None = None, final: dict | None = None, n_starts: int = 3,
+           seed: int = 0, status=lambda msg: None) -> Selection:
+    """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume elements] (k0 the rule's
-    springs, anything positive for the elements); ``families`` (one per block)."""
-    options = dict(options or {"maxiter": 200})
+    springs, anything positive for the elements); ``families`` (one per block);
+    ``options``: the validation fits' L-BFGS-B options, ``final``: the final fit's, from
+    ``n_starts`` starts (seeded by ``seed``)."""
+    options = dict(options or {"maxiter": 40})
     problem = balanced(problem)
-    families = list(families)
-    names = sorted(set(families), key=families.index)
-    idx = {f: [i for i, g in enumerate(families) if g == f] for f in names}
+    folds = make_folds(families, [b.name for b in problem.blocks])
     rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups)
     scores = per_load(rule, rule.k0)
-    table = [dict(model="rule", **{f: float(scores[idx[f]].mean()) for f in names})]
+    table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
     for cand in candidates:
         cp = columns(problem, n_springs, cand, kv0, groups)
         row = {"model": cand.name}
-        for f in names if len(names) > 1 else ():
+        for f, out in folds.items() if len(folds) > 1 else ():
             status(f"validation: {cand.name} without {f}")
-            rest = [i for i in range(len(families)) if families[i] != f]
+            rest = [i for i in range(len(families)) if i not in set(out)]
             k = fit(subset(cp, rest), cand, options)
-            row[f] = float(per_load(subset(cp, idx[f]), k).mean())
+            row[f] = float(per_load(subset(cp, out), k).mean())
         table.append(row)
+    names = tuple(folds)
     for row in table:
-        row["mean"] = float(np.mean([row[f] for f in names])) if all(f in row for f in names) else math.nan
-    best = min(table, key=lambda r: r["mean"] if math.isfinite(r["mean"]) else math.inf)
-    if best["model"] == "rule" or not math.isfinite(best["mean"]):
-        return Selection("rule", problem.k0[:n_springs].copy(), tuple(table), tuple(names))
+        row.update(summary(row, names))
+    best = choose(table)
+    if best["model"] == "rule":
+        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names)
     cand = next(c for c in candidates if c.name == best["model"])
-    status(f"fitting {cand.name} on every training state")
-    k = fit(columns(problem, n_springs, cand, kv0, groups), cand, options)
-    return Selection(cand.name, k, tuple(table), tuple(names))
+    cp = columns(problem, n_springs, cand, kv0, groups)
+    fits = []
+    for i, x0 in enumerate(starts(cp, n_starts, seed)):
+        status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
+        r = fit_result(cp, cand, dict(final or options), x0)
+        fits.append((r["info"]["phi"], r["k"]))          # the training objective, prior included
+    fits.sort(key=lambda t: t[0])
+    return Selection(cand.name, tuple(k for _, k in fits), tuple(table), tuple(names))
+
+
+CLAMPED = "clamped"     # the family of the training states that hold a face (not the linear sets')
+
+
+def make_folds(families, names=None) -> dict:
+    """{fold name: block indices left out}: each free-traction family as one fold, each
+    clamped state as its own ('clamped:<load name>'), so a clamped fold's fit still sees
+    the other clamped states, as the final fit sees them all."""
+    folds: dict = {}
+    for i, f in enumerate(families):
+        folds.setdefault(f"{CLAMPED}:{names[i] if names else i}" if f == CLAMPED else f, []).append(i)
+    return folds
+
+
+def summary(row: dict, folds) -> dict:
+    """A table row's ``free`` (mean over the free-traction families' folds), ``clamped``
+    (mean over the clamped states' folds) and ``score`` (their mean, or the one there)."""
+    if not all(f in row for f in folds):
+        return {"free": math.nan, "clamped": math.nan, "score": math.nan}
+    free = [row[f] for f in folds if not f.startswith(CLAMPED)]
+    held = [row[f] for f in folds if f.startswith(CLAMPED)]
+    parts = [float(np.mean(v)) if v else math.nan for v in (free, held)]
+    return {"free": parts[0], "clamped": parts[1], "score": float(np.nanmean(parts))}
+
+
+MARGIN = 0.01      # a candidate beats the rule by more than 1 % of its score (and 1e-9): less is a tie
+
+
+def choose(table) -> dict:
+    """The row chosen: the lowest score among the candidates that beat the rule (the
+    table's first row) on the score and are no worse on the clamped states, where there
+    are any (a fit that is better on free-traction states but worse under a clamp, as
+    springs at high nu are, never wins: the loads users run hold a face); else the rule."""
+    rule = table[0]
+
+    def beats(a, b):
+        return a < b - max(MARGIN * b, 1e-9)
+    ok = [r for r in table[1:] if math.isfinite(r["score"]) and beats(r["score"], rule["score"])
+          and not (math.isfinite(rule["clamped"]) and r["clamped"] > rule["clamped"] + 1e-9)]
+    return min(ok, key=lambda r: r["score"]) if ok else rule

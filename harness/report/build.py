@@ -63,6 +63,7 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 from harness.report.frames import REF_COARSE, SCORED, optimizer_frame
+from harness.report.markdown import cell as _cell, markdown_table  # noqa: F401  (markdown_table: report's API)
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
@@ -178,7 +179,7 @@ def comparable(df):
 
 def seeds_frame(df):
     """Mean, standard deviation and count over seeds of every numeric score, for the
-    cases that ran several seeds (issue 4: 'several seeds per random case')."""
+    cases that ran several seeds."""
     import pandas as pd
     if df.empty or "seed" not in df or "status" not in df:
         return pd.DataFrame()
@@ -201,28 +202,6 @@ def seeds_frame(df):
 
 
 # -- markdown and html ---------------------------------------------------------------------
-
-def _cell(v) -> str:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return ""
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if hasattr(v, "item"):
-        return _cell(v.item())
-    return str(v).replace("|", "\\|").replace("\n", " ")
-
-
-def markdown_table(df) -> str:
-    """A GitHub-flavoured Markdown table (numbers to 4 significant digits). Written here
-    rather than via pandas.to_markdown so springbench needs no `tabulate` dependency."""
-    cols = [str(c) for c in df.columns]
-    numeric = [df[c].dtype.kind in "iuf" for c in df.columns]
-    lines = ["| " + " | ".join(c.replace("|", "\\|") for c in cols) + " |",
-             "| " + " | ".join("---:" if n else "---" for n in numeric) + " |"]
-    for row in df.itertuples(index=False):
-        lines.append("| " + " | ".join(_cell(v) for v in row) + " |")
-    return "\n".join(lines) + "\n"
-
 
 def _flagged(df):
     """The table for Markdown with ref-coarse rows marked: their ``G_ref`` cell gets a
@@ -294,7 +273,7 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
                "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
                markdown_table(opts)]
-    from harness.report.nu_sweep import skipped_lines, sweep_frame, sweep_table
+    from harness.report.nu_sweep import markdown_section, skipped_lines, sweep_frame, sweep_table
     sweep = sweep_table(sweep_frame(df))
     if not sweep.empty:
         md += ["\n## Model classes against Poisson's ratio\n",
@@ -306,6 +285,7 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
         skipped = skipped_lines(df)
         if skipped:
             md += ["\nNo rows (status `skip`):\n"] + skipped
+        md += markdown_section(df)
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
     atomic_write(md_path, "\n".join(md).encode())

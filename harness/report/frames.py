@@ -57,7 +57,7 @@ def headline_frame(df):
 
 
 def optimizer_frame(df):
-    """The optimised rows side by side (issue 4: SA vs L-BFGS-B on the same cases): one
+    """The optimised rows side by side (SA vs L-BFGS-B on the same cases): one
     line per case, model, optimizer and objective, numbers averaged over seeds (spread in
     seeds.csv); ``G_final_vs_sa`` = G_final / G_final of the case's SA row, same seed."""
     import pandas as pd

@@ -92,6 +92,8 @@ KINDS = [  # (file name pattern, caption of any figure of that kind)
     (r"fig-lloyd\.png", "Lloyd statistics against iterations (Deussen Fig. 2)."),
     (r"fig-lloyd-bars\.png", "G per Lloyd iteration count (Deussen Fig. 12), ours and the paper's trend."),
     (r"fig-nu-sweep\.png", "Normalised G against Poisson's ratio per model class (fitted and held-out loads), Cauchy ratio marked."),
+    (r"fig-nu-sweep-families\.png", "Held-out normalised G per load family (sag, tip, torsion, bridge) against "
+                                     "Poisson's ratio: each class's fitted row solid, the unfitted stiffness rules dashed."),
     (r"fig-volume\.png", "Relative volume variation against time (Bourguignon & Cani Fig. 3)."),
     (r"fig-spectrum\.png", "Natural frequencies of the models against the FEM."),
     (r"fig-anisotropy\.png", "Effective Young's modulus against pull direction (polar)."),
@@ -125,6 +127,11 @@ GLOSSARY = [
                                               "comparable across cases (0.05 = 5 % RMS error)."),
     ("G_heldout", "normalised G on the held-out loads (sag, tip), which no fit ever used; G_heldout_initial "
                   "before the fit."),
+    ("G_heldout_mean, G_heldout_<load>", "the mean over the held-out loads of each load's own normalised G "
+                                         "(a small load counts as much as a large one), and each load's."),
+    ("G_heldout_mean_spread, choice", "a validated fit ([optimizer.select]): max - min of G_heldout_mean over "
+                                      "its starts (gaps inside it are ties), and the capacity validation chose "
+                                      "('rule': the rule's constants kept)."),
     ("G_ref", "the reference's own estimated error as a normalised G at the row's nodes: a G below a few "
               "times G_ref says more about the reference than about the model."),
     ("ref_error_max", "the reference's largest estimated point error, relative to its largest displacement."),

@@ -30,9 +30,9 @@ from pathlib import Path
 from typing import Callable
 
 STAGES = [
-    "harness.stages.reference_check",   # FEM reference + its verification (issue 2)
+    "harness.stages.reference_check",   # FEM reference + its verification
     "harness.stages.sms",               # spring/mass build + score + optimise (issues 3, 4)
-    "harness.stages.bc2000",            # Bourguignon & Cani experiments (issue 5)
+    "harness.stages.bc2000",            # Bourguignon & Cani experiments
 ]
 
 

@@ -3,7 +3,8 @@ unoptimised baseline row, then optimise the first rule's constants with each opt
 run of the case (see optimiser_runs: [optimizer] method, each of ``compare``, and the
 ``[optimizer.frequency]`` row that adds the natural frequencies to G, Deussen Section 8)
 and score each result: one row per run, all from the same initial model, reference and
-weights, so the table compares optimisers and not set-ups. Every scored row carries
+weights, so the table compares optimisers and not set-ups. With ``[optimizer.select]`` the
+springs' fit chooses its capacity by validation (harness/stages/sms_select.py). Every scored row carries
 ``G_ref`` (the reference's own estimated error as a normalised G at the same nodes, loads
 and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coarse" when
 G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
@@ -30,7 +31,8 @@ import pandas as pd
 
 from harness.case.loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
-from harness.stages.sms_measures import engine_columns, error_modes, fem_frequencies, freq_error, model_frequencies
+from harness.stages.sms_measures import (engine_columns, error_modes, fem_frequencies, freq_error, heldout_columns,
+                                         model_frequencies, per_load_columns)
 
 NAME = "sms"
 
@@ -195,7 +197,7 @@ def _run(case, ctx, spec) -> list[dict]:
                "seconds": build_seconds + time.perf_counter() - t1, **(sms_mt.constants(net) if mt else {})}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
-                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **_per_load(sc, sh), **_heldout(sh))
+                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **per_load_columns(sc, sh), **heldout_columns(sh))
         else:
             row.update(G_initial=math.nan, G_final=math.nan, G_norm_initial=math.nan, G_norm_final=math.nan,
                        note=f"no reference ({why})")
@@ -210,9 +212,14 @@ def _run(case, ctx, spec) -> list[dict]:
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
-            row, net, trace = (sms_mt.optimise if mt else _optimise)(
-                case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label, common, start_row,
-                evaluate, write, fem_f)
+            if run_.get("select") and not mt and not p1 and getattr(start, "volume", None) is None:
+                from harness.stages import sms_select
+                row, net, trace = sms_select.optimise(case, ctx, run_, start, u_ref, names, fit, weights, label,
+                                                      common, start_row, evaluate, write)
+            else:
+                row, net, trace = (sms_mt.optimise if mt else _optimise)(
+                    case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label, common, start_row,
+                    evaluate, write, fem_f)
             rows.append(row)
             opt_nets[row["_tag"]] = net
             if trace is not None:
@@ -252,29 +259,6 @@ def _run(case, ctx, spec) -> list[dict]:
             if len(freqs["fem"]) > fitted:
                 row["freq_error_heldout"] = freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
     return rows
-
-
-def _per_load(sc, sh) -> dict:
-    """G_<load> of every load, fitted and held out."""
-    out = {f"G_{k}": v for k, v in sc.per_load.items()}
-    if sh is not None:
-        out.update({f"G_{k}": v for k, v in sh.per_load.items()})
-    return out
-
-
-def _heldout(sh, first=None) -> dict:
-    """On the held-out loads: G_heldout (pooled: normalised by all their displacements
-    together), G_heldout_mean (the mean of each load's own normalised G, so a small load
-    counts as much as a large one) and G_heldout_<load>; for an optimised row also the
-    start's pooled and mean values (``_initial``); none without held-out loads."""
-    if sh is None:
-        return {}
-    per = {f"G_heldout_{k}": float(v) for k, v in sh.per_load_norm.items()}
-    out = {"G_heldout": sh.G_norm, "G_heldout_mean": float(np.mean(list(per.values()))), **per}
-    if first is not None:
-        out.update(G_heldout_initial=first.get("G_heldout", math.nan),
-                   G_heldout_mean_initial=first.get("G_heldout_mean", math.nan))
-    return out
 
 
 # -- optimisers -------------------------------------------------------------------------
@@ -343,6 +327,8 @@ def optimiser_runs(case, opt) -> list[dict]:
         raise CaseError(f"options {sorted(mine)} but method = 'none' runs no optimiser", file=file,
                         field="optimizer.options", fix="set [optimizer] method, or remove the options")
     runs = [] if method == "none" else [dict(method=method, options=mine, objective="G", where="optimizer.options")]
+    if runs and opt.get("select"):      # the validated fit (harness/stages/sms_select.py)
+        runs[0]["select"] = dict(opt["select"])
     runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G", where=f"optimizer.compare_options.{m}")
              for m in compare]
     fq = opt.get("frequency")
@@ -426,7 +412,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
            "G_s_initial": first.get("G_s_initial", math.nan),
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **_per_load(sc, sh), **_heldout(sh, first),
+           **per_load_columns(sc, sh), **heldout_columns(sh, first),
            "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
            "_tag": tag}
     if freq_kw:

@@ -1,6 +1,6 @@
-"""Measures of the sms stage's models beside G (harness/stages/sms.py): natural
-frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``), and what an
-engine needs to know (``k_spread``, ``dt_stable``)."""
+"""Measures of the sms stage's models (harness/stages/sms.py): the per-load and held-out G
+columns, natural frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``),
+and what an engine needs to know (``k_spread``, ``dt_stable``)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,29 @@ import numpy as np
 import pandas as pd
 
 from harness.errors import ModelError
+
+
+def per_load_columns(sc, sh) -> dict:
+    """G_<load> of every load, fitted and held out."""
+    out = {f"G_{k}": v for k, v in sc.per_load.items()}
+    if sh is not None:
+        out.update({f"G_{k}": v for k, v in sh.per_load.items()})
+    return out
+
+
+def heldout_columns(sh, first=None) -> dict:
+    """On the held-out loads: G_heldout (pooled: normalised by all their displacements
+    together), G_heldout_mean (the mean of each load's own normalised G, so a small load
+    counts as much as a large one) and G_heldout_<load>; for an optimised row also the
+    start's pooled and mean values (``_initial``); none without held-out loads."""
+    if sh is None:
+        return {}
+    per = {f"G_heldout_{k}": float(v) for k, v in sh.per_load_norm.items()}
+    out = {"G_heldout": sh.G_norm, "G_heldout_mean": float(np.mean(list(per.values()))), **per}
+    if first is not None:
+        out.update(G_heldout_initial=first.get("G_heldout", math.nan),
+                   G_heldout_mean_initial=first.get("G_heldout_mean", math.nan))
+    return out
 
 
 def engine_columns(net, p1: bool) -> dict:

@@ -1,4 +1,4 @@
-"""Loads and masses for bodies that are not boxes (issue 12): the homogeneous stress
+"""Loads and masses for bodies that are not boxes: the homogeneous stress
 states on gmsh meshes (cylinder, ellipsoid, holed block, holed plate), their closed
 form, their nodal forces, lumped masses, the held-out end loads."""
 
@@ -15,7 +15,8 @@ import reference
 from harness.case.reader import load_case
 from harness.case.elasticity import isotropic_compliance, plane
 from harness.errors import CaseError
-from harness.case.loadsets import ANCHORS, homogeneous_closed_form, stress_tensor
+from harness.case.linear_states import linear_closed_form as homogeneous_closed_form
+from harness.case.loadsets import ANCHORS, stress_tensor
 from harness.io.meshfile import boundary_facets, read_mesh
 
 import meshes

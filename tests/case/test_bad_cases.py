@@ -1,4 +1,4 @@
-"""Case files with one mistake in each section and kind of value (issue 13): wrong types,
+"""Case files with one mistake in each section and kind of value: wrong types,
 nan/inf, out of range, numbers too large or small to compute with (1e200, E = 1e308, size =
 [1e-300, 1e-300]), a zero load, unknown keys ("did you mean"), and mistakes only a stage's
 check sees. Each is a small edit of a valid case; ``springbench validate`` gives exit 2 and

@@ -11,7 +11,8 @@ import skfem
 
 from harness.case.elasticity import isotropic_compliance, plane
 from harness.case.linear_states import divergence, gradient_states, linear_closed_form
-from harness.case.loadsets import ANCHORS, LOAD_SETS, family, stress_field, stress_tensor
+from harness.case.loadsets import ANCHORS, family, stress_field, stress_tensor
+from harness.case.sets import LOAD_SETS
 from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
 from reference.fem import Discretisation

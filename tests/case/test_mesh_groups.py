@@ -1,4 +1,4 @@
-"""Boundary parts from a mesh's named groups (issue 12): gmsh physical groups and meshio
+"""Boundary parts from a mesh's named groups: gmsh physical groups and meshio
 point sets read as parts, selecting the same points for the FEM (refined, P2) and the
 spring model; a clamped group holds u = 0 in both; a traction on a group carries its
 area times the traction, and the FEM's clamp reaction balances it; an unknown group is a

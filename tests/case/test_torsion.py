@@ -1,4 +1,4 @@
-"""Torsion (issue 12): a twist traction t = w x (x - c) on a mesh group, the FEM against
+"""Torsion: a twist traction t = w x (x - c) on a mesh group, the FEM against
 Saint-Venant's theta = T L / (G J) on a gmsh cylinder, the spring model's forces a pure
 torque equal to the FEM's, and calibrate holding it out with the clamp and the loaded
 end named by groups."""

@@ -1,4 +1,4 @@
-"""Mistakes that passed silently before (issue 13): a 2-entry grid in a 3-D case, an
+"""Mistakes that passed silently before: a 2-entry grid in a 3-D case, an
 absurd divisions, score weights that are NaN or all zero. Each is one line naming the
 file or flag and the fix, exit 2."""
 

@@ -1,4 +1,4 @@
-"""springbench calibrate with bad flags and bad meshes (issue 13): each is exit 2 and one line
+"""springbench calibrate with bad flags and bad meshes: each is exit 2 and one line
 naming the flag, or the user's mesh file (never calibrate's temporary copy), with the fix;
 nothing is written. Every mesh here fails before any FEM solve, so the table is fast."""
 

@@ -1,4 +1,4 @@
-"""Bad input to score, reference, build, report, run and validate beyond case files (issue 13):
+"""Bad input to score, reference, build, report, run and validate beyond case files:
 a network file with an out-of-range spring index, NaN points or no stiffness, a points CSV
 that is empty or not numbers, a truncated result file, a folder without case files, a
 time step that blows up. Each is exit 2 and one line naming the user's file (or flag), the

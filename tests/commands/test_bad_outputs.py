@@ -1,4 +1,4 @@
-"""Outputs that cannot be written (issue 13): ``--out`` into a read-only folder, onto an
+"""Outputs that cannot be written: ``--out`` into a read-only folder, onto an
 existing folder, under a file, and a disk that fills up, for build, score, reference,
 calibrate, bench, run and report. Each is exit 2 and one line naming the user's path (never
 a temporary file) and what to do, and nothing is half-written: the old file stays, no

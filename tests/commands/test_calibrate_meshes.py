@@ -1,4 +1,4 @@
-"""springbench calibrate on meshes users bring (issue 12): a cylinder, an ellipsoid, a
+"""springbench calibrate on meshes users bring: a cylinder, an ellipsoid, a
 holed block, a holed plate, nu up to 0.49, a mesh in millimetres. Each exports positive
 masses carrying rho V, damping and a stable step an explicit engine can use (checked
 against a dense eigen-solve written here), and a finite held-out G."""
@@ -10,6 +10,8 @@ import pandas as pd
 import pytest
 
 from harness import cli
+from harness.case.loadsets import VOIGT
+from harness.case.linear_states import gradient_states
 
 import meshes
 
@@ -76,7 +78,10 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
                                        rel=1e-10)
     assert data["loads_heldout"] == (["sag", "tip", "tip2", "torsion", "bridge"] if dim == 3 else
                                      ["sag", "tip", "bridge"])
-    assert len(data["loads_fitted"]) == (24 if dim == 3 else 9)          # the linear states (linear3d / 2d)
+    fitted = data["loads_fitted"]       # the linear states (linear3d / 2d), then the clamped training states
+    clamped = ["train-tip", "train-tip2", "train-torsion"] if dim == 3 else ["train-tip"]
+    assert len(fitted) == len(VOIGT[dim]) + len(gradient_states(dim)) + len(clamped)
+    assert fitted[-len(clamped):] == clamped
     per = data["G_heldout_loads"]
     assert list(per) == data["loads_heldout"] and data["G_heldout_mean"] == pytest.approx(np.mean(list(per.values())))
     assert min(per.values()) <= data["G_norm_heldout"] <= max(per.values())     # pooled: a weighted mean of them

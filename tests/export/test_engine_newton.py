@@ -1,4 +1,4 @@
-"""Engine round trip (issue 12): the JSON of a calibrated tet mesh and of a triangle mesh
+"""Engine round trip: the JSON of a calibrated tet mesh and of a triangle mesh
 loaded into NVIDIA Newton (``ModelBuilder.add_particle`` / ``add_spring``, float32, CPU; constants by the best rule, which
 is deterministic where a wall-time fit budget is not),
 run with ``SolverSemiImplicit`` at the exported ``dt_stable_float32`` and ``spring_damping``
@@ -28,11 +28,11 @@ wp = pytest.importorskip("warp")
 E, NU, RHO, S = 1e7, 0.3, 1000.0, 1e3      # S: the tip traction, 1e-4 E (small rotations)
 
 
-def calibrated(tmp_path, mesh):
+def calibrated(tmp_path, mesh, *argv):
     out = tmp_path / "m.vtu"
     assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
                      "--magnitude", str(S), "--method", "rule", "--max-refine", "0",   # deterministic: no wall-time budget
-                     "--out", str(out)]) == 0
+                     "--out", str(out), *argv]) == 0
     m = read_mesh(mesh)
     args = argparse.Namespace(mesh=mesh, format=None, E=E, nu=NU, density=RHO, plane="stress", magnitude=S, peak_strain=1e-3,
                               rule="lloyd", method="rule", init="none", budget=1.0, loads="homogeneous",
@@ -43,14 +43,18 @@ def calibrated(tmp_path, mesh):
 
 
 def newton_equilibrium(data, fixed, force, max_steps=150_000):
-    """Particles and springs exactly as the JSON says (clamped particles get mass 0),
-    the load as external particle forces, a little extra velocity damping to settle."""
+    """Particles and springs exactly as the JSON says (clamped particles get mass 0), its
+    volume terms as Newton tetrahedra with k_mu = 0, k_lambda = kv (Newton's Neo-Hookean
+    energy is then kv/2 V0 (J - 1)^2, the exported term's kv/2 (V - V0)^2 / V0), the load
+    as external particle forces, a little extra velocity damping to settle."""
     b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
     q = np.asarray(data["particle_q"], float)
     for i, (x, m) in enumerate(zip(q, data["particle_mass"])):
         b.add_particle(wp.vec3(*x), wp.vec3(0.0, 0.0, 0.0), 0.0 if fixed[i] else float(m), radius=0.0)
     for (i, j), ke, kd in zip(data["spring_indices"], data["spring_stiffness"], data["spring_damping"]):
         b.add_spring(int(i), int(j), float(ke), float(kd), 0.0)
+    for (i, j, k, l), kv in zip(data.get("volume_indices", []), data.get("volume_stiffness", [])):
+        b.add_tetrahedron(int(i), int(j), int(k), int(l), k_mu=0.0, k_lambda=float(kv), k_damp=0.0)
     model = b.finalize(device="cpu")
     solver = newton.solvers.SolverSemiImplicit(model)
     s0, s1, control = model.state(), model.state(), model.control()
@@ -94,3 +98,23 @@ def test_newton_reproduces_springbench_statics_and_the_fem(tmp_path, which):
         u_fem = fem.displacement(net.points, name)
         e_nt, e_sb = (np.sqrt(np.mean(np.sum((u - u_fem) ** 2, axis=1))) for u in (u_nt, u_sb))
         assert abs(e_nt - e_sb) <= 0.01 * np.abs(u_fem).max(), name           # and is as good against the FEM
+
+
+@pytest.mark.slow
+def test_newton_runs_springs_plus_volume_as_tetrahedra(tmp_path):
+    """springs + one volume term per tetrahedron (calibrate --model springs+volume): in
+    Newton the springs plus tetrahedra with k_mu = 0, k_lambda = kv reach springbench's own
+    linear statics of the same model (the volume term changes the answer, so a Newton
+    model that ignored it would fail)."""
+    from harness.models.volume import with_volume
+    mesh = meshes.cylinder(tmp_path)
+    data, case, net = calibrated(tmp_path, mesh, "--model", "springs+volume")
+    assert len(data["volume_indices"]) == len(read_mesh(mesh).cells["tetra"]) and min(data["volume_stiffness"]) > 0
+    vnet = with_volume(net, "element", np.asarray(data["volume_stiffness"]), np.asarray(data["volume_indices"]))
+    res, plain = statics.solve(vnet, case), statics.solve(net, case)
+    load_ = next(l for l in case.loads if l.name == "tip")
+    fixed = statics.fixed_mask(net.points, case, load_).any(axis=1)
+    u_sb = res.displacement("tip")
+    assert np.abs(plain.displacement("tip") - u_sb).max() > 0.05 * np.abs(u_sb).max()     # the term matters
+    u_nt, steps = newton_equilibrium(data, fixed, statics.force_vector(net, case, load_))
+    assert np.sqrt(np.sum((u_nt - u_sb) ** 2) / np.sum(u_sb ** 2)) <= 1e-3, steps

@@ -336,7 +336,7 @@ def test_read_minimal_foreign_vtu(tmp_path):
         read_vtu(tmp_path / "g.vtu")
 
 
-# -- several optimisers on one case, and the frequency term (issue 4) -------------------
+# -- several optimisers on one case, and the frequency term -------------------
 
 class ModalRef(ClosedFormRef):
     """ClosedFormRef plus target natural frequencies: ``scale`` times the initial
@@ -532,7 +532,7 @@ def _plain_gradient_descent(problem, n_evals):
 
 @pytest.mark.slow
 def test_plain_gradient_descent_is_slow_on_separate_constants_only(tmp_path, monkeypatch):
-    """README claim (issue 4: why the paper's gradient descent did badly): with the same
+    """README claim(why the paper's gradient descent did badly): with the same
     number of G evaluations as L-BFGS-B over log k, steepest descent on k stays well above
     it when all 72 constants of the 5 x 5 grid are free (an ill-conditioned problem), and
     matches it with the 3 grouped constants."""

@@ -1,4 +1,4 @@
-"""The log-k prior of the gradient fits (issue 12): its value and gradient against a sum
+"""The log-k prior of the gradient fits: its value and gradient against a sum
 and central differences written here (per spring and grouped), the whole objective's
 gradient with it, and recoverability: on a problem with known constants the prior's fit
 tends to the truth as its weight goes to 0 (the minimiser moves by O(weight))."""

@@ -190,7 +190,7 @@ def test_graded_solution_round_trips_through_the_cache(tmp_path):
 
 @pytest.mark.parametrize("size,nu", [((10.0, 1.0, 1.0), 0.49), ((2.0, 1.0, 0.5), 0.28), ((1000.0, 200.0, 200.0), 0.45)])
 def test_thin_soft_and_millimetre_boxes_solve_at_default_settings(tmp_path, size, nu):
-    """The inputs that made 'auto' give up (issue 11): a 10:1 bar at nu = 0.49, a
+    """The inputs that made 'auto' give up: a 10:1 bar at nu = 0.49, a
     2 x 1 x 0.5 box, a bar in millimetres with E in Pa. Every load solves to a small
     residual; the stretch meets its closed form, the shears are finite."""
     E = 1e5 if size[0] > 100 else 210.0

@@ -1,4 +1,4 @@
-"""The console summary of a run is a headline table, one line per case (issue 13)."""
+"""The console summary of a run is a headline table, one line per case."""
 
 import math
 

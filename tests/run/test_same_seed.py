@@ -1,4 +1,4 @@
-"""Same seed, same table (issue 13): two runs of a small suite, the first on a cold
+"""Same seed, same table: two runs of a small suite, the first on a cold
 reference cache, the second warm and with two workers, write the same summary.csv in
 every column that is not a timing (nor ``cached``, which says which run was cold)."""
 

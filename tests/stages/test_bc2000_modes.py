@@ -1,4 +1,4 @@
-"""Held-out natural frequencies of the B&C fem stage (issue 12): the linearised models'
+"""Held-out natural frequencies of the B&C fem stage: the linearised models'
 first modes against the FEM's, with the held-out sag's clamp, checked against a dense
 generalised eigen-solve written here (masses and constraints by hand)."""
 

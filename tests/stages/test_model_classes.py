@@ -1,4 +1,4 @@
-"""``[model] classes`` in the sms stage (issue #15): the classes share nodes, masses, loads
+"""``[model] classes`` in the sms stage: the classes share nodes, masses, loads
 and reference; the ``springs`` class gives the rows of the same case without classes, bit
 for bit; ``k_spread`` is max/median of the fitted row's stored constants; ``dt_stable`` of
 the P1 row is 2 / omega_max of a dense eigen-solve written here (scikit-fem's P1 K on the

@@ -24,7 +24,7 @@ FIGURES = [
     "harness.report.figures.anisotropy",   # polar plot of effective stiffness (anisotropy.csv)
     "harness.report.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
     "harness.report.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
-    "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class, issue 15 (summary.csv)
+    "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class (summary.csv)
 ]
 
 

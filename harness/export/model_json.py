@@ -1,0 +1,66 @@
+"""MODEL.vtu and MODEL.json of a calibrated network (``springbench calibrate``): the
+network for ParaView and, for explicit engines, its particles, springs, damping, stable
+step and any volume or kn term, in SI units (the keys: harness/commands/calibrate.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+
+def export(net, out: Path, meta: dict | None = None) -> dict:
+    """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
+    import numpy as np
+    from harness.export.engine import spring_damping, stable_step
+    from harness.export.vtu import write_vtu
+    meta = dict(meta or {})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_vtu(out, net)
+    L = net.rest_lengths
+    q = np.hstack([net.points, np.zeros((net.n_nodes, 3 - net.dim))]) if net.dim < 3 else net.points
+    k = np.asarray(net.k, float)
+    zeta = float(meta.pop("damping_ratio", 0.0))
+    positive = bool(np.all(np.asarray(net.masses) > 0))
+    kd = spring_damping(net.springs, k, net.masses, zeta) if positive else np.full(len(k), np.nan)
+    vol = getattr(net, "volume", None)
+    step = stable_step(net.points, net.springs, k, net.masses, kd, volume=vol) if positive else {}
+    data = {
+        "units": {"length": "m", "mass": "kg", "time": "s", "spring_stiffness": "N/m (f = k (l - l0))",
+                  "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
+                  "spring_stiffness_times_length": "N (k l0; per-length convention, f = k l0 (l - l0) / l0)",
+                  "E": "Pa", "density": "kg/m^3", "omega_max": "rad/s",
+                  "G_norm": "RMS displacement error / RMS FEM displacement (weighted, fitted loads)",
+                  "note": "2-D models: unit thickness" if net.dim == 2 else ""},
+        "dim": net.dim,
+        "particle_q": q.tolist(),
+        "particle_mass": np.asarray(net.masses, float).tolist(),
+        "spring_indices": np.asarray(net.springs, int).tolist(),
+        "spring_rest_length": L.tolist(),
+        "spring_stiffness": k.tolist(),
+        "spring_damping": kd.tolist(),
+        "damping_ratio": zeta,
+        "spring_stiffness_times_length": (k * L).tolist(),
+        **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
+        **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
+    }
+    if vol is not None and hasattr(vol, "nodes"):      # springs + kn (harness/models/kn.py)
+        data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
+                             kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
+                                          "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
+                                          "d = dim; each spring's tension T = sum over its two ends a of "
+                                          "kn_a V_a d^2 s_a / (N_a l0), f_i = T (x_j - x_i)/l, f_j = -f_i")
+        data.update(kn_nodes=vol.nodes.tolist(), kn_node_volume=vol.V.tolist(),
+                    kn_spring_count=vol.N.astype(int).tolist(), kn_stiffness=vol.kv.tolist(),
+                    kn_shared=bool(vol.shared))
+    elif vol is not None:     # springs + volume (harness/models/volume.py)
+        data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
+                             volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
+                                              "f = -kv (V - V0) / V0 dV/dx")
+        data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
+                    volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
+    data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
+    if not positive:
+        data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"
+    out.with_suffix(".json").write_text(json.dumps(data))
+    return data

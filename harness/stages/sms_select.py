@@ -1,0 +1,92 @@
+"""The sms stage's validated fit (``[optimizer.select]``): the capacity of the fit chosen by
+leave-one-family-out validation on the fitted loads (harness/optimize/select.py), the
+rule when nothing beats it, the final fit from several starts.
+
+The row is the stage's optimised row with, besides, ``choice`` (the rule, or the
+candidate chosen), ``val_<model>`` (each model's validation score), ``val_families``,
+``n_starts`` and ``G_heldout_mean_spread`` (max - min of G_heldout_mean over the final
+fit's starts: differences inside it are ties, not rankings). The validation table is
+``validation.csv`` (one row per model, one column per left-out family and the score).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pandas as pd
+
+from harness.errors import CaseError
+
+FREE_FAMILIES = ("constant", "bending", "torsion", "shear-gradient", "gravity")
+
+
+def families(case, names) -> list[str]:
+    """Each fitted load's family: the linear sets' own, 'clamped' for every other load."""
+    from harness.case.loadsets import family
+    from harness.optimize.select import CLAMPED
+    by_name = {l.name: l for l in case.loads}
+    return [family(by_name[n]) or CLAMPED for n in names]
+
+
+def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write):
+    """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
+    stage gives the other model classes its plain fit)."""
+    from harness.mechanics import statics
+    from harness.models.springs import spring_directions
+    from harness.models.volume import initial_kv, with_volume
+    from harness.optimize import select as sel
+    from harness.optimize.problem import FitProblem
+    from harness.scoring import node_weights
+    from harness.stages.sms_measures import heldout_columns, per_load_columns
+    spec = run_["select"]
+    if run_["method"] != "lbfgs":
+        raise CaseError(f"[optimizer.select] fits by lbfgs, not {run_['method']}",
+                        file=str(case.path) if case.path else None, field="optimizer.method", fix="method = 'lbfgs'")
+    t0 = time.perf_counter()
+    kv0 = initial_kv(case.material, case.dim)
+    vnet = with_volume(base, "element", kv0)
+    _, free, forces = statics.all_load_arrays(base, case)
+    fit_names = [names[i] for i in fit]
+    wdof = np.repeat(node_weights(base.classes, weights), base.dim)
+    problem = FitProblem.from_network(base.points, base.springs, np.concatenate([base.k, vnet.volume.kv]),
+                                      free[fit], forces[fit], u_ref[fit].reshape(len(fit), -1), wdof, fit_names,
+                                      extra_columns=vnet.volume.columns(base.points))
+    d, L = spring_directions(base.points, base.springs)
+    cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
+    fams = families(case, fit_names)
+    budget = run_["options"].get("max_seconds")         # split: validation and the final fit's starts alike
+    n_folds = len(sel.make_folds(fams)) if len(set(fams)) > 1 else 0
+    val = {**run_["options"], "maxiter": int(spec["maxiter"]),
+           "max_seconds": None if budget is None else budget / max(len(cands) * n_folds, 1)}
+    final = {**run_["options"], "max_seconds": None if budget is None else budget / int(spec["starts"])}
+    s = sel.select(problem, base.n_springs, fams, kv0, sel.direction_groups(d, L), cands, val, final,
+                   int(spec["starts"]), int(base.info["seed"]), ctx.status)
+    seconds = time.perf_counter() - t0
+    pd.DataFrame(list(s.table)).to_csv(ctx.file("validation.csv"), index=False)
+
+    def network(k):
+        net = base.with_k(k[:base.n_springs], stiffness=f"{base.info['stiffness']}+select")
+        return with_volume(net, "element", k[base.n_springs:]) if s.volume else net
+    scored = []
+    for k in s.starts:
+        net = network(k)
+        scored.append((net, *evaluate(net)))
+    net, res, sc, sh = scored[0]
+    stiff = base.info["stiffness"]
+    tag = f"{stiff}-select"
+    write(net, res, tag)
+    means = [heldout_columns(h).get("G_heldout_mean", math.nan) for _, _, _, h in scored]
+    row = {**common, "model": f"{label}[{stiff}]", "stiffness": stiff, "optimizer": "lbfgs", "seconds": seconds,
+           "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
+           "G_s_initial": first.get("G_s_initial", math.nan), "G_final": sc.G, "G_norm_final": sc.G_norm,
+           "G_s_final": sc.G_s, **per_load_columns(sc, sh), **heldout_columns(sh, first), "objective": "G",
+           "choice": s.choice, "val_families": " ".join(s.families), "n_starts": len(s.starts),
+           "G_heldout_mean_spread": float(np.nanmax(means) - np.nanmin(means)) if sh is not None else math.nan,
+           "n_params": int(len(s.k)), "_tag": tag, "opt_prior": next(
+               (c.prior for c in cands if c.name == s.choice), math.nan)}
+    row.update({f"val_{r['model']}": r["score"] for r in s.table})
+    if s.volume:
+        row.update(volume="element", n_volumes=net.volume.n_elements)
+    return row, net, None

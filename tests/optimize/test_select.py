@@ -1,0 +1,96 @@
+"""The capacity chosen by leave-one-family-out validation (harness/optimize/select.py):
+its pieces against hand computations, and whole selections on networks whose truth is
+known (the rule exact: the rule is kept; the rule off by a factor: a fit wins)."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize_scalar
+
+from harness.optimize import select as sel
+from harness.optimize.problem import FitProblem
+from harness.optimize.synthetic import basic_loads, grid_network, solve_network
+
+FAMILIES = ["constant", "constant", "bending", "bending", "clamped", "clamped"]
+
+
+def problem(truth_factor, seed=0):
+    """A 2-D grid network under six loads (the basic four and two more clamped ones),
+    reference = the same network with constants k0 * truth_factor (per spring)."""
+    p, springs, _ = grid_network((6, 4))
+    names, free, forces = basic_loads(p)
+    rng = np.random.default_rng(seed)
+    extra_free = np.ones((2, p.size), bool)
+    left = np.flatnonzero(p[:, 0] == 0)
+    right = np.flatnonzero(p[:, 0] == p[:, 0].max())
+    extra_forces = np.zeros((2, p.size))
+    for j, (held, pulled) in enumerate(((left, right), (right, left))):
+        extra_free[j, 2 * held], extra_free[j, 2 * held + 1] = False, False
+        extra_forces[j, 2 * pulled + 1] = rng.uniform(0.5, 1.5, len(pulled))
+    free, forces = np.vstack([free, extra_free]), np.vstack([forces, extra_forces])
+    names = list(names) + ["clamp-left", "clamp-right"]
+    L = np.linalg.norm(p[springs[:, 1]] - p[springs[:, 0]], axis=1)
+    k0 = 1.0 / L
+    u = solve_network(p, springs, k0 * truth_factor, free, forces)
+    return FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names), p, springs
+
+
+def test_balanced_sums_the_loads_own_normalised_g():
+    prob, _, _ = problem(np.full(1, 1.7))
+    k = prob.k0 * 1.3
+    own = []
+    for b, u in zip(prob.blocks, prob.solve(k)):
+        own.append(np.sum(b.w * (b.u_ref - u) ** 2) / np.sum(b.w * b.u_ref ** 2))   # no constrained part here
+    assert sel.balanced(prob).G2(k) == pytest.approx(sum(own), rel=1e-12)
+    assert np.allclose(sel.per_load(prob, k) ** 2, own, rtol=1e-12)
+
+
+def test_best_scale_is_the_minimum_of_g_over_a_global_factor():
+    rng = np.random.default_rng(1)
+    prob, _, _ = problem(2.5 * np.exp(0.3 * rng.standard_normal(1)))
+    s = sel.best_scale(prob)
+    num = minimize_scalar(lambda t: prob.G2(prob.k0 * t), bounds=(0.1, 10), method="bounded",
+                          options={"xatol": 1e-10})
+    assert s == pytest.approx(num.x, rel=1e-6)
+    exact, _, _ = problem(np.full(1, 2.5))
+    assert sel.best_scale(exact) == pytest.approx(2.5, rel=1e-10)          # u scales as 1 / s exactly
+
+
+def test_folds_leave_families_out_and_clamped_states_one_at_a_time():
+    folds = sel.make_folds(FAMILIES, ["a", "b", "c", "d", "e", "f"])
+    assert folds == {"constant": [0, 1], "bending": [2, 3], "clamped:e": [4], "clamped:f": [5]}
+
+
+def test_choose_keeps_the_rule_unless_a_candidate_beats_it_under_the_clamps():
+    folds = ("constant", "clamped:e")
+    row = lambda name, a, b: {"model": name, "constant": a, "clamped:e": b, **sel.summary(  # noqa: E731
+        {"constant": a, "clamped:e": b}, folds)}
+    rule = row("rule", 0.40, 0.05)
+    free_only = row("free-only", 0.10, 0.08)         # far better without a clamp, worse with one: never
+    assert sel.choose([rule, free_only])["model"] == "rule"
+    both = row("both", 0.30, 0.04)
+    assert sel.choose([rule, free_only, both])["model"] == "both"
+    assert both["score"] == pytest.approx(0.5 * (0.30 + 0.04))
+    no_clamp = [{"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
+                {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))}]
+    assert sel.choose(no_clamp)["model"] == "c"
+
+
+CANDS = [c for c in sel.CANDIDATES if c.name in ("scale", "springs-prior1")]
+
+
+@pytest.mark.parametrize("factor,choice", [(1.0, "rule"), (2.0, "not rule")])
+def test_select_keeps_an_exact_rule_and_fits_a_wrong_one(factor, choice):
+    prob, p, springs = problem(np.full(1, factor))
+    groups = np.zeros(prob.n_springs, int)
+    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60}, {"maxiter": 200}, 3)
+    assert [r["model"] for r in s.table] == ["rule", "scale", "springs-prior1"]
+    if choice == "rule":
+        assert s.choice == "rule" and np.array_equal(s.k, prob.k0)
+        assert s.table[0]["score"] <= 1e-12
+    else:
+        assert s.choice != "rule" and len(s.starts) == 3
+        assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9)        # u twice the truth: 100 % off
+        assert sel.per_load(prob, s.k).max() < 1e-3                        # the factor is recovered
+        assert all(math.isfinite(r["score"]) for r in s.table)
