@@ -11,7 +11,10 @@ it, the way a bar, a beam or an organ held at one end is.
 - ``bridge``: the sag's body force with both ends clamped;
 - training states (fitted, never held out): ``train-tip``, ``train-tip2`` and
   ``train-torsion``, the tip loads and the twist with the ends swapped (the high end
-  clamped, the low end loaded).
+  clamped, the low end loaded); and per other axis b with faces at its ends (``sides``)
+  ``train-<b>-<c>``: the low end face along b clamped, the high one sheared along c (each
+  axis but b; tau = 2 G eps), so the clamps a fit is validated on are not all at one
+  place. The side faces are end faces along b in a band of SIDE_BAND of the extent.
 
 The ends are end faces (harness.io.end_faces): the boundary facets within a band of 5 %
 of the length at each end of the axis whose outward normals point along it (cos >= 0.5;
@@ -40,6 +43,7 @@ from harness.case.moments import EXPONENTS, mesh_moments
 from harness.io.meshfile import boundary_facets
 
 PEAK_STRAIN = 1e-3
+SIDE_BAND = 0.25     # of the side faces, a fraction of the body's extent across (a curved side: a wide cap)
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,7 @@ class EndLoads:
     dim: int = 3
     clamp_info: str = ""           # where the clamp is: centroid, normal, node count
     cos: float = COS               # of the end faces: outward normals n . e >= cos
+    sides: tuple = ()              # (axis b, band, cos) of the side clamps' end faces
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -77,7 +82,12 @@ class EndLoads:
         """Clamped training states (the family 'clamped'): the tip loads and the twist with
         the ends swapped (the high end held, the low end loaded), so a fit sees how a clamp
         behaves without seeing a held-out load."""
-        return ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
+        ends = ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
+        return ends + tuple(name for name, *_ in self._side_states())
+
+    def _side_states(self):
+        """(name, side axis b, traction axis c) of the side states."""
+        return [(f"train-{'xyz'[b]}-{'xyz'[c]}", b, c) for b, *_ in self.sides for c in range(self.dim) if c != b]
 
     @property
     def second(self) -> int:
@@ -109,6 +119,7 @@ class EndLoads:
         if self.dim == 3:
             out["tip2"] = bend(t) / (s.tip_area * s.L)
             out["torsion"] = 2 * eps * E / (2 * (1 + nu)) / s.tip_radius
+        out["side"] = 2 * eps * E / (2 * (1 + nu))       # a shear traction tau = 2 G eps: eps_bc ~ eps
         return out
 
     def toml(self, magnitudes: dict) -> tuple[str, str]:
@@ -137,14 +148,23 @@ class EndLoads:
         if dim == 3:
             cases += load("train-tip2") + hold("tip") + back(vector=vec(self.second, m["tip2"]))
             cases += load("train-torsion") + hold("tip") + back(twist=vec(self.axis, -m["torsion"]))
-        return f"clamp = {part(self.clamp, 0)}\ntip = {part(self.tip, 1)}\n", cases
+        parts = f"clamp = {part(self.clamp, 0)}\ntip = {part(self.tip, 1)}\n"
+        for b, band, cos in self.sides:
+            for side in (0, 1):
+                parts += (f'side-{"xyz"[b]}{side} = {{ end = "{"xyz"[b]}{side}", band = {float(band)!r}, '
+                          f'cos = {float(cos)!r} }}\n')
+        for name, b, c in self._side_states():
+            cases += (load(name) + hold(f"side-{'xyz'[b]}0") + trac(vector=vec(c, m["side"])).replace(
+                'part = "tip"', f'part = "side-{"xyz"[b]}1"'))
+        return parts, cases
 
 
 def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None,
-              groups=None) -> EndLoads:
+              groups=None, sides: bool = True) -> EndLoads:
     """The end loads of a mesh (points (n, dim), meshio-style cells): its end faces along
     the longest axis, or the mesh groups named ``clamp`` / ``tip`` (``groups``:
-    harness.io.meshfile.Mesh.groups)."""
+    harness.io.meshfile.Mesh.groups); with ``sides`` the side states' faces too (the end
+    faces of the other axes that hold, module doc)."""
     points = np.asarray(points, float)
     dim = points.shape[1]
     lo, hi = points.min(axis=0), points.max(axis=0)
@@ -173,10 +193,27 @@ def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | No
             tf = group_facets(tip) if tip is not None else end_facets(points, facets, inside, axis, 1, band, cos)
             if holds(cf) and any(len(f) for f in tf):
                 return EndLoads(axis, across, clamp, tip, band, _section(points, cells, axis, tf), dim,
-                                _where(points, facets, inside, cf), cos)
+                                _where(points, facets, inside, cf), cos,
+                                _sides(points, facets, inside, axis, holds) if sides else ())
         band *= 1.5
     raise SpringbenchError("no end of the mesh's longest axis can be clamped (no face there whose normals point "
                            "along the axis)", field="mesh", fix="name a face group with --clamp, or --heldout none")
+
+
+def _sides(points, facets, inside, axis: int, holds) -> tuple:
+    """((b, band, cos), ...) per axis b but ``axis``: the narrowest band (from SIDE_BAND,
+    x 1.5 at a time) in which b's low end face holds and its high one has a facet (none: no
+    entry)."""
+    def first(b):
+        band = SIDE_BAND
+        while band <= 0.5:
+            for cos in (COS, 0.0):
+                lo, hi = (end_facets(points, facets, inside, b, side, band, cos) for side in (0, 1))
+                if holds(lo) and any(len(f) for f in hi):
+                    return b, band, cos
+            band *= 1.5
+        return None
+    return tuple(f for f in (first(b) for b in range(points.shape[1]) if b != axis) if f is not None)
 
 
 def _where(points, facets, inside, fac) -> str:

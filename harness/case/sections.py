@@ -14,7 +14,8 @@ _COMPARE = tuple(m for m in OPTIMIZER_METHODS if m != "none")
 # [optimizer.select] candidates: the model capacities a validated fit chooses among;
 # harness/optimize/select.py's CANDIDATES must hold exactly these names (it checks at import)
 SELECT_CANDIDATES = ("scale", "groups", "springs-prior10", "springs-prior1", "springs-prior0.1",
-                     "scale+volume", "springs-prior1+volume", "springs-prior0.1+volume")
+                     "scale+volume", "springs-prior1+volume", "springs-prior0.1+volume",
+                     "features", "features+volume")
 SELECT_DEFAULT = ("springs-prior1", "springs-prior0.1", "springs-prior1+volume", "springs-prior0.1+volume")
 
 # [model] kind = "sms": spring/mass systems of Deussen 1995 (harness/models/sms.py)

@@ -2,16 +2,19 @@
 "Training, validation, held-out").
 
 A fit has choices the data must make: how many constants it may move (one scale for all
-springs, a few groups, every spring with a pull towards the rule, springs plus a volume
-term per element) and how hard the pull is. Leave-one-family-out validation makes them:
+springs, a few groups, a few coefficients of the springs' geometric features, every
+spring with a pull towards the rule, springs plus a volume term per element) and how hard
+the pull is. Leave-one-family-out validation makes them:
 every candidate is fitted without one fold of the training states and scored on it; the
 folds are the free-traction families (constant, bending, torsion, shear-gradient,
-gravity: harness/case/linear_states.py) and each clamped training state on its own. A
-candidate's score is the mean of its free-traction folds' and its clamped folds' means;
+gravity: harness/case/linear_states.py) and the clamped training states together. A
+candidate's score is the mean of its free-traction folds' mean and its clamped fold's;
 the rule itself (no fit) is scored the same way. A candidate is chosen only if it beats
 the rule's score (by more than MARGIN) and is no worse than the rule on the clamped
-folds (:func:`choose`): free-traction states alone cannot reveal that a fit got worse
-under a clamp, as springs at high nu do. Else the rule is the choice. The chosen
+fold (:func:`choose`): free-traction states alone cannot reveal that a fit got worse
+under a clamp, as springs at high nu do, and the clamped states hold faces at several
+places (harness/case/default_loads.py: the ends and the sides), since a fit that is
+better under one clamp can be worse under another. Else the rule is the choice. The chosen
 candidate is refitted on all training states from several starts. The held-out loads
 never choose anything: they are not in the problem given here.
 
@@ -40,8 +43,10 @@ from harness.optimize.problem import FitProblem
 class Candidate:
     """One model capacity: ``groups`` 'one' (one scale for all springs), 'direction'
     (one per spring direction class and length tercile), 'spring' (per spring, pulled
-    towards the rule with weight ``prior``); ``volume``: the element volume columns join,
-    with one shared kv (its own parameter)."""
+    towards the rule with weight ``prior``), 'features' (log k = log k_rule + c0 + sum_j
+    c_j phi_j, the learned rule's geometric features phi_j of each spring: a handful of
+    coefficients fitted on this mesh); ``volume``: the element volume columns join, with
+    one shared kv (its own parameter)."""
     name: str
     groups: str
     prior: float = 0.0
@@ -53,7 +58,8 @@ CANDIDATES = (Candidate("scale", "one"), Candidate("groups", "direction"),
               Candidate("springs-prior1", "spring", 1.0), Candidate("springs-prior0.1", "spring", 0.1),
               Candidate("scale+volume", "one", volume=True),
               Candidate("springs-prior1+volume", "spring", 1.0, volume=True),
-              Candidate("springs-prior0.1+volume", "spring", 0.1, volume=True))
+              Candidate("springs-prior0.1+volume", "spring", 0.1, volume=True),
+              Candidate("features", "features"), Candidate("features+volume", "features", volume=True))
 
 
 if tuple(c.name for c in CANDIDATES) != SELECT_CANDIDATES:
@@ -122,7 +128,7 @@ def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, gr
     k0 = problem.k0[:e].copy()
     if cand.volume:
         k0[n_springs:] = kv0
-    g = {"one": np.zeros(n_springs, int), "direction": groups, "spring": None}[cand.groups]
+    g = {"one": np.zeros(n_springs, int), "direction": groups, "spring": None, "features": None}[cand.groups]
     if cand.volume:
         top = (int(g.max()) + 1) if g is not None else n_springs
         springs = g if g is not None else np.arange(n_springs)
@@ -130,15 +136,64 @@ def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, gr
     return FitProblem(blocks, k0, g, problem.bounds, None, problem.coords)
 
 
-def fit(problem: FitProblem, cand: Candidate, options: dict, x0=None) -> np.ndarray:
+def fit(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> np.ndarray:
     """The candidate's constants fitted on ``problem`` (L-BFGS-B, adjoint gradient), from
     the rule (x0 None) or from log(k/k0) = x0 per parameter."""
-    return fit_result(problem, cand, options, x0)["k"]
+    return fit_result(problem, cand, options, x0, features)["k"]
 
 
-def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None) -> dict:
-    """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit."""
+def basis(problem: FitProblem, n_springs: int, features: np.ndarray) -> np.ndarray:
+    """(columns, p) M of a 'features' candidate: log(k/k0) = M x over its columns; x =
+    (c0, c_1..c_q[, the volume columns' common log factor])."""
+    e = problem.n_springs
+    M = np.zeros((e, 1 + features.shape[1] + (e > n_springs)))
+    M[:n_springs, 0] = 1.0
+    M[:n_springs, 1:1 + features.shape[1]] = features
+    if e > n_springs:
+        M[n_springs:, -1] = 1.0
+    return M
+
+
+def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> dict:
+    """k = k0 exp(M x) with x fitted by L-BFGS-B on G^2 / G0^2 (adjoint gradient; a few
+    parameters: no prior), from x0 (None: 0, the rule); ``options``: maxiter (default
+    200) and max_seconds (the best point seen when it is reached)."""
+    import time
+
+    from scipy.optimize import minimize
+
+    from harness.optimize.problem import value_and_grad
+    G0sq = value_and_grad(problem, problem.k0, grad=False)[0]
+    budget = options.get("max_seconds")
+    deadline = None if budget is None else time.perf_counter() + float(budget)
+    best = [math.inf, None]
+
+    class Stop(Exception):
+        pass
+
+    def phi(x):
+        if deadline is not None and best[1] is not None and time.perf_counter() > deadline:
+            raise Stop
+        k = problem.k0 * np.exp(np.clip(M @ x, -30, 30))
+        G2, g = value_and_grad(problem, k)
+        if G2 / G0sq < best[0]:
+            best[:] = [G2 / G0sq, np.array(x)]
+        return G2 / G0sq, M.T @ (g * k) / G0sq
+    x = np.zeros(M.shape[1]) if x0 is None else np.asarray(x0, float)
+    try:
+        minimize(phi, x, jac=True, method="L-BFGS-B", bounds=[(-7.0, 7.0)] * len(x),
+                 options={"maxiter": int(options.get("maxiter") or 200)})
+    except Stop:
+        pass
+    return {"k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)), "info": {"phi": float(best[0])}}
+
+
+def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> dict:
+    """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit
+    ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features)."""
     from harness.optimize.gradient import lbfgs
+    if cand.groups == "features":
+        return features_fit(problem, basis(problem, len(features), features), options, x0)
     opts = dict(options)
     if cand.groups == "spring":
         opts["prior"] = cand.prior
@@ -157,11 +212,16 @@ def best_scale(problem: FitProblem) -> float:
     return den / num if num > 0 else 1.0
 
 
-def starts(problem: FitProblem, n: int, seed: int = 0) -> list:
-    """Start points log(k/k0) per parameter: the rule itself, its best global scale, then
-    perturbations of the rule by factors exp(0.2 N(0, 1)) (seeded)."""
-    npar = problem.n_params
-    out = [np.zeros(npar), np.full(npar, math.log(best_scale(problem)))]
+def starts(problem: FitProblem, n: int, seed: int = 0, M: np.ndarray | None = None) -> list:
+    """Start points (log(k/k0) per parameter; with a 'features' basis M its coefficients):
+    the rule itself, its best global scale, then perturbations of the rule by factors
+    exp(0.2 N(0, 1)) (seeded; M: of each coefficient)."""
+    if M is None:
+        npar, scale = problem.n_params, np.ones(problem.n_params)
+    else:
+        npar = M.shape[1]
+        scale = np.linalg.lstsq(M, np.ones(len(M)), rcond=None)[0]      # M scale = 1: the global factor
+    out = [np.zeros(npar), math.log(best_scale(problem)) * scale]
     rng = np.random.default_rng(seed)
     out += [0.2 * rng.standard_normal(npar) for _ in range(max(n - 2, 0))]
     return out[:n]
@@ -179,25 +239,27 @@ def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
 
 def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np.ndarray,
            candidates=CANDIDATES, options: dict | None = None, final: dict | None = None, n_starts: int = 3,
-           seed: int = 0, status=lambda msg: None) -> Selection:
+           seed: int = 0, status=lambda msg: None, features: np.ndarray | None = None) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume elements] (k0 the rule's
     springs, anything positive for the elements); ``families`` (one per block);
     ``options``: the validation fits' L-BFGS-B options, ``final``: the final fit's, from
-    ``n_starts`` starts (seeded by ``seed``)."""
+    ``n_starts`` starts (seeded by ``seed``); ``features`` (springs, q): the learned rule's
+    geometric features of the springs, which 'features' candidates need (None: skipped)."""
     options = dict(options or {"maxiter": 40})
     problem = balanced(problem)
-    folds = make_folds(families, [b.name for b in problem.blocks])
+    folds = make_folds(families)
     rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups)
     scores = per_load(rule, rule.k0)
     table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
+    candidates = [c for c in candidates if c.groups != "features" or features is not None]
     for cand in candidates:
         cp = columns(problem, n_springs, cand, kv0, groups)
         row = {"model": cand.name}
         for f, out in folds.items() if len(folds) > 1 else ():
             status(f"validation: {cand.name} without {f}")
             rest = [i for i in range(len(families)) if i not in set(out)]
-            k = fit(subset(cp, rest), cand, options)
+            k = fit(subset(cp, rest), cand, options, features=features)
             row[f] = float(per_load(subset(cp, out), k).mean())
         table.append(row)
     names = tuple(folds)
@@ -209,9 +271,10 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     cand = next(c for c in candidates if c.name == best["model"])
     cp = columns(problem, n_springs, cand, kv0, groups)
     fits = []
-    for i, x0 in enumerate(starts(cp, n_starts, seed)):
+    M = basis(cp, n_springs, features) if cand.groups == "features" else None
+    for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
         status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
-        r = fit_result(cp, cand, dict(final or options), x0)
+        r = fit_result(cp, cand, dict(final or options), x0, features)
         fits.append((r["info"]["phi"], r["k"]))          # the training objective, prior included
     fits.sort(key=lambda t: t[0])
     return Selection(cand.name, tuple(k for _, k in fits), tuple(table), tuple(names))
@@ -220,25 +283,41 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
 CLAMPED = "clamped"     # the family of the training states that hold a face (not the linear sets')
 
 
-def make_folds(families, names=None) -> dict:
-    """{fold name: block indices left out}: each free-traction family as one fold, each
-    clamped state as its own ('clamped:<load name>'), so a clamped fold's fit still sees
-    the other clamped states, as the final fit sees them all."""
+def make_folds(families) -> dict:
+    """{fold name: block indices left out}: each free-traction family as one fold, and
+    the clamped states together as one ('clamped'): its fit has seen no clamp at all, as
+    the final fit has never seen the clamps users put elsewhere (with one clamped state
+    out at a time the fit would learn the shared clamp from the others)."""
     folds: dict = {}
     for i, f in enumerate(families):
-        folds.setdefault(f"{CLAMPED}:{names[i] if names else i}" if f == CLAMPED else f, []).append(i)
+        folds.setdefault(f, []).append(i)
     return folds
 
 
 def summary(row: dict, folds) -> dict:
     """A table row's ``free`` (mean over the free-traction families' folds), ``clamped``
-    (mean over the clamped states' folds) and ``score`` (their mean, or the one there)."""
+    (the clamped fold's) and ``score`` (their mean, or the one there)."""
     if not all(f in row for f in folds):
         return {"free": math.nan, "clamped": math.nan, "score": math.nan}
     free = [row[f] for f in folds if not f.startswith(CLAMPED)]
     held = [row[f] for f in folds if f.startswith(CLAMPED)]
     parts = [float(np.mean(v)) if v else math.nan for v in (free, held)]
     return {"free": parts[0], "clamped": parts[1], "score": float(np.nanmean(parts))}
+
+
+def training_score(values, families) -> float:
+    """The score :func:`summary` gives a model that is not fitted (a rule): ``values`` each
+    training state's own normalised G, ``families`` theirs; the mean over free-traction
+    families of their mean, averaged with the mean over the clamped states. The stage
+    starts its fits from the rule this ranks first: the pooled G would let the states with
+    the largest displacements (the clamped ones) decide alone."""
+    free: dict = {}
+    held = []
+    for v, f in zip(values, families):
+        (held.append(v) if f == CLAMPED else free.setdefault(f, []).append(v))
+    parts = [float(np.mean([np.mean(v) for v in free.values()])) if free else math.nan,
+             float(np.mean(held)) if held else math.nan]
+    return float(np.nanmean(parts)) if any(math.isfinite(p) for p in parts) else math.nan
 
 
 MARGIN = 0.01      # a candidate beats the rule by more than 1 % of its score (and 1e-9): less is a tie

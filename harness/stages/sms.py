@@ -32,7 +32,7 @@ import pandas as pd
 from harness.case.loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
 from harness.stages.sms_measures import (engine_columns, error_modes, fem_frequencies, freq_error, heldout_columns,
-                                         model_frequencies, per_load_columns)
+                                         model_frequencies, fit_score, per_load_columns, rank)
 
 NAME = "sms"
 
@@ -197,7 +197,8 @@ def _run(case, ctx, spec) -> list[dict]:
                "seconds": build_seconds + time.perf_counter() - t1, **(sms_mt.constants(net) if mt else {})}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
-                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **per_load_columns(sc, sh), **heldout_columns(sh))
+                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **per_load_columns(sc, sh), **fit_score(case, sc),
+                       **heldout_columns(sh))
         else:
             row.update(G_initial=math.nan, G_final=math.nan, G_norm_initial=math.nan, G_norm_final=math.nan,
                        note=f"no reference ({why})")
@@ -208,7 +209,7 @@ def _run(case, ctx, spec) -> list[dict]:
     opt_nets, traces = {}, []
     start_row, start = rows[0], base
     if opt.get("start", "first") == "best" and u_ref is not None:
-        start_row = min(rows, key=lambda r: r["G_norm_final"])
+        start_row = min(rows, key=rank)
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
@@ -412,7 +413,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
            "G_s_initial": first.get("G_s_initial", math.nan),
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **per_load_columns(sc, sh), **heldout_columns(sh, first),
+           **per_load_columns(sc, sh), **fit_score(case, sc), **heldout_columns(sh, first),
            "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
            "_tag": tag}
     if freq_kw:

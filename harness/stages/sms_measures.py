@@ -1,5 +1,5 @@
 """Measures of the sms stage's models (harness/stages/sms.py): the per-load and held-out G
-columns, natural frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``),
+columns, the fitted loads' balanced score, natural frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``),
 and what an engine needs to know (``k_spread``, ``dt_stable``)."""
 
 from __future__ import annotations
@@ -18,6 +18,29 @@ def per_load_columns(sc, sh) -> dict:
     if sh is not None:
         out.update({f"G_{k}": v for k, v in sh.per_load.items()})
     return out
+
+
+def families(case, names) -> list[str]:
+    """Each fitted load's family: the linear sets' own, 'clamped' for every other load."""
+    from harness.case.loadsets import family
+    from harness.optimize.select import CLAMPED
+    by_name = {l.name: l for l in case.loads}
+    return [family(by_name[n]) or CLAMPED for n in names]
+
+
+def fit_score(case, sc) -> dict:
+    """``G_fit_score``: the validation's score of the row's model on the fitted loads as
+    they are (harness/optimize/select.py ``training_score``: each load's own normalised G,
+    families and clamped states weighted alike); 'best' starts the fits from its lowest."""
+    from harness.optimize.select import training_score
+    names = list(case.fit_loads)
+    return {"G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names))}
+
+
+def rank(row) -> tuple:
+    """Rows ranked as 'best' ranks rules: by ``G_fit_score``, then by the pooled G."""
+    score = row.get("G_fit_score", math.nan)
+    return (score if math.isfinite(score) else math.inf, row.get("G_norm_final", math.inf))
 
 
 def heldout_columns(sh, first=None) -> dict:

@@ -19,27 +19,19 @@ import pandas as pd
 
 from harness.errors import CaseError
 
-FREE_FAMILIES = ("constant", "bending", "torsion", "shear-gradient", "gravity")
-
-
-def families(case, names) -> list[str]:
-    """Each fitted load's family: the linear sets' own, 'clamped' for every other load."""
-    from harness.case.loadsets import family
-    from harness.optimize.select import CLAMPED
-    by_name = {l.name: l for l in case.loads}
-    return [family(by_name[n]) or CLAMPED for n in names]
-
+VALIDATION_BUDGET = 2.0     # the validation fits together: at most this many times the fit's budget
 
 def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write):
     """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
     stage gives the other model classes its plain fit)."""
     from harness.mechanics import statics
+    from harness.models.learned_rule import geometry
     from harness.models.springs import spring_directions
     from harness.models.volume import initial_kv, with_volume
     from harness.optimize import select as sel
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
-    from harness.stages.sms_measures import heldout_columns, per_load_columns
+    from harness.stages.sms_measures import families, fit_score, heldout_columns, per_load_columns
     spec = run_["select"]
     if run_["method"] != "lbfgs":
         raise CaseError(f"[optimizer.select] fits by lbfgs, not {run_['method']}",
@@ -56,13 +48,17 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     d, L = spring_directions(base.points, base.springs)
     cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
     fams = families(case, fit_names)
-    budget = run_["options"].get("max_seconds")         # split: validation and the final fit's starts alike
-    n_folds = len(sel.make_folds(fams)) if len(set(fams)) > 1 else 0
+    budget = run_["options"].get("max_seconds")
+    # validation fits stop at maxiter (so on small meshes the choice does not depend on the
+    # machine's speed) or at their share of VALIDATION_BUDGET x the budget (large meshes)
+    n_fits = len(cands) * len(sel.make_folds(fams))
     val = {**run_["options"], "maxiter": int(spec["maxiter"]),
-           "max_seconds": None if budget is None else budget / max(len(cands) * n_folds, 1)}
+           "max_seconds": None if budget is None else VALIDATION_BUDGET * budget / max(n_fits, 1)}
     final = {**run_["options"], "max_seconds": None if budget is None else budget / int(spec["starts"])}
     s = sel.select(problem, base.n_springs, fams, kv0, sel.direction_groups(d, L), cands, val, final,
-                   int(spec["starts"]), int(base.info["seed"]), ctx.status)
+                   int(spec["starts"]), int(base.info["seed"]), ctx.status,
+                   features=geometry(base.points, base.springs, base.cells)
+                   if any(c.groups == "features" for c in cands) else None)
     seconds = time.perf_counter() - t0
     pd.DataFrame(list(s.table)).to_csv(ctx.file("validation.csv"), index=False)
 
@@ -81,7 +77,8 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     row = {**common, "model": f"{label}[{stiff}]", "stiffness": stiff, "optimizer": "lbfgs", "seconds": seconds,
            "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
            "G_s_initial": first.get("G_s_initial", math.nan), "G_final": sc.G, "G_norm_final": sc.G_norm,
-           "G_s_final": sc.G_s, **per_load_columns(sc, sh), **heldout_columns(sh, first), "objective": "G",
+           "G_s_final": sc.G_s, **per_load_columns(sc, sh), **fit_score(case, sc), **heldout_columns(sh, first),
+           "objective": "G",
            "choice": s.choice, "val_families": " ".join(s.families), "n_starts": len(s.starts),
            "G_heldout_mean_spread": float(np.nanmax(means) - np.nanmin(means)) if sh is not None else math.nan,
            "n_params": int(len(s.k)), "_tag": tag, "opt_prior": next(

@@ -120,6 +120,38 @@ def test_the_springs_forces_are_the_fems_consistent_load(tmp_path, bodies, body)
                                                                   rel=1e-12)
 
 
+def test_side_states_clamp_and_shear_the_faces_across_the_axis(tmp_path, bodies):
+    """The tube (axis x): per other axis b the side state holds b's low end face (its
+    facets facing -b on the outer wall, by the analytic normal) and shears the high one
+    along each other axis with tau = 2 G eps = E / (1 + nu) 1e-3: the springs' resultant
+    is tau x that face's area, the FEM's the same to 1e-12."""
+    case, m, ends = calibrate_case(tmp_path, bodies["tube"])
+    assert [b for b, *_ in ends.sides] == [1, 2]
+    sides = ("train-y-x", "train-y-z", "train-z-x", "train-z-y")
+    assert ends.training[-4:] == sides and set(sides) <= set(case.fit_loads)
+    from harness.models.sms import build_network
+    net = build_network(case)
+    facets, inside = boundary_facets(m.cells, m.points)
+    by = {l.name: l for l in case.loads}
+    tau = E / (1 + NU) * 1e-3
+    for name in sides:
+        b, c = "xyz".index(name[6]), "xyz".index(name[8])
+        band, cos = next((bd, cs) for a, bd, cs in ends.sides if a == b)
+        low, high = (end_facets(m.points, facets, inside, b, side, band, cos)[0] for side in (0, 1))
+        for face, sign in ((low, -1), (high, 1)):
+            centre = m.points[face].mean(axis=1)
+            r = np.linalg.norm(centre[:, 1:], axis=1)
+            assert len(face) and np.all(sign * centre[:, b] / r > 0.5) and np.all(r > 0.9 * RO)
+        held = np.flatnonzero(statics.fixed_mask(net.points, case, by[name]).all(axis=1))
+        assert np.array_equal(held, np.unique(low))
+        x = m.points[high]
+        area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
+        f = statics.force_vector(net, case, by[name]).sum(axis=0)
+        want = np.zeros(3)
+        want[c] = tau * area
+        np.testing.assert_allclose(f, want, rtol=1e-12, atol=1e-12 * tau * area)
+
+
 def test_the_clamp_holds_the_same_nodes_in_both(tmp_path, bodies):
     """The FEM fixes the P2 dofs of the clamp's facets (vertices and mid-edges), the springs
     the vertices: the same nodes, the face and nothing behind it."""

@@ -179,7 +179,8 @@ def test_default_end_loads_twist_the_tip_about_the_long_axis(tmp_path, cyls):
     assert parts.startswith('clamp = { end = "x0", band = 0.05, cos = 0.5 }\ntip = { end = "x1"')
     g = end_loads(m.points, m.cells, "clamp", "tip", m.groups)
     parts, _ = g.toml(mags)
-    assert parts == 'clamp = { group = "clamp" }\ntip = { group = "tip" }\n'
+    assert parts.startswith('clamp = { group = "clamp" }\ntip = { group = "tip" }\nside-y0 = { end = "y0"')
+    assert [line.split(" =")[0] for line in parts.splitlines()[2:]] == ["side-y0", "side-y1", "side-z0", "side-z1"]
     assert "group 'tip'" in g.describe() and "group 'clamp' clamped" in g.describe()
     flat = read_mesh(meshes.holed_plate(tmp_path))
     assert end_loads(flat.points, flat.cells).names == ("sag", "tip", "bridge")        # no torsion in 2-D

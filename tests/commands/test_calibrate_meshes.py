@@ -80,6 +80,8 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
                                      ["sag", "tip", "bridge"])
     fitted = data["loads_fitted"]       # the linear states (linear3d / 2d), then the clamped training states
     clamped = ["train-tip", "train-tip2", "train-torsion"] if dim == 3 else ["train-tip"]
+    clamped += [f"train-{b}-{c}" for b in "xyz"[:dim] for c in "xyz"[:dim] if b != c and f"train-{b}-{c}" in fitted]
+    assert len(clamped) == (7 if dim == 3 else 2)      # the end states, then the sides
     assert len(fitted) == len(VOIGT[dim]) + len(gradient_states(dim)) + len(clamped)
     assert fitted[-len(clamped):] == clamped
     per = data["G_heldout_loads"]
@@ -87,7 +89,10 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
     assert min(per.values()) <= data["G_norm_heldout"] <= max(per.values())     # pooled: a weighted mean of them
     assert np.isfinite(data["G_norm_heldout"]) and np.isfinite(data["G_norm"])
     if method == "lbfgs":       # one refinement: the FEM's estimate of its own error (none without)
-        assert 0 < data["reference_error"] < 0.1
+        assert 0 < data["reference_error_heldout"] < 0.1 and 0 < data["reference_error_fitted"] < 1
+        assert data["reference_error"] == max(data["reference_error_heldout"], data["reference_error_fitted"])
+        assert f"FEM error <= {100 * data['reference_error_heldout']:.3g} % on held-out loads" in printed \
+            or data["reference_error_heldout"] >= data["reference_error_fitted"]
     assert data["E"] == 1e5 and data["nu"] == nu and data["density"] == RHO
     # damping: 2 zeta sqrt(k mu) per spring; the stable step from a dense eigen-solve
     s = np.asarray(data["spring_indices"])

@@ -57,15 +57,14 @@ def test_best_scale_is_the_minimum_of_g_over_a_global_factor():
     assert sel.best_scale(exact) == pytest.approx(2.5, rel=1e-10)          # u scales as 1 / s exactly
 
 
-def test_folds_leave_families_out_and_clamped_states_one_at_a_time():
-    folds = sel.make_folds(FAMILIES, ["a", "b", "c", "d", "e", "f"])
-    assert folds == {"constant": [0, 1], "bending": [2, 3], "clamped:e": [4], "clamped:f": [5]}
+def test_folds_leave_families_out_and_the_clamped_states_together():
+    assert sel.make_folds(FAMILIES) == {"constant": [0, 1], "bending": [2, 3], "clamped": [4, 5]}
 
 
 def test_choose_keeps_the_rule_unless_a_candidate_beats_it_under_the_clamps():
-    folds = ("constant", "clamped:e")
-    row = lambda name, a, b: {"model": name, "constant": a, "clamped:e": b, **sel.summary(  # noqa: E731
-        {"constant": a, "clamped:e": b}, folds)}
+    folds = ("constant", "clamped")
+    row = lambda name, a, b: {"model": name, "constant": a, "clamped": b, **sel.summary(  # noqa: E731
+        {"constant": a, "clamped": b}, folds)}
     rule = row("rule", 0.40, 0.05)
     free_only = row("free-only", 0.10, 0.08)         # far better without a clamp, worse with one: never
     assert sel.choose([rule, free_only])["model"] == "rule"
@@ -94,3 +93,53 @@ def test_select_keeps_an_exact_rule_and_fits_a_wrong_one(factor, choice):
         assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9)        # u twice the truth: 100 % off
         assert sel.per_load(prob, s.k).max() < 1e-3                        # the factor is recovered
         assert all(math.isfinite(r["score"]) for r in s.table)
+
+
+def test_training_score_weighs_families_and_the_clamped_states_alike():
+    """By hand: free families constant (0.1, 0.3) and bending (0.5), clamped (0.2, 0.4):
+    free = mean(0.2, 0.5) = 0.35, clamped = 0.3, score = 0.325; the pooled mean would be 0.3."""
+    fams = ["constant", "constant", "bending", sel.CLAMPED, sel.CLAMPED]
+    assert sel.training_score([0.1, 0.3, 0.5, 0.2, 0.4], fams) == pytest.approx(0.325, rel=1e-14)
+    assert sel.training_score([0.1, 0.3], ["constant", "bending"]) == pytest.approx(0.2, rel=1e-14)
+    assert sel.training_score([0.2, 0.4], [sel.CLAMPED] * 2) == pytest.approx(0.3, rel=1e-14)
+    # the rule's row of a validation table scores the same
+    row = {"model": "rule", "constant": 0.2, "bending": 0.5, "clamped": 0.3}
+    assert sel.summary(row, ("constant", "bending", "clamped"))["score"] == pytest.approx(0.325, rel=1e-14)
+
+
+def test_best_ranks_rules_by_the_balanced_score_not_the_pooled_g():
+    from harness.stages.sms_measures import rank
+    rows = [{"stiffness": "uniform", "G_norm_final": 0.11, "G_fit_score": 0.29},      # pooled best, balanced worse
+            {"stiffness": "learned", "G_norm_final": 0.15, "G_fit_score": 0.21},
+            {"stiffness": "mt", "G_norm_final": 0.05, "G_fit_score": math.nan}]
+    assert min(rows, key=rank)["stiffness"] == "learned"
+    assert min(rows[2:], key=rank)["stiffness"] == "mt"          # without a score: the pooled G
+
+
+def test_features_fit_recovers_planted_coefficients():
+    """Truth k = k0 exp(c0 + X c) for features X of the springs: the 'features' fit of a
+    rule k0 finds c0 and c (G to ~0), from the rule and from the best-scale start."""
+    p, springs, _ = grid_network((6, 4))
+    L = np.linalg.norm(p[springs[:, 1]] - p[springs[:, 0]], axis=1)
+    d = (p[springs[:, 1]] - p[springs[:, 0]]) / L[:, None]
+    X = np.column_stack([np.abs(d[:, 0]), p[springs].mean(axis=1)[:, 1] / p[:, 1].max()])   # direction, height
+    planted = np.array([0.4, -0.5, 0.3])
+    names, free, forces = basic_loads(p)
+    k0 = 1.0 / L
+    u = solve_network(p, springs, k0 * np.exp(planted[0] + X @ planted[1:]), free, forces)
+    prob = sel.balanced(FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names))
+    cand = next(c for c in sel.CANDIDATES if c.name == "features")
+    M = sel.basis(prob, prob.n_springs, X)
+    for x0 in sel.starts(prob, 2, 0, M):
+        k = sel.fit(prob, cand, {"maxiter": 300}, x0, features=X)
+        assert sel.per_load(prob, k).max() < 1e-5
+        np.testing.assert_allclose(np.log(k / k0), planted[0] + X @ planted[1:], atol=1e-4)
+    assert sel.starts(prob, 2, 0, M)[1] == pytest.approx([math.log(sel.best_scale(prob)), 0, 0], abs=1e-12)
+
+
+def test_features_candidates_need_features_and_are_skipped_without():
+    prob, _, _ = problem(np.full(1, 2.0))
+    groups = np.zeros(prob.n_springs, int)
+    cands = [c for c in sel.CANDIDATES if c.name in ("scale", "features")]
+    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, cands, {"maxiter": 30}, {"maxiter": 60}, 2)
+    assert [r["model"] for r in s.table] == ["rule", "scale"]
