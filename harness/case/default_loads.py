@@ -160,11 +160,11 @@ class EndLoads:
 
 
 def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None,
-              groups=None, sides: bool = True) -> EndLoads:
+              groups=None) -> EndLoads:
     """The end loads of a mesh (points (n, dim), meshio-style cells): its end faces along
     the longest axis, or the mesh groups named ``clamp`` / ``tip`` (``groups``:
-    harness.io.meshfile.Mesh.groups); with ``sides`` the side states' faces too (the end
-    faces of the other axes that hold, module doc)."""
+    harness.io.meshfile.Mesh.groups), and the side states' faces (the end faces of the
+    other axes that hold, module doc)."""
     points = np.asarray(points, float)
     dim = points.shape[1]
     lo, hi = points.min(axis=0), points.max(axis=0)
@@ -186,32 +186,35 @@ def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | No
     if clamp is not None and not holds(group_facets(clamp)):
         raise SpringbenchError(f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
                                f"needed)", field="--clamp", fix="name a face group of the mesh")
-    band = BAND
-    while band <= 0.5:
-        for cos in (COS, 0.0):     # a pointed end has no face: then the facets that face that way at all
-            cf = group_facets(clamp) if clamp is not None else end_facets(points, facets, inside, axis, 0, band, cos)
-            tf = group_facets(tip) if tip is not None else end_facets(points, facets, inside, axis, 1, band, cos)
-            if holds(cf) and any(len(f) for f in tf):
-                return EndLoads(axis, across, clamp, tip, band, _section(points, cells, axis, tf), dim,
-                                _where(points, facets, inside, cf), cos,
-                                _sides(points, facets, inside, axis, holds) if sides else ())
-        band *= 1.5
+    for band, cos in _bands(BAND):
+        cf = group_facets(clamp) if clamp is not None else end_facets(points, facets, inside, axis, 0, band, cos)
+        tf = group_facets(tip) if tip is not None else end_facets(points, facets, inside, axis, 1, band, cos)
+        if holds(cf) and any(len(f) for f in tf):
+            return EndLoads(axis, across, clamp, tip, band, _section(points, cells, axis, tf), dim,
+                            _where(points, facets, inside, cf), cos, _sides(points, facets, inside, axis, holds))
     raise SpringbenchError("no end of the mesh's longest axis can be clamped (no face there whose normals point "
                            "along the axis)", field="mesh", fix="name a face group with --clamp, or --heldout none")
 
 
+def _bands(start: float):
+    """(band, cos) to try, narrowest first: the band from ``start`` x 1.5 at a time up to
+    half the extent, each with the faces' cos and then 0 (a pointed end has no face: then
+    the facets that face that way at all)."""
+    band = start
+    while band <= 0.5:
+        yield band, COS
+        yield band, 0.0
+        band *= 1.5
+
+
 def _sides(points, facets, inside, axis: int, holds) -> tuple:
-    """((b, band, cos), ...) per axis b but ``axis``: the narrowest band (from SIDE_BAND,
-    x 1.5 at a time) in which b's low end face holds and its high one has a facet (none: no
-    entry)."""
+    """((b, band, cos), ...) per axis b but ``axis``: the first :func:`_bands` from
+    SIDE_BAND in which b's low end face holds and its high one has a facet (none: no entry)."""
     def first(b):
-        band = SIDE_BAND
-        while band <= 0.5:
-            for cos in (COS, 0.0):
-                lo, hi = (end_facets(points, facets, inside, b, side, band, cos) for side in (0, 1))
-                if holds(lo) and any(len(f) for f in hi):
-                    return b, band, cos
-            band *= 1.5
+        for band, cos in _bands(SIDE_BAND):
+            lo, hi = (end_facets(points, facets, inside, b, side, band, cos) for side in (0, 1))
+            if holds(lo) and any(len(f) for f in hi):
+                return b, band, cos
         return None
     return tuple(f for f in (first(b) for b in range(points.shape[1]) if b != axis) if f is not None)
 

@@ -299,25 +299,21 @@ def summary(row: dict, folds) -> dict:
     (the clamped fold's) and ``score`` (their mean, or the one there)."""
     if not all(f in row for f in folds):
         return {"free": math.nan, "clamped": math.nan, "score": math.nan}
-    free = [row[f] for f in folds if not f.startswith(CLAMPED)]
-    held = [row[f] for f in folds if f.startswith(CLAMPED)]
+    free = [row[f] for f in folds if f != CLAMPED]
+    held = [row[f] for f in folds if f == CLAMPED]
     parts = [float(np.mean(v)) if v else math.nan for v in (free, held)]
     return {"free": parts[0], "clamped": parts[1], "score": float(np.nanmean(parts))}
 
 
 def training_score(values, families) -> float:
     """The score :func:`summary` gives a model that is not fitted (a rule): ``values`` each
-    training state's own normalised G, ``families`` theirs; the mean over free-traction
-    families of their mean, averaged with the mean over the clamped states. The stage
-    starts its fits from the rule this ranks first: the pooled G would let the states with
-    the largest displacements (the clamped ones) decide alone."""
-    free: dict = {}
-    held = []
-    for v, f in zip(values, families):
-        (held.append(v) if f == CLAMPED else free.setdefault(f, []).append(v))
-    parts = [float(np.mean([np.mean(v) for v in free.values()])) if free else math.nan,
-             float(np.mean(held)) if held else math.nan]
-    return float(np.nanmean(parts)) if any(math.isfinite(p) for p in parts) else math.nan
+    training state's own normalised G, ``families`` theirs, averaged per fold first. The
+    stage starts its fits from the rule this ranks first: the pooled G would let the
+    states with the largest displacements (the clamped ones) decide alone."""
+    if not len(values):
+        return math.nan
+    folds = make_folds(families)
+    return summary({f: float(np.mean([values[i] for i in idx])) for f, idx in folds.items()}, folds)["score"]
 
 
 MARGIN = 0.01      # a candidate beats the rule by more than 1 % of its score (and 1e-9): less is a tie

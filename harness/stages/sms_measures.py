@@ -1,6 +1,7 @@
 """Measures of the sms stage's models (harness/stages/sms.py): the per-load and held-out G
-columns, the fitted loads' balanced score, natural frequencies against the FEM's (``frequencies.csv``, ``freq_error_*``),
-and what an engine needs to know (``k_spread``, ``dt_stable``)."""
+columns, the fitted loads' balanced score, natural frequencies against the FEM's
+(``frequencies.csv``, ``freq_error_*``), and what an engine needs to know (``k_spread``,
+``dt_stable``)."""
 
 from __future__ import annotations
 

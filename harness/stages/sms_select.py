@@ -21,6 +21,7 @@ from harness.errors import CaseError
 
 VALIDATION_BUDGET = 2.0     # the validation fits together: at most this many times the fit's budget
 
+
 def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write):
     """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
     stage gives the other model classes its plain fit)."""
