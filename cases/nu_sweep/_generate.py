@@ -16,8 +16,10 @@ Three bodies, each at nu in NUS; every file differs from its siblings only in ``
 The protocol is calibrate's (harness/commands/calibrate.py, harness/case/default_loads.py):
 
 - fitted: the linear stress states (``linear3d``: 24, 2-D ``linear2d``: 9) of stress
-  1e-3 E, and the clamped training states with the other end held (``train-tip``,
-  ``train-tip2``, ``train-torsion``: x1 clamped, x0 loaded);
+  1e-3 E, and the clamped training states: the ends swapped (``train-tip``,
+  ``train-tip2``, ``train-torsion``: x1 clamped, x0 loaded) and the sides (``train-<b>-<c>``:
+  the face b0 held, b1 sheared along c; a box's faces y0, y1, z0, z1, the cylinder's
+  caps within a quarter of its diameter);
 - held out, never fitted and never used to choose anything: ``sag`` (gravity), ``tip``
   and ``tip2`` (end tractions along the two transverse axes), ``torsion`` (a twist about
   x), all with x0 clamped, and ``bridge`` (the sag with both ends clamped); 2-D: sag, tip,
@@ -94,8 +96,9 @@ def _cylinder():
 
 
 def _beam(dim: int, size):
-    """EndLoads of a box (rectangle) of ``size`` along x: its section in closed form."""
-    from harness.case.default_loads import EndLoads, Section
+    """EndLoads of a box (rectangle) of ``size`` along x: its section in closed form; its
+    side states hold the faces y0 (and z0) and shear y1 (z1)."""
+    from harness.case.default_loads import COS, SIDE_BAND, EndLoads, Section
     L, h = size[0], size[1:]
     A = 1.0
     for s in h:
@@ -103,39 +106,31 @@ def _beam(dim: int, size):
     I = (0.0,) + tuple(A * s ** 2 / 12 for s in h)     # int (x_b - xbar_b)^2 dA over the section
     c = tuple(s / 2 for s in size)
     radius = (sum(s ** 2 for s in h) ** 0.5) / 2 if dim == 3 else float("nan")
-    return EndLoads(0, 1, None, None, 0.05, Section(L, A, I, c, A, radius), dim)
+    return EndLoads(0, 1, None, None, 0.05, Section(L, A, I, c, A, radius), dim,
+                    sides=tuple((b, SIDE_BAND, COS) for b in range(1, dim)))
 
 
 def _num(x: float) -> float:
     return float(f"{x:.4g}")
 
 
-def loads(dim: int, ends, E: float, nu: float, density: float, clamp: str, tip: str) -> str:
-    """The held-out and clamped training loads (default_loads' names and signs), clamped
-    and loaded on the parts ``clamp`` (the x0 end) and ``tip`` (the x1 end)."""
-    m = {k: _num(v) for k, v in ends.magnitudes(E, nu, density, PEAK_STRAIN).items()}
+BOX_FACES = {"clamp": "x0", "tip": "x1", "side-y0": "y0", "side-y1": "y1", "side-z0": "z0", "side-z1": "z1"}
 
-    def vec(axis, value):
-        v = [0.0] * dim
-        v[axis] = value
-        return "[" + ", ".join(repr(x) for x in v) + "]"
-    hold = lambda p: f'[[loads.case.constraint]]\npart = "{p}"\ncomponents = "all"\n'          # noqa: E731
-    push = lambda p, key, v: f'[[loads.case.traction]]\npart = "{p}"\n{key} = {v}\n'           # noqa: E731
-    case = lambda n: f'\n[[loads.case]]\nname = "{n}"\n'                                       # noqa: E731
-    a, b, t = ends.axis, ends.across, ends.second
-    out = case("sag") + f"gravity = {vec(b, -m['sag'])}\n" + hold(clamp)
-    out += case("tip") + hold(clamp) + push(tip, "vector", vec(b, -m["tip"]))
-    if dim == 3:
-        out += case("tip2") + hold(clamp) + push(tip, "vector", vec(t, -m["tip2"]))
-        out += case("torsion") + hold(clamp) + push(tip, "twist", vec(a, m["torsion"]))
-    out += case("bridge") + f"gravity = {vec(b, -m['bridge'])}\n" + hold(clamp) + hold(tip)
-    out += case("train-tip") + hold(tip) + push(clamp, "vector", vec(b, m["tip"]))
-    if dim == 3:
-        out += case("train-tip2") + hold(tip) + push(clamp, "vector", vec(t, m["tip2"]))
-        out += case("train-torsion") + hold(tip) + push(clamp, "twist", vec(a, -m["torsion"]))
+
+def loads(ends, E: float, nu: float, density: float, box: bool) -> tuple[str, str]:
+    """([body.parts] lines, the held-out and clamped training loads): calibrate's own
+    (``EndLoads.toml``); a box's parts are its faces x0, x1, y0, ... (no parts lines)."""
+    m = {k: _num(v) for k, v in ends.magnitudes(E, nu, density, PEAK_STRAIN).items()}
+    parts, cases = ends.toml(m)
+    cases = cases.replace("[[loads.case]]\n", "\n[[loads.case]]\n")
+    if box:
+        parts = ""
+        for name, face in BOX_FACES.items():
+            cases = cases.replace(f'part = "{name}"', f'part = "{face}"')
     names = ", ".join(f'"{n}"' for n in ends.names)
-    return (f"heldout = [{names}]     # never fitted, never chosen on: G_heldout, G_heldout_<load>\n"
-            f"# peak strain ~{PEAK_STRAIN:g} (beam theory); training states train-*: x1 clamped, x0 loaded\n" + out)
+    return parts, (f"heldout = [{names}]     # never fitted, never chosen on: G_heldout, G_heldout_<load>\n"
+                   f"# peak strain ~{PEAK_STRAIN:g} (beam theory); training states train-*: the x1 end held, "
+                   "x0 loaded; train-<b>-<c>: the b0 face held, b1 sheared along c\n" + cases)
 
 
 FIT = """
@@ -157,21 +152,20 @@ options = { maxiter = 400, max_seconds = 3600.0 }
 def _bodies() -> dict:
     box, plate = (2.0, 1.0, 1.0), (2.0, 1.0)
     return {
-        "box": dict(dim=3, E=1000.0, density=1.0, ends=lambda: _beam(3, box), parts=("x0", "x1"),
+        "box": dict(dim=3, E=1000.0, density=1.0, ends=lambda: _beam(3, box), lattice=True,
                     description="3-D box lattice 2 x 1 x 1, 5 x 3 x 3 grid with edge, face and body diagonals",
                     body=f'[body]\nshape = "box"\nsize = {list(box)}\n', magnitude=1.0,
                     reference=("[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 0     # one graded "
                                "level, no estimate (rows ref-coarse)\n\n[full.reference]\nmax_refine = 4\n"),
                     model='placement = "grid"\ngrid = [5, 3, 3]\nstructure = "edges+face+body"\nmasses = "voronoi"\n'),
-        "cylinder": dict(dim=3, E=1e5, density=1000.0, ends=lambda: _cylinder()[0], parts=("clamp", "tip"),
+        "cylinder": dict(dim=3, E=1e5, density=1000.0, ends=lambda: _cylinder()[0], lattice=False,
                          description=("3-D gmsh tetrahedral cylinder r 0.1, length 0.5 ({} nodes, {} tets)"
                                       .format(*_cylinder()[1:]) if (FOLDER / "cylinder.vtu").exists() else ""),
-                         body=('[body]\nshape = "mesh"\nfile = "cylinder.vtu"\n\n[body.parts]\n'
-                               'clamp = { end = "x0" }\ntip = { end = "x1" }\n'), magnitude=100.0,
+                         body='[body]\nshape = "mesh"\nfile = "cylinder.vtu"\n', magnitude=100.0,
                          reference=("[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 0\n\n"
                                     "[full.reference]\nmax_refine = 3     # adaptive, up to 200k dofs\n"),
                          model='placement = "mesh"\nmasses = "lumped"\n'),
-        "plate": dict(dim=2, E=1000.0, density=1.0, ends=lambda: _beam(2, plate), parts=("x0", "x1"),
+        "plate": dict(dim=2, E=1000.0, density=1.0, ends=lambda: _beam(2, plate), lattice=True,
                       description="2-D plane-stress plate 2 x 1, 9 x 5 grid with both diagonals (structure1)",
                       body=f'[body]\nshape = "rectangle"\nsize = {list(plate)}\n', magnitude=1.0,
                       reference=("[reference]\nmodes = 4\n\n[quick.reference]\nmax_refine = 1\n\n"
@@ -187,12 +181,13 @@ def case_text(body: str, nu: float) -> str:
     b = BODIES[body]
     dim = b["dim"]
     plane = 'plane = "stress"\n' if dim == 2 else ""
+    parts, held = loads(b["ends"](), b["E"], nu, b["density"], box=b["lattice"])
     return (HEAD.format(name=f"{body}_nu{nu:.2f}", dim=dim, description=b["description"], nu=nu, body=body)
-            + "\n" + b["body"]
+            + "\n" + b["body"] + (f"\n[body.parts]\n{parts}" if parts else "")
             + f"\n[material]\nE = {b['E']!r}\ndensity = {b['density']!r}\n{plane}nu = {nu}\n"
             + f'\n[loads]\nset = "linear{dim}d"     # fitted: the linear stress states, stress 1e-3 E\n'
             + f"magnitude = {b['magnitude']!r}\n"
-            + loads(dim, b["ends"](), b["E"], nu, b["density"], *b["parts"])
+            + held
             + "\n" + b["reference"] + '\n[model]\nkind = "sms"\n' + b["model"]
             + f"stiffness = {STIFFNESS}     # every rule a row\n"
             + f"classes = {CLASSES}\n" + FIT)

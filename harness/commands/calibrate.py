@@ -108,7 +108,8 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out loads
               of each one's own G_norm), G_heldout_loads ({load: G_norm}), choice (rule, the validated
               capacity, or fit), validation (the table that chose: each model's score per left-out
-              family), G_heldout_mean_spread (over the final fit's starts), reference_error (FEM's own, relative; the worst of
+              family), validation_skipped (null when the validation ran, else the --budget in s
+              that lets it run), G_heldout_mean_spread (over the final fit's starts), reference_error (FEM's own, relative; the worst of
               reference_error_fitted and reference_error_heldout),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
@@ -461,6 +462,7 @@ def _report(args, rows, net, case):
                 reference_error_fitted=exported.get("ref_error_max", math.nan),
                 reference_error_heldout=exported.get("ref_error_heldout", math.nan),
                 choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
+                validation_skipped=exported.get("val_skipped", math.nan),
                 G_heldout_mean_spread=exported.get("G_heldout_mean_spread", math.nan),
                 mass_residual=exported.get("mass_residual", math.nan), masses=args.masses,
                 prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else

@@ -39,7 +39,7 @@ import numpy as np
 from scipy.linalg.blas import dsyrk as syrk
 
 from harness.optimize.incremental_kernels import _accept, _kernels, _propose  # noqa: F401  (tests call the plain ones)
-from harness.optimize.problem import FitProblem
+from harness.optimize.problem import FitProblem, per_matrix
 
 
 class _Set:
@@ -82,10 +82,7 @@ def sparse_factor(ls, k):
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
     K = ls.stiffness(k)
-    sym = ls.__dict__.get("_sa_symbolic")
-    if sym is None:
-        sym = Symbolic(K, ls.coords, leaf=SOLVE_LEAF)
-        ls._sa_symbolic = sym  # pattern-only, reused by every engine on this problem
+    sym = per_matrix(ls.B, "symbolic-sa", lambda: Symbolic(K, ls.coords, leaf=SOLVE_LEAF))   # every engine's
     fac = MultifrontalCholesky(K, sym, ls.name)
     if warm_up():   # compiled now, not in the timed loop; inverted diagonal blocks: every
         fac._flat(drop=True)   # solve with this factor takes the compiled path

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -202,23 +203,32 @@ class FitProblem:
 @dataclass
 class LoadSet:
     """Loads sharing one free-dof set: B, the block indices, and column-stacked F, Uref,
-    W (nfree, L); ``perm`` is the fill-reducing order (None: SuperLU's own)."""
+    W (nfree, L); ``perm`` is the fill-reducing order of SuperLU (None: its own). What
+    depends on B alone (the map k -> K, the orderings) is kept per matrix
+    (:func:`per_matrix`), so problems on subsets of the same blocks share it."""
     B: sp.csc_matrix
     index: list
     F: np.ndarray
     Uref: np.ndarray
     W: np.ndarray
     const: float
-    perm: np.ndarray | None
     name: str
     coords: np.ndarray | None = None
+    k0: np.ndarray | None = None        # the constants the ordering's pattern is built from
+
+    @property
+    def perm(self) -> np.ndarray | None:
+        """Nested dissection by the coordinates (above 2,000 dofs), else None."""
+        if self.coords is None or self.B.shape[0] <= 2000:
+            return None
+        from harness.linalg.sparse import nested_dissection
+        return per_matrix(self.B, "perm", lambda: nested_dissection(stiffness(self.B, self.k0), self.coords))
 
     def stiffness(self, k) -> sp.csc_matrix:
         """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
-        if self.__dict__.get("_kmap") is None:
-            self._kpattern, self._kmap = _stiffness_map(self.B)
-        K = self._kpattern.copy()
-        K.data = self._kmap @ np.asarray(k, float)
+        pattern, kmap = per_matrix(self.B, "kmap", lambda: _stiffness_map(self.B))
+        K = pattern.copy()
+        K.data = kmap @ np.asarray(k, float)
         return K
 
     def factor(self, k, kind: str = "auto"):
@@ -235,10 +245,26 @@ class LoadSet:
             # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
             from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             K = self.stiffness(k)
-            if self.__dict__.get("_sym") is None:
-                self._sym = Symbolic(K, self.coords)
-            return MultifrontalCholesky(K, self._sym, self.name)
+            return MultifrontalCholesky(K, per_matrix(self.B, "symbolic", lambda: Symbolic(K, self.coords)), self.name)
         return Factor(self.stiffness(k), self.perm, self.name)
+
+
+_PER_MATRIX: dict = {}      # id(B) -> (weakref to B, {name: value})
+
+
+def per_matrix(B, name: str, make):
+    """``make()`` once per matrix object B and name, kept while B lives: the stiffness
+    map, the orderings and the symbolic factorisation depend on B's pattern alone, and a
+    validated fit solves subsets of the same blocks dozens of times."""
+    entry = _PER_MATRIX.get(id(B))
+    if entry is None or entry[0]() is not B:
+        entry = (weakref.ref(B), {})
+        _PER_MATRIX[id(B)] = entry
+        weakref.finalize(B, _PER_MATRIX.pop, id(B), None)
+    store = entry[1]
+    if name not in store:
+        store[name] = make()
+    return store[name]
 
 
 DENSE_FACTOR_MAX = 400
@@ -275,7 +301,6 @@ def _key(B: sp.csc_matrix):
 
 
 def load_sets(problem: FitProblem) -> list[LoadSet]:
-    from harness.linalg.sparse import nested_dissection
     groups: dict = {}
     for i, b in enumerate(problem.blocks):
         key = id(b.B)
@@ -288,14 +313,10 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
         idx = sorted(idx)
         bl = [problem.blocks[i] for i in idx]
         B = bl[0].B.tocsc()
-        perm = None
-        if problem.coords is not None and problem.coords[idx[0]] is not None and B.shape[0] > 2000:
-            K = stiffness(B, problem.k0)
-            perm = nested_dissection(K, problem.coords[idx[0]])
         out.append(LoadSet(B, idx, np.stack([b.f for b in bl], 1), np.stack([b.u_ref for b in bl], 1),
-                           np.stack([b.w for b in bl], 1), float(sum(b.const for b in bl)), perm,
+                           np.stack([b.w for b in bl], 1), float(sum(b.const for b in bl)),
                            "+".join(b.name for b in bl),
-                           None if problem.coords is None else problem.coords[idx[0]]))
+                           None if problem.coords is None else problem.coords[idx[0]], problem.k0))
     return out
 
 

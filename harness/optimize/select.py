@@ -31,12 +31,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from harness.case.sections import SELECT_CANDIDATES
-from harness.optimize.problem import FitProblem
+from harness.optimize.problem import FitProblem, per_matrix
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,7 @@ class Selection:
     starts: tuple
     table: tuple
     families: tuple
+    skipped: float = 0.0    # > 0: the validation did not run; the seconds it would need
 
     @property
     def k(self) -> np.ndarray:
@@ -123,7 +125,7 @@ def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, gr
     sliced: dict = {}              # blocks with one B (the same free dofs) keep sharing one
     for b in problem.blocks:
         if id(b.B) not in sliced:
-            sliced[id(b.B)] = b.B[:, :e].tocsc() if e < b.B.shape[1] else b.B
+            sliced[id(b.B)] = per_matrix(b.B, f"columns:{e}", lambda: b.B[:, :e].tocsc()) if e < b.B.shape[1] else b.B
     blocks = tuple(dataclasses.replace(b, B=sliced[id(b.B)]) for b in problem.blocks)
     k0 = problem.k0[:e].copy()
     if cand.volume:
@@ -158,8 +160,6 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> 
     """k = k0 exp(M x) with x fitted by L-BFGS-B on G^2 / G0^2 (adjoint gradient; a few
     parameters: no prior), from x0 (None: 0, the rule); ``options``: maxiter (default
     200) and max_seconds (the best point seen when it is reached)."""
-    import time
-
     from scipy.optimize import minimize
 
     from harness.optimize.problem import value_and_grad
@@ -250,9 +250,16 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     problem = balanced(problem)
     folds = make_folds(families)
     rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups)
+    t0 = time.perf_counter()
     scores = per_load(rule, rule.k0)
+    step = STEP_COST * (time.perf_counter() - t0)
     table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
+    need = affordable(len(candidates) * len(folds), int(options.get("maxiter") or 40), step,
+                      options.get("max_seconds"))
+    if need:
+        table[0].update(summary(table[0], tuple(folds)))
+        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), tuple(folds), need)
     for cand in candidates:
         cp = columns(problem, n_springs, cand, kv0, groups)
         row = {"model": cand.name}
@@ -278,6 +285,20 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
         fits.append((r["info"]["phi"], r["k"]))          # the training objective, prior included
     fits.sort(key=lambda t: t[0])
     return Selection(cand.name, tuple(k for _, k in fits), tuple(table), tuple(names))
+
+
+STEP_COST = 1.5    # a fit's step (solve and adjoint) in solves of all training states
+MIN_STEPS = 0.5    # validation runs only if its fits can take this fraction of their maxiter
+
+
+def affordable(n_fits: int, maxiter: int, step: float, share) -> float:
+    """0 if ``n_fits`` validation fits of ``maxiter`` steps of ``step`` seconds each can
+    take MIN_STEPS of their steps within ``share`` seconds apiece (None: no cap); else
+    the seconds they would need: fits stopped after a few steps stay near the rule, and
+    their choice would be the rule by starvation, not by validation."""
+    if share is None or n_fits == 0 or share >= MIN_STEPS * maxiter * step:
+        return 0.0
+    return n_fits * MIN_STEPS * maxiter * step
 
 
 CLAMPED = "clamped"     # the family of the training states that hold a face (not the linear sets')

@@ -4,8 +4,11 @@ rule when nothing beats it, the final fit from several starts.
 
 The row is the stage's optimised row with, besides, ``choice`` (the rule, or the
 candidate chosen), ``val_<model>`` (each model's validation score), ``val_families``,
-``n_starts`` and ``G_heldout_mean_spread`` (max - min of G_heldout_mean over the final
-fit's starts: differences inside it are ties, not rankings). The validation table is
+``n_starts``, ``val_skipped`` (NaN when the validation ran; else the budget in seconds
+that would let it run: on large meshes its fits cannot take enough steps within
+VALIDATION_BUDGET x the budget, and the rule is the choice) and ``G_heldout_mean_spread``
+(max - min of G_heldout_mean over the final fit's starts: differences inside it are
+ties, not rankings). The validation table is
 ``validation.csv`` (one row per model, one column per left-out family and the score).
 """
 
@@ -81,6 +84,7 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
            "G_s_final": sc.G_s, **per_load_columns(sc, sh), **fit_score(case, sc), **heldout_columns(sh, first),
            "objective": "G",
            "choice": s.choice, "val_families": " ".join(s.families), "n_starts": len(s.starts),
+           "val_skipped": s.skipped / VALIDATION_BUDGET if s.skipped else math.nan,
            "G_heldout_mean_spread": float(np.nanmax(means) - np.nanmin(means)) if sh is not None else math.nan,
            "n_params": int(len(s.k)), "_tag": tag, "opt_prior": next(
                (c.prior for c in cands if c.name == s.choice), math.nan)}

@@ -1,6 +1,8 @@
 """FitProblem and the optimiser registry, against independent dense computations and
 recoverable problems (reference = displacements of known perturbed constants, best G = 0)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -274,3 +276,32 @@ def test_a_start_worse_than_k0_is_rejected():
         res = optimize(noisy, method, {"init": "equilibrium-gap", "maxiter": 30}, seed=0)
         assert res.info.get("init_rejected") is True
         assert res.G_final < 0.9 * res.G_initial
+
+
+def test_per_matrix_values_are_made_once_and_dropped_with_their_matrix():
+    import gc
+
+    import scipy.sparse as sp
+
+    from harness.optimize import problem as pr
+    B = sp.random(30, 40, 0.2, format="csc", random_state=0)
+    made = []
+    for _ in range(3):
+        assert pr.per_matrix(B, "x", lambda: made.append(1) or len(made)) == 1
+    assert made == [1] and id(B) in pr._PER_MATRIX
+    key = id(B)
+    del B
+    gc.collect()
+    assert key not in pr._PER_MATRIX
+
+
+def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
+    from harness.optimize import select as sel
+    prob, _ = recoverable_problem((34, 34))
+    k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
+    whole = prob.G2(k)
+    part = sel.subset(prob, [0])
+    again = FitProblem(tuple(dataclasses.replace(b, B=b.B.copy()) for b in part.blocks), part.k0, None,
+                       part.bounds, None, part.coords)                  # fresh matrices: nothing shared
+    assert part.load_sets()[0].stiffness(k).data.tobytes() == again.load_sets()[0].stiffness(k).data.tobytes()
+    assert part.G2(k) == again.G2(k) and 0 < part.G2(k) <= whole

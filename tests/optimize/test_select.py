@@ -143,3 +143,18 @@ def test_features_candidates_need_features_and_are_skipped_without():
     cands = [c for c in sel.CANDIDATES if c.name in ("scale", "features")]
     s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, cands, {"maxiter": 30}, {"maxiter": 60}, 2)
     assert [r["model"] for r in s.table] == ["rule", "scale"]
+
+
+def test_affordable_needs_half_the_steps_within_each_share():
+    assert sel.affordable(24, 30, 0.1, None) == 0.0                    # no cap: always
+    assert sel.affordable(24, 30, 0.1, 1.5) == 0.0                     # 15 steps of 0.1 s fit in 1.5 s
+    assert sel.affordable(24, 30, 0.1, 1.4) == pytest.approx(24 * 15 * 0.1)
+
+
+def test_select_skips_a_validation_it_cannot_afford_and_keeps_the_rule():
+    prob, _, _ = problem(np.full(1, 2.0))                  # a wrong rule: a validation would fit it
+    groups = np.zeros(prob.n_springs, int)
+    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60, "max_seconds": 1e-12},
+                   {"maxiter": 200}, 3)
+    assert s.choice == "rule" and s.skipped > 0 and [r["model"] for r in s.table] == ["rule"]
+    assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9) and np.array_equal(s.k, prob.k0)
