@@ -1,25 +1,23 @@
 """springbench bench calibrate: ``springbench calibrate`` end to end (mesh check, FEM
-reference, rules, fit, held-out scoring, export) on gmsh cylinders of about 1k, 10k and
-50k tetrahedra (E = 1e5 Pa, nu = 0.45, density 1000), each in its own process (so its
-peak memory is its own) with an empty reference cache. Needs gmsh (``pip install -e
-".[bench]"``); without it the benchmark writes one row saying so.
+reference, rules, validation, fit, held-out scoring, export) on gmsh cylinders of about
+1k, 10k, 50k and 200k tetrahedra (E = 1e5 Pa, nu = 0.45, density 1000), each beside the
+rule alone on the same mesh (``--method rule --rule vangelder``: the reference and the
+rules' statics, no fit), each run in its own process (so its peak memory is its own)
+with an empty reference cache. Needs gmsh (``pip install -e ".[bench]"``); without it
+the benchmark writes one row saying so.
 
-Targets: the 50k-tet mesh calibrated in <= 3 min with <= 4 GB, a 200k-tet mesh in <= 10 min with <= 12 GB (2 cores).
-Columns: mesh size, seconds, peak memory, G_norm before (the start rule, the best on the
-fitted loads) and after the fit, G_heldout of both, the reference's own error and the
-ratio of seconds to the 1k mesh's (the baseline run in the same benchmark). The
-reference's error: the 1k and 10k meshes are refined adaptively (up to 200k dofs); the
-50k mesh (214k P2 dofs) is too large to refine and is estimated from coarse levels of
-its body (reference/coarse.py: ~1/30 and ~1/10 of its dofs, its own system solved in
-their subspaces), so its row has an estimate too. The solve on the mesh itself (203k free
-P2 dofs, three held-out loads) takes the two-level method (reference/twolevel.py: 23 CG
-iterations, ~30 s CPU; pyamg's AMG took ~190 s CPU, ~6 min on the loaded machine). The
-50k calibration by stage, before (cProfile wall seconds of a run that got 56 % of a CPU:
-328 s CPU in all) -> after (cProfile CPU seconds: 142 s CPU in all, 162 s wall at 97 %):
-reference 365 -> 56 (the mesh's solve 276 -> 29, coarse levels 71 -> 18), the rules'
-statics (5 networks; the mesh surface read 44 times, the symbolic factorisation 10 times)
-125 -> 23, spring/mass build (Lloyd's per-element least squares batched) 12 -> 4, the fit
-63 -> 61 (its 60 s wall budget); peak memory 2.7 -> 1.9 GB.
+Targets: the 50k-tet mesh calibrated in <= 3 min with <= 4 GB, a 200k-tet mesh in <= 10
+min with <= 12 GB (2 cores).
+Columns: mesh size, seconds (the default calibration) and rule_seconds (the rule alone),
+peak memory (the largest run so far: sizes run in increasing order), the choice the
+validation made and validation_skipped (the --budget that would let it run, when it could
+not), the start rule's G_fit_score, the exported model's G_heldout_mean beside the best
+rule's in hindsight, the reference's own error on the fitted and held-out loads, and the
+ratios of seconds to the 1k mesh's and to the rule alone. The reference's error: meshes
+up to ~10k tets are refined adaptively (up to 200k dofs); larger ones are estimated from
+coarse levels of their body (reference/coarse.py, their own system solved in the coarse
+levels' subspaces), the solve on the mesh itself by the two-level method
+(reference/twolevel.py).
 """
 
 from __future__ import annotations

@@ -453,20 +453,18 @@ def _report(args, rows, net, case):
     from harness.export.model_json import export
     from harness.stages.sms_measures import rank
     exported = next(r for r in rows if r["exported"])
+    from_row = dict(G_norm="G_norm_final", G_norm_heldout="G_heldout", G_heldout_mean="G_heldout_mean",
+                    reference_error_fitted="ref_error_max", reference_error_heldout="ref_error_heldout",
+                    validation_skipped="val_skipped", G_heldout_mean_spread="G_heldout_mean_spread",
+                    mass_residual="mass_residual")       # JSON key: the exported row's column
     meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
-                G_norm=exported.get("G_norm_final", math.nan), G_norm_heldout=exported.get("G_heldout", math.nan),
-                G_heldout_mean=exported.get("G_heldout_mean", math.nan),
+                **{key: exported.get(col, math.nan) for key, col in from_row.items()},
                 G_heldout_loads={n: finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
                 reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
-                reference_error_fitted=exported.get("ref_error_max", math.nan),
-                reference_error_heldout=exported.get("ref_error_heldout", math.nan),
                 choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
-                validation_skipped=exported.get("val_skipped", math.nan),
-                G_heldout_mean_spread=exported.get("G_heldout_mean_spread", math.nan),
-                mass_residual=exported.get("mass_residual", math.nan), masses=args.masses,
-                prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
-                              prior_weight(args) if args.method == "lbfgs" else math.nan))
+                masses=args.masses, prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
+                                                  prior_weight(args) if args.method == "lbfgs" else math.nan))
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_fit_score", "G_heldout", "G_heldout_mean",
                         "G_heldout_mean_spread",
