@@ -46,16 +46,21 @@ def test_protocol_fits_linear_and_clamped_states_and_holds_out_the_end_loads(bod
     dim = case.dim
     held = ("sag", "tip", "tip2", "torsion", "bridge") if dim == 3 else ("sag", "tip", "bridge")
     train = ("train-tip", "train-tip2", "train-torsion") if dim == 3 else ("train-tip",)
+    sides = tuple(f"train-{b}-{c}" for b in "yz"[:dim - 1] for c in "xyz"[:dim] if c != b)    # calibrate's
     assert case.heldout == held
     families = {l.name: l.family for l in case.loads}
     linear = [n for n in case.fit_loads if families[n] is not None]
-    assert len(linear) == (24 if dim == 3 else 9) and set(case.fit_loads) - set(linear) == set(train)
+    assert len(linear) == (24 if dim == 3 else 9) and set(case.fit_loads) - set(linear) == set(train + sides)
     assert set(families[n] for n in linear) >= {"constant", "bending", "gravity", "shear-gradient"}
     by = {l.name: l for l in case.loads}
     for name in held + train:    # the held-out loads hold x0 (bridge: both ends), the training ones x1
         parts = {c.part for c in by[name].constraints}
         assert len(parts) == (2 if name == "bridge" else 1), name
     assert {c.part for c in by["sag"].constraints} != {c.part for c in by["train-tip"].constraints}
+    for name in sides:          # the face b0 held, b1 sheared along c
+        b = name.split("-")[1]
+        assert [c.part for c in by[name].constraints] == [f"{b}0" if body != "cylinder" else f"side-{b}0"]
+        assert [t.part for t in by[name].tractions] == [f"{b}1" if body != "cylinder" else f"side-{b}1"]
     model = case.section("model")
     assert set(model["stiffness"]) == set(STIFFNESS_RULES)
     assert case.section("optimizer")["start"] == "best"
