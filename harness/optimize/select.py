@@ -258,10 +258,7 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
     need = affordable(len(candidates) * len(folds), int(options.get("maxiter") or 40), step,
                       options.get("max_seconds"))
-    if need:
-        table[0].update(summary(table[0], tuple(folds)))
-        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), tuple(folds), need)
-    for cand in candidates:
+    for cand in candidates if not need else ():
         cp = columns(problem, n_springs, cand, kv0, groups)
         row = {"model": cand.name}
         for f, out in folds.items() if len(folds) > 1 else ():
@@ -275,7 +272,7 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
         row.update(summary(row, names))
     best = choose(table)
     if best["model"] == "rule":
-        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names)
+        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names, need)
     cand = next(c for c in candidates if c.name == best["model"])
     cp = columns(problem, n_springs, cand, kv0, groups)
     fits = []

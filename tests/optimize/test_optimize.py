@@ -296,6 +296,7 @@ def test_per_matrix_values_are_made_once_and_dropped_with_their_matrix():
 
 
 def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
+    from harness.optimize import problem as pr
     from harness.optimize import select as sel
     prob, _ = recoverable_problem((34, 34))
     k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
@@ -305,3 +306,5 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
                        part.bounds, None, part.coords)                  # fresh matrices: nothing shared
     assert part.load_sets()[0].stiffness(k).data.tobytes() == again.load_sets()[0].stiffness(k).data.tobytes()
     assert part.G2(k) == again.G2(k) and 0 < part.G2(k) <= whole
+    shared = part.load_sets()[0].B
+    assert shared is prob.load_sets()[0].B and "kmap" in pr._PER_MATRIX[id(shared)][1]     # built once, shared
