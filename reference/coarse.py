@@ -18,7 +18,7 @@ import numpy as np
 import scipy.sparse as sp
 import skfem
 
-from reference import solvers
+from reference import solvers, twolevel
 from reference.fem import Discretisation
 from reference.locate import Locator
 
@@ -51,6 +51,7 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
     full = np.asarray(P.multiply(P).sum(axis=0)).ravel()
     R = coarse.rigid_modes()
     coords = np.repeat(coarse.doflocs.T, coarse.dim, axis=0)
+    low = twolevel.prolongation(coarse)      # the coarse mesh's P1 fields: the two-level method's subspace
     out, groups = {}, {}
     for name in F:
         groups.setdefault(fixed[name].tobytes(), []).append(name)
@@ -62,7 +63,8 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
         A = sp.csr_matrix(P0.T @ (K[free][:, free] @ P0))
         b = np.column_stack([P0.T @ F[n][free] for n in names])
         rec: dict = {}
-        y = solvers.solve(A, b, method, R[kept], info=rec, coords=coords[kept])
+        y = solvers.solve(A, b, method, R[kept], info=rec, coords=coords[kept],
+                          coarse=None if low is None else low[kept])
         if info is not None:
             info.append(dict(rec, loads=list(names), n=len(kept), nnz=int(A.nnz), coarse=True))
         for i, n in enumerate(names):

@@ -109,6 +109,7 @@ class DenseFactor:
 
 # --- BLAS threads ------------------------------------------------------------------------
 _ONE_THREAD = 0   # depth of nested single_thread_blas blocks
+_OUTER = 1        # BLAS threads in effect when the outermost block began
 
 
 @contextmanager
@@ -116,7 +117,7 @@ def single_thread_blas():
     """Run the block with one BLAS thread: threads do not speed up a chain's small dense
     products, and the other core runs another chain. Nested blocks cost nothing (the
     outer one already holds the limit; asking threadpoolctl costs ~2 ms a time)."""
-    global _ONE_THREAD
+    global _ONE_THREAD, _OUTER
     if _ONE_THREAD:
         _ONE_THREAD += 1
         try:
@@ -124,10 +125,28 @@ def single_thread_blas():
         finally:
             _ONE_THREAD -= 1
         return
-    from threadpoolctl import threadpool_limits
+    from threadpoolctl import threadpool_info, threadpool_limits
+    _OUTER = max([int(i.get("num_threads", 1)) for i in threadpool_info() if i.get("user_api") == "blas"] or [1])
     with threadpool_limits(1):
         _ONE_THREAD += 1
         try:
             yield
         finally:
             _ONE_THREAD -= 1
+
+
+def blas_limited() -> bool:
+    """Whether a single_thread_blas block is running (a caller asked for one thread)."""
+    return _ONE_THREAD > 0
+
+
+@contextmanager
+def outer_blas_threads():
+    """Inside single_thread_blas: the BLAS threads from before it (a pool worker's one, or
+    the machine's cores) for a block of large dense products; outside: nothing changes."""
+    if not _ONE_THREAD or _OUTER <= 1:
+        yield
+        return
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(_OUTER, user_api="blas"):
+        yield

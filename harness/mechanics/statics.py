@@ -278,10 +278,17 @@ def solve_arrays(points, springs, k, free: np.ndarray, f: np.ndarray, name: str 
 
 @dataclass(frozen=True, eq=False)
 class StaticsResult:
-    """u (L, n, dim) displacements per load case ``names``; forces (L, n, dim)."""
+    """u (L, n, dim) displacements per load case ``names``; forces (L, n, dim);
+    ``load_seconds`` (L,) the wall time of each load's factorisation and solve (loads that
+    share one split it)."""
     names: tuple[str, ...]
     u: np.ndarray
     forces: np.ndarray
+    load_seconds: np.ndarray | None = None
+
+    @property
+    def seconds(self) -> float:
+        return float(np.sum(self.load_seconds)) if self.load_seconds is not None else float("nan")
 
     def displacement(self, load: str) -> np.ndarray:
         return self.u[self.names.index(load)]
@@ -290,37 +297,62 @@ class StaticsResult:
 def solve(network, case, loads=None) -> StaticsResult:
     """Equilibrium displacements of every load case (or the named ones); load cases with
     the same constraints share one factorisation. Errors name the case file."""
+    return solve_all([network], case, loads)[0]
+
+
+def solve_all(networks, case, loads=None) -> list[StaticsResult]:
+    """:func:`solve` for networks on the same nodes, springs and masses (one mesh under
+    several stiffness rules): the loads' arrays are made once, each constraint set's
+    ordering and symbolic factorisation serve every network, and one numeric factor is
+    alive at a time."""
     with naming(case):
-        return _solve(network, case, loads)
+        return _solve_all(list(networks), case, loads)
 
 
-def _solve(network, case, loads=None) -> StaticsResult:
+def _stiffness(network):
+    K = stiffness_matrix(incidence(network.points, network.springs), network.k)
+    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
+        K = K + network.volume.stiffness_matrix(network.points)
+    return sp.csc_matrix(K)
+
+
+def _solve_all(networks, case, loads=None) -> list[StaticsResult]:
+    import time
     loads = [l for l in case.loads if loads is None or l.name in loads]
     if not loads:
         raise ModelError("no load cases to solve", field="loads", fix="add [loads] set = 'basic2d' or [[loads.case]]")
-    B = incidence(network.points, network.springs)
-    K = stiffness_matrix(B, network.k)
-    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
-        K = (K + network.volume.stiffness_matrix(network.points)).tocsc()
-    n, dim = network.points.shape
-    us, fs, facs = [], [], {}
-    for load in loads:
-        free, f = load_arrays(network, case, load)
-        key = free.tobytes()
+    first = networks[0]
+    n, dim = first.points.shape
+    arrays = [load_arrays(first, case, load) for load in loads]
+    groups: dict = {}
+    for i, (free, _) in enumerate(arrays):
+        groups.setdefault(free.tobytes(), []).append(i)
+    u = np.zeros((len(networks), len(loads), n * dim))
+    seconds = np.zeros((len(networks), len(loads)))
+    Ks = [None] * len(networks)
+    for idx in groups.values():
+        free = arrays[idx[0]][0]
         fd = np.flatnonzero(free)
-        if key not in facs:
-            check_connected(network.points, network.springs, free, load.name)
-            facs[key] = _Factor(K[fd][:, fd], fd, network.points, load.name)
-        u = np.zeros(n * dim)
-        u[fd] = facs[key](f[fd])
-        us.append(u.reshape(n, dim))
-        fs.append(f.reshape(n, dim))
-    return StaticsResult(tuple(l.name for l in loads), np.array(us), np.array(fs))
+        name = loads[idx[0]].name
+        check_connected(first.points, first.springs, free, name)
+        F = np.column_stack([arrays[i][1][fd] for i in idx])
+        for j, net in enumerate(networks):
+            t0 = time.perf_counter()
+            if Ks[j] is None:
+                Ks[j] = _stiffness(net)
+            x = _Factor(Ks[j][fd][:, fd], fd, first.points, name)(F)
+            u[j][np.ix_(idx, fd)] = x.T
+            seconds[j, idx] = (time.perf_counter() - t0) / len(idx)
+    forces = np.array([f.reshape(n, dim) for _, f in arrays])
+    names = tuple(l.name for l in loads)
+    return [StaticsResult(names, u[j].reshape(len(loads), n, dim), forces, seconds[j])
+            for j in range(len(networks))]
 
 
 _SYMBOLIC: dict = {}        # the multifrontal Cholesky's symbolic factorisations by pattern and dof
-# locations: the networks of one mesh under different stiffness rules share them (50k-tet mesh:
-# ~1.5 s CPU each, 10 a calibration)
+# locations: the networks of one mesh under different stiffness rules share them (a 104k-dof
+# network of a 200k-tet mesh: ~2 s and ~0.5 GB each; solve_all uses each one in a row)
+SYMBOLIC_KEEP = 2
 
 
 def _symbolic(K, coords):
@@ -334,7 +366,7 @@ def _symbolic(K, coords):
         h.update(np.ascontiguousarray(a).tobytes())
     key = h.hexdigest()
     if key not in _SYMBOLIC:
-        if len(_SYMBOLIC) >= 4:
+        if len(_SYMBOLIC) >= SYMBOLIC_KEEP:
             _SYMBOLIC.pop(next(iter(_SYMBOLIC)))
         _SYMBOLIC[key] = Symbolic(A, coords)
     return _SYMBOLIC[key]

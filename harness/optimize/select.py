@@ -239,25 +239,34 @@ def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
 
 def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np.ndarray,
            candidates=CANDIDATES, options: dict | None = None, final: dict | None = None, n_starts: int = 3,
-           seed: int = 0, status=lambda msg: None, features: np.ndarray | None = None) -> Selection:
+           seed: int = 0, status=lambda msg: None, features: np.ndarray | None = None,
+           rule_solve: tuple | None = None) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume elements] (k0 the rule's
     springs, anything positive for the elements); ``families`` (one per block);
     ``options``: the validation fits' L-BFGS-B options, ``final``: the final fit's, from
     ``n_starts`` starts (seeded by ``seed``); ``features`` (springs, q): the learned rule's
-    geometric features of the springs, which 'features' candidates need (None: skipped)."""
+    geometric features of the springs, which 'features' candidates need (None: skipped);
+    ``rule_solve``: (each block's own normalised G at the rule, the seconds of one solve of
+    all blocks) when the caller has solved them: a validation those seconds show to be
+    unaffordable is skipped without a solve here."""
     options = dict(options or {"maxiter": 40})
     problem = balanced(problem)
     folds = make_folds(families)
     rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups)
-    scores = per_load(rule, rule.k0)         # the first solve builds what the fits share (per_matrix)
-    t0 = time.perf_counter()
-    per_load(rule, rule.k0)
-    step = STEP_COST * (time.perf_counter() - t0)
-    table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
-    need = affordable(len(candidates) * len(folds), int(options.get("maxiter") or 40), step,
-                      options.get("max_seconds"))
+    n_fits, maxiter = len(candidates) * len(folds), int(options.get("maxiter") or 40)
+    need = 0.0
+    if rule_solve is not None:
+        scores, seconds = np.asarray(rule_solve[0], float), float(rule_solve[1])
+        need = affordable(n_fits, maxiter, STEP_COST * seconds, options.get("max_seconds"))
+    if not need:
+        scores = per_load(rule, rule.k0)         # the first solve builds what the fits share (per_matrix)
+        t0 = time.perf_counter()
+        per_load(rule, rule.k0)
+        step = STEP_COST * (time.perf_counter() - t0)
+        need = affordable(n_fits, maxiter, step, options.get("max_seconds"))
+    table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
     for cand in candidates if not need else ():
         cp = columns(problem, n_springs, cand, kv0, groups)
         row = {"model": cand.name}

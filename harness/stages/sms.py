@@ -157,9 +157,10 @@ def _run(case, ctx, spec) -> list[dict]:
                       "std_distance": base.info["lloyd_std_distance"],
                       "std_area": base.info["lloyd_std_size"]}).to_csv(ctx.file("lloyd.csv"), index=False)
 
-    def evaluate(net):
-        """(statics, score on the fitted loads, score on the held-out loads or None)."""
-        res = statics.solve(net, case)
+    def evaluate(net, res=None):
+        """(statics (``res``, or solved here), score on the fitted loads, score on the
+        held-out loads or None)."""
+        res = statics.solve(net, case) if res is None else res
         if u_ref is None:
             return res, None, None
         sc, sh = fit_and_heldout(u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout)
@@ -185,16 +186,22 @@ def _run(case, ctx, spec) -> list[dict]:
                 from harness.models.volume import save
                 save(ctx.file(f"volume-{tag}.npz"), net)
 
-    rows, nets = [], {}
+    rows, nets, made = [], {}, {}
     for rule in rules:
         t1 = time.perf_counter()
-        net = base if rule == base.info["stiffness"] else base.with_k(
+        nets[rule] = base if rule == base.info["stiffness"] else base.with_k(
             spring_constants(rule, base.points, base.springs, base.cells, case.material), stiffness=rule)
-        nets[rule] = net
-        res, sc, sh = evaluate(net)
+        made[rule] = time.perf_counter() - t1
+    ctx.status(f"statics of the {len(rules)} stiffness rule{'s' * (len(rules) > 1)}")
+    solved = dict(zip(rules, statics.solve_all(list(nets.values()), case)))    # one ordering per constraint set
+    for rule in rules:
+        t1 = time.perf_counter()
+        net = nets[rule]
+        res, sc, sh = evaluate(net, solved[rule])
         write(net, res, rule)
         row = {**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
-               "seconds": build_seconds + time.perf_counter() - t1, **(sms_mt.constants(net) if mt else {})}
+               "seconds": build_seconds + made[rule] + res.seconds + time.perf_counter() - t1,
+               **(sms_mt.constants(net) if mt else {})}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
                        G_s_initial=sc.G_s, G_s_final=sc.G_s, **per_load_columns(sc, sh), **fit_score(case, sc),
@@ -216,7 +223,8 @@ def _run(case, ctx, spec) -> list[dict]:
             if run_.get("select") and not mt and not p1 and getattr(start, "volume", None) is None:
                 from harness.stages import sms_select
                 row, net, trace = sms_select.optimise(case, ctx, run_, start, u_ref, names, fit, weights, label,
-                                                      common, start_row, evaluate, write)
+                                                      common, start_row, evaluate, write,
+                                                      solved.get(start_row["stiffness"]))
             else:
                 row, net, trace = (sms_mt.optimise if mt else _optimise)(
                     case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label, common, start_row,

@@ -25,9 +25,12 @@ from harness.errors import CaseError
 VALIDATION_BUDGET = 2.0     # the validation fits together: at most this many times the fit's budget
 
 
-def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write):
+def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write,
+             first_res=None):
     """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
-    stage gives the other model classes its plain fit)."""
+    stage gives the other model classes its plain fit); ``first_res``: base's statics, when
+    the stage has them (a validation they show unaffordable then costs no solve, and the
+    rule's row reuses them)."""
     from harness.mechanics import statics
     from harness.models.learned_rule import geometry
     from harness.models.springs import spring_directions
@@ -59,10 +62,16 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     val = {**run_["options"], "maxiter": int(spec["maxiter"]),
            "max_seconds": None if budget is None else VALIDATION_BUDGET * budget / max(n_fits, 1)}
     final = {**run_["options"], "max_seconds": None if budget is None else budget / int(spec["starts"])}
+    rule_solve = None
+    if first_res is not None:
+        _, sc0, _ = evaluate(base, first_res)
+        at = {n: i for i, n in enumerate(first_res.names)}
+        rule_solve = ([sc0.per_load_norm[n] for n in fit_names],
+                      float(sum(first_res.load_seconds[at[n]] for n in fit_names)))
     s = sel.select(problem, base.n_springs, fams, kv0, sel.direction_groups(d, L), cands, val, final,
                    int(spec["starts"]), int(base.info["seed"]), ctx.status,
                    features=geometry(base.points, base.springs, base.cells)
-                   if any(c.groups == "features" for c in cands) else None)
+                   if any(c.groups == "features" for c in cands) else None, rule_solve=rule_solve)
     seconds = time.perf_counter() - t0
     pd.DataFrame(list(s.table)).to_csv(ctx.file("validation.csv"), index=False)
 
@@ -72,7 +81,8 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     scored = []
     for k in s.starts:
         net = network(k)
-        scored.append((net, *evaluate(net)))
+        same = first_res is not None and s.choice == "rule"      # the rule's own constants: solved already
+        scored.append((net, *evaluate(net, first_res if same else None)))
     net, res, sc, sh = scored[0]
     stiff = base.info["stiffness"]
     tag = f"{stiff}-select"

@@ -668,3 +668,28 @@ def test_cauchy_rule_on_a_tet_mesh_equals_a_cell_by_cell_least_squares():
             acc[where[tuple(sorted((a_, b_)))]] += kq
     acc = np.maximum(acc, 0.01 * np.median(acc[acc > 0]))
     np.testing.assert_allclose(k, acc, rtol=1e-9, atol=1e-12 * acc.max())
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_solve_all_matches_a_dense_solve_of_each_network(dim, monkeypatch):
+    """Several networks on one mesh (the stiffness rules' constants) solved together, each
+    constraint set ordered and factorised symbolically once, give each network's own
+    dense solve; the multifrontal path (3-D) and SuperLU (2-D) alike."""
+    monkeypatch.setattr(statics, "MULTIFRONTAL_MIN", 10)
+    rng = np.random.default_rng(5 + dim)
+    shape = (4, 3) if dim == 2 else (3, 3, 4)
+    hi = np.array([3.0, 2.0, 2.0][:dim])
+    p = grid_points(np.zeros(dim), hi, shape)
+    top = grid_structure(shape, "structure1" if dim == 2 else "edges+face+body")
+    case = Case(path=None, name="t", dim=dim, body=Body("rectangle" if dim == 2 else "box", (0.0,) * dim, tuple(hi)),
+                material=Material(1.0, 0.3), loads=basic2d(1.0) if dim == 2 else basic3d(1.0), reference=None)
+    ks = [rng.uniform(0.5, 2.0, len(top.springs)) for _ in range(3)]
+    results = statics.solve_all([make_network(p, top.springs, k) for k in ks], case)
+    assert len(results) == 3
+    for k, res in zip(ks, results):
+        net = make_network(p, top.springs, k)
+        assert res.load_seconds.shape == (len(case.loads),) and np.all(res.load_seconds >= 0)
+        for i, load in enumerate(case.loads):
+            free, f = statics.load_arrays(net, case, load)
+            u = _dense_solve(p, top.springs, k, np.flatnonzero(free), f)
+            assert np.allclose(res.u[i].ravel(), u, rtol=1e-10, atol=1e-12 * np.abs(u).max())

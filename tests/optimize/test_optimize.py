@@ -123,10 +123,15 @@ def test_bad_problem_input_is_one_line_error():
         FitProblem.from_network(pts, spr, np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names[:2])
 
 
-@pytest.mark.parametrize("shape", [(34, 34), (9, 9, 9)])
-def test_multifrontal_cholesky_matches_direct_solve(shape):
+@pytest.mark.parametrize("shape, big", [((34, 34), None), ((9, 9, 9), None), ((9, 9, 9), 1)])
+def test_multifrontal_cholesky_matches_direct_solve(shape, big, monkeypatch):
+    """Against SuperLU; ``big`` = 1: every front takes the threaded path (BLAS threads
+    restored inside the single-thread block), which must give the same factor."""
     import scipy.sparse.linalg as spla
+    from harness.linalg import multifrontal
     from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+    if big is not None:
+        monkeypatch.setattr(multifrontal, "BIG_FRONT", big)
     prob, _ = recoverable_problem(shape, seed=3)
     for s in prob.load_sets()[:2]:
         k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)

@@ -158,3 +158,27 @@ def test_select_skips_a_validation_it_cannot_afford_and_keeps_the_rule():
                    {"maxiter": 200}, 3)
     assert s.choice == "rule" and s.skipped > 0 and [r["model"] for r in s.table] == ["rule"]
     assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9) and np.array_equal(s.k, prob.k0)
+
+
+def test_select_trusts_the_callers_solve_to_skip_without_solving(monkeypatch):
+    """``rule_solve`` (the caller's per-load errors at the rule and the seconds their solve
+    took): a validation those seconds cannot afford is skipped with no solve here (a
+    200k-tet body's solve of all training states costs a minute), its table from the given
+    errors; seconds it can afford make select solve and time itself as without them."""
+    prob, _, _ = problem(np.full(1, 2.0))
+    groups = np.zeros(prob.n_springs, int)
+    given = np.linspace(0.1, 0.6, len(FAMILIES))
+    real = sel.per_load
+
+    def no_solve(*a, **k):
+        raise AssertionError("solved")
+    monkeypatch.setattr(sel, "per_load", no_solve)
+    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60, "max_seconds": 1.0},
+                   {"maxiter": 200}, 3, rule_solve=(given, 10.0))
+    assert s.choice == "rule" and s.skipped == pytest.approx(sel.affordable(len(CANDS) * 3, 60, sel.STEP_COST * 10.0, 1.0))
+    want = {"constant": given[:2].mean(), "bending": given[2:4].mean(), "clamped": given[4:].mean()}
+    assert {f: s.table[0][f] for f in want} == pytest.approx(want, rel=1e-12)
+    monkeypatch.setattr(sel, "per_load", real)
+    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60}, {"maxiter": 200}, 3,
+                   rule_solve=(given, 10.0))
+    assert s.choice != "rule" and s.table[0]["clamped"] == pytest.approx(1.0, rel=1e-9)   # its own solve

@@ -59,3 +59,26 @@ def test_a_mesh_the_budget_refines_keeps_the_pointwise_estimate(tmp_path):
     case = mesh_case(tmp_path, write_mesh(tmp_path / "sq.vtu", m), 2, CANTILEVER, "max_refine = 1\n")
     ref = reference.solve(case, cache=False)
     assert ref.level >= 1 and ref.changes is not None and ref.changes.uniform is None
+
+
+def test_galerkin_levels_solved_by_the_two_level_method_equal_the_cholesky():
+    """A coarse level's Galerkin system may be too large to factorise (a 200k-tet body's
+    69k-dof level): the two-level CG on it, with the coarse mesh's own P1 fields as its
+    subspace, gives the same fields as the Cholesky of the same system."""
+    from harness.case.elasticity import element_stiffness
+    from harness.case.reader import Material
+    fine = skfem.MeshTet.init_tensor(*[np.linspace(0, s, n) for s, n in ((2.0, 9), (1.0, 5), (1.0, 5))])
+    grid = coarse.grid_mesh(fine, 0.3)
+    d, cd = Discretisation(fine, "tet", "P2"), Discretisation(grid, "tet", "P2")
+    K = d.stiffness(element_stiffness(Material(1.0, 0.45), d.centroids()))
+    x = d.doflocs
+    fixed = np.flatnonzero(np.repeat(x[0] < 1e-12, 3))
+    F = np.zeros(d.ndof)
+    F[2::3] = -np.where(x[0] > 2 - 1e-12, 1.0, 0.0) - 0.1 * x[0]      # a tip load and a graded body load
+    kw = dict(coarse=cd, fine=d)
+    direct = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "direct", **kw)["a"]
+    info = []
+    two = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "two-level", info=info, **kw)["a"]
+    assert info[0]["method"] == "two-level"
+    assert np.abs(two - direct).max() <= 1e-8 * np.abs(direct).max()
+    assert np.abs(direct).max() > 0
