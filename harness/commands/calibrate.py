@@ -207,53 +207,6 @@ def add_arguments(p):
     p.add_argument("--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)")
 
 
-def _check(args):
-    def bad(flag, msg, fix):
-        raise SpringbenchError(msg, field=flag, fix=fix)
-    if not (math.isfinite(args.E) and args.E > 0):
-        bad("--E", f"{args.E} is not a positive number", "Young's modulus in Pa, e.g. --E 2e5")
-    if not (-1 < args.nu < 0.5):
-        bad("--nu", f"{args.nu} is out of range", "a Poisson ratio in (-1, 0.5), e.g. --nu 0.3")
-    if not (math.isfinite(args.density) and args.density > 0):
-        bad("--density", f"{args.density} is not a positive number", "kg/m^3, e.g. --density 1000")
-    if args.magnitude is not None and not (math.isfinite(args.magnitude) and args.magnitude > 0):
-        bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
-    peak = getattr(args, "peak_strain", PEAK_STRAIN)
-    if not (math.isfinite(peak) and 0 < peak <= 0.1):
-        bad("--peak-strain", f"{peak} is not in (0, 0.1]", f"a small strain, e.g. --peak-strain {PEAK_STRAIN:g}")
-    if not (math.isfinite(args.damping_ratio) and 0 <= args.damping_ratio < 1):
-        bad("--damping-ratio", f"{args.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
-    if args.prior_weight is not None and not (math.isfinite(args.prior_weight) and args.prior_weight >= 0):
-        bad("--prior-weight", f"{args.prior_weight} is not a number >= 0", f"e.g. --prior-weight {PRIOR_WEIGHT:g}, or 0 for none")
-    if args.prior_weight is not None and args.method != "lbfgs":
-        bad("--prior-weight", f"--method {args.method} has no prior", "use --prior-weight with --method lbfgs")
-    if args.init != "none" and args.method not in ("lbfgs", "gauss-newton"):
-        bad("--init", f"--method {args.method} has no start point to set", "use --init with --method lbfgs or gauss-newton")
-    if not (args.budget > 0):
-        bad("--budget", f"{args.budget} is not a positive number of seconds", "e.g. --budget 60")
-    if not (args.tol > 0) or args.max_refine < 0:
-        bad("--tol", "needs --tol > 0 and --max-refine >= 0", "e.g. --tol 1e-3 --max-refine 1")
-    if args.k_ratio is not None and not (math.isfinite(args.k_ratio) and args.k_ratio >= 1):
-        bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
-    if args.seed < 0:
-        bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
-    from harness.case.schema import LARGEST, SMALLEST     # what the case-file numbers may be
-    # E's lower end leaves room for the default traction, 1e-3 E
-    for flag, v, lo in (("--E", args.E, 1e3 * SMALLEST), ("--density", args.density, SMALLEST),
-                        ("--magnitude", args.magnitude, SMALLEST)):
-        if v is not None and not lo <= v <= LARGEST:
-            bad(flag, f"{v:g} is too {'large' if v > LARGEST else 'small'} to compute with",
-                f"a value between {lo:g} and {LARGEST:g}: change the units")
-    if args.out.suffix.lower() != ".vtu":
-        bad("--out", f"'{args.out}' does not end in .vtu", "e.g. --out model.vtu")
-    from harness.outputs import check_out_file
-    for out in (args.out, args.out.with_suffix(".json"), args.out.with_suffix(".csv")):
-        check_out_file(out, "--out")       # before the work, not after it
-    if not args.mesh.is_file():
-        raise SpringbenchError("is a folder, not a mesh file" if args.mesh.is_dir() else "no such mesh file",
-                               file=str(args.mesh), fix="check the path")
-
-
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
 
 
@@ -315,7 +268,8 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
 
 
 def main(args) -> int:
-    _check(args)
+    from harness.commands.calibrate_check import check
+    check(args, PRIOR_WEIGHT)
     from harness.case.mesh_checks import check_mesh
     from harness.io.meshfile import read_mesh
     mesh = read_mesh(args.mesh, args.format)
