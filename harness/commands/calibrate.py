@@ -42,7 +42,9 @@ a peak strain of about ``--peak-strain`` (default 1e-3): small strains.
 Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
 Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
 
-Writes (and prints the table and a one-sentence verdict):
+Prints where the held-out loads clamp the body (before the work), then the table and the
+verdict: the held-out error against the best rule's on the same loads, the fitted error, the
+reference's status and, for a validated fit, what the validation chose. Writes:
 
 - ``MODEL.vtu`` — ParaView-ready network (points in m, ``line`` cells = springs, point
   data ``mass`` in kg, cell data ``stiffness`` = linear k in N/m with f = k (l - l0)).
@@ -59,7 +61,10 @@ Writes (and prints the table and a one-sentence verdict):
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
   the held-out loads of each one's own relative error) and ``G_heldout_loads`` ({load: its
-  relative error}), ``reference_error`` (the FEM's
+  relative error}), ``status`` (the exported row's reference status, ``ok`` or ``ref-coarse``),
+  ``verdict`` and ``best_rule_heldout`` (the exported constants against the best rule on the
+  held-out loads, harness/report/findings.py), ``opt_stop`` and ``opt_stops`` (the optimiser's
+  whole stop messages), ``reference_error`` (the FEM's
   own estimated error, relative: the worst of ``reference_error_fitted`` and
   ``reference_error_heldout``), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
@@ -111,6 +116,11 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               family), validation_skipped (null when the validation ran, else the --budget in s
               that lets it run), G_heldout_mean_spread (over the final fit's starts), reference_error (FEM's own, relative; the worst of
               reference_error_fitted and reference_error_heldout),
+              status (the exported row's reference status: ok, or ref-coarse: the FEM's own error is above
+              a tenth of the model's or missed its tol), verdict (held-out loads: better, tie or
+              fit-worse-than-rule for a fit, rule when a rule is exported, null without held-out loads),
+              best_rule_heldout ({rule, G_heldout_mean}: the best rule on the held-out loads), opt_stop and
+              opt_stops (the optimiser's whole stop message: the exported start's, and every start's),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
@@ -120,7 +130,7 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each family's
               and of the clamped states' own G_norm; ranks the rules), G_heldout, G_heldout_mean,
               G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout (the FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
-              dt_stable (s) with --k-ratio, seconds, seed, opt_stop
+              dt_stable (s) with --k-ratio, seconds, seed, opt_stop, opt_stops (every start's, " | " between)
 2-D meshes: unit thickness (k and masses per unit thickness).
 the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by default
 its capacity (the prior weight a, a volume term per element or none) is chosen by leave-one-family-out
@@ -313,8 +323,8 @@ def _run(args, mesh, tmp: Path):
               file=sys.stderr)
     pts = mesh.points * UNITS[args.length_unit]
     ends = end_loads(pts, mesh.cells, args.clamp, args.load_region, mesh.groups) if args.heldout == "ends" else None
-    if ends is not None:
-        print(f"  {ends.describe()}", file=sys.stderr)
+    if ends is not None:     # on stdout, before the work: a wrong clamp is seen at once
+        print(f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead", flush=True)
     last = [0.0]
 
     def status(msg):  # at most one line a second
@@ -370,13 +380,19 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     res = statics.solve(capped, case)
     u_ref = reference_displacements(ref, capped.points, res.names)
     sc, sh = fit_and_heldout(u_ref, res.u, capped.classes, case_weights(case), res.names, case.fit_loads, case.heldout)
-    out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed")}
+    out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed", "G_ref",
+                                                     "G_ref_heldout", "ref_error_max", "ref_error_heldout")}
     out.update(optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}", G_norm_initial=row.get("G_norm_final"),
                G_norm_final=sc.G_norm, G_heldout=sh.G_norm if sh else math.nan,
                k_ratio=float(capped.k.max() / np.median(capped.k)), _net=capped)
     if sh is not None:
         per = {f"G_heldout_{name}": float(v) for name, v in sh.per_load_norm.items()}
         out.update(G_heldout_mean=float(np.mean(list(per.values()))), **per)
+    if "status" in row:     # the reference's error against the capped constants' (harness/scoring.py ref_status)
+        from harness.scoring import ref_status
+        out["status"] = ref_status(row.get("G_ref", math.nan), sc.G_norm, row.get("ref_met_tol"))
+        if sh is not None and ref_status(row.get("G_ref_heldout", math.nan), sh.G_norm, None) != "ok":
+            out["status"] = "ref-coarse"
     if np.all(net.masses > 0):
         for r, n in ((row, net), (out, capped)):
             kd = spring_damping(n.springs, n.k, n.masses, zeta)
@@ -403,7 +419,9 @@ def _worst(*values) -> float:
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
-    from harness.commands.calibrate_verdict import finite, heldout_sentence, pct, records, validation_sentence
+    from harness.commands.calibrate_verdict import (finite, fitted_sentence, heldout_sentence, records,
+                                                    reference_sentence, validation_sentence, verdict)
+    from harness.report.findings import heldout_error
     from harness.export.model_json import export
     from harness.stages.sms_measures import rank
     exported = next(r for r in rows if r["exported"])
@@ -419,11 +437,19 @@ def _report(args, rows, net, case):
                 choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
                 masses=args.masses, prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
                                                   prior_weight(args) if args.method == "lbfgs" else math.nan))
+    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    said, rule = verdict(exported, rules) if case.heldout else (None, None)
+    stops = exported.get("opt_stops") or exported.get("opt_stop")
+    meta.update(status=str(exported.get("status", "ok")), verdict=said,
+                best_rule_heldout=None if rule is None else {"rule": rule["stiffness"],
+                                                             "G_heldout_mean": finite(heldout_error(rule))},
+                opt_stop=exported.get("opt_stop") if isinstance(exported.get("opt_stop"), str) else None,
+                opt_stops=stops.split(" | ") if isinstance(stops, str) else [])
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_fit_score", "G_heldout", "G_heldout_mean",
                         "G_heldout_mean_spread",
                         "choice", "ref_error_max", "ref_error_heldout", "status",
-                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_prior")
+                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     from harness.outputs import staged
@@ -431,23 +457,12 @@ def _report(args, rows, net, case):
     with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
         data = export(net, vtu, meta)         # writes vtu and its .json beside it (harness/export/model_json.py)
         df.to_csv(csv, index=False)
-    print(df.to_string(index=False))
-    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
-    best = min(rules, key=rank)
-    held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
-    fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
-    if fem is None or not math.isfinite(fem):
-        fem = "FEM error not estimated (--max-refine 0, or no coarser mesh of the body could be made)"
-    elif case.heldout and math.isfinite(fem_held) and fem_held < fem:
-        fem = f"FEM error <= {pct(fem_held)} on held-out loads, {pct(meta['reference_error_fitted'])} on fitted ones"
-    else:
-        fem = f"FEM error <= {pct(fem)}"
-    print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
-          f"{fem}; the best stiffness rule ({best['stiffness']}) gave {pct(best.get('G_norm_final'))}.")
+    print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
+    print(heldout_sentence(exported, rules, case.heldout))
+    print(fitted_sentence(exported, min(rules, key=rank)))
+    print(reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
     if "choice" in exported:
         print(validation_sentence(exported, meta["validation"] or []))
-    if case.heldout and exported.get("optimizer", "none") != "none":
-        print(heldout_sentence(exported, rules))
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "

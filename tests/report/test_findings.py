@@ -1,0 +1,87 @@
+"""The findings vocabulary (harness/report/findings.py) and calibrate's verdict sentences on
+hand-made rows whose answers are worked out here: a fit worse than the best rule held out,
+a tie inside the spread over starts, a better fit, an exported rule, no held-out loads;
+memorised (held-out G > 3 x fitted) and ref-coarse."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from harness.commands.calibrate_verdict import heldout_sentence, reference_sentence, verdict
+from harness.optimize.gradient import scipy_stop
+from harness.report.findings import MEMORISED, against_rule, flags, heldout_error
+
+RULES = [dict(stiffness="lloyd", optimizer="none", G_norm_final=0.30, G_heldout=0.20, G_heldout_mean=0.1200),
+         dict(stiffness="vangelder", optimizer="none", G_norm_final=0.25, G_heldout=0.10, G_heldout_mean=0.0926),
+         dict(stiffness="uniform", optimizer="none", G_norm_final=0.40, G_heldout=0.50, G_heldout_mean=math.nan)]
+NAMES = ("sag", "tip", "bridge")
+
+
+def fit(mean, spread=0.0, fitted=0.10, pooled=0.11, **kw):
+    return dict(stiffness="vangelder", optimizer="lbfgs", G_norm_final=fitted, G_heldout=pooled,
+                G_heldout_mean=mean, G_heldout_mean_spread=spread, **kw)
+
+
+def test_the_newcomers_case_is_fit_worse_than_rule():
+    """0.0940 held out against the best rule's 0.0926 (the rule on fitted loads would hide it)."""
+    row = fit(0.0940, spread=0.0005)
+    assert verdict(row, RULES) == ("fit-worse-than-rule", RULES[1])
+    text = heldout_sentence(row, RULES, NAMES)
+    assert "the fit 9.4 %" in text and "the best rule (vangelder) 9.26 %" in text
+    assert "fit worse than the rule on held-out loads: export the rule instead (--method rule --rule vangelder)" in text
+    assert flags(row, RULES) == ["fit-worse-than-rule"]
+
+
+@pytest.mark.parametrize("mean, spread, want", [(0.0930, 0.0005, "tie"), (0.0922, 0.0005, "tie"),
+                                                (0.0900, 0.0005, "better"), (0.0926, 0.0, "tie")])
+def test_ties_are_inside_the_spread(mean, spread, want):
+    assert against_rule(fit(mean, spread), RULES) == (want, RULES[1])
+    text = heldout_sentence(fit(mean, spread), RULES, NAMES)
+    assert ("a tie within the spread over starts" in text) == (want == "tie")
+    if want == "better":
+        assert f"x{0.0900 / 0.0926:.2f} the rule's error" in text
+
+
+def test_an_exported_rule_is_compared_with_the_best_rule_in_hindsight():
+    mine = dict(RULES[0], optimizer="lbfgs", choice="rule")     # the validation kept the rule lloyd
+    assert verdict(mine, RULES)[0] == "rule"
+    text = heldout_sentence(mine, RULES, NAMES)
+    assert "the exported rule (lloyd) 12 %" in text and "--method rule --rule vangelder exports that one" in text
+    assert "it is the best of the rules there" in heldout_sentence(RULES[1], RULES, NAMES)
+
+
+def test_no_heldout_loads_says_so():
+    rules = [dict(r, G_heldout=math.nan, G_heldout_mean=math.nan) for r in RULES]
+    assert verdict(fit(math.nan, pooled=math.nan), rules) == (None, None)
+    assert heldout_sentence(fit(math.nan, pooled=math.nan), rules, ()).startswith("No held-out loads")
+
+
+def test_memorised_is_held_out_over_three_times_fitted_and_only_for_fits():
+    assert "memorised" in flags(fit(0.05, fitted=0.10, pooled=MEMORISED * 0.10 * 1.01), RULES)
+    assert "memorised" not in flags(fit(0.05, fitted=0.10, pooled=MEMORISED * 0.10 * 0.99), RULES)
+    assert flags(dict(RULES[2], status="ref-coarse"), RULES) == ["ref-coarse"]     # a rule memorises nothing
+    assert heldout_error(RULES[2]) == 0.50          # no per-load mean: the pooled G
+
+
+def test_reference_sentence_names_where_the_fem_is_coarse():
+    meta = dict(status="ref-coarse", reference_error=0.08, reference_error_heldout=0.005, reference_error_fitted=0.08)
+    row = fit(0.05, fitted=0.05, pooled=0.06, G_ref=0.02, G_ref_heldout=0.001)    # 0.02 > 0.005: fitted only
+    text = reference_sentence(row, meta, True, 1)
+    assert text.startswith("Reference ref-coarse (FEM error <= 0.5 % on held-out loads, 8 % on fitted ones)")
+    assert "on the fitted loads is above a tenth" in text and "--max-refine 2" in text
+    ok = reference_sentence(dict(row, G_ref=0.001), dict(meta, status="ok"), True, 1)
+    assert ok.startswith("Reference ok") and "the model's" in ok
+
+
+def test_scipys_empty_detail_is_filled_in():
+    """scipy >= 1.15 says "ABNORMAL: " for a failed line search (a gradient of the wrong
+    sign gives one here); the stop message says what that means."""
+    from scipy.optimize import minimize
+    res = minimize(lambda x: (float(x @ x), -2 * x), np.ones(3), jac=True, method="L-BFGS-B")
+    stop = scipy_stop(res)
+    assert res.status == 2 and stop.startswith("scipy: ABNORMAL") and "line search" in stop
+    good = minimize(lambda x: (float(x @ x), 2 * x), np.ones(3), jac=True, method="L-BFGS-B")
+    assert scipy_stop(good) == f"scipy: {good.message}"
