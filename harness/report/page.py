@@ -194,18 +194,25 @@ def _glossary() -> list[str]:
     return ["<section id='glossary'><h2>Columns</h2>", f"<dl>{items}</dl></section>"]
 
 
-def index_html(results_root) -> str:
-    """The page of ``results_root`` (its suites: the folders holding a summary.csv)."""
-    root = Path(results_root)
+def page_suites(root: Path) -> tuple[list[Path], list[Path]]:
+    """(the suite folders of ``root`` (those holding a summary.csv) in page order, its
+    benchmark CSVs)."""
     suites = sorted((d for d in root.iterdir() if (d / "summary.csv").is_file()) if root.is_dir() else [],
                     key=lambda s: (ORDER.index(s.name) if s.name in ORDER else len(ORDER), s.name))
     bench = sorted((root / "bench").glob("*.csv")) if (root / "bench").is_dir() else []
+    return suites, bench
+
+
+def index_html(results_root) -> str:
+    """The page of ``results_root`` (its suites: the folders holding a summary.csv)."""
+    root = Path(results_root)
+    suites, bench = page_suites(root)
     toc = [(s.name, SUITES.get(s.name, (s.name,))[0]) for s in suites]
     toc += [("bench", "Benchmarks")] if bench else []
     toc += [("glossary", "Columns")]
     parts = ["<!DOCTYPE html>", "<html lang='en'><head><meta charset='utf-8'>",
              "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-             f"<title>springbench results: {_e(root.resolve().name)}</title>", f"<style>{CSS}</style></head><body>",
+             "<title>springbench results</title>", f"<style>{CSS}</style></head><body>",
              "<header><h1>springbench results</h1>",
              "<p>How well does a spring/mass model imitate linear elasticity? Each suite below reproduces a "
              "paper's experiments against a verified scikit-fem reference and scores the models with Deussen's "
