@@ -1,4 +1,6 @@
-"""springbench bench NAME: benchmarks registered in harness.bench.BENCHES."""
+"""springbench bench NAME: benchmarks registered in harness.bench.BENCHES. Every row of the
+CSV carries the provenance of the run (harness/provenance.py FIELDS: format version, git
+commit and dirty flag, library versions, CPU model, cores, load average at the start)."""
 
 from __future__ import annotations
 
@@ -33,8 +35,11 @@ def main(args) -> int:
                                file=str(out), field=flag, fix="drop --results (quick runs go to runs/bench)")
     check_out_dir(out, flag)      # before a bench that takes minutes
     check_out_file(path, flag)
+    from harness.provenance import collect, columns
+    started = collect()                 # the load average at the start, before the bench loads the machine
     mod = importlib.import_module(BENCHES[args.name])
     df = mod.run(quick=args.quick)
+    df = df.assign(**{k: v for k, v in columns(started).items() if k not in df.columns})
     atomic_write(path, df.to_csv(index=False).encode(), flag)
     print(df.to_string(index=False))
     print(f"-> {path}")

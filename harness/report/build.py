@@ -5,6 +5,7 @@ Layout written by :mod:`harness.run.runner`::
     results/index.html                      one static page linking every suite
     results/<suite>/summary.csv, summary.md one row per case, model (and seed)
     results/<suite>/seeds.csv               mean/std/n over seeds (cases with several seeds)
+    results/<suite>/provenance.json         the code and machine of the runs that made its results
     results/<suite>/<case>/result-seed<N>.json   manifest (input hash, status, files) + rows
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
@@ -235,6 +236,8 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
         raise SpringbenchError("no stored results here", file=str(suite_dir),
                                fix="give a folder results/<suite> written by 'springbench run'")
     df = summary_frame(manifests)
+    from harness.report import origin
+    origin.write(suite_dir, manifests)
     csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
     from harness.outputs import write_changed
     write_changed(csv_path, df.to_csv(index=False).encode())

@@ -161,6 +161,9 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
         if (suite / name).is_file():
             data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
     parts.append("<p>Full tables: " + "; ".join(data) + ".</p>")
+    from harness.report.origin import lines
+    parts.append("<details class='note'><summary>Code and machine</summary>"
+                 + "".join(f"<p>{_e(line)}</p>" for line in lines(suite)) + "</details>")
     pngs = sorted(suite.rglob("fig-*.png"))
     key = _key_figures(suite, pngs)
     if key:

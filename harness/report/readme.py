@@ -42,6 +42,8 @@ def _suite(root: Path, suite: Path, df, sections) -> list[str]:
         if (suite / name).is_file():
             links.append(f"[{name}]({_link(root, suite / name)}) ({what})")
     out.append("Full tables: " + "; ".join(links) + ".\n")
+    from harness.report.origin import lines
+    out.append("Code and machine: " + " ".join(lines(suite)) + "\n")
     return out
 
 

@@ -25,6 +25,16 @@ from harness.report import figures  # noqa: E402
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def fake_bench(folder: Path, monkeypatch, frame: str):
+    """``bench reference`` runs a module written here whose run() returns ``frame`` (Python source)."""
+    import re
+    from harness.bench import BENCHES
+    name = "fake_bench_" + re.sub(r"\W", "_", folder.name)      # one module per test (imports are cached)
+    (folder / f"{name}.py").write_text(f"import pandas\ndef run(quick):\n    return {frame}\n")
+    monkeypatch.syspath_prepend(str(folder))
+    monkeypatch.setitem(BENCHES, "reference", name)
+
+
 def snapshot(folder: Path) -> dict:
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
@@ -82,11 +92,11 @@ def test_report_and_bench_write_into_runs_by_default(tmp_path, monkeypatch, caps
     assert cli.main(["bench", "reference", "--quick", "--results", str(tmp_path / "results")]) == 2
     assert "--quick run would overwrite them" in capsys.readouterr().err
     args = cli.build_parser().parse_args(["bench", "reference", "--quick"])
+    import pandas as pd
     from harness.commands import bench
-    monkeypatch.setattr(bench.importlib, "import_module", lambda name: type("B", (), {
-        "run": staticmethod(lambda quick: __import__("pandas").DataFrame({"n": [1]}))}))
+    fake_bench(tmp_path, monkeypatch, "pandas.DataFrame({'n': [1]})")
     assert bench.main(args) == 0
-    assert (tmp_path / "runs" / "bench" / "reference.csv").read_text() == "n\n1\n"
+    assert pd.read_csv(tmp_path / "runs" / "bench" / "reference.csv")["n"].tolist() == [1]
     assert not (tmp_path / "results").exists()
 
 
