@@ -54,13 +54,18 @@ def main(args) -> int:
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
                     scheduler=args.scheduler, force=args.force, figures=args.figures)
     import pandas as pd
-    from harness.report.frames import headline_frame
+    from harness.report.findings import case_lines, legend, summary_text
+    seen = []
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)
+        lines = case_lines(df)
+        seen += list(lines["findings"])
         print(f"\n== {suite.name}: {len(df)} rows in {csv} (all columns; tables and figures: summary.md)")
-        with pd.option_context("display.width", 160, "display.max_columns", 20, "display.precision", 4):
-            print(headline_frame(df).to_string(index=False, max_colwidth=50))
+        print("\n".join(summary_text(suite.name, lines)))
+    if rep.suites:
+        print("\n".join(["\nmodel: each case's best fit on the fitted loads (else its best stiffness rule); held-out: "
+                         "the mean of each held-out load's G where recorded, else the pooled G"] + legend(seen)))
     n = len(rep.results)
     print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
           f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "

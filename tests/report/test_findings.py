@@ -21,6 +21,7 @@ NAMES = ("sag", "tip", "bridge")
 
 
 def fit(mean, spread=0.0, fitted=0.10, pooled=0.11, **kw):
+    """A fitted row: held-out error ``mean`` (G_heldout_mean), pooled G_heldout ``pooled``."""
     return dict(stiffness="vangelder", optimizer="lbfgs", G_norm_final=fitted, G_heldout=pooled,
                 G_heldout_mean=mean, G_heldout_mean_spread=spread, **kw)
 
@@ -60,8 +61,9 @@ def test_no_heldout_loads_says_so():
 
 
 def test_memorised_is_held_out_over_three_times_fitted_and_only_for_fits():
-    assert "memorised" in flags(fit(0.05, fitted=0.10, pooled=MEMORISED * 0.10 * 1.01), RULES)
-    assert "memorised" not in flags(fit(0.05, fitted=0.10, pooled=MEMORISED * 0.10 * 0.99), RULES)
+    assert "memorised" in flags(fit(MEMORISED * 0.10 * 1.01, fitted=0.10), RULES)
+    assert "memorised" not in flags(fit(MEMORISED * 0.10 * 0.99, fitted=0.10, pooled=1.0), RULES)
+    assert "memorised" in flags(fit(math.nan, fitted=0.10, pooled=MEMORISED * 0.10 * 1.01), RULES)   # pooled: no mean
     assert flags(dict(RULES[2], status="ref-coarse"), RULES) == ["ref-coarse"]     # a rule memorises nothing
     assert heldout_error(RULES[2]) == 0.50          # no per-load mean: the pooled G
 
@@ -85,3 +87,38 @@ def test_scipys_empty_detail_is_filled_in():
     assert res.status == 2 and stop.startswith("scipy: ABNORMAL") and "line search" in stop
     good = minimize(lambda x: (float(x @ x), 2 * x), np.ones(3), jac=True, method="L-BFGS-B")
     assert scipy_stop(good) == f"scipy: {good.message}"
+
+
+def test_case_lines_pick_the_fitters_row_and_flag_it():
+    """A hand-made summary: two seeds of a case whose L-BFGS-B fit (lowest fitted G) is
+    memorised and worse than the rule lloyd held out; a case of rules only; a case without G."""
+    import pandas as pd
+    from harness.report.findings import case_lines, legend, summary_text
+    rows = []
+    for seed in (0, 1):
+        rows += [dict(case="a", seed=seed, model="m[lloyd]", optimizer="none", stiffness="lloyd", status="ok",
+                      G_norm_final=0.20, G_heldout=0.10 + 0.02 * seed),
+                 dict(case="a", seed=seed, model="m[lloyd]", optimizer="sa", objective="G", stiffness="lloyd",
+                      status="ok", G_norm_final=0.05, G_heldout=0.12),
+                 dict(case="a", seed=seed, model="m[lloyd]", optimizer="lbfgs", objective="G", stiffness="lloyd",
+                      status="ref-coarse" if seed else "ok", G_norm_final=0.03, G_heldout=0.30 + 0.1 * seed),
+                 dict(case="a", seed=seed, model="m[lloyd]", optimizer="lbfgs", objective="G+freq",
+                      stiffness="lloyd", status="ok", G_norm_final=0.01, G_heldout=0.01)]
+    rows += [dict(case="b", seed=0, model="m[cauchy]", optimizer="none", stiffness="cauchy", status="ok",
+                  G_norm_final=0.3, G_heldout=0.2),
+             dict(case="c", seed=0, model="FEM", status="ok"), dict(case="c", seed=0, model="FEM", status="error")]
+    lines = case_lines(pd.DataFrame(rows)).set_index("case")
+    a = lines.loc["a"]
+    assert a.model == "lbfgs" and a.n_seeds == 2           # G+freq is not the G fit a fitter exports
+    assert a.fitted == pytest.approx(0.03) and a.heldout == pytest.approx(0.35)     # means over seeds
+    assert a.findings == ["ref-coarse", "memorised", "fit-worse-than-rule"]          # 0.35 > 3 x 0.03; > 0.11
+    assert lines.loc["b"].model == "rule cauchy" and lines.loc["b"].findings == []
+    assert lines.loc["c"].model == "" and lines.loc["c"].findings == ["error"]
+    text = summary_text("demo", lines.reset_index())
+    assert text[0].split() == ["case", "model", "G_norm", "fitted", "/", "held-out", "status"]
+    assert "a (2 seeds)" in text[1] and "0.03 / 0.35" in text[1] and text[1].endswith("fit-worse-than-rule")
+    edge = text[0].index("held-out") + len("held-out")       # the numbers are right-aligned under the header
+    assert text[1][:edge].endswith("0.03 / 0.35") and text[2][:edge].endswith("0.3 / 0.2")
+    assert text[3][:edge].endswith(" -") and text[3].split()[1] == "-"
+    assert [ln.split(":")[0].strip() for ln in legend(lines["findings"])] == ["ref-coarse", "memorised",
+                                                                               "fit-worse-than-rule"]
