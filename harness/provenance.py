@@ -84,7 +84,7 @@ def describe(p: dict | None) -> str:
     def get(key):
         v = p.get(key)
         return NOT_RECORDED if v is None or v != v or v == "" else v     # NaN: a CSV's empty cell
-    if not any(p.get(k) not in (None, "") and p.get(k) == p.get(k) for k in FIELDS):
+    if get("format_version") == NOT_RECORDED:      # every record has it: without it, nothing was recorded
         return NOT_RECORDED
     commit = get("git_commit")
     dirty = p.get("git_dirty")

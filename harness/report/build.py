@@ -349,5 +349,8 @@ def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = Fa
         roots = {root.resolve()}
     out = [build_suite(s, figures=figures, redraw=redraw) for s in suites]
     for r in roots:
+        if figures and (r / "bench").is_dir():
+            from harness.report.figures import make_bench_figures
+            make_bench_figures(r / "bench", redraw=redraw)
         build_index(r)
     return out

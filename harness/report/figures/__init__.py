@@ -1,7 +1,7 @@
 """Figure registry: each figure kind is one module listed in ``FIGURES``.
 
 A figure module has ``NAME``, ``SCOPE`` ("case": drawn per case data folder; "suite":
-drawn once per suite folder from its summary.csv), ``DATA`` (globs of the files it reads in
+drawn once per suite folder from its summary.csv; "bench": once from the bench CSVs), ``DATA`` (globs of the files it reads in
 the folder; or ``inputs(folder) -> list[Path]`` when it reads others too), optionally
 ``CODE`` (the other modules its drawing depends on) and ``make(folder) -> list[Path]``,
 which reads stored data files (formats in :mod:`harness.report.build`), writes PNGs into
@@ -27,6 +27,7 @@ FIGURES = [
     "harness.report.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
     "harness.report.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
     "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class (summary.csv)
+    "harness.report.figures.bench_reference",   # the benchmarks' plot: FEM solve time and error (bench/reference.csv)
 ]
 
 
@@ -113,6 +114,11 @@ def make_case_figures(folder, redraw: bool = False) -> list[Path]:
 def make_suite_figures(suite_dir, redraw: bool = False) -> list[Path]:
     """The suite's figures (drawn from its summary.csv), skipped like a case's."""
     return _stamped(Path(suite_dir), figure_modules("suite"), redraw)
+
+
+def make_bench_figures(bench_dir, redraw: bool = False) -> list[Path]:
+    """The benchmarks' plot (drawn from the bench CSVs), skipped like a case's."""
+    return _stamped(Path(bench_dir), figure_modules("bench"), redraw)
 
 
 def pyplot():
