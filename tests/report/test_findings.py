@@ -122,3 +122,41 @@ def test_case_lines_pick_the_fitters_row_and_flag_it():
     assert text[3][:edge].endswith(" -") and text[3].split()[1] == "-"
     assert [ln.split(":")[0].strip() for ln in legend(lines["findings"])] == ["ref-coarse", "memorised",
                                                                                "fit-worse-than-rule"]
+
+
+def test_headline_sentences_carry_the_numbers_of_hand_made_tables():
+    """The page's findings on small summaries whose answers are worked out here."""
+    import pandas as pd
+    from harness.report.claims import deussen, nu_sweep, verification
+    d = pd.DataFrame([
+        dict(case="f8", seed=0, optimizer="sa", objective="G", G_initial=2.0, G_final=0.5, paper_G_initial=2.8,
+             paper_G_final=0.55, status="ok", G_norm_final=0.1, G_heldout=0.1),
+        dict(case="f9", seed=0, optimizer="sa", objective="G", G_initial=3.0, G_final=0.1, status="ok",
+             G_norm_final=0.01, G_heldout=0.5),
+        dict(case="f9", seed=0, optimizer="none", stiffness="lloyd", status="ok", G_norm_final=0.2, G_heldout=0.2)])
+    said = deussen(d)
+    assert said[0].startswith("Deussen 1995: simulated annealing lowers G by 4x to 30x on the paper's 2 ")
+    assert "(the paper: 5.1x where it gives both numbers)" in said[0]          # 2.8 / 0.55
+    assert "memorised its training loads in 1 of 2 cases" in said[1] and "f9: 0.500 held out against 0.0100" in said[1]
+    assert said[2] == ("Deussen 1995: in 1 of 2 cases the best fit predicts the held-out loads worse than the best "
+                       "stiffness rule does without any fit.")
+    v = pd.DataFrame([dict(case="b", load="stretch-x", closed_form_error=2e-13, error_estimate=3e-13, ref_tol=1e-4),
+                      dict(case="b", load="shear-xy", error_estimate=5e-5, ref_tol=1e-4),
+                      dict(case="b", load="shear-yx", error_estimate=2e-3, ref_tol=1e-4),
+                      dict(case="c", load="tip", error_estimate=1e-5, ref_tol=1e-4, f1_eb_ratio=0.9986)])
+    said = verification(v)
+    assert said[0].startswith("FEM reference: it meets the closed-form solution of 1 loads to 2.0e-13")
+    assert "on 3 loads without a closed form its own error estimate is 1.0e-05 to 0.0020" in said[1]
+    assert said[1].endswith("within its tolerance (0.0001) on 2 of them.")
+    assert said[2] == "FEM reference: the cantilever's first frequency is 0.14 % from Euler-Bernoulli's beam formula."
+    rows = []
+    for nu, fit, rule, spread in ((0.1, 0.05, 0.10, 0.0), (0.3, 0.099, 0.10, 0.002), (0.45, 0.20, 0.10, 0.0)):
+        rows += [dict(case=f"bar_nu{nu}", model_class="springs", nu=nu, optimizer="lbfgs", objective="G",
+                      stiffness="lloyd", G_norm_final=0.05, G_heldout_sag=fit, G_heldout_mean=fit,
+                      G_heldout_mean_spread=spread, status="ok"),
+                 dict(case=f"bar_nu{nu}", model_class="springs", nu=nu, optimizer="none", stiffness="lloyd",
+                      G_norm_final=0.2, G_heldout_sag=rule, G_heldout_mean=rule, status="ok")]
+    said = nu_sweep(pd.DataFrame(rows))
+    # nu 0.1 wins; 0.3 is inside the spread (0.099 vs 0.100 +- 0.002); 0.45 loses
+    assert said == ["Poisson-ratio map, bar: a fitted model class beats the best unfitted stiffness rule on held-out "
+                    "loads at 1 of 3 Poisson ratios (its held-out error 0.50x to 2x the rule's)."]
