@@ -20,6 +20,8 @@ def add_arguments(p):
                    help="results root whose bench/ folder gets the CSV (default: runs/; results/ holds the "
                         "published benchmarks: --results results)")
     p.add_argument("--quick", action="store_true", help="smaller sizes, for a smoke test")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (sizes done, ETA; never drawn when stderr is not a terminal)")
 
 
 def main(args) -> int:
@@ -35,12 +37,16 @@ def main(args) -> int:
                                file=str(out), field=flag, fix="drop --results (quick runs go to runs/bench)")
     check_out_dir(out, flag)      # before a bench that takes minutes
     check_out_file(path, flag)
+    from harness.progress import configure
     from harness.provenance import collect, columns
+    configure(getattr(args, "quiet", False))
     started = collect()                 # the load average at the start, before the bench loads the machine
     mod = importlib.import_module(BENCHES[args.name])
     df = mod.run(quick=args.quick)
     df = df.assign(**{k: v for k, v in columns(started).items() if k not in df.columns})
     atomic_write(path, df.to_csv(index=False).encode(), flag)
-    print(df.to_string(index=False))
+    from harness.provenance import FIELDS, describe
+    print(df.drop(columns=[c for c in FIELDS if c in df.columns and c in columns(started)]).to_string(index=False))
+    print(f"code and machine: {describe(started)}")
     print(f"-> {path}")
     return 0

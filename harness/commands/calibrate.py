@@ -94,7 +94,6 @@ import json
 import math
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from harness.case.default_loads import PEAK_STRAIN
@@ -215,6 +214,8 @@ def add_arguments(p):
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell (meshio name or bc2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa; >= 0)")
     p.add_argument("--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress line (phase, elapsed time, ETA; never drawn when stderr is not a terminal)")
 
 
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
@@ -279,7 +280,9 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
 
 def main(args) -> int:
     from harness.commands.calibrate_check import check
+    from harness.progress import configure
     check(args, PRIOR_WEIGHT)
+    configure(getattr(args, "quiet", False))
     from harness.case.mesh_checks import check_mesh
     from harness.io.meshfile import read_mesh
     mesh = read_mesh(args.mesh, args.format)
@@ -325,21 +328,20 @@ def _run(args, mesh, tmp: Path):
     ends = end_loads(pts, mesh.cells, args.clamp, args.load_region, mesh.groups) if args.heldout == "ends" else None
     if ends is not None:     # on stdout, before the work: a wrong clamp is seen at once
         print(f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead", flush=True)
-    last = [0.0]
-
-    def status(msg):  # at most one line a second
-        now = time.monotonic()
-        if now - last[0] >= 1.0:
-            last[0] = now
-            print(f"  {msg}", file=sys.stderr, flush=True)
-
     (tmp / "calibrate.toml").write_text(case_text(args, mesh.dim, mesh.cells, mesh_file, None, ends))
     try:
         case = load_case(tmp / "calibrate.toml")
     except CaseError as exc:
         raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
-    ctx = StageContext(out_dir=tmp / "out", seed=args.seed, status=status)
-    rows = stage.run(case, ctx)
+    from harness.commands.calibrate_progress import tracker
+    from harness.progress import Clock
+    clock = Clock("calibrate")           # on a terminal only (and not with --quiet)
+    try:
+        ctx = StageContext(out_dir=tmp / "out", seed=args.seed,
+                           status=tracker(clock, args.budget, selects(args) and METHODS[args.method] != "none"))
+        rows = stage.run(case, ctx)
+    finally:
+        clock.close()
     if args.method == "rule":
         exported = min(rows, key=rank) if args.rule == "best" else rows[0]
     else:

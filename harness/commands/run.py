@@ -40,6 +40,9 @@ def add_arguments(p):
     p.add_argument("--force", action="store_true",
                    help="recompute finished cases even if their inputs are unchanged")
     p.add_argument("--no-figures", dest="figures", action="store_false", help="tables only")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (cases done, ETA; never drawn when stderr is not a terminal, where one line "
+                        "per finished case goes to stdout instead) and no such lines")
 
 
 def main(args) -> int:
@@ -52,7 +55,8 @@ def main(args) -> int:
                                file=str(results), field="--results",
                                fix="drop --results (quick runs go to runs/) or add --full to republish")
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
-                    scheduler=args.scheduler, force=args.force, figures=args.figures)
+                    scheduler=args.scheduler, force=args.force, figures=args.figures,
+                    progress=False if getattr(args, "quiet", False) else None)
     import pandas as pd
     from harness.report.findings import case_lines, legend, summary_text
     seen = []
