@@ -338,7 +338,7 @@ def _run(args, mesh, tmp: Path):
     clock = Clock("calibrate")           # on a terminal only (and not with --quiet)
     try:
         ctx = StageContext(out_dir=tmp / "out", seed=args.seed,
-                           status=tracker(clock, args.budget, selects(args) and METHODS[args.method] != "none"))
+                           status=tracker(clock, args.budget, selects(args)))
         rows = stage.run(case, ctx)
     finally:
         clock.close()

@@ -89,8 +89,8 @@ def reference_sentence(exported: dict, meta: dict, heldout: bool, max_refine: in
     status = meta["status"]
     fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
     if fem is None or not math.isfinite(fem):
-        return (f"Reference {status}: FEM error not estimated (--max-refine 0, or no coarser mesh of the body could "
-                f"be made), so the errors above may be partly the FEM's.")
+        return (f"Reference status {status}, but FEM error not estimated (--max-refine 0, or no coarser mesh of the "
+                f"body could be made), so the errors above may be partly the FEM's.")
     if heldout and math.isfinite(fem_held) and fem_held < fem:
         est = f"FEM error <= {pct(fem_held)} on held-out loads, {pct(meta['reference_error_fitted'])} on fitted ones"
     else:

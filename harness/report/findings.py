@@ -44,8 +44,8 @@ def heldout_error(row) -> float:
 
 def fitted(row) -> bool:
     """Whether the row's constants were fitted (an optimiser ran), not a rule's."""
-    opt = row.get("optimizer", "none")
-    return isinstance(opt, str) and opt not in ("", "none") and row.get("choice") != "rule"
+    opt = row.get("optimizer", "none")     # "none+k-ratio 10": a rule's constants, capped
+    return isinstance(opt, str) and opt.split("+")[0] not in ("", "none") and row.get("choice") != "rule"
 
 
 def best_rule(rules):

@@ -160,3 +160,10 @@ def test_headline_sentences_carry_the_numbers_of_hand_made_tables():
     # nu 0.1 wins; 0.3 is inside the spread (0.099 vs 0.100 +- 0.002); 0.45 loses
     assert said == ["Poisson-ratio map, bar: a fitted model class beats the best unfitted stiffness rule on held-out "
                     "loads at 1 of 3 Poisson ratios (its held-out error 0.50x to 2x the rule's)."]
+
+
+def test_a_capped_rule_is_still_a_rule():
+    """calibrate --method rule --k-ratio: the exported row is a rule's constants, capped."""
+    capped = dict(RULES[0], optimizer="none+k-ratio 10")
+    assert verdict(capped, RULES)[0] == "rule" and "the exported rule (lloyd)" in heldout_sentence(capped, RULES, NAMES)
+    assert verdict(dict(capped, optimizer="lbfgs+k-ratio 10"), RULES)[0] == "fit-worse-than-rule"   # 0.12 > 0.0926
