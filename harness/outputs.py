@@ -92,6 +92,19 @@ def atomic_write(path, data: bytes, field: str | None = None):
             os.fsync(fh.fileno())
 
 
+def write_changed(path, data: bytes, field: str | None = None) -> bool:
+    """:func:`atomic_write` unless ``path`` already holds exactly ``data`` (then the file,
+    its time stamp included, is left alone); True if it wrote."""
+    path = Path(path)
+    try:
+        if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
+            return False
+    except OSError:
+        pass
+    atomic_write(path, data, field)
+    return True
+
+
 @contextmanager
 def staged(paths, field: str | None = None):
     """Temp paths beside ``paths``; on leaving the block every temp file replaces its

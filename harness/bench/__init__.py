@@ -1,7 +1,8 @@
 """Benchmarks: name -> module with ``run(quick: bool) -> pandas.DataFrame``.
 
 Each reports speeds as ratios against a baseline measured in the same process; the
-CSV goes to results/bench/<name>.csv. A new benchmark is one module added here.
+CSV goes to runs/bench/<name>.csv (``--results results``: the published
+results/bench/). A new benchmark is one module added here.
 """
 
 BENCHES = {

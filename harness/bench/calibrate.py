@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness.progress import steps
+
 FULL = (1_000, 10_000, 50_000, 200_000)
 QUICK = (1_000, 5_000)
 RADIUS, LENGTH = 0.1, 0.5
@@ -119,7 +121,7 @@ def run(quick: bool = False) -> pd.DataFrame:
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
         tmp = Path(tmp)
-        for n in (QUICK if quick else FULL):
+        for n in steps(QUICK if quick else FULL, "bench calibrate", "mesh"):
             mesh = tmp / f"cylinder{n}.vtu"
             tets = cylinder(mesh, n)
             rows.append(dict(task="calibrate", n_tets=tets, **_one(mesh, tmp / f"model{n}.vtu")))

@@ -27,6 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness.progress import steps as progress
+
 CXX_MS = {("tetra", "MS"): 1.5, ("tetra", "MT"): 7.3, ("hexa", "MS"): 1.6, ("hexa", "MT"): 6.1}
 MESHES = Path(__file__).resolve().parents[3] / "shared" / "reference-data" / "bourguignon2000" / "meshes"
 
@@ -53,7 +55,7 @@ def table1(quick: bool) -> list[dict]:
     from harness.models.massspring import build_massspring
     rows = []
     repeats = 30 if quick else 100          # best of many: the machine is shared
-    for kind in ("tetra", "hexa"):
+    for kind in progress(("tetra", "hexa"), "bench dynamics", "mesh"):
         mesh = read_mesh(MESHES / kind / "cube_555" / "cube.mesh")
         cells = mesh.cells["tetra" if kind == "tetra" else "hexahedron"]
         a, e = (np.pi / 2, np.pi / 2) if kind == "tetra" else (0.0, 0.0)

@@ -35,6 +35,7 @@ import pandas as pd
 
 from harness.optimize import optimize
 from harness.optimize.synthetic import noisy, recoverable_problem
+from harness.progress import steps
 
 FULL = [((100, 100), 1e-4, 60.0), ((20, 20, 20), 1e-2, 60.0)]
 QUICK = [((30, 30), 1e-4, 15.0), ((8, 8, 8), 1e-2, 15.0)]
@@ -49,7 +50,7 @@ NOISE_SEED = 1
 
 def run(quick: bool = False) -> pd.DataFrame:
     rows = []
-    for shape, target, budget in (QUICK if quick else FULL):
+    for shape, target, budget in steps(QUICK if quick else FULL, "bench fit", "network"):
         t = time.perf_counter()
         prob, k_true = recoverable_problem(shape, sigma=SIGMA, seed=SEED, diagonals="face")
         prob.load_sets()

@@ -64,6 +64,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.models.stiffness_rules import RULES        # the rule names calibrate's --rule takes
+from harness.progress import steps
 
 E, RHO = 1e5, 1000.0
 NUS = (0.3, 0.45)
@@ -465,12 +466,11 @@ def run(quick: bool = False) -> pd.DataFrame:
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-heldout-") as tmp:
         tmp = Path(tmp)
-        for body in bodies:
+        for body in steps(bodies, "bench heldout", "body"):
             mesh = tmp / f"{body.name}.msh"
             make_body(body, mesh, n_tets)
             for nu in nus:
                 rows += study_one(body, mesh, nu, tmp)
-                print(f"  heldout: {body.name} nu={nu:g} done", file=sys.stderr, flush=True)
     df = summarise(pd.DataFrame(rows))
     print(summary_table(df).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     print(verdict(df))

@@ -22,6 +22,7 @@ from harness.case.elasticity import isotropic_compliance, plane
 from reference import solvers
 from reference.fem import Discretisation
 from reference.locate import Locator
+from harness.progress import steps
 
 
 def _system(cell: str, n: int):
@@ -50,7 +51,7 @@ def _time_solve(A, b, R, method):
 def run(quick: bool = False) -> pd.DataFrame:
     rows = []
     sizes_2d = [16, 32] if quick else [32, 64, 128]
-    for n in sizes_2d:
+    for n in steps(sizes_2d, "bench reference 2-D", "size"):
         d, A, b, R, t_asm = _system("tri", n)
         t_dir, r_dir = _time_solve(A, b, R, "direct")
         rows.append(dict(task="solve", dim=2, element="P2 tri", n_dofs=d.ndof, solver="direct",
@@ -61,7 +62,7 @@ def run(quick: bool = False) -> pd.DataFrame:
                          seconds=t_amg, assembly_seconds=t_asm, residual=r_amg, ratio=t_dir / t_amg,
                          note="ratio = direct / amg time"))
     sizes_3d = [(3, True), (4, True)] if quick else [(4, True), (6, True), (10, False)]
-    for n, with_direct in sizes_3d:
+    for n, with_direct in steps(sizes_3d, "bench reference 3-D", "size"):
         d, A, b, R, t_asm = _system("tet", n)
         t_amg, r_amg = _time_solve(A, b, R, "amg")
         t_dir, r_dir = _time_solve(A, b, R, "direct") if with_direct else (np.nan, np.nan)

@@ -24,6 +24,7 @@ import pandas as pd
 
 from harness.optimize import optimize
 from harness.optimize.synthetic import recoverable_problem
+from harness.progress import steps
 
 # (grid shape, incremental budget, refactor budget): a float is wall seconds of the SA
 # loop after setup, an int a number of proposals. The incremental budgets are proposal
@@ -43,7 +44,7 @@ def _budget(b, setup_guess: float) -> dict:
 
 def run(quick: bool = False) -> pd.DataFrame:
     rows = []
-    for shape, inc_seconds, base_budget, repeats in (QUICK if quick else FULL):
+    for shape, inc_seconds, base_budget, repeats in steps(QUICK if quick else FULL, "bench sa", "network"):
         t = time.perf_counter()
         prob, _ = recoverable_problem(shape, sigma=0.3, seed=0, diagonals="face")
         build = time.perf_counter() - t

@@ -152,6 +152,9 @@ def with_anchors(l: dict, body: Body, file: str) -> Body:
     if taken:
         raise CaseError(f"part name '{taken[0]}' is reserved for the {l['set']} loads' constraints", file=file,
                         field=f"body.parts.{taken[0]}", fix="rename that part")
+    if len(boundary) < 3:    # a closed surface has no boundary facets
+        raise CaseError("the body has no boundary to anchor its loads on", file=file, field="body",
+                        fix="give a volume mesh (tetrahedra or hexahedra; 2-D: triangles or quads)")
     pts = anchor_points(boundary)
     parts = dict(body.parts, **{a: (tuple(p), tuple(p)) for a, p in zip(ANCHORS, pts)})
     return replace(body, parts=MappingProxyType(parts))

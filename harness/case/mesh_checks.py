@@ -101,6 +101,8 @@ def check_mesh(mesh, file: str | None = None) -> None:
     cells = {k: np.asarray(v) for k, v in mesh.cells.items() if len(v)}
     if not cells:
         fail("the mesh has no cells", "give triangle, quad, tetra or hexahedron cells")
+    if pts.shape[1] == 3 and not cells.keys() & {"tetra", "hexahedron"}:
+        _surface(pts, cells, fail)
     n = len(pts)
     used = np.zeros(n, bool)
     for kind, c in cells.items():
@@ -153,6 +155,18 @@ def check_mesh(mesh, file: str | None = None) -> None:
             fail(f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
                  "each face may belong to at most two cells; remove overlapping or duplicate cells")
     _check_connected(pts, cells, fail)
+
+
+def _surface(pts, cells, fail):
+    """Triangles or quads whose nodes do not lie in z = 0: a surface in 3-D (an STL, a
+    shell), which has no volume to be elastic in, or a flat mesh in another plane."""
+    what = " and ".join(f"{len(c)} {kind}s" for kind, c in sorted(cells.items()))
+    z = pts[:, 2]
+    if np.ptp(z) <= 1e-12 * max(float(np.ptp(pts[:, :2], axis=0).max()), np.finfo(float).tiny):
+        fail(f"a flat mesh of {what} at z = {z[0]:g}: 2-D meshes lie in the plane z = 0",
+             "move it to z = 0, or give volume cells (tetrahedra or hexahedra)")
+    fail(f"no volume cells: the mesh is a surface in 3-D ({what})",
+         "tetrahedralise it first, e.g. with gmsh")
 
 
 def _check_connected(pts, cells, fail):

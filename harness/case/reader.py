@@ -26,7 +26,7 @@ from harness.case.sets import LOAD_SETS
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
-from harness.case.schema import Field, check, did_you_mean
+from harness.case.schema import Field, describe, check, did_you_mean
 
 MODES = ("quick", "full")
 
@@ -255,6 +255,8 @@ def load_case(path, mode: str = "quick") -> Case:
         raw = tomllib.loads(path.read_text())
     except FileNotFoundError:
         raise CaseError("file not found", file=file, fix="check the path")
+    except IsADirectoryError:
+        raise CaseError("a folder, not a case file", file=file, fix="give a .toml case file")
     except tomllib.TOMLDecodeError as exc:
         raise CaseError(f"not valid TOML ({exc})", file=file, fix="fix the syntax at that line")
     except UnicodeDecodeError:
@@ -298,8 +300,11 @@ def _section(key: str, value, file: str) -> dict:
     spec = case_sections.SECTIONS[key]
     if spec == "model":
         kinds = case_sections.MODEL_KINDS
-        kind = value.get("kind") if isinstance(value, dict) else None
-        if kind not in kinds:
+        if not isinstance(value, dict):
+            raise CaseError(f"expected a table, got {describe(value)}", file=file, field=key,
+                            fix=f'a [model] table with kind = one of {", ".join(kinds)}')
+        kind = value.get("kind")
+        if not isinstance(kind, str) or kind not in kinds:
             raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
                             fix=f"one of {', '.join(kinds)}")
         spec = {"kind": Field("str"), **kinds[kind]}

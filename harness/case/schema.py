@@ -45,7 +45,7 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
-def _describe(v) -> str:
+def describe(v) -> str:
     return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
             list: "a list", dict: "a table"}.get(type(v), type(v).__name__)
 
@@ -56,7 +56,7 @@ def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
         raise CaseError(msg, file=file, field=(path + key) if key else path.rstrip("."), fix=fix)
 
     if not isinstance(data, dict):
-        fail("", f"expected a table, got {_describe(data)}")
+        fail("", f"expected a table, got {describe(data)}")
     errors = []       # every mistake of the table, not just the first
     for key in sorted(set(data) - set(spec)):
         errors.append(CaseError("unknown key", file=file, field=path + key, fix=did_you_mean(key, spec)))
@@ -102,7 +102,7 @@ def _value(v, f: Field, file: str, where: str):
         return v
     if k == "float":
         if not _is_number(v):
-            fail(f"expected a number, got {_describe(v)}")
+            fail(f"expected a number, got {describe(v)}")
         v = float(v)
         if not math.isfinite(v):
             fail("expected a finite number")
@@ -110,16 +110,16 @@ def _value(v, f: Field, file: str, where: str):
         _range(v, f, fail)
     elif k == "int":
         if not isinstance(v, int) or isinstance(v, bool):
-            fail(f"expected an integer, got {_describe(v)}")
+            fail(f"expected an integer, got {describe(v)}")
         if f.choices and v not in f.choices:
             fail(f"{v} is not one of {', '.join(map(str, f.choices))}")
         _range(v, f, fail)
     elif k == "bool":
         if not isinstance(v, bool):
-            fail(f"expected true or false, got {_describe(v)}")
+            fail(f"expected true or false, got {describe(v)}")
     elif k == "str":
         if not isinstance(v, str):
-            fail(f"expected a string, got {_describe(v)}")
+            fail(f"expected a string, got {describe(v)}")
         if f.choices and v not in f.choices:
             fail(f"'{v}' is not one of {', '.join(map(str, f.choices))}")
     elif k == "strs":
@@ -133,7 +133,7 @@ def _value(v, f: Field, file: str, where: str):
         v = tuple(v)
     elif k == "floats":
         if not isinstance(v, list) or not all(_is_number(x) for x in v):
-            fail(f"expected a list of numbers, got {_describe(v)}")
+            fail(f"expected a list of numbers, got {describe(v)}")
         v = tuple(float(x) for x in v)
         if not all(math.isfinite(x) for x in v):
             fail("expected finite numbers")

@@ -109,7 +109,10 @@ DYNAMICS = {
     "push": Field("floats", (0.0, -1.0, 0.0), length=3, doc="force (N) on each pulled node (flag 2)"),
     "drag": Field("float", 5e-3, min=0, doc="drag per step (the program's 5e-3), physical drag * dt"),
     "meshes": Field("strs", (), doc="more meshes (relative to the case file) run with the same settings"),
-    "snapshots": Field("any", [], doc="step numbers whose particle states are written"),
+    "snapshots": Field("any", [], doc="step numbers whose particle states are written",
+                       check=lambda v: None if isinstance(v, list) and all(
+                           isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in v)
+                       else "expected a list of step numbers (integers >= 0)"),
     "static": Field("bool", False, doc="also solve the static equilibrium (Newton)"),
     "repeats": Field("int", 3, min=1, doc="timing repeats (best of)"),
 }
@@ -165,7 +168,9 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
     # [expect]: the paper's numbers, reported beside ours
     "expect": {
         "source": Field("str", ""),
-        "values": Field("any", {}),
+        "values": Field("any", {}, check=lambda v: _values_problem(v),
+                        doc="the paper's numbers by column, e.g. values = { G_final = 0.47 }, or by model, "
+                            "e.g. values = { MT = { peak_abs_dV_percent = 1.5 } }"),
     },
     # [dynamics]: time integration settings of the bc2000 experiments
     "dynamics": DYNAMICS,
@@ -187,6 +192,20 @@ def _seeds_problem(v):
         return f"expected an integer >= 0 or a non-empty list of them, got {v!r}"
     if len(set(seeds)) != len(seeds):
         return "repeated seed"
+    return None
+
+
+def _values_problem(v, depth=0):
+    """[expect] values: a table of numbers, or (one level down) of tables of numbers."""
+    if not isinstance(v, dict):
+        return "expected a table of numbers, e.g. { G_final = 0.47 }"
+    for name, x in v.items():
+        if isinstance(x, dict) and depth == 0:
+            problem = _values_problem(x, 1)
+            if problem:
+                return f"{name}: {problem}"
+        elif not (isinstance(x, (int, float)) and not isinstance(x, bool)):
+            return f"{name}: expected a number, got {x!r}"
     return None
 
 

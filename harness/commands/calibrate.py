@@ -42,7 +42,9 @@ a peak strain of about ``--peak-strain`` (default 1e-3): small strains.
 Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
 Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
 
-Writes (and prints the table and a one-sentence verdict):
+Prints where the held-out loads clamp the body (before the work), then the table and the
+verdict: the held-out error against the best rule's on the same loads, the fitted error, the
+reference's status and, for a validated fit, what the validation chose. Writes:
 
 - ``MODEL.vtu`` — ParaView-ready network (points in m, ``line`` cells = springs, point
   data ``mass`` in kg, cell data ``stiffness`` = linear k in N/m with f = k (l - l0)).
@@ -59,7 +61,10 @@ Writes (and prints the table and a one-sentence verdict):
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
   the held-out loads of each one's own relative error) and ``G_heldout_loads`` ({load: its
-  relative error}), ``reference_error`` (the FEM's
+  relative error}), ``status`` (the exported row's reference status, ``ok`` or ``ref-coarse``),
+  ``verdict`` and ``best_rule_heldout`` (the exported constants against the best rule on the
+  held-out loads, harness/report/findings.py), ``opt_stop`` and ``opt_stops`` (the optimiser's
+  whole stop messages), ``reference_error`` (the FEM's
   own estimated error, relative: the worst of ``reference_error_fitted`` and
   ``reference_error_heldout``), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
@@ -89,7 +94,6 @@ import json
 import math
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 from harness.case.default_loads import PEAK_STRAIN
@@ -111,6 +115,11 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               family), validation_skipped (null when the validation ran, else the --budget in s
               that lets it run), G_heldout_mean_spread (over the final fit's starts), reference_error (FEM's own, relative; the worst of
               reference_error_fitted and reference_error_heldout),
+              status (the exported row's reference status: ok, or ref-coarse: the FEM's own error is above
+              a tenth of the model's or missed its tol), verdict (held-out loads: better, tie or
+              fit-worse-than-rule for a fit, rule when a rule is exported, null without held-out loads),
+              best_rule_heldout ({rule, G_heldout_mean}: the best rule on the held-out loads), opt_stop and
+              opt_stops (the optimiser's whole stop message: the exported start's, and every start's),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
@@ -120,7 +129,7 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each family's
               and of the clamped states' own G_norm; ranks the rules), G_heldout, G_heldout_mean,
               G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout (the FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
-              dt_stable (s) with --k-ratio, seconds, seed, opt_stop
+              dt_stable (s) with --k-ratio, seconds, seed, opt_stop, opt_stops (every start's, " | " between)
 2-D meshes: unit thickness (k and masses per unit thickness).
 the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by default
 its capacity (the prior weight a, a volume term per element or none) is chosen by leave-one-family-out
@@ -205,53 +214,8 @@ def add_arguments(p):
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell (meshio name or bc2000)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa; >= 0)")
     p.add_argument("--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)")
-
-
-def _check(args):
-    def bad(flag, msg, fix):
-        raise SpringbenchError(msg, field=flag, fix=fix)
-    if not (math.isfinite(args.E) and args.E > 0):
-        bad("--E", f"{args.E} is not a positive number", "Young's modulus in Pa, e.g. --E 2e5")
-    if not (-1 < args.nu < 0.5):
-        bad("--nu", f"{args.nu} is out of range", "a Poisson ratio in (-1, 0.5), e.g. --nu 0.3")
-    if not (math.isfinite(args.density) and args.density > 0):
-        bad("--density", f"{args.density} is not a positive number", "kg/m^3, e.g. --density 1000")
-    if args.magnitude is not None and not (math.isfinite(args.magnitude) and args.magnitude > 0):
-        bad("--magnitude", f"{args.magnitude} is not a positive number", "a traction in Pa")
-    peak = getattr(args, "peak_strain", PEAK_STRAIN)
-    if not (math.isfinite(peak) and 0 < peak <= 0.1):
-        bad("--peak-strain", f"{peak} is not in (0, 0.1]", f"a small strain, e.g. --peak-strain {PEAK_STRAIN:g}")
-    if not (math.isfinite(args.damping_ratio) and 0 <= args.damping_ratio < 1):
-        bad("--damping-ratio", f"{args.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
-    if args.prior_weight is not None and not (math.isfinite(args.prior_weight) and args.prior_weight >= 0):
-        bad("--prior-weight", f"{args.prior_weight} is not a number >= 0", f"e.g. --prior-weight {PRIOR_WEIGHT:g}, or 0 for none")
-    if args.prior_weight is not None and args.method != "lbfgs":
-        bad("--prior-weight", f"--method {args.method} has no prior", "use --prior-weight with --method lbfgs")
-    if args.init != "none" and args.method not in ("lbfgs", "gauss-newton"):
-        bad("--init", f"--method {args.method} has no start point to set", "use --init with --method lbfgs or gauss-newton")
-    if not (args.budget > 0):
-        bad("--budget", f"{args.budget} is not a positive number of seconds", "e.g. --budget 60")
-    if not (args.tol > 0) or args.max_refine < 0:
-        bad("--tol", "needs --tol > 0 and --max-refine >= 0", "e.g. --tol 1e-3 --max-refine 1")
-    if args.k_ratio is not None and not (math.isfinite(args.k_ratio) and args.k_ratio >= 1):
-        bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
-    if args.seed < 0:
-        bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
-    from harness.case.schema import LARGEST, SMALLEST     # what the case-file numbers may be
-    # E's lower end leaves room for the default traction, 1e-3 E
-    for flag, v, lo in (("--E", args.E, 1e3 * SMALLEST), ("--density", args.density, SMALLEST),
-                        ("--magnitude", args.magnitude, SMALLEST)):
-        if v is not None and not lo <= v <= LARGEST:
-            bad(flag, f"{v:g} is too {'large' if v > LARGEST else 'small'} to compute with",
-                f"a value between {lo:g} and {LARGEST:g}: change the units")
-    if args.out.suffix.lower() != ".vtu":
-        bad("--out", f"'{args.out}' does not end in .vtu", "e.g. --out model.vtu")
-    from harness.outputs import check_out_file
-    for out in (args.out, args.out.with_suffix(".json"), args.out.with_suffix(".csv")):
-        check_out_file(out, "--out")       # before the work, not after it
-    if not args.mesh.is_file():
-        raise SpringbenchError("is a folder, not a mesh file" if args.mesh.is_dir() else "no such mesh file",
-                               file=str(args.mesh), fix="check the path")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress line (phase, elapsed time, ETA; never drawn when stderr is not a terminal)")
 
 
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
@@ -315,7 +279,10 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
 
 
 def main(args) -> int:
-    _check(args)
+    from harness.commands.calibrate_check import check
+    from harness.progress import configure
+    check(args, PRIOR_WEIGHT)
+    configure(getattr(args, "quiet", False))
     from harness.case.mesh_checks import check_mesh
     from harness.io.meshfile import read_mesh
     mesh = read_mesh(args.mesh, args.format)
@@ -359,23 +326,22 @@ def _run(args, mesh, tmp: Path):
               file=sys.stderr)
     pts = mesh.points * UNITS[args.length_unit]
     ends = end_loads(pts, mesh.cells, args.clamp, args.load_region, mesh.groups) if args.heldout == "ends" else None
-    if ends is not None:
-        print(f"  {ends.describe()}", file=sys.stderr)
-    last = [0.0]
-
-    def status(msg):  # at most one line a second
-        now = time.monotonic()
-        if now - last[0] >= 1.0:
-            last[0] = now
-            print(f"  {msg}", file=sys.stderr, flush=True)
-
+    if ends is not None:     # on stdout, before the work: a wrong clamp is seen at once
+        print(f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead", flush=True)
     (tmp / "calibrate.toml").write_text(case_text(args, mesh.dim, mesh.cells, mesh_file, None, ends))
     try:
         case = load_case(tmp / "calibrate.toml")
     except CaseError as exc:
         raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
-    ctx = StageContext(out_dir=tmp / "out", seed=args.seed, status=status)
-    rows = stage.run(case, ctx)
+    from harness.commands.calibrate_progress import tracker
+    from harness.progress import Clock
+    clock = Clock("calibrate")           # on a terminal only (and not with --quiet)
+    try:
+        ctx = StageContext(out_dir=tmp / "out", seed=args.seed,
+                           status=tracker(clock, args.budget, selects(args)))
+        rows = stage.run(case, ctx)
+    finally:
+        clock.close()
     if args.method == "rule":
         exported = min(rows, key=rank) if args.rule == "best" else rows[0]
     else:
@@ -416,13 +382,19 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     res = statics.solve(capped, case)
     u_ref = reference_displacements(ref, capped.points, res.names)
     sc, sh = fit_and_heldout(u_ref, res.u, capped.classes, case_weights(case), res.names, case.fit_loads, case.heldout)
-    out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed")}
+    out = {k_: v for k_, v in row.items() if k_ in ("model", "stiffness", "n_nodes", "n_springs", "seed", "G_ref",
+                                                     "G_ref_heldout", "ref_error_max", "ref_error_heldout")}
     out.update(optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}", G_norm_initial=row.get("G_norm_final"),
                G_norm_final=sc.G_norm, G_heldout=sh.G_norm if sh else math.nan,
                k_ratio=float(capped.k.max() / np.median(capped.k)), _net=capped)
     if sh is not None:
         per = {f"G_heldout_{name}": float(v) for name, v in sh.per_load_norm.items()}
         out.update(G_heldout_mean=float(np.mean(list(per.values()))), **per)
+    if "status" in row:     # the reference's error against the capped constants' (harness/scoring.py ref_status)
+        from harness.scoring import ref_status
+        out["status"] = ref_status(row.get("G_ref", math.nan), sc.G_norm, row.get("ref_met_tol"))
+        if sh is not None and ref_status(row.get("G_ref_heldout", math.nan), sh.G_norm, None) != "ok":
+            out["status"] = "ref-coarse"
     if np.all(net.masses > 0):
         for r, n in ((row, net), (out, capped)):
             kd = spring_damping(n.springs, n.k, n.masses, zeta)
@@ -449,7 +421,9 @@ def _worst(*values) -> float:
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
-    from harness.commands.calibrate_verdict import finite, heldout_sentence, pct, records, validation_sentence
+    from harness.commands.calibrate_verdict import (finite, fitted_sentence, heldout_sentence, records,
+                                                    reference_sentence, validation_sentence, verdict)
+    from harness.report.findings import heldout_error
     from harness.export.model_json import export
     from harness.stages.sms_measures import rank
     exported = next(r for r in rows if r["exported"])
@@ -465,11 +439,19 @@ def _report(args, rows, net, case):
                 choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
                 masses=args.masses, prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
                                                   prior_weight(args) if args.method == "lbfgs" else math.nan))
+    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    said, rule = verdict(exported, rules) if case.heldout else (None, None)
+    stops = exported.get("opt_stops") or exported.get("opt_stop")
+    meta.update(status=str(exported.get("status", "ok")), verdict=said,
+                best_rule_heldout=None if rule is None else {"rule": rule["stiffness"],
+                                                             "G_heldout_mean": finite(heldout_error(rule))},
+                opt_stop=exported.get("opt_stop") if isinstance(exported.get("opt_stop"), str) else None,
+                opt_stops=stops.split(" | ") if isinstance(stops, str) else [])
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_fit_score", "G_heldout", "G_heldout_mean",
                         "G_heldout_mean_spread",
                         "choice", "ref_error_max", "ref_error_heldout", "status",
-                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_prior")
+                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     from harness.outputs import staged
@@ -477,23 +459,12 @@ def _report(args, rows, net, case):
     with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
         data = export(net, vtu, meta)         # writes vtu and its .json beside it (harness/export/model_json.py)
         df.to_csv(csv, index=False)
-    print(df.to_string(index=False))
-    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
-    best = min(rules, key=rank)
-    held = f", {pct(meta['G_norm_heldout'])} on held-out loads" if case.heldout else ""
-    fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
-    if fem is None or not math.isfinite(fem):
-        fem = "FEM error not estimated (--max-refine 0, or no coarser mesh of the body could be made)"
-    elif case.heldout and math.isfinite(fem_held) and fem_held < fem:
-        fem = f"FEM error <= {pct(fem_held)} on held-out loads, {pct(meta['reference_error_fitted'])} on fitted ones"
-    else:
-        fem = f"FEM error <= {pct(fem)}"
-    print(f"RMS displacement error {pct(meta['G_norm'])} of the FEM on the fitted loads{held}; "
-          f"{fem}; the best stiffness rule ({best['stiffness']}) gave {pct(best.get('G_norm_final'))}.")
+    print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
+    print(heldout_sentence(exported, rules, case.heldout))
+    print(fitted_sentence(exported, min(rules, key=rank)))
+    print(reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
     if "choice" in exported:
         print(validation_sentence(exported, meta["validation"] or []))
-    if case.heldout and exported.get("optimizer", "none") != "none":
-        print(heldout_sentence(exported, rules))
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "

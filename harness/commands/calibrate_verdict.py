@@ -41,15 +41,69 @@ def finite(v):
     return float(v) if v is not None and math.isfinite(v) else None
 
 
-def heldout_sentence(exported: dict, rules: list) -> str:
-    """The fit's held-out mean error against the best rule's on the same loads: better,
-    worse, or a tie within the spread over starts."""
-    rule = min(rules, key=lambda r: r.get("G_heldout_mean", math.inf))
-    fit, other = exported.get("G_heldout_mean", math.nan), rule.get("G_heldout_mean", math.nan)
-    spread = exported.get("G_heldout_mean_spread", 0.0) or 0.0
-    verdict = ("a tie within the spread over starts" if abs(fit - other) <= spread else
-               "the fit is better" if fit < other else
-               f"the fit is worse than that rule on held-out loads: export the rule instead "
-               f"(--method rule --rule {rule['stiffness']})")
-    return (f"Held-out loads, mean of each load's error: {pct(fit)} (spread over starts {pct(spread)}) against "
-            f"the best rule's {pct(other)} ({rule['stiffness']}): {verdict}.")
+def verdict(exported: dict, rules: list) -> tuple:
+    """(JSON ``verdict``, the best rule's row on held-out loads): "better", "tie" or
+    "fit-worse-than-rule" for a fit; "rule" when a rule's constants are exported; None
+    without held-out loads (harness/report/findings.py)."""
+    from harness.report.findings import against_rule, best_rule, fitted
+    if not fitted(exported):
+        return ("rule" if best_rule(rules) is not None else None), best_rule(rules)
+    v, rule = against_rule(exported, rules)
+    return ({"worse": "fit-worse-than-rule"}.get(v, v)), rule
+
+
+def heldout_sentence(exported: dict, rules: list, names) -> str:
+    """Held-out against held-out, in one sentence: the exported constants' error on the
+    loads no fit saw beside the best rule's on the same loads, and what to do about it."""
+    from harness.report.findings import fitted, heldout_error
+    v, rule = verdict(exported, rules)
+    if v is None:
+        return ("No held-out loads (--heldout none): the errors below are on the loads the constants were fitted "
+                "to, which says how well they fit, not how well they predict.")
+    fit, other = heldout_error(exported), heldout_error(rule)
+    head = (f"Held-out loads ({', '.join(names)}; never fitted), mean RMS error of each relative to the FEM: ")
+    if not fitted(exported):
+        mine = exported["stiffness"]
+        tail = ("it is the best of the rules there" if mine == rule["stiffness"] else
+                f"--method rule --rule {rule['stiffness']} exports that one")
+        return f"{head}the exported rule ({mine}) {pct(fit)}, the best rule ({rule['stiffness']}) {pct(other)}: {tail}."
+    spread = exported.get("G_heldout_mean_spread")
+    spread = f" (spread over starts {pct(spread)})" if spread is not None and math.isfinite(spread) else ""
+    tail = {"tie": "a tie within the spread over starts: either predicts as well",
+            "better": f"the fit is better, x{fit / other:.2f} the rule's error" if other > 0 else "the fit is better",
+            "fit-worse-than-rule": f"fit worse than the rule on held-out loads: export the rule instead "
+                                   f"(--method rule --rule {rule['stiffness']})"}[v]
+    return f"{head}the fit {pct(fit)}{spread}, the best rule ({rule['stiffness']}) {pct(other)}: {tail}."
+
+
+def fitted_sentence(exported: dict, best: dict) -> str:
+    """The fitted loads' error beside the best rule's there (the rule the fit started from)."""
+    return (f"Fitted loads: RMS displacement error {pct(exported.get('G_norm_final'))} of the FEM "
+            f"(the best stiffness rule there, {best['stiffness']}, {pct(best.get('G_norm_final'))}).")
+
+
+def reference_sentence(exported: dict, meta: dict, heldout: bool, max_refine: int) -> str:
+    """The FEM reference's status (ok / ref-coarse), its own error, where it is coarse and
+    what that means."""
+    from harness.scoring import ref_status
+    status = meta["status"]
+    fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
+    if fem is None or not math.isfinite(fem):
+        return (f"Reference status {status}, but FEM error not estimated (--max-refine 0, or no coarser mesh of the "
+                f"body could be made), so the errors above may be partly the FEM's.")
+    if heldout and math.isfinite(fem_held) and fem_held < fem:
+        est = f"FEM error <= {pct(fem_held)} on held-out loads, {pct(meta['reference_error_fitted'])} on fitted ones"
+    else:
+        est = f"FEM error <= {pct(fem)}"
+    coarse = [name for name, g_ref, g, met in (
+        ("fitted", exported.get("G_ref", math.nan), exported.get("G_norm_final", math.nan), exported.get("ref_met_tol")),
+        ("held-out", exported.get("G_ref_heldout", math.nan), exported.get("G_heldout", math.nan), None))
+        if (name == "fitted" or heldout) and ref_status(g_ref, g, met) != "ok"]
+    where = f" on the {' and '.join(coarse)} loads" if coarse else ""
+    if status == "ok":
+        return (f"Reference ok ({est}): the FEM's own error is under a tenth of the model's, so the errors "
+                f"above are the model's.")
+    return (f"Reference ref-coarse ({est}): the FEM's own error{where} is above a tenth of the model's or missed "
+            f"its tolerance, so part of those errors is the FEM's; --max-refine {max_refine + 1} (or a finer mesh) "
+            f"makes it finer.")
+

@@ -40,6 +40,9 @@ def add_arguments(p):
     p.add_argument("--force", action="store_true",
                    help="recompute finished cases even if their inputs are unchanged")
     p.add_argument("--no-figures", dest="figures", action="store_false", help="tables only")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (cases done, ETA; never drawn when stderr is not a terminal, where one line "
+                        "per finished case goes to stdout instead) and no such lines")
 
 
 def main(args) -> int:
@@ -52,15 +55,21 @@ def main(args) -> int:
                                file=str(results), field="--results",
                                fix="drop --results (quick runs go to runs/) or add --full to republish")
     rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
-                    scheduler=args.scheduler, force=args.force, figures=args.figures)
+                    scheduler=args.scheduler, force=args.force, figures=args.figures,
+                    progress=False if getattr(args, "quiet", False) else None)
     import pandas as pd
-    from harness.report.frames import headline_frame
+    from harness.report.findings import case_lines, legend, summary_text
+    seen = []
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)
+        lines = case_lines(df)
+        seen += list(lines["findings"])
         print(f"\n== {suite.name}: {len(df)} rows in {csv} (all columns; tables and figures: summary.md)")
-        with pd.option_context("display.width", 160, "display.max_columns", 20, "display.precision", 4):
-            print(headline_frame(df).to_string(index=False, max_colwidth=50))
+        print("\n".join(summary_text(suite.name, lines)))
+    if rep.suites:
+        print("\n".join(["\nmodel: each case's best fit on the fitted loads (else its best stiffness rule); held-out: "
+                         "the mean of each held-out load's G where recorded, else the pooled G"] + legend(seen)))
     n = len(rep.results)
     print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
           f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "

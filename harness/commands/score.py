@@ -45,10 +45,23 @@ def main(args) -> int:
 
     import reference
     from harness.errors import SpringbenchError
+    from harness.case.schema import LARGEST, SMALLEST
     if args.weights is not None and not (all(math.isfinite(w) and w >= 0 for w in args.weights)
                                          and sum(args.weights) > 0):
         raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
                                "not all zero", field="--weights", fix="e.g. --weights 1 3 15")
+    if args.weights is not None and not all(w == 0 or SMALLEST <= w <= LARGEST for w in args.weights):
+        raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)}: a weight is too "
+                               f"{'large' if max(args.weights) > LARGEST else 'small'} to compute with",
+                               field="--weights", fix=f"weights between {SMALLEST:g} and {LARGEST:g} (or 0), e.g. "
+                                                      "--weights 1 3 15")
+    for what, path in (("network", args.model), ("case", args.case)):
+        if Path(path).is_dir():
+            raise SpringbenchError(f"cannot read it: a folder, not a {what} file", file=str(path),
+                                   fix="give the file's path")
+    if args.out is not None and any(Path(args.out).resolve() == Path(f).resolve() for f in (args.model, args.case)):
+        raise SpringbenchError(f"{args.out} is an input of the command: the table would overwrite it",
+                               field="--out", fix="give another file name, e.g. --out score.csv")
 
     from harness.case.reader import load_case
     from harness.errors import ModelError

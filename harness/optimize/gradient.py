@@ -182,6 +182,26 @@ def prior_term(problem: FitProblem, x: np.ndarray, weight: float):
     return weight * float(xe @ xe) / n, (2.0 * weight / n) * xe
 
 
+# what scipy's L-BFGS-B means by a status whose detail it leaves empty (scipy >= 1.15 says
+# "ABNORMAL: " where the Fortran code said ABNORMAL_TERMINATION_IN_LNSRCH)
+SCIPY_DETAILS = {
+    "ABNORMAL": "the line search found no step that lowers the objective (ABNORMAL_TERMINATION_IN_LNSRCH): "
+                "rounding dominates the objective's changes, or its gradient disagrees with it",
+    "ERROR": "invalid input to L-BFGS-B",
+    "WARNING": "stopped on a warning",
+}
+
+
+def scipy_stop(res) -> str:
+    """The whole of scipy's stop message: ``scipy: STATUS: detail``, with the detail filled
+    in where scipy leaves it empty."""
+    msg = str(res.message).strip()
+    status, _, detail = msg.partition(":")
+    if not detail.strip():
+        msg = f"{status}: {SCIPY_DETAILS.get(status, 'no detail given')}"
+    return f"scipy: {msg}"
+
+
 def _result(obj: Objective, t0: float, stop: str, nit: int, extra: dict) -> dict:
     x = obj.best[1]
     k = obj.k(x)
@@ -249,7 +269,7 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
                           bounds=list(zip(np.log(lo) / d, np.log(hi) / d)),
                           options=dict(maxiter=int(opts["maxiter"]), maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
                                        maxcor=int(opts["memory"]), gtol=float(opts["gtol"]), ftol=float(opts["ftol"])))
-        stop = f"scipy: {res.message}"
+        stop = scipy_stop(res)
     except _Stop:
         stop = obj.done()
     return _result(obj, t0, stop, nit[0], {"init": opts["init"], "prior": float(opts["prior"]), **init_info})
@@ -283,7 +303,7 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
                           bounds=[(np.log(lo), np.log(hi))] * n,
                           options=dict(maxiter=int(opts["maxiter"] or 400 * n), maxfev=int(opts["maxiter"] or 400 * n) * 2,
                                        xatol=float(opts["xatol"]), fatol=float(opts["fatol"]), adaptive=n > 4))
-        stop = f"scipy: {res.message}"
+        stop = scipy_stop(res)
     except _Stop:
         stop = obj.done()
     return _result(obj, t0, stop, nit[0], {"prior": float(opts["prior"])})

@@ -74,12 +74,14 @@ class Selection:
     (spring-only choices: the springs' columns only) from each start of the final fit
     (``starts``, the exported one first: the lowest training objective); the validation
     table: one row per model (the rule first) with its score on each left-out family and
-    the score that chose (``score``)."""
+    the score that chose (``score``); ``stops``: the optimiser's stop message of each start
+    (as ``starts``; none for the rule)."""
     choice: str
     starts: tuple
     table: tuple
     families: tuple
     skipped: float = 0.0    # > 0: the validation did not run; the seconds it would need
+    stops: tuple = ()
 
     @property
     def k(self) -> np.ndarray:
@@ -179,13 +181,14 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> 
         if G2 / G0sq < best[0]:
             best[:] = [G2 / G0sq, np.array(x)]
         return G2 / G0sq, M.T @ (g * k) / G0sq
+    from harness.optimize.gradient import scipy_stop
     x = np.zeros(M.shape[1]) if x0 is None else np.asarray(x0, float)
     try:
-        minimize(phi, x, jac=True, method="L-BFGS-B", bounds=[(-7.0, 7.0)] * len(x),
-                 options={"maxiter": int(options.get("maxiter") or 200)})
+        stop = scipy_stop(minimize(phi, x, jac=True, method="L-BFGS-B", bounds=[(-7.0, 7.0)] * len(x),
+                                   options={"maxiter": int(options.get("maxiter") or 200)}))
     except Stop:
-        pass
-    return {"k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)), "info": {"phi": float(best[0])}}
+        stop = "max_seconds"
+    return {"k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)), "info": {"phi": float(best[0]), "stop": stop}}
 
 
 def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> dict:
@@ -289,9 +292,10 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
         status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
         r = fit_result(cp, cand, dict(final or options), x0, features)
-        fits.append((r["info"]["phi"], r["k"]))          # the training objective, prior included
+        fits.append((r["info"]["phi"], r["k"], str(r["info"].get("stop"))))   # the training objective, prior included
     fits.sort(key=lambda t: t[0])
-    return Selection(cand.name, tuple(k for _, k in fits), tuple(table), tuple(names))
+    return Selection(cand.name, tuple(k for _, k, _ in fits), tuple(table), tuple(names),
+                     stops=tuple(stop for _, _, stop in fits))
 
 
 STEP_COST = 1.5    # a fit's step (solve and adjoint) in solves of all training states

@@ -5,6 +5,7 @@ Layout written by :mod:`harness.run.runner`::
     results/index.html                      one static page linking every suite
     results/<suite>/summary.csv, summary.md one row per case, model (and seed)
     results/<suite>/seeds.csv               mean/std/n over seeds (cases with several seeds)
+    results/<suite>/provenance.json         the code and machine of the runs that made its results
     results/<suite>/<case>/result-seed<N>.json   manifest (input hash, status, files) + rows
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
@@ -235,13 +236,15 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
         raise SpringbenchError("no stored results here", file=str(suite_dir),
                                fix="give a folder results/<suite> written by 'springbench run'")
     df = summary_frame(manifests)
+    from harness.report import origin
+    origin.write(suite_dir, manifests)
     csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
-    from harness.outputs import atomic_write
-    atomic_write(csv_path, df.to_csv(index=False).encode())
+    from harness.outputs import write_changed
+    write_changed(csv_path, df.to_csv(index=False).encode())
     seeds = seeds_frame(df)
     seeds_path = suite_dir / "seeds.csv"
     if not seeds.empty:
-        atomic_write(seeds_path, seeds.to_csv(index=False).encode())
+        write_changed(seeds_path, seeds.to_csv(index=False).encode())
     elif seeds_path.exists():
         seeds_path.unlink()
     n_err = int((df.get("status") == "error").sum()) if "status" in df else 0
@@ -288,13 +291,13 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
         md += markdown_section(df)
     sources = sorted({str(m["expect"].get("source", "")) for m in manifests
                       if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
-    atomic_write(md_path, "\n".join(md).encode())
+    write_changed(md_path, "\n".join(md).encode())
     pngs = []
     if figures:
         from harness.report import figures as figs
         for d in data_folders(suite_dir, manifests):
             pngs += figs.make_case_figures(d, redraw=redraw)
-        pngs += figs.make_suite_figures(suite_dir)
+        pngs += figs.make_suite_figures(suite_dir, redraw=redraw)
     return {"csv": csv_path, "md": md_path, "figures": pngs, "table": df, "sources": sources}
 
 
@@ -307,18 +310,23 @@ def suites_under(results_root) -> list[Path]:
 
 
 def build_index(results_root) -> Path:
-    """``<results_root>/index.html``, the page a person reads (:mod:`harness.report.page`)."""
-    from harness.report.page import index_html
-    from harness.outputs import atomic_write
-    out = Path(results_root) / "index.html"
-    atomic_write(out, index_html(results_root).encode())
+    """``<results_root>/index.html``, the page a person reads (:mod:`harness.report.page`),
+    and ``README.md``, its tables as Markdown (:mod:`harness.report.readme`)."""
+    from harness.report.page import index_html, page_suites
+    from harness.report.readme import readme_md
+    from harness.outputs import write_changed
+    root = Path(results_root)
+    out = root / "index.html"
+    write_changed(out, index_html(root).encode())
+    suites, bench = page_suites(root)
+    write_changed(root / "README.md", readme_md(root, suites, bench).encode())
     return out
 
 
 def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = False) -> list[dict]:
     """``springbench report``: rebuild the named suite folders (default: all under the
-    results root) and the index."""
-    from harness.paths import DEFAULT_RESULTS
+    results root, runs/ unless given) and the index."""
+    from harness.paths import DEFAULT_RUNS
     if paths:
         suites = []
         for p in map(Path, paths):
@@ -333,12 +341,16 @@ def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = Fa
                                        fix="give a folder results/<suite> written by 'springbench run'")
         roots = {s.resolve().parent for s in suites}
     else:
-        root = Path(results_root or DEFAULT_RESULTS)
+        root = Path(results_root or DEFAULT_RUNS)
         suites = suites_under(root)
         if not suites:
-            raise SpringbenchError("no stored results", file=str(root), fix="run 'springbench run' first")
+            raise SpringbenchError("no stored results", file=str(root),
+                                   fix="run 'springbench run' first, or report the published ones: --results results")
         roots = {root.resolve()}
     out = [build_suite(s, figures=figures, redraw=redraw) for s in suites]
     for r in roots:
+        if figures and (r / "bench").is_dir():
+            from harness.report.figures import make_bench_figures
+            make_bench_figures(r / "bench", redraw=redraw)
         build_index(r)
     return out

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from harness.report.frames import REF_COARSE
+from harness.report.claims import suite_lists
 from harness.report.headlines import headline_tables
 from harness.report.text import BENCH, GLOSSARY, KEY_FIGURES, SUITES, UNITS, case_label, figure_caption
 
@@ -35,6 +36,8 @@ figure{margin:1.2em 0}figure img{width:100%;height:auto;border:1px solid #e3e3e3
 details{margin:.6em 0}summary{cursor:pointer}.figs li{margin:.15em 0}
 dl{display:grid;grid-template-columns:max-content 1fr;gap:.3em 1em}dt{font-weight:600}dd{margin:0}
 code{background:#f3f3f3;padding:0 .2em}
+.scroll{overflow-x:auto;max-width:100%}ul.findings li{margin:.3em 0}
+@media (max-width:600px){body{padding:1em .8em}dl{grid-template-columns:1fr}table{font-size:12px}}
 """
 
 
@@ -152,17 +155,27 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
               file=sys.stderr)
         tables = []
     for heading, table, note in tables:
-        parts += [f"<h3>{_e(heading)}</h3>", html_table(table)]
+        parts += [f"<h3>{_e(heading)}</h3>", f"<div class='scroll'>{html_table(table)}</div>"]
         if note:
             parts.append(f"<p class='note'>{_e(note)}</p>")
+    pngs = sorted(suite.rglob("fig-*.png"))
+    key = _key_figures(suite, pngs)
+    lists = suite_lists(suite.name, df)
+    if lists and key:          # findings read beside their figure
+        parts += [_figure(root, p, cap) for p, cap in key]
+        key = []
+    for heading, sentences in lists:
+        parts += [f"<h3>{_e(heading)}</h3>", "<ul class='findings'>" + "".join(f"<li>{_e(x)}</li>"
+                                                                               for x in sentences) + "</ul>"]
     data = [f"<a href='{_href(root, suite / 'summary.csv')}'>summary.csv</a> (all {len(df)} rows, "
             f"{len(df.columns)} columns: every score, per-load G and stage detail)"]
     for name, what in (("summary.md", "the key columns as Markdown"), ("seeds.csv", "means and spreads over seeds")):
         if (suite / name).is_file():
             data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
     parts.append("<p>Full tables: " + "; ".join(data) + ".</p>")
-    pngs = sorted(suite.rglob("fig-*.png"))
-    key = _key_figures(suite, pngs)
+    from harness.report.origin import lines
+    parts.append("<details class='note'><summary>Code and machine</summary>"
+                 + "".join(f"<p>{_e(line)}</p>" for line in lines(suite)) + "</details>")
     if key:
         parts.append("<h3>Figures</h3>")
         parts += [_figure(root, p, cap) for p, cap in key]
@@ -182,11 +195,34 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
 
 
 def _bench_section(root: Path, files: list[Path]) -> list[str]:
-    items = "".join(f"<li><a href='{_href(root, f)}'>{_e(f.name)}</a>: {_e(BENCH.get(f.stem, 'benchmark'))}</li>"
-                    for f in files)
-    return ["<section id='bench'><h2>Benchmarks</h2>",
-            "<p>Each benchmark is a ratio against a baseline measured in the same run "
-            "(<code>springbench bench NAME</code>); README.md gives the targets.</p>", f"<ul>{items}</ul></section>"]
+    import pandas as pd
+    from harness.report.bench_tables import bench_table, provenance_line
+    parts = ["<section id='bench'><h2>Benchmarks</h2>",
+             "<p>Each benchmark is measured by <code>springbench bench NAME</code> (speeds as ratios against a "
+             "baseline measured in the same run); README.md gives the targets.</p>"]
+    for png in sorted((root / "bench").glob("fig-*.png")):
+        parts.append(_figure(root, png, figure_caption(png.name)))
+    for f in files:
+        parts.append(f"<h3>{_e(f.stem)}: {_e(BENCH.get(f.stem, 'benchmark'))}</h3>")
+        try:
+            table, note = bench_table(f.stem, pd.read_csv(f))
+            parts += [f"<div class='scroll'>{html_table(table)}</div>",
+                      f"<p class='note'>{_e(note)} Code and machine: {_e(provenance_line(pd.read_csv(f)))}. "
+                      f"<a href='{_href(root, f)}'>{_e(f.name)}</a></p>"]
+        except (OSError, ValueError, pd.errors.EmptyDataError):
+            parts.append(f"<p class='warn'>{_e(f.name)} could not be read.</p>")
+    return parts + ["</section>"]
+
+
+def _findings(suites: list[Path]) -> list[str]:
+    from harness.report.claims import headline_findings
+    items = headline_findings(suites)
+    if not items:
+        return []
+    return ["<section id='findings'><h2>Findings</h2><ul class='findings'>"
+            + "".join(f"<li>{_e(s)}</li>" for s in items) + "</ul>",
+            "<p class='note'>Each sentence is generated from the stored tables below (normalised G: RMS displacement "
+            "error relative to the FEM's, 0.05 = 5 %; held-out: loads no fit saw).</p></section>"]
 
 
 def _glossary() -> list[str]:
@@ -194,25 +230,34 @@ def _glossary() -> list[str]:
     return ["<section id='glossary'><h2>Columns</h2>", f"<dl>{items}</dl></section>"]
 
 
-def index_html(results_root) -> str:
-    """The page of ``results_root`` (its suites: the folders holding a summary.csv)."""
-    root = Path(results_root)
+def page_suites(root: Path) -> tuple[list[Path], list[Path]]:
+    """(the suite folders of ``root`` (those holding a summary.csv) in page order, its
+    benchmark CSVs)."""
     suites = sorted((d for d in root.iterdir() if (d / "summary.csv").is_file()) if root.is_dir() else [],
                     key=lambda s: (ORDER.index(s.name) if s.name in ORDER else len(ORDER), s.name))
     bench = sorted((root / "bench").glob("*.csv")) if (root / "bench").is_dir() else []
-    toc = [(s.name, SUITES.get(s.name, (s.name,))[0]) for s in suites]
+    return suites, bench
+
+
+def index_html(results_root) -> str:
+    """The page of ``results_root`` (its suites: the folders holding a summary.csv)."""
+    root = Path(results_root)
+    suites, bench = page_suites(root)
+    findings = _findings(suites)
+    toc = [("findings", "Findings")] if findings else []
+    toc += [(s.name, SUITES.get(s.name, (s.name,))[0]) for s in suites]
     toc += [("bench", "Benchmarks")] if bench else []
     toc += [("glossary", "Columns")]
     parts = ["<!DOCTYPE html>", "<html lang='en'><head><meta charset='utf-8'>",
              "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-             f"<title>springbench results: {_e(root.resolve().name)}</title>", f"<style>{CSS}</style></head><body>",
+             "<title>springbench results</title>", f"<style>{CSS}</style></head><body>",
              "<header><h1>springbench results</h1>",
              "<p>How well does a spring/mass model imitate linear elasticity? Each suite below reproduces a "
              "paper's experiments against a verified scikit-fem reference and scores the models with Deussen's "
              "G criterion. This page is rebuilt from the stored results by <code>springbench report</code>; "
              "nothing on it is recomputed.</p>",
              "<nav><ul>" + "".join(f"<li><a href='#{_e(a)}'>{_e(t)}</a></li>" for a, t in toc) + "</ul></nav>",
-             "</header><main>"]
+             "</header><main>"] + findings
     for s in suites:
         parts += _suite_section(root, s)
     if bench:

@@ -150,10 +150,13 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
                                field="--results", fix="give a writable folder")
     clean_stale_scratch()
     with run_lock(results):
-        return _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress)
+        from harness.provenance import collect
+        return _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress,
+                           collect())
 
 
-def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress) -> RunReport:
+def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress,
+                provenance=None) -> RunReport:
     planned, failed = plan(list(paths), mode, stages)
     _prune_seeds(results, planned)
     done: list[JobResult] = []
@@ -171,7 +174,7 @@ def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figure
     all_results = list(done)
 
     def finish(res: JobResult):
-        store(results, res)
+        store(results, res, provenance)
         all_results.append(res)
         if res.status == "error":
             bar.write(error_line(res))

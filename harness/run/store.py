@@ -41,8 +41,9 @@ def read_result(path: Path) -> dict | None:
         return None
 
 
-def store(results: Path, res: JobResult) -> Path:
-    """Write a job's data files, then its result file (the 'finished' marker)."""
+def store(results: Path, res: JobResult, provenance: dict | None = None) -> Path:
+    """Write a job's data files, then its result file (the 'finished' marker), which
+    records the run's ``provenance`` (harness/provenance.py)."""
     job = res.job
     out = data_dir(results, job)
     root = out.resolve()
@@ -70,6 +71,8 @@ def store(results: Path, res: JobResult) -> Path:
         "files": sorted(res.files), "data_dir": "." if job.n_seeds == 1 else f"seed{job.seed}",
         "seconds": res.seconds, "code": res.code, "rows": res.rows,
     }
+    if provenance is not None:
+        manifest["provenance"] = provenance
     path = result_path(results, job)
     atomic_write(path, json.dumps(manifest, indent=1, allow_nan=True).encode())
     return path

@@ -99,6 +99,8 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
            "n_params": int(len(s.k)), "_tag": tag, "opt_prior": next(
                (c.prior for c in cands if c.name == s.choice), math.nan)}
     row.update({f"val_{r['model']}": r["score"] for r in s.table})
+    if s.stops:     # the exported start's stop, and every start's (" | " between them)
+        row.update(opt_stop=s.stops[0], opt_stops=" | ".join(s.stops))
     if s.volume:
         row.update(volume="element", n_volumes=net.volume.n_elements)
     return row, net, None

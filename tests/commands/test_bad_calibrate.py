@@ -39,6 +39,15 @@ FLAG_CASES = [  # (extra argv, text the line must hold)
     ("--max-refine -1", "--max-refine"), ("--out model.txt", "--out"), ("--heldout some", "--heldout"),
     ("--loads all", "--loads"), ("--solver lu", "--solver"), ("--plane membrane", "--plane"),
     ("--format nosuchformat", "nosuchformat"), ("--format bc2000", "cube.vtu"), ("--frobnicate", "--frobnicate"),
+    ("--peak-strain 0", "--peak-strain"), ("--peak-strain nan", "--peak-strain"), ("--peak-strain 1", "--peak-strain"),
+    ("--peak-strain inf", "--peak-strain"), ("--budget inf", "--budget"), ("--budget -1", "--budget"),
+    ("--tol inf", "--tol"), ("--tol 1e-40", "--tol"), ("--tol 1", "--tol"), ("--tol -1", "--tol"),
+    ("--max-refine 1.5", "--max-refine"), ("--nu 0.4999999999", "--nu"), ("--model foo", "--model"),
+    ("--damping-ratio inf", "--damping-ratio"), ("--magnitude nan", "--magnitude"), ("--magnitude inf", "--magnitude"),
+    ("--density nan", "--density"), ("--k-ratio -1", "--k-ratio"), ("--seed 1.5", "--seed"),
+    ("--clamp nosuch", "--clamp"), ("--load-region nosuch", "--load-region"),
+    ("--clamp x --heldout none", "--clamp"), ("--load-region x --heldout none", "--load-region"),
+    ("--E", "--E"), ("--rule", "--rule"), ("--out OUT --out MESH", "--out"), ("--prior-weight x", "--prior-weight"),
 ]
 MISSING = [("MESH --nu 0.3 --out OUT", "--E"), ("MESH --E 1e5 --out OUT", "--nu"), ("MESH --E 1e5 --nu 0.3", "--out"),
            ("--E 1e5 --nu 0.3 --out OUT", "MESH")]
@@ -174,6 +183,39 @@ def test_bad_mesh_names_the_users_file(name, bad_meshes, tmp_path, capsys):
     assert not any(tmp_path.iterdir())
 
 
+def _surface(cube: Path, folder: Path, flat: bool) -> Path:
+    """The cube's boundary triangles as an STL: a closed surface in 3-D (an STL as exported
+    by CAD), or one face of it moved to z = 1 (a flat mesh outside the plane z = 0)."""
+    m = meshio.read(cube)
+    t = m.cells_dict["tetra"]
+    faces = np.sort(np.vstack([t[:, [0, 1, 2]], t[:, [0, 1, 3]], t[:, [0, 2, 3]], t[:, [1, 2, 3]]]), axis=1)
+    u, c = np.unique(faces, axis=0, return_counts=True)
+    tris = u[c == 1]
+    if flat:
+        tris = tris[np.all(m.points[tris][..., 2] == 1.0, axis=1)]
+    used = np.unique(tris)
+    remap = np.full(len(m.points), -1)
+    remap[used] = np.arange(len(used))
+    out = folder / ("flat.stl" if flat else "surface.stl")
+    meshio.write(out, meshio.Mesh(m.points[used], [("triangle", remap[tris])]))
+    return out
+
+
+@pytest.mark.parametrize("heldout", ["ends", "none"])
+@pytest.mark.parametrize("flat, must", [(False, "no volume cells"), (True, "z = 0")], ids=["surface", "flat_in_z1"])
+def test_a_surface_mesh_is_one_line(cube, tmp_path_factory, tmp_path, capsys, heldout, flat, must):
+    """A surface STL says it has no volume cells, with and without the held-out loads
+    (--heldout none once ended in a traceback when the body had no boundary)."""
+    stl = _surface(cube, tmp_path_factory.mktemp("stl"), flat)
+    code, err, lines = cli_run(["calibrate", stl, "--E", "1e5", "--nu", "0.3", "--heldout", heldout,
+                                "--out", tmp_path / "m.vtu"], capsys)
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert str(stl) in lines[0] and must in lines[0] and names_a_fix(lines[0]), lines[0]
+    if not flat:
+        assert "tetrahedralise it first, e.g. with gmsh" in lines[0]
+    assert not any(tmp_path.iterdir())
+
+
 def test_the_good_mesh_passes(cube, tmp_path, capsys, monkeypatch):
     """The control: the mesh every flag case uses is fine, so each failure is its flag's."""
     monkeypatch.setenv("SPRINGBENCH_CACHE", str(tmp_path / "cache"))
@@ -182,4 +224,5 @@ def test_the_good_mesh_passes(cube, tmp_path, capsys, monkeypatch):
     assert {p.name for p in tmp_path.iterdir()} == {"m.vtu", "m.json", "m.csv", "cache"}
 
 
-CALIBRATE_CASES = [f"calibrate {c}" for c, _ in FLAG_CASES + MISSING] + [f"calibrate mesh {m}" for m in MESH_CASES]
+CALIBRATE_CASES = ([f"calibrate {c}" for c, _ in FLAG_CASES + MISSING] + [f"calibrate mesh {m}" for m in MESH_CASES]
+                   + ["calibrate mesh surface STL", "calibrate mesh flat in z = 1"])

@@ -103,7 +103,7 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
     assert data["dt_stable_float32"] < data["dt_stable"]
     exported = df[df.exported].iloc[0]
     assert exported.G_norm_final == pytest.approx(data["G_norm"], rel=1e-12)
-    assert "on held-out loads" in printed
+    assert "Held-out loads (sag, tip, " in printed and "the best rule (" in printed
     assert ("FEM error <=" if method == "lbfgs" else "FEM error not estimated") in printed
     if method == "lbfgs":
         assert exported.optimizer == "lbfgs" and exported.G_norm_final < df.iloc[0].G_norm_initial

@@ -43,6 +43,9 @@ def test_run_prints_one_line_per_case(tmp_path, monkeypatch, capsys):
     out = capsys.readouterr().out.strip().splitlines()
     start = next(i for i, line in enumerate(out) if line.startswith("== v:"))
     table = out[start + 1:start + 4]
-    assert table[0].split()[:3] == ["case", "rows", "status"]
+    assert table[0].split() == ["case", "model", "G_norm", "fitted", "/", "held-out", "status"]
     assert {table[1].split()[0], table[2].split()[0]} == {"plate_stress_tri", "plate_strain_quad"}
-    assert len(out) - start <= 6          # header, two cases, the jobs line (and a blank)
+    assert all(line.split()[1:3] == ["-", "-"] for line in table[1:])    # the reference only: no G
+    legend = [line for line in out[start:] if line.startswith("  ref-coarse: ")]
+    assert len(legend) == (1 if any(line.endswith("ref-coarse") for line in table[1:]) else 0)
+    assert len(out) - start <= 10    # header, two cases, what model/held-out mean, the legend, the jobs line, blanks

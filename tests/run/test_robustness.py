@@ -60,8 +60,11 @@ def test_catalogue_is_large_and_annotated():
     from test_bad_cases import BAD_CASES
     from test_bad_commands import COMMAND_CASES
     from test_bad_outputs import OUTPUT_CASES
+    from test_bad_score import SCORE_FLAG_CASES
+    from test_schema_types import PARAMS
     names = ([f"case file {p.name}" for p in CATALOGUE] + [f"cli {' '.join(a)}" for a, _ in CLI_CASES]
-             + CALIBRATE_CASES + BAD_CASES + COMMAND_CASES + OUTPUT_CASES)
+             + CALIBRATE_CASES + BAD_CASES + COMMAND_CASES + OUTPUT_CASES + SCORE_FLAG_CASES
+             + [f"case key {key} = a {kind} ({base['']['name']})" for base, key, kind in PARAMS])
     assert len(set(names)) == len(names) >= 300, len(names)
     assert all(header(p, "expect") for p in CATALOGUE)
 

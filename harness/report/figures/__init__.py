@@ -1,7 +1,9 @@
 """Figure registry: each figure kind is one module listed in ``FIGURES``.
 
 A figure module has ``NAME``, ``SCOPE`` ("case": drawn per case data folder; "suite":
-drawn once per suite folder from its summary.csv) and ``make(folder) -> list[Path]``,
+drawn once per suite folder from its summary.csv; "bench": once from the bench CSVs), ``DATA`` (globs of the files it reads in
+the folder; or ``inputs(folder) -> list[Path]`` when it reads others too), optionally
+``CODE`` (the other modules its drawing depends on) and ``make(folder) -> list[Path]``,
 which reads stored data files (formats in :mod:`harness.report.build`), writes PNGs into
 ``folder`` and returns their paths; no data file, no figure (an empty list). Figures
 never recompute anything. A figure that fails is reported as one warning line and the
@@ -25,6 +27,7 @@ FIGURES = [
     "harness.report.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
     "harness.report.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
     "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class (summary.csv)
+    "harness.report.figures.bench_reference",   # the benchmarks' plot: FEM solve time and error (bench/reference.csv)
 ]
 
 
@@ -51,42 +54,71 @@ def _make(mods, folder: Path) -> list[Path]:
 STAMP = ".figures.json"
 
 
-def _stamp(folder: Path, mods) -> str:
-    """What a folder's figures depend on: its data files (name, size, mtime) and the
-    figure code."""
+def _stamp(files, mods) -> str:
+    """What figures depend on: the bytes of their data files (by name) and the figure code;
+    never a time, so a fresh checkout or a copy of the results finds its figures current."""
     import hashlib
     h = hashlib.sha256()
-    for f in sorted(folder.iterdir()):
-        if f.is_file() and not f.name.startswith((".", "fig-")):
-            st = f.stat()
-            h.update(f"{f.name}\0{st.st_size}\0{st.st_mtime_ns}\0".encode())
-    for m in mods + [sys.modules[__name__]]:
+    for f in sorted(files, key=lambda f: f.name):
+        h.update(f"{f.name}\0".encode())
+        h.update(hashlib.sha256(f.read_bytes()).digest())
+    code = [sys.modules[__name__]] + [importlib.import_module(n) for m in mods for n in getattr(m, "CODE", ())]
+    for m in mods + code:
         h.update(Path(m.__file__).read_bytes())
     return h.hexdigest()
 
 
-def make_case_figures(folder, redraw: bool = False) -> list[Path]:
-    """Figures of one case data folder; skipped (the existing PNGs returned) when its
-    data files and the figure code are unchanged since the last drawing."""
+def _data_files(folder: Path, mods) -> list[Path]:
+    """The files the figure modules read in ``folder`` (their ``inputs(folder)``, else their
+    ``DATA`` globs): what a stamp hashes, and nothing else."""
+    files = set()
+    for m in mods:
+        files |= set(m.inputs(folder)) if hasattr(m, "inputs") else {f for g in m.DATA for f in folder.glob(g)}
+    return sorted(f for f in files if f.is_file())
+
+
+def _stamped(folder: Path, mods, redraw: bool) -> list[Path]:
+    """Each module's figures of ``folder``, redrawn only when its stamp (the data it reads
+    and its code) differs from the one recorded in the folder's STAMP file with the PNGs it
+    drew; the file is rewritten only when something changed (byte-identical otherwise)."""
     import json
-    folder = Path(folder)
-    mods = figure_modules("case")
-    stamp, sfile = _stamp(folder, mods), folder / STAMP
-    if not redraw and sfile.exists():
-        try:
-            old = json.loads(sfile.read_text())
-            pngs = [folder / n for n in old["pngs"]]
-            if old["stamp"] == stamp and all(p.exists() for p in pngs):
-                return pngs
-        except (ValueError, KeyError, TypeError):
-            pass
-    out = _make(mods, folder)
-    sfile.write_text(json.dumps({"stamp": stamp, "pngs": [p.name for p in out if p.parent == folder]}))
+    from harness.outputs import write_changed
+    sfile = folder / STAMP
+    try:
+        old = json.loads(sfile.read_text()) if sfile.exists() else {}
+        old = old if isinstance(old, dict) else {}
+    except (OSError, ValueError):
+        old = {}
+    new, out = {}, []
+    for m in mods:
+        stamp = _stamp(_data_files(folder, [m]), [m])
+        prev = old.get(m.NAME)
+        pngs = None
+        if not redraw and isinstance(prev, dict) and prev.get("stamp") == stamp:
+            pngs = [folder / n for n in prev.get("pngs", [])]
+            pngs = pngs if all(p.exists() for p in pngs) else None
+        if pngs is None:
+            pngs = _make([m], folder)
+        new[m.NAME] = {"stamp": stamp, "pngs": sorted(p.name for p in pngs if p.parent == folder)}
+        out += pngs
+    write_changed(sfile, json.dumps(new, sort_keys=True, indent=1).encode())
     return out
 
 
-def make_suite_figures(suite_dir) -> list[Path]:
-    return _make(figure_modules("suite"), suite_dir)
+def make_case_figures(folder, redraw: bool = False) -> list[Path]:
+    """Figures of one case data folder; a kind is skipped (its existing PNGs returned) when
+    the data it reads and its code are unchanged since its last drawing."""
+    return _stamped(Path(folder), figure_modules("case"), redraw)
+
+
+def make_suite_figures(suite_dir, redraw: bool = False) -> list[Path]:
+    """The suite's figures (drawn from its summary.csv), skipped like a case's."""
+    return _stamped(Path(suite_dir), figure_modules("suite"), redraw)
+
+
+def make_bench_figures(bench_dir, redraw: bool = False) -> list[Path]:
+    """The benchmarks' plot (drawn from the bench CSVs), skipped like a case's."""
+    return _stamped(Path(bench_dir), figure_modules("bench"), redraw)
 
 
 def pyplot():

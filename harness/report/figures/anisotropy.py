@@ -12,6 +12,7 @@ from pathlib import Path
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "anisotropy", "case"
+DATA = ("anisotropy.csv",)      # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -15,6 +15,7 @@ import numpy as np
 from harness.report.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "deformed", "case"
+DATA = ("deformed*.npz",)      # the files it reads (globs in the folder): its figures' stamp
 VIEW = (22.0, -58.0)   # elevation, azimuth (degrees) of the 3-D panels
 
 

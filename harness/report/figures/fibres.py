@@ -8,6 +8,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "fibres", "case"
+DATA = ("fibres*.npz",)      # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -8,6 +8,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots, title
 
 NAME, SCOPE = "lloyd", "case"
+DATA = ("lloyd.csv",)      # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -10,6 +10,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots
 
 NAME, SCOPE = "lloyd_bars", "suite"
+DATA = ("summary.csv",)      # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -17,6 +17,8 @@ from pathlib import Path
 from harness.report.figures import read_csv, save, subplots
 
 NAME, SCOPE = "nu_sweep", "suite"
+DATA = ("summary.csv",)      # the files it reads (globs in the folder): its figures' stamp
+CODE = ("harness.report.nu_sweep",)     # the other code its figures depend on
 FLOOR = 1e-6    # G below this (P1 on a linear field: exact to rounding) is drawn at it
 RULE_COLOURS = ("tab:gray", "tab:brown", "tab:olive", "tab:cyan", "tab:pink", "black")
 

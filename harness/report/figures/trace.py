@@ -7,6 +7,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, read_csv, save, subplots, title
 
 NAME, SCOPE = "trace", "case"
+DATA = ("trace.csv",)      # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -11,31 +11,48 @@ from pathlib import Path
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "volume", "case"
+DATA = ("volume.csv",)      # the files it reads (globs in the folder): its figures' stamp
 MODELS = ("MS", "MT0", "MT")
 
 
-def original_curves(folder: Path) -> dict:
-    """{model: (t, dV/V0 %)} of the original program's record named by the case file of the
-    stored result in ``folder`` (its column rule is the bc2000 stage's: t, MS, MT0, MT, or
-    t, V, dV/V0 % for one model); {} when there is none or it cannot be read."""
-    import numpy as np
+def original_record(folder: Path) -> Path | None:
+    """The original program's record (``[dynamics] original``) named by the case file of the
+    first stored result in ``folder``; None when there is none or it cannot be found."""
     manifests = sorted(folder.glob("result-seed*.json")) or sorted(folder.parent.glob("result-seed*.json"))
-    for m in manifests:
+    for m in manifests[:1]:
         try:
             case = Path(json.loads(m.read_text())["file"])
             if not case.is_file():  # results moved: the checkout's own cases/<suite>/
                 case = m.parents[2].parent / "cases" / m.parents[1].name / case.name
             import tomllib
             name = tomllib.loads(case.read_text()).get("dynamics", {}).get("original")
-            if not name:
-                return {}
-            ref = np.loadtxt(case.parent / name, skiprows=1, ndmin=2)
         except (OSError, ValueError, KeyError, TypeError, IndexError):
-            return {}
-        if ref.shape[1] == 4:
-            return {n: (ref[:, 0], ref[:, i + 1]) for i, n in enumerate(MODELS)}
-        return {"*": (ref[:, 0], ref[:, 2])} if ref.shape[1] >= 3 else {}
-    return {}
+            return None
+        return case.parent / name if name and (case.parent / name).is_file() else None
+    return None
+
+
+def inputs(folder: Path) -> list[Path]:
+    """What the figure reads: volume.csv and the original program's record."""
+    rec = original_record(folder) if (folder / "volume.csv").exists() else None
+    return [folder / "volume.csv"] + ([rec] if rec is not None else [])
+
+
+def original_curves(folder: Path) -> dict:
+    """{model: (t, dV/V0 %)} of the original program's record (:func:`original_record`; its
+    column rule is the bc2000 stage's: t, MS, MT0, MT, or t, V, dV/V0 % for one model); {}
+    when there is none or it cannot be read."""
+    import numpy as np
+    rec = original_record(folder)
+    if rec is None:
+        return {}
+    try:
+        ref = np.loadtxt(rec, skiprows=1, ndmin=2)
+    except (OSError, ValueError):
+        return {}
+    if ref.shape[1] == 4:
+        return {n: (ref[:, 0], ref[:, i + 1]) for i, n in enumerate(MODELS)}
+    return {"*": (ref[:, 0], ref[:, 2])} if ref.shape[1] >= 3 else {}
 
 
 def deviations(df, orig: dict) -> dict:
