@@ -255,7 +255,7 @@ def case_text(args, dim: int, cell_types=(), mesh_file: Path | None = None, rule
     if method == "lbfgs" and not chosen:
         init += f", prior = {prior_weight(args)!r}"
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
-    if args.rule == "best" and method != "none":
+    if args.rule == "best":      # no rule is first: the stage ranks them (and solves only the ones that can win)
         opt += 'start = "best"\n'
     if chosen:
         opt += "[optimizer.select]\n"
@@ -448,10 +448,10 @@ def _report(args, rows, net, case):
                 opt_stop=exported.get("opt_stop") if isinstance(exported.get("opt_stop"), str) else None,
                 opt_stops=stops.split(" | ") if isinstance(stops, str) else [])
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
-                        "G_norm_initial", "G_norm_final", "G_fit_score", "G_heldout", "G_heldout_mean",
-                        "G_heldout_mean_spread",
+                        "G_norm_initial", "G_norm_final", "G_fit_score", "G_fit_score_bound", "G_heldout",
+                        "G_heldout_mean", "G_heldout_mean_spread",
                         "choice", "ref_error_max", "ref_error_heldout", "status",
-                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior")
+                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior", "note")
             if any(c in r for r in rows)]
     df = pd.DataFrame(rows)[cols]
     from harness.outputs import staged
