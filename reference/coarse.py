@@ -60,7 +60,8 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
         P0 = P[free]
         kept = np.flatnonzero((np.asarray(P0.multiply(P0).sum(axis=0)).ravel() >= KEEP * full) & (full > 0))
         P0 = sp.csr_matrix(P0[:, kept])
-        A = sp.csr_matrix(P0.T @ (K[free][:, free] @ P0))
+        Pz = sp.csr_matrix((P0.data, P0.indices, _rows_at(P0.indptr, free, fine.ndof)), shape=(fine.ndof, len(kept)))
+        A = sp.csr_matrix(Pz.T @ (K @ Pz))          # = P0^T K_ff P0 without slicing K (852k dofs: ~3 s a slice)
         b = np.column_stack([P0.T @ F[n][free] for n in names])
         rec: dict = {}
         y = solvers.solve(A, b, method, R[kept], info=rec, coords=coords[kept],
@@ -72,6 +73,14 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
             u[free] = P0 @ y[:, i]
             out[n] = u
     return out
+
+
+def _rows_at(indptr: np.ndarray, rows: np.ndarray, n: int) -> np.ndarray:
+    """The indptr of an (n, .) CSR matrix whose rows ``rows`` (sorted) are those of the
+    CSR matrix with ``indptr`` and whose other rows are empty."""
+    counts = np.zeros(n, np.int64)
+    counts[rows] = np.diff(indptr)
+    return np.concatenate([[0], np.cumsum(counts)])
 
 
 def grid_mesh(mesh, fraction: float):

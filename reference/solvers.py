@@ -128,6 +128,14 @@ def choose(method: str, n: int, dim: int) -> str:
     return "direct" if n <= SUPERLU_MAX[dim] else "amg"
 
 
+def equilibrated(A: sp.spmatrix, s: np.ndarray) -> sp.csr_matrix:
+    """S A S with S = diag(s), as CSR (A's entries scaled in a copy, no products)."""
+    A = sp.csr_matrix(A, copy=True)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    A.data *= s[rows] * s[A.indices]
+    return A
+
+
 def accepted_rtol(normA: float, xnorm: np.ndarray, bnorm: np.ndarray) -> np.ndarray:
     """The relative residual each column is accepted at (see :data:`FLOOR`)."""
     return np.clip(FLOOR * np.finfo(float).eps * normA * xnorm / bnorm, RTOL, DIRECT_RTOL)
@@ -186,7 +194,7 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
         raise _singular()
     # equilibration: As = S A S, S = D^-1/2; A x = b  <=>  As y = S b, x = S y
     s = 1.0 / np.sqrt(d)
-    As = sp.csr_matrix(A.multiply(s[:, None]).multiply(s[None, :]))
+    As = equilibrated(A, s)
     bs = b2 * s[:, None]
     bnorm = np.linalg.norm(b2, axis=0)
     live = bnorm > 0
@@ -346,7 +354,7 @@ def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = Non
 def _two_level_inverse(As, coords, coarse):
     from reference import twolevel
     s = 1.0 / np.sqrt(As.diagonal())
-    Ass = sp.csr_matrix(As.multiply(s[:, None]).multiply(s[None, :]))
+    Ass = equilibrated(As, s)
     M = twolevel.TwoLevel(Ass, s, coarse, coords)
 
     def solve(r):
