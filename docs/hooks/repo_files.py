@@ -2,9 +2,10 @@
 
 The published results (``results/README.md``, written by ``springbench report``, and every
 file it links to, following links through Markdown and HTML files) and the shipped example
-(``examples/``) live outside ``docs/``. They are added under their repository paths, so a
-page links to them as ``results/README.md`` or ``examples/lug.msh`` and ``mkdocs build
---strict`` checks those links like any other.
+(``examples/``) live outside ``docs/``. They are added to the site under their repository
+paths. A page links to them as the repository has them, ``../results/README.md`` from
+``docs/``, so the link works on GitHub too; for the site that link is read as
+``results/README.md``, and ``mkdocs build --strict`` checks it like any other.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from pathlib import Path
 from mkdocs.structure.files import File, Files
 
 ROOTS = ("results/README.md", "examples/lug.msh", "examples/make_lug.py")
+UP = re.compile(r"\]\(\.\./((?:results|examples)/[^)\s]*)\)")     # ](../results/...) in a page of docs/
 LINK = re.compile(r"""\]\(([^)\s]+)\)|(?:src|href)=["']([^"']+)["']""")
 
 
@@ -51,3 +53,10 @@ def on_files(files: Files, config) -> Files:
                 f.dest_uri = f"{stem}/index.html" if config.use_directory_urls else f"{stem}.html"
             files.append(f)
     return files
+
+
+def on_page_markdown(markdown: str, page, config, files) -> str:
+    """A top-level page's ``../results/`` and ``../examples/`` links, as the site has them."""
+    if "/" in page.file.src_uri:
+        return markdown
+    return UP.sub(r"](\1)", markdown)

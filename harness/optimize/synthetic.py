@@ -3,7 +3,8 @@
 A regular grid with diagonals, loaded like the basic load sets (docs/design.md, "Load
 sets for boxes": stretch with rollers on the opposite face, shear with that face
 clamped), and a *recoverable* reference: the displacements of the same network with
-known, randomly perturbed constants, so the best G is exactly 0. Independent of harness/models on purpose.
+known, randomly perturbed constants, so the best G is exactly 0. Independent of
+harness/models on purpose.
 """
 
 from __future__ import annotations

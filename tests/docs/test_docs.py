@@ -73,6 +73,17 @@ def test_every_page_is_in_the_nav():
     assert missing == set(), "nav entries with no page"
 
 
+@pytest.mark.parametrize("path", [README, ROOT / "cases" / "README.md", *sorted(DOCS.glob("*.md"))],
+                         ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_links_resolve_in_the_repository_too(path):
+    """Read on GitHub, every relative link of README, cases/README.md and the docs pages names
+    a file of the repository (the site reads ../results/ and ../examples/ through the hook)."""
+    text = re.sub(r"```.*?```", "", path.read_text(encoding="utf-8"), flags=re.S)
+    targets = [m.split("#")[0] for m in re.findall(r"\]\(([^)\s]+)\)", text)]
+    broken = [t for t in targets if t and "://" not in t and not (path.parent / t).exists()]
+    assert broken == [], f"{path.name}: links to nothing: {broken}"
+
+
 def test_the_hook_follows_links_from_the_results_page(tmp_path):
     """docs/hooks/repo_files.py adds the results page and every file it links to, through
     Markdown and HTML, and nothing outside the repository or not linked."""
