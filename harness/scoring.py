@@ -1,4 +1,4 @@
-"""The G criteria of Deussen, Kobbelt & Tuecke 1995 (eq. 12, Section 5.4), as DESIGN.md:
+"""The G criteria of Deussen, Kobbelt & Tuecke 1995 (eq. 12, Section 5.4; docs/design.md, "The G criteria"):
 
     G_{a:b:c} = sqrt( sum_i sum_p w_p |u_ref,i(p) - u_i(p)|^2 ),  w_p = a inner, b border, c corner
 
@@ -68,7 +68,7 @@ def fit_and_heldout(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weigh
                     ) -> tuple[ScoreResult, ScoreResult | None]:
     """Scores of u against u_ref (L, n, dim) over loads ``names`` kept apart: on the
     fitted loads ``fit`` and on the held-out ones ``heldout`` (None when there are none),
-    the same weights (DESIGN.md, "Fitted and held-out loads")."""
+    the same weights (docs/design.md, "Fitted and held-out loads")."""
     names = list(names)
     u_ref, u = np.asarray(u_ref, float), np.asarray(u, float)
 
@@ -100,7 +100,7 @@ def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
     return g_arrays(u_ref, res.u, network.classes, case_weights(case, weights), res.names)
 
 
-# -- the reference's own error beside every score (DESIGN.md) ---------------------------
+# -- the reference's own error beside every score (docs/design.md) -------------------
 
 REF_COARSE_FRACTION = 0.1   # G_ref above this fraction of a row's normalised G: "ref-coarse"
 

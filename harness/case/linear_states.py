@@ -1,4 +1,4 @@
-"""The ``linear2d`` / ``linear3d`` load sets (DESIGN.md, "Load sets for any shape"):
+"""The ``linear2d`` / ``linear3d`` load sets (docs/design.md, "Load sets for any shape"):
 equilibrated linear stress fields sigma(x) = sigma0 + sum_k xi_k G[k] on the whole
 boundary of any body, xi = (x - c) / L the coordinates of the body's Frame (centroid c,
 size L), with minimal constraints at its anchor points. A state of magnitude s has

@@ -1,7 +1,7 @@
 """Load cases: constraints and tractions on named parts, body forces.
 
 The standard sets ``basic2d`` (Deussen 1995 Fig. 4) and ``basic3d`` (Fig. 7) are
-defined here once, exactly as ``shared/DESIGN.md`` states, and every consumer (the
+defined here once (docs/design.md, "Load sets for boxes"), and every consumer (the
 FEM reference, the spring networks, the anisotropic model) applies these objects.
 The registry of the sets by name is harness/case/sets.py.
 """
@@ -184,10 +184,11 @@ def minimal_constraints(anchors, names=ANCHORS) -> tuple[Constraint, ...]:
 
 
 def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
-    """The homogeneous stress states (DESIGN.md), one unit Voigt component times s each
-    (sxx, syy, [szz, syz, sxz,] sxy). A box gets them as face tractions sigma . n and the
-    corner constraints of the stretches; any other body (``anchors``: its anchor points)
-    as ``stress`` on the whole boundary with minimal constraints at the anchors."""
+    """The homogeneous stress states (docs/design.md, "Load sets for any shape"), one unit
+    Voigt component times s each (sxx, syy, [szz, syz, sxz,] sxy). A box gets them as face
+    tractions sigma . n and the corner constraints of the stretches; any other body
+    (``anchors``: its anchor points) as ``stress`` on the whole boundary with minimal
+    constraints at the anchors."""
     out = []
     for I, (i, j) in enumerate(VOIGT[dim]):
         voigt = np.zeros(len(VOIGT[dim]))

@@ -80,7 +80,7 @@ def part_exists(name: str, dim: int, user_parts: Mapping | None = None) -> bool:
 
 def classify_nodes(points: np.ndarray, bbox, boundary: np.ndarray | None = None,
                    rtol: float = RTOL) -> np.ndarray:
-    """Node classes for the G weights: 0 inner, 1 border, 2 corner (DESIGN.md).
+    """Node classes for the G weights: 0 inner, 1 border, 2 corner (docs/design.md, "The G criteria").
 
     ``points`` is (n, dim). A corner is a vertex of the bounding box; a border node
     is any other node on the boundary: on a bounding-box face, or flagged in

@@ -3,7 +3,7 @@
 The schema of the core sections (body, material, loads, reference) lives here; the
 sections that later stages own (model, optimizer, score, expect, dynamics, ...) are
 registered in :mod:`harness.case.sections`. ``[quick]`` and ``[full]`` hold partial
-cases merged over the base for ``--quick`` / ``--full`` runs. Schema: cases/README.md.
+cases merged over the base for ``--quick`` / ``--full`` runs. Schema: docs/case-files.md.
 """
 
 from __future__ import annotations

@@ -21,7 +21,7 @@ the rule, its best global scale and a perturbed start (``G_heldout_mean_spread``
 spread of their held-out error). ``--prior-weight a`` fixes a per-spring fit with weight
 a instead (no validation).
 
-Loads (DESIGN.md). Fitted (``--loads linear``, the default): the equilibrated linear
+Loads (docs/design.md, "Load sets"). Fitted (``--loads linear``, the default): the equilibrated linear
 stress states (harness/case/linear_states.py: the six constant ones, bending, torsion,
 shear gradient and gravity, 24 in 3-D, 9 in 2-D) as tractions sigma(x) . n on the whole
 surface with minimal constraints, exact for any shape (their FEM answer is the closed

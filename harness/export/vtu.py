@@ -1,4 +1,4 @@
-"""Spring networks to and from VTU (meshio), as DESIGN.md states, so ParaView opens them:
+"""Spring networks to and from VTU (meshio; docs/design.md, "Files"), so ParaView opens them:
 points = rest positions (z = 0 in 2-D), one ``line`` cell block = springs, point data
 ``mass``, cell data ``stiffness`` (linear spring k), optional point data ``u_<load>``
 (displacements, padded to 3 components). We also write point data ``class`` (G weight

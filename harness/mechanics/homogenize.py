@@ -14,7 +14,7 @@ plane strain and in 3-D. Any other target nu (or an anisotropic target breaking 
 relations) is out of reach: the relative misfit of the best non-negative group
 constants is the error floor no optimiser can beat in the interior of a large grid under
 a uniform strain. It is not a floor for a finite network's G on particular loads: the
-boundary layers and the fit to those loads can take G well below it (README).
+boundary layers and the fit to those loads can take G well below it (docs/models.md, "The Cauchy limit").
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Linear statics of spring networks under the case's load cases (DESIGN.md).
+"""Linear statics of spring networks under the case's load cases (docs/design.md, "Clamps
+and loads act on faces").
 
 K = B diag(k) B^T (``harness.models.springs``). A load case fixes the listed displacement
 components of the nodes on its constraint parts (``harness.case.parts.part_predicate``, the

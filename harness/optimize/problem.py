@@ -2,7 +2,7 @@
 
 For load cases i with free dofs F_i, the model displacement is u_i = K_i^-1 f_i with
 K_i = B_i diag(k) B_i^T (B_i: the incidence columns b_e restricted to F_i) and u = 0 on
-the constrained dofs. DESIGN.md's criterion is
+the constrained dofs. The criterion (docs/design.md, "The G criteria") is
 
     G(k) = sqrt( sum_i sum_dof w (u_ref,i - u_i)^2 ),
 
@@ -185,7 +185,7 @@ class FitProblem:
         return out
 
     def G(self, k) -> float:
-        """DESIGN.md's G by full re-solve (the reference implementation)."""
+        """G (docs/design.md, "The G criteria") by full re-solve (the reference implementation)."""
         return float(np.sqrt(self.G2(k)))
 
     def G2(self, k) -> float:
@@ -196,7 +196,7 @@ class FitProblem:
         return total
 
     def G_ref_norm(self) -> float:
-        """sqrt(sum w |u_ref|^2): the normaliser of DESIGN.md's normalised G."""
+        """sqrt(sum w |u_ref|^2): the normaliser of the normalised G (docs/design.md, "The G criteria")."""
         return float(np.sqrt(sum(float(b.u_ref @ (b.w * b.u_ref)) + b.const for b in self.blocks)))
 
 

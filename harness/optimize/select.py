@@ -1,5 +1,5 @@
-"""Model capacity chosen by validation on the training states only (DESIGN.md,
-"Training, validation, held-out").
+"""Model capacity chosen by validation on the training states only (docs/design.md,
+"Fitted and held-out loads").
 
 A fit has choices the data must make: how many constants it may move (one scale for all
 springs, a few groups, a few coefficients of the springs' geometric features, every

@@ -1,9 +1,10 @@
 """Self-contained spring networks for optimiser tests and benchmarks.
 
-A regular grid with diagonals, loaded like DESIGN.md's basic load sets (stretch with
-rollers on the opposite face, shear with that face clamped), and a *recoverable*
-reference: the displacements of the same network with known, randomly perturbed
-constants, so the best G is exactly 0. Independent of harness/models on purpose.
+A regular grid with diagonals, loaded like the basic load sets (docs/design.md, "Load
+sets for boxes": stretch with rollers on the opposite face, shear with that face
+clamped), and a *recoverable* reference: the displacements of the same network with
+known, randomly perturbed constants, so the best G is exactly 0. Independent of
+harness/models on purpose.
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ def grid_network(shape, spacing=1.0, diagonals: str = "all"):
 
 
 def basic_loads(points: np.ndarray, s: float = 1.0):
-    """Load cases like DESIGN.md's basic2d/basic3d on the grid's bounding box.
+    """Load cases like basic2d/basic3d (docs/design.md, "Load sets for boxes") on the grid's bounding box.
 
     Returns names, free_masks (L, ndof) bool, forces (L, ndof). Stretch-a: nodal force
     along +a on face a = a1, rollers (u_a = 0) on face a = a0, rigid motion removed at the

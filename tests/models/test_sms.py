@@ -263,7 +263,7 @@ def test_sms_stage_rows(tmp_path, monkeypatch):
 @pytest.mark.parametrize("dim,nu,structure", [(2, 1 / 3, "structure1"), (3, 0.25, "edges+face+body")])
 def test_cauchy_rule_reproduces_the_stretch_closed_form(dim, nu, structure):
     """At the Cauchy Poisson ratio the cell-wise Cauchy-Born constants make the grid's
-    stretch response the continuum closed form exactly (DESIGN.md's stretch formulas)."""
+    stretch response the continuum closed form exactly (docs/design.md, "Load sets for boxes")."""
     n = 5 if dim == 2 else 4
     hi = (4.0,) * dim
     p = grid_points(np.zeros(dim), hi, (n,) * dim)
@@ -300,7 +300,8 @@ def test_sms_stage_calls_the_optimiser_contract(tmp_path, monkeypatch):
     opt = rows[-1]
     assert opt["optimizer"] == "sa" and seen == {"method": "sa", "options": {"temperatures": 2}, "n": 20, "blocks": 4}
     assert opt["G_initial"] == rows[0]["G_initial"]
-    # our own re-score of the returned constants agrees with the problem's G (DESIGN.md's G twice)
+    # our own re-score of the returned constants agrees with the problem's G
+    # (docs/design.md, "The G criteria", computed twice)
     assert opt["G_final"] == pytest.approx(opt["G_final_optimizer"], rel=1e-9)
     import pandas as pd
     assert list(pd.read_csv(tmp_path / "out" / "trace.csv").columns[:2]) == ["step", "G"]

@@ -1,4 +1,4 @@
-"""The reference's own error beside every score (DESIGN.md): G_ref by hand, the
+"""The reference's own error beside every score (docs/design.md, same title): G_ref by hand, the
 "ref-coarse" status of sms rows (stand-in and real reference), and ref-coarse rows kept
 and flagged in summary.md."""
 

@@ -1,4 +1,4 @@
-"""G criteria (Deussen eq. 12 / Section 5.4 as DESIGN.md states them) on hand-computed cases."""
+"""G criteria (Deussen eq. 12 / Section 5.4; docs/design.md, "The G criteria") on hand-computed cases."""
 
 import numpy as np
 import pytest
@@ -41,7 +41,8 @@ def test_g_adds_loads_in_quadrature_and_is_zero_for_exact():
 
 
 class _ClosedForm:
-    """A stand-in reference: the plane-stress closed form of the stretches (DESIGN.md)."""
+    """A stand-in reference: the plane-stress closed form of the stretches (docs/design.md,
+    "Load sets for boxes")."""
     def __init__(self, case):
         self.case = case
 

@@ -1,6 +1,6 @@
-"""Fitted and held-out loads in the sms stage (DESIGN.md): a held-out load never reaches
-the optimiser, G is on the fitted loads and G_heldout on the held-out ones, both
-recomputed here from the stored displacements."""
+"""Fitted and held-out loads in the sms stage (docs/design.md, "Fitted and held-out loads"):
+a held-out load never reaches the optimiser, G is on the fitted loads and G_heldout on the
+held-out ones, both recomputed here from the stored displacements."""
 
 import numpy as np
 import pandas as pd

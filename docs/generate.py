@@ -1,0 +1,25 @@
+"""Rewrites the generated parts of the front-door documents (harness/report/docs_gen.py):
+README.md's results table from results/bench/heldout.csv and docs/commands.md's reference
+of every command and flag from the command line's parser.
+
+    python docs/generate.py
+
+tests/docs/ fail until this has been run after a change to either.
+"""
+
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from harness.cli import build_parser                                          # noqa: E402
+from harness.report.docs_gen import (BEGIN, CMD_BEGIN, CMD_END, END, commands_reference,  # noqa: E402
+                                     heldout_table, update)
+
+if __name__ == "__main__":
+    for path, content, markers in (
+            (ROOT / "README.md", heldout_table(ROOT / "results"), (BEGIN, END)),
+            (ROOT / "docs" / "commands.md", commands_reference(build_parser()), (CMD_BEGIN, CMD_END))):
+        changed = update(path, content, *markers)
+        print(f"{path.relative_to(ROOT)}: " + ("rewritten" if changed else "unchanged"))
