@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+RULE_TIE = 0.02     # two rules' held-out errors closer than this (relative) are a tie, not a ranking
+
 
 def pct(v) -> str:
     """A fraction as a percentage to 3 digits, "n/a" when missing or not finite."""
@@ -65,6 +67,7 @@ def heldout_sentence(exported: dict, rules: list, names) -> str:
     if not fitted(exported):
         mine = exported["stiffness"]
         tail = ("it is the best of the rules there" if mine == rule["stiffness"] else
+                f"a tie (within {RULE_TIE:.0%})" if abs(fit - other) <= RULE_TIE * other else
                 f"--method rule --rule {rule['stiffness']} exports that one")
         return f"{head}the exported rule ({mine}) {pct(fit)}, the best rule ({rule['stiffness']}) {pct(other)}: {tail}."
     spread = exported.get("G_heldout_mean_spread")

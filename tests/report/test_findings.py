@@ -52,6 +52,10 @@ def test_an_exported_rule_is_compared_with_the_best_rule_in_hindsight():
     text = heldout_sentence(mine, RULES, NAMES)
     assert "the exported rule (lloyd) 12 %" in text and "--method rule --rule vangelder exports that one" in text
     assert "it is the best of the rules there" in heldout_sentence(RULES[1], RULES, NAMES)
+    near = dict(RULES[0], stiffness="near", G_heldout_mean=RULES[1]["G_heldout_mean"] * 1.015)
+    assert "a tie (within 2%)" in heldout_sentence(near, RULES, NAMES)          # 1.5 % apart: no ranking
+    far = dict(near, G_heldout_mean=RULES[1]["G_heldout_mean"] * 1.03)
+    assert "--method rule --rule vangelder exports that one" in heldout_sentence(far, RULES, NAMES)
 
 
 def test_no_heldout_loads_says_so():
