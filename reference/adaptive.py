@@ -82,6 +82,8 @@ COARSE = (1 / (3 * WIDE ** 2), 1 / WIDE ** 2)   # a mesh no refinement of fits i
 # 1/4 of the vertices (72k dofs on the 50k-tet cylinder) the direct solve ran > 6 min
 # and 5.7 GB; at 1/16, 20k dofs, ~20 s. A refinement adds at least ~25 % dofs:
 GROWTH_MIN = 1.25
+COARSE_MAX_DOFS = 25_000   # the finer coarse level has at most about these dofs (the shares shrink
+# alike: a 200k-tet body's 1/10 level, 69k dofs and 32 M nonzeros, took ~190 s of its 5 clamp sets)
 HIGHEST = {"P1": 1.0, "P2": 2.0}   # the observed order at most the degree k: point values
 # converge at k + 1 only where the solution is smooth, and a clamped or partly loaded face
 # has singular edges (B&C tetra cube_333, against the independent solve: 1.0-1.3 for the
@@ -254,8 +256,9 @@ def _with_coarse(case, d: Discretisation, parts, status, info):
     K = d.stiffness(C)
     U = {**solve_system(K, F, fixed, spec.solver, d, info=info), **exact}
     kept = []
+    shrink = min(1.0, COARSE_MAX_DOFS / (COARSE[-1] * d.ndof))
     for share in COARSE:
-        cm = grid_mesh(d.mesh, share)
+        cm = grid_mesh(d.mesh, share * shrink)
         if cm is None:
             return U, []
         cd = Discretisation(cm, spec.cell, spec.element)
