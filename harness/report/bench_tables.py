@@ -10,8 +10,8 @@ from harness.report.headlines import fmt
 
 MAX_ROWS = 40
 COLUMNS = {   # bench name -> the columns shown, in order (those present)
-    "calibrate": ["n_tets", "seconds", "peak_gb", "start_rule", "G_norm_before", "G_norm_after", "G_heldout_before",
-                  "G_heldout", "reference_error", "note"],
+    "calibrate": ["n_tets", "seconds", "rule_seconds", "peak_gb", "choice", "validation_skipped", "start_rule",
+                  "G_heldout_mean", "best_rule", "G_heldout_mean_best_rule", "reference_error_heldout"],
     "reference": ["task", "dim", "element", "n_dofs", "solver", "method", "seconds", "ratio", "true_error",
                   "estimate"],
     "sa": ["dim", "n_springs", "method", "engine", "steps_per_s", "acceptance", "G_ratio", "speedup"],
