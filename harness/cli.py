@@ -11,7 +11,7 @@ import sys
 from harness.errors import SpringbenchError, error_lines
 from harness.outputs import os_error
 
-COMMANDS = ["run", "validate", "reference", "build", "score", "calibrate", "bench", "report", "rules"]
+COMMANDS = ["run", "validate", "reference", "build", "score", "calibrate", "pack", "engines", "bench", "report", "rules"]
 
 
 class _Parser(argparse.ArgumentParser):

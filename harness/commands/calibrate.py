@@ -56,7 +56,9 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   (e) N = k l0 (SOFA's MeshSpringForceField divides its stiffness by the rest length;
   SOFA's SpringForceField takes k itself, ``springs="i j k kd l0"``), ``dt_stable`` and
   ``dt_stable_float32`` (s: explicit symplectic Euler limit with that damping, and with a
-  float32 margin), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
+  float32 margin), ``dt_safe`` and ``settle_damping`` (the step and the damping an engine
+  settles with), ``clamped_nodes``, ``loaded_nodes``, ``forces`` and ``gravity`` per load
+  (harness/export/engine_loads.py), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
   ``loads_fitted``, ``loads_heldout``, ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
@@ -123,13 +125,19 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
               volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
-              kn_stiffness (kn, Pa; 2-D N/m), kn_shared
+              kn_stiffness (kn, Pa; 2-D N/m), kn_shared; for engines: dt_safe (s: the step to use,
+              0.8 dt_stable, measured in NVIDIA Newton in float32), settle_damping ({c, omega_1, load,
+              velocity_factor}: after every step v *= velocity_factor, mass damping c = 2 omega_1 about
+              critical for the lowest mode), and per load clamped_nodes ({nodes, components}: the held
+              node ids and components), loaded_nodes and forces (N, one row per loaded node) and
+              gravity (m/s^2, already inside forces; null without a body force)
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each family's
               and of the clamped states' own G_norm; ranks the rules), G_heldout, G_heldout_mean,
-              G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout (the FEM's own error), status (ok / ref-coarse), k_ratio (max/median k) and
-              dt_stable (s) with --k-ratio, seconds, seed, opt_stop, opt_stops (every start's, " | " between)
+              G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout (the FEM's own error),
+              status (ok / ref-coarse), k_ratio (max/median k, with --k-ratio), dt_stable (s, the JSON's),
+              dt_safe (s), seconds, seed, opt_stop, opt_stops (every start's, " | " between)
 2-D meshes: unit thickness (k and masses per unit thickness).
 the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by default
 its capacity (the prior weight a, a volume term per element or none) is chosen by leave-one-family-out
@@ -291,22 +299,19 @@ def main(args) -> int:
         tmp = Path(tmp)
         try:
             rows, net, case = _run(args, mesh, tmp)
+            _report(args, rows, net, case)       # the case may read its mesh file (in tmp) again
         except SpringbenchError as exc:   # name the user's mesh, never our temporary files
             if exc.file is None or str(tmp) in str(exc.file):
                 raise type(exc)(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
             raise
-    _report(args, rows, net, case)
     return 0
 
 
-def _run(args, mesh, tmp: Path):
-    """(rows, the exported network, the case) of one calibration in the folder tmp."""
+def mesh_case(args, mesh, tmp: Path):
+    """The in-memory case of ``args`` for the read ``mesh`` (its file written to tmp when
+    it must be scaled to m), printing the clamp and load faces it chose."""
     from harness.case.reader import load_case
     from harness.case.default_loads import end_loads
-    from harness.export.vtu import read_vtu
-    from harness.stages import StageContext
-    from harness.stages import sms as stage
-    from harness.stages.sms_measures import rank
     from harness.io.mesh_groups import require_group, scaled_copy
     for flag, group in (("--clamp", args.clamp), ("--load-region", args.load_region)):
         if group is not None and args.heldout == "none":
@@ -333,6 +338,16 @@ def _run(args, mesh, tmp: Path):
         case = load_case(tmp / "calibrate.toml")
     except CaseError as exc:
         raise SpringbenchError(exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix) from None
+    return case
+
+
+def _run(args, mesh, tmp: Path):
+    """(rows, the exported network, the case) of one calibration in the folder tmp."""
+    from harness.export.vtu import read_vtu
+    from harness.stages import StageContext
+    from harness.stages import sms as stage
+    from harness.stages.sms_measures import rank
+    case = mesh_case(args, mesh, tmp)
     from harness.commands.calibrate_progress import tracker
     from harness.progress import Clock
     clock = Clock("calibrate")           # on a terminal only (and not with --quiet)
@@ -418,6 +433,12 @@ def _worst(*values) -> float:
     return math.nan if any(math.isnan(v) for v in values) else max(values)
 
 
+def positive(net) -> bool:
+    """Whether every mass is positive (an explicit engine can run the network)."""
+    import numpy as np
+    return bool(np.all(np.asarray(net.masses) > 0))
+
+
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
@@ -447,17 +468,21 @@ def _report(args, rows, net, case):
                                                              "G_heldout_mean": finite(heldout_error(rule))},
                 opt_stop=exported.get("opt_stop") if isinstance(exported.get("opt_stop"), str) else None,
                 opt_stops=stops.split(" | ") if isinstance(stops, str) else [])
+    from harness.export.engine_loads import load_records, settle_recipe
+    meta.update(load_records(net, case), settle_damping=settle_recipe(net, case) if positive(net) else None)
     cols = [c for c in ("model", "stiffness", "optimizer", "exported", "n_nodes", "n_springs", "G_initial", "G_final",
                         "G_norm_initial", "G_norm_final", "G_fit_score", "G_fit_score_bound", "G_heldout",
                         "G_heldout_mean", "G_heldout_mean_spread",
                         "choice", "ref_error_max", "ref_error_heldout", "status",
-                        "k_ratio", "dt_stable", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior", "note")
-            if any(c in r for r in rows)]
-    df = pd.DataFrame(rows)[cols]
+                        "k_ratio", "dt_stable", "dt_safe", "seconds", "seed", "opt_stop", "opt_stops", "opt_prior",
+                        "note")
+            if any(c in r for r in rows) or c == "dt_safe"]
     from harness.outputs import staged
     out = args.out              # the three files appear together or not at all (disk full: none)
     with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
         data = export(net, vtu, meta)         # writes vtu and its .json beside it (harness/export/model_json.py)
+        exported.update(dt_stable=data["dt_stable"], dt_safe=data.get("dt_safe"))   # one step, the JSON's, in the table
+        df = pd.DataFrame(rows).reindex(columns=cols)
         df.to_csv(csv, index=False)
     print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
     print(heldout_sentence(exported, rules, case.heldout))
@@ -465,7 +490,7 @@ def _report(args, rows, net, case):
     print(reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
     if "choice" in exported:
         print(validation_sentence(exported, meta["validation"] or []))
-    step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s)"
+    step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s, safe {data['dt_safe']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "
           f"k {min(data['spring_stiffness']):.3g}..{max(data['spring_stiffness']):.3g} N/m, {step}")

@@ -1,16 +1,38 @@
-"""springbench score MODEL.vtu CASE: G criteria of any spring network against the FEM reference."""
+"""springbench score MODEL.vtu CASE: G criteria of any spring network against the FEM reference;
+springbench score --displacements U DIR: any engine's displacements on a benchmark pack
+(harness/export/pack_score.py), with a gate for CI (exit 1 on a miss, a JUnit report)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 HELP = ("score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G per load, G_{a:b:c}, "
-        "normalised G, and G_ref (the reference's own error as a normalised G)")
+        "normalised G, and G_ref (the reference's own error as a normalised G); or, with --displacements, any "
+        "engine's displacements on a benchmark pack (springbench pack), gated for CI")
+EPILOG = """forms:
+  springbench score MODEL.vtu CASE [--out G.csv] [--weights A B C] [--full]
+  springbench score --displacements U.npz|U.csv|U.vtu DIR [--max-g-norm X] [--max LOAD=X ...]
+                    [--loads A,B] [--out G.csv] [--junit FILE]
+the pack form prints per load G_norm (RMS error / RMS FEM displacement), max_error (largest
+error / largest FEM displacement), G_ref (the FEM's own error estimate as a G_norm), the gate and
+status (ok / ref-coarse / miss); exit 1 when a load misses its gate, 0 when all meet it, 2 for bad
+input. U: .npz one (n, dim) array per load name; .csv columns load,node,ux,uy[,uz]; .vtu point
+data u_<load>; at the pack's nodes, in metres."""
 
 
 def add_arguments(p):
-    p.add_argument("model", metavar="MODEL.vtu", help="spring network (e.g. from 'springbench build')")
-    p.add_argument("case", metavar="CASE", help="case file (body, material, loads, [score] weights)")
+    p.add_argument("model", metavar="MODEL.vtu|DIR", nargs="?",
+                   help="spring network (e.g. from 'springbench build'); with --displacements: the pack's folder")
+    p.add_argument("case", metavar="CASE", nargs="?", help="case file (body, material, loads, [score] weights)")
+    p.add_argument("--displacements", type=Path, default=None, metavar="U",
+                   help="an engine's displacements per load of a pack (.npz, .csv or .vtu; metres)")
+    p.add_argument("--max-g-norm", dest="max_g_norm", type=float, default=None, metavar="X",
+                   help="pack form: exit 1 when a load's G_norm exceeds X")
+    p.add_argument("--max", dest="max_load", action="append", default=[], metavar="LOAD=X",
+                   help="pack form: this load's own gate (repeatable)")
+    p.add_argument("--loads", default=None, metavar="A,B", help="pack form: score only these loads")
+    p.add_argument("--junit", type=Path, default=None, metavar="FILE",
+                   help="pack form: also write a JUnit XML report (one test case per load)")
     p.add_argument("--out", type=Path, default=None, metavar="CSV", help="also write the table as CSV")
     p.add_argument("--weights", type=float, nargs=3, default=None, metavar=("A", "B", "C"),
                    help="G weights inner border corner (default: the case's [score] weights)")
@@ -42,6 +64,14 @@ def score_table(net, case, ref, weights=None):
 
 def main(args) -> int:
     import math
+    if args.displacements is not None or args.max_g_norm is not None or args.max_load or args.junit is not None \
+            or args.loads is not None:
+        from harness.commands.score_pack import main as pack_main
+        return pack_main(args)
+    from harness.errors import SpringbenchError
+    if args.model is None or args.case is None:
+        raise SpringbenchError("needs MODEL.vtu and CASE (or --displacements U DIR for a pack)",
+                               fix="springbench score MODEL.vtu CASE, or springbench score --displacements U.npz DIR")
 
     import reference
     from harness.errors import SpringbenchError

@@ -59,6 +59,12 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
                                               "f = -kv (V - V0) / V0 dV/dx")
         data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
                     volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
+    from harness.export.engine_loads import DT_SAFE
+    dt = step.get("dt_stable", math.nan)
+    data["dt_safe"] = DT_SAFE * dt if math.isfinite(dt) else math.nan
+    if isinstance(data.get("settle_damping"), dict) and math.isfinite(data["dt_safe"]):
+        data["settle_damping"] = dict(data["settle_damping"],
+                                      velocity_factor=math.exp(-data["settle_damping"]["c"] * data["dt_safe"]))
     data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
     if not positive:
         data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"

@@ -118,3 +118,30 @@ def test_newton_runs_springs_plus_volume_as_tetrahedra(tmp_path):
     assert np.abs(plain.displacement("tip") - u_sb).max() > 0.05 * np.abs(u_sb).max()     # the term matters
     u_nt, steps = newton_equilibrium(data, fixed, statics.force_vector(net, case, load_))
     assert np.sqrt(np.sum((u_nt - u_sb) ** 2) / np.sum(u_sb ** 2)) <= 1e-3, steps
+
+
+@pytest.mark.slow
+def test_the_documented_newton_recipe_reaches_springbench_statics(tmp_path):
+    """docs/calibrate.md's Newton snippet, run as printed on a calibrated cylinder's JSON:
+    its clamped_nodes, loaded_nodes and forces are the ones springbench's statics holds
+    and applies, and dt_safe with settle_damping settles the sag within the snippet's
+    5,000 steps to 1e-3 (L2) of springbench's own statics."""
+    import re
+    from pathlib import Path
+    mesh = meshes.cylinder(tmp_path)
+    data, case, net = calibrated(tmp_path, mesh)
+    res = statics.solve(net, case)
+    for load in case.loads:
+        f = np.zeros((net.n_nodes, 3))
+        f[data["loaded_nodes"][load.name]] = data["forces"][load.name]
+        assert np.allclose(f, statics.force_vector(net, case, load), rtol=1e-8, atol=0), load.name
+        fixed = statics.fixed_mask(net.points, case, load)
+        rows = data["clamped_nodes"][load.name]
+        assert rows["nodes"] == np.flatnonzero(fixed.any(axis=1)).tolist(), load.name
+        assert rows["components"] == [np.flatnonzero(r).tolist() for r in fixed[rows["nodes"]]], load.name
+    doc = (Path(__file__).parents[2] / "docs" / "calibrate.md").read_text()
+    snippet = re.search(r"In NVIDIA Newton.*?```python\n(.*?)```", doc, re.S).group(1)
+    space = {"d": data, "L": "sag"}
+    exec(snippet, space)
+    u_sb = res.displacement("sag")
+    assert np.sqrt(np.sum((space["u"] - u_sb) ** 2) / np.sum(u_sb ** 2)) <= 1e-3
