@@ -13,6 +13,7 @@ on a 875-tet cylinder.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 
 from harness.errors import SpringbenchError
 
@@ -37,9 +38,7 @@ def adapter(name: str):
     if name not in ENGINES:
         raise SpringbenchError(f"unknown engine '{name}'", field="ENGINE", fix=f"one of {', '.join(ENGINES)}")
     target, package, _ = ENGINES[name]
-    try:
-        importlib.import_module(package)
-    except ImportError:
+    if importlib.util.find_spec(package) is None:       # found, not imported: an engine sets itself up
         raise SpringbenchError(f"engine '{name}' needs the package '{package}', which is not installed",
                                field="ENGINE", fix=f"{EXTRA} (or pip install {package})") from None
     module, func = target.split(":")

@@ -45,7 +45,12 @@ class MujocoSim:
     def load(self, ld):
         mj = self.mj
         full = ld.held_nodes[ld.held_components.all(axis=1)]
-        self.m = mj.MjModel.from_xml_string(_xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu))
+        previous, self.warnings = mj.get_mju_user_warning(), []
+        mj.set_mju_user_warning(self.warnings.append)     # else MuJoCo writes MUJOCO_LOG.TXT into the cwd
+        try:
+            self.m = mj.MjModel.from_xml_string(_xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu))
+        finally:
+            mj.set_mju_user_warning(previous)
         self.d = mj.MjData(self.m)
         self.m.opt.timestep = self.dt
         self.vb = self.m.flex_vertbodyid.copy()

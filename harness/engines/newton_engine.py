@@ -39,9 +39,10 @@ class NewtonSim:
     """One Newton model; per load: forces, holds, damping; ``advance`` / ``measure`` for settle."""
 
     def __init__(self, q, masses, springs=(), tets=(), dt=1e-4):
-        import newton
         import warp as wp
-        wp.config.quiet = True
+        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)   # before Newton initialises Warp: no
+        #                                                                   banner or module log on stdout
+        import newton
         self.wp, self.newton = wp, newton
         self.q0 = np.asarray(q, float)
         self.masses = np.asarray(masses, float)
@@ -71,9 +72,8 @@ class NewtonSim:
         self.factor = np.float32(factor)
 
     def advance(self, n: int):
-        """n steps; their positions and net forces are averaged (a float32 engine's rounding
-        keeps its high modes trembling) and their speeds are RMS-averaged (the kinetic energy
-        of the trembling counts)."""
+        """n steps; their positions, velocities and net forces are averaged (a float32
+        engine's rounding keeps its high modes trembling)."""
         wp = self.wp
         acc = [np.zeros_like(self.q0) for _ in range(3)]
         for _ in range(n):
@@ -92,9 +92,9 @@ class NewtonSim:
             if len(self.part_nodes):
                 self.s0.particle_q.assign(x)
             acc[0] += self.s0.particle_q.numpy()
-            acc[1] += v * v
+            acc[1] += v
             acc[2] += last.particle_f.numpy()
-        self.mean = [acc[0] / n, np.sqrt(acc[1] / n), acc[2] / n]
+        self.mean = [a / n for a in acc]
 
     def measure(self):
         x, v, f = self.mean

@@ -7,7 +7,7 @@ scaled by exp(-c dt) (mass-proportional damping c = 2 omega_1, about critical fo
 body's lowest mode, :func:`pack_omega`), so equilibrium comes in tens of periods of
 that mode, not in millions of steps.
 
-Stopping rule, every ``check`` steps (``measure`` averages u and f over them, and v as an RMS: a float32
+Stopping rule, every ``check`` steps (``measure`` averages u, v and f over them: a float32
 engine's rounding keeps its high modes trembling):
 
 - *stationary*: the displacement's change since the last check, divided by the share
@@ -17,11 +17,12 @@ engine's rounding keeps its high modes trembling):
   the origin are multiples of 6e-8 m);
 - *in equilibrium*: the net force |f| on the free components is at most ``res_tol`` of the
   external force, or it has stopped falling (by under 5 % over ``STALL`` checks) while the
-  kinetic energy is at most ``ke_tol`` of the load's work W = f . u_fem / 2. The second
+  kinetic energy of the averaged motion (the slow modes, which move the averaged
+  displacement) is at most ``ke_tol`` of the load's work W = f . u_fem / 2. The second
   is float32 rounding: forces are differences of O(E) terms and the high modes are
   stiff, so on a steel lug (632 nodes, omega_max / omega_1 ~ 1e3) the averaged force stays
   tens of percent of the load while the averaged position is Newton's P1 answer to 2e-3;
-  a kinetic energy below 1e-3 W says the trembling is that small in displacement.
+  the trembling is fast and small in displacement.
 
 Settled when both hold; diverged when a value is not finite or the displacement passes
 1e3 times the FEM's; not settled when the steps run out. The answer reports steps,

@@ -133,14 +133,12 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys):
 
 
 def test_a_missing_engine_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):
-    import importlib
-    real = importlib.import_module
+    import importlib.util
+    real = importlib.util.find_spec
 
     def no_mujoco(name, *a, **k):
-        if name == "mujoco":
-            raise ImportError("no mujoco")
-        return real(name, *a, **k)
-    monkeypatch.setattr(importlib, "import_module", no_mujoco)
+        return None if name == "mujoco" else real(name, *a, **k)
+    monkeypatch.setattr(importlib.util, "find_spec", no_mujoco)
     from harness.engines import adapter
     from harness.errors import SpringbenchError
     with pytest.raises(SpringbenchError) as exc:
@@ -152,14 +150,14 @@ def test_a_missing_engine_is_one_line_naming_the_extra(monkeypatch, tmp_path, ca
 
 class Oscillator:
     """One node on a spring (k, m) under a force F, stepped by symplectic Euler; its
-    measured net force carries a constant ``floor`` and its velocity an alternating
-    ``tremble`` (a float32 engine's rounding)."""
+    measured net force carries ``floor`` F, shrinking by ``fade`` per step (a float32
+    engine's rounding, constant; a slow creep, fading)."""
 
-    def __init__(self, k, m, F, dt, floor=0.0, tremble=0.0):
-        self.k, self.m, self.F, self.dt, self.floor, self.tremble = k, m, F, dt, floor, tremble
+    def __init__(self, k, m, F, dt, floor=0.0, fade=1.0):
+        self.k, self.m, self.F, self.dt, self.floor, self.fade = k, m, F, dt, floor, fade
         self.u = np.zeros((1, 3))
         self.v = np.zeros((1, 3))
-        self.damp, self.sign = 1.0, 1.0
+        self.damp = 1.0
 
     def set_damping(self, factor):
         self.damp = factor
@@ -168,27 +166,25 @@ class Oscillator:
         for _ in range(n):
             self.v = self.damp * (self.v + self.dt * (self.F - self.k * self.u) / self.m)
             self.u = self.u + self.dt * self.v
-            self.sign = -self.sign
+        self.floor *= self.fade ** n
 
     def measure(self):
-        return self.u.copy(), self.v + self.sign * self.tremble, self.F - self.k * self.u + self.floor * self.F
+        return self.u.copy(), self.v.copy(), self.F - self.k * self.u + self.floor * self.F
 
 
-@pytest.mark.parametrize("floor, tremble, status", [(0.0, 0.0, "settled"), (0.3, 0.0, "settled"),
-                                                    (0.3, 0.05, "not-settled")])
-def test_settle_stops_at_equilibrium_or_at_a_stalled_residual_of_a_still_body(floor, tremble, status):
+@pytest.mark.parametrize("floor, fade, status", [(0.0, 1.0, "settled"), (0.3, 1.0, "settled"),
+                                                 (0.3, 1.0 - 1e-4, "not-settled")])
+def test_settle_stops_at_equilibrium_or_at_a_stalled_residual_of_a_still_body(floor, fade, status):
     from types import SimpleNamespace
 
-    from harness.engines.settle import KE_TOL, rayleigh_omega, settle
+    from harness.engines.settle import rayleigh_omega, settle
     k, m, F = 4.0e3, 0.5, np.array([[0.0, -2.0, 1.0]])
     load = SimpleNamespace(force=F, u_fem=F / k, held_nodes=np.zeros(0, int), held_components=np.zeros((0, 3), bool))
     omega = rayleigh_omega(load, np.array([m]))
     assert omega == pytest.approx(np.sqrt(k / m))         # the exact mode of one mass on one spring
-    work = 0.5 * float(np.sum(F * F)) / k
-    assert 0.5 * m * 3 * 0.05 ** 2 > 10 * KE_TOL * work   # the trembling case is well above the bound
     dt = 0.2 * 2.0 / omega
-    a = settle(Oscillator(k, m, F, dt, floor, tremble), load, np.array([m]), dt, omega, max_steps=20_000)
-    assert a.status == status
+    a = settle(Oscillator(k, m, F, dt, floor, fade), load, np.array([m]), dt, omega, max_steps=20_000)
+    assert a.status == status                             # a residual still falling 2 % per check is no floor
     if status == "settled":
         assert np.abs(a.u - F / k).max() <= 1e-4 * np.abs(F / k).max()
         assert a.residual == pytest.approx(floor, abs=1e-2)
