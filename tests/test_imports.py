@@ -130,7 +130,7 @@ def test_no_import_circles():
 # below everything; the report reads stored results and never imports the runner, which calls it.
 LAYERS = ("harness harness.errors harness.paths harness.outputs harness.linalg harness.provenance harness.progress",
           "harness.io", "harness.case", "reference", "harness.geometry", "harness.models",
-          "harness.mechanics", "harness.optimize", "harness.scoring", "harness.export",
+          "harness.mechanics", "harness.optimize", "harness.scoring", "harness.export", "harness.engines",
           "harness.stages", "harness.report", "harness.run", "harness.bench", "harness.commands",
           "harness.cli harness.__main__")
 

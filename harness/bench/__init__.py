@@ -12,4 +12,5 @@ BENCHES = {
     "dynamics": "harness.bench.dynamics",
     "calibrate": "harness.bench.calibrate",
     "heldout": "harness.bench.heldout",
+    "engines": "harness.bench.engines",
 }

@@ -48,8 +48,32 @@ def heldout_summary(df):
     return pd.DataFrame(rows) if rows else None
 
 
+def engines_summary(df):
+    """Per body, mesh and nu: each engine's (and springbench export's) mean G_norm over the
+    held-out loads; a cell says why when an engine found no equilibrium."""
+    import pandas as pd
+    if not {"body", "nu", "engine", "model", "load", "G_norm", "status"} <= set(df.columns):
+        return None
+    m = df[df["load"] == "mean"].copy()
+    m["who"] = m["engine"] + ": " + m["model"].str.replace(r"springbench (\w+):.*", r"springbench \1", regex=True)
+    rows = []
+    for (body, tets, nu), g in m.groupby(["body", "n_tets", "nu"], sort=False):
+        row = {"body": body, "tets": fmt(tets), "nu": f"{nu:g}"}
+        for _, r in g.iterrows():
+            row[r["who"]] = fmt(r["G_norm"]) if r["status"] == "settled" else f"{fmt(r['G_norm'])} ({r['status']})"
+        rows.append(row)
+    return pd.DataFrame(rows).fillna("") if rows else None
+
+
 def bench_table(name: str, df):
     """(table of display strings, note) of one benchmark's CSV."""
+    if name == "engines":
+        t = engines_summary(df)
+        if t is not None:
+            return t, ("Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the mean over "
+                       "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
+                       "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated model) run in "
+                       "Newton. Every load, step count and wall time is in engines.csv.")
     if name == "heldout":
         t = heldout_summary(df)
         if t is not None:
