@@ -21,11 +21,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _modules():
     for name in COMMANDS:
-        try:
-            yield name, importlib.import_module(f"harness.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"harness.commands.{name}":
-                raise
+        yield name, importlib.import_module(f"harness.commands.{name}")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -31,7 +31,7 @@ from typing import Callable
 
 STAGES = [
     "harness.stages.reference_check",   # FEM reference + its verification
-    "harness.stages.sms",               # spring/mass build + score + optimise (issues 3, 4)
+    "harness.stages.sms",               # spring/mass build + score + optimise
     "harness.stages.bc2000",            # Bourguignon & Cani experiments
 ]
 
@@ -60,16 +60,8 @@ class StageContext:
 
 
 def load_stages(names=None):
-    """Import the stage modules named in ``names`` (default: ``STAGES``); modules that
-    do not exist yet are skipped (the stages are built by several issues)."""
-    out = []
-    for name in (STAGES if names is None else names):
-        try:
-            out.append(importlib.import_module(name))
-        except ModuleNotFoundError as exc:
-            if exc.name != name:
-                raise
-    return out
+    """Import the stage modules named in ``names`` (default: ``STAGES``)."""
+    return [importlib.import_module(name) for name in (STAGES if names is None else names)]
 
 
 def check_case(case, stages=None):

@@ -122,14 +122,31 @@ def test_newton_runs_a_springbench_export_to_its_linear_statics(packs, tmp_path)
 
 
 @pytest.mark.slow
-def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys):
-    pytest.importorskip("mujoco")
+@pytest.mark.parametrize("engine", ["newton-tets", "mujoco-flex", "newton-springs"])
+def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engine):
+    """From a pack of a gmsh mesh no other test shares, one command runs the engine and one
+    scores it; the gate exits 0 above the engine's error and 1 below it; the JUnit file
+    parses and holds one test case per load."""
+    from xml.etree import ElementTree
+    pytest.importorskip("mujoco" if engine == "mujoco-flex" else "newton")
     folder, by_size = packs
-    _, out, _ = by_size[0.06]
-    u = tmp_path / "u.npz"
-    assert cli.main(["engines", "run", "mujoco-flex", str(out), "--loads", "tip,sag", "--out", str(u)]) == 0
-    assert cli.main(["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--max-g-norm", "0.5"]) == 0
-    assert cli.main(["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--max-g-norm", "0.01"]) == 1
+    mesh, out, _ = by_size[0.06]
+    extra = []
+    if engine == "newton-springs":
+        assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
+                         "--method", "rule", "--max-refine", "0", "--out", str(tmp_path / "m.vtu")]) == 0
+        extra = ["--model", str(tmp_path / "m.json")]
+    u, table, report = tmp_path / "u.npz", tmp_path / "g.csv", tmp_path / "junit.xml"
+    assert cli.main(["engines", "run", engine, str(out), "--loads", "tip,sag", "--out", str(u), *extra]) == 0
+    assert cli.main(["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--out", str(table)]) == 0
+    import pandas as pd
+    g = pd.read_csv(table).set_index("load").G_norm
+    worst = float(g.drop("total").max())
+    gate = ["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--junit", str(report)]
+    assert cli.main([*gate, "--max-g-norm", str(1.5 * worst)]) == 0
+    assert cli.main([*gate, "--max-g-norm", str(0.5 * worst)]) == 1
+    cases = ElementTree.parse(report).getroot().iter("testcase")
+    assert sorted(c.get("name") for c in cases) == ["sag", "tip"]
 
 
 def test_a_missing_engine_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):
