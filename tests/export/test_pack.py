@@ -150,3 +150,25 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     got = {r["load"]: r["G_norm"] for r in score_fields(pack, fields)}
     for name, want in data["G_heldout_loads"].items():
         assert got[name] == pytest.approx(want, rel=1e-6), name
+
+
+def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, capsys):
+    """The original Bourguignon & Cani cube as a case: the pack holds the case's loads,
+    its held-out ones marked, on the mesh's own nodes in the case's units; a box body is
+    one line (an engine needs a mesh)."""
+    from pathlib import Path
+    from harness.case.reader import load_case
+    root = Path(__file__).resolve().parents[2]
+    case_file = root / "cases" / "bourguignon2000" / "fem_cube333_tetra.toml"
+    case = load_case(case_file)
+    if not case.body.file or not Path(case.body.file).exists():
+        pytest.skip("../shared/reference-data is not beside the repository")
+    assert cli.main(["pack", str(case_file), "--out", str(tmp_path / "p")]) == 0
+    pack = read_pack(tmp_path / "p")
+    assert [ld.name for ld in pack.loads] == [ld.name for ld in case.loads]
+    assert {ld.name for ld in pack.loads if ld.role == "heldout"} == set(case.heldout)
+    assert (pack.E, pack.nu) == (case.material.E, case.material.nu)
+    capsys.readouterr()
+    assert cli.main(["pack", str(root / "cases" / "deussen1995" / "sec6_box3d.toml"), "--out", str(tmp_path / "q")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mesh" in err[0] and not (tmp_path / "q").exists()
