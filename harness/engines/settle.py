@@ -10,11 +10,12 @@ that mode, not in millions of steps.
 Stopping rule, every ``check`` steps (``measure`` averages u, v and f over them: a float32
 engine's rounding keeps its high modes trembling):
 
-- *stationary*: the displacement's change since the last check, divided by the share
-  1 - exp(-omega_1 check dt) of the remaining error that damping at rate omega_1 removes
-  in a check (so it estimates the distance still to go), is at most ``rtol`` of its
-  largest value, or at most 4 ``resolution`` (a float32 engine's positions ~0.5 m from
-  the origin are multiples of 6e-8 m);
+- *stationary*: the displacement's change over the last K checks, divided by the share
+  1 - exp(-omega_1 K check dt) >= 1/2 of the remaining error that damping at rate
+  omega_1 removes in them (K the fewest checks that remove half: so it estimates the
+  distance still to go, and float32 noise in a small change is not magnified), is at most
+  ``rtol`` of the displacement's largest value, or at most 4 ``resolution`` (a float32
+  engine's positions ~0.5 m from the origin are multiples of 6e-8 m);
 - *in equilibrium*: the net force |f| on the free components is at most ``res_tol`` of the
   external force, or it has stopped falling (by under 5 % over ``STALL`` checks) while the
   kinetic energy of the averaged motion (the slow modes, which move the averaged
@@ -125,9 +126,10 @@ def settle(sim, load, masses: np.ndarray, dt: float, omega1: float, max_steps: i
     umax = float(np.linalg.norm(load.u_fem, axis=1).max())
     work = 0.5 * float(np.sum(load.force * load.u_fem))
     c = 2.0 * omega1 if math.isfinite(omega1) else 0.0
-    removed = -math.expm1(-0.5 * c * check * dt) if c > 0 else 1.0
+    span = max(1, math.ceil(math.log(2.0) / (0.5 * c * check * dt))) if c > 0 else 1
+    removed = -math.expm1(-0.5 * c * span * check * dt) if c > 0 else 1.0
     sim.set_damping(math.exp(-c * dt))
-    prev, steps, history = None, 0, []
+    past, steps, history = [], 0, []
     while steps < max_steps:
         sim.advance(check)
         steps += check
@@ -137,13 +139,14 @@ def settle(sim, load, masses: np.ndarray, dt: float, omega1: float, max_steps: i
         if not (np.all(np.isfinite(u)) and math.isfinite(res)) or np.abs(u).max() > 1e3 * max(umax, 1e-300):
             return Answer(np.full_like(u, np.nan), "diverged", steps, steps * dt, time.perf_counter() - t0, ke, res,
                           f"at step {steps} (dt {dt:.3g} s)")
+        past.append(u)
+        before = past.pop(0) if len(past) > span else None
         scale = max(float(np.abs(u).max()), 4.0 * resolution / rtol, 1e-300)
-        change = math.inf if prev is None else float(np.abs(u - prev).max()) / removed / scale
+        change = math.inf if before is None else float(np.abs(u - before).max()) / removed / scale
         history.append(res)
         stalled = len(history) > STALL and res >= 0.95 * history[-1 - STALL]
         if change <= rtol and (res <= res_tol or (stalled and ke <= ke_tol * work)):
             note = "" if res <= res_tol else f"residual {res:.2g} stalled, kinetic {ke / work:.1g} of the work"
             return Answer(u, "settled", steps, steps * dt, time.perf_counter() - t0, ke, res, note)
-        prev = u
     return Answer(u, "not-settled", steps, steps * dt, time.perf_counter() - t0, ke, res,
                   f"residual {res:.2g} after {steps} steps")
