@@ -22,7 +22,7 @@ engine's rounding keeps its high modes trembling):
   displacement) is at most ``ke_tol`` of the load's work W = f . u_fem / 2. The second
   is float32 rounding: forces are differences of O(E) terms and the high modes are
   stiff, so on a steel lug (632 nodes, omega_max / omega_1 ~ 1e3) the averaged force stays
-  tens of percent of the load while the averaged position is Newton's P1 answer to 2e-3;
+  5-10 % of the load while the averaged position is Newton's P1 answer to 2e-3;
   the trembling is fast and small in displacement.
 
 Settled when both hold; diverged when a value is not finite or the displacement passes
