@@ -171,3 +171,28 @@ def test_a_capped_rule_is_still_a_rule():
     capped = dict(RULES[0], optimizer="none+k-ratio 10")
     assert verdict(capped, RULES)[0] == "rule" and "the exported rule (lloyd)" in heldout_sentence(capped, RULES, NAMES)
     assert verdict(dict(capped, optimizer="lbfgs+k-ratio 10"), RULES)[0] == "fit-worse-than-rule"   # 0.12 > 0.0926
+
+
+def test_the_engine_tables_finding_and_summary_say_what_a_hand_made_table_holds():
+    """Two engines and one springbench export on one body at nu 0.3 and 0.49, numbers
+    chosen here: the sentence gives the spans at each nu and the settled count; the
+    summary has one column per engine and model and names a load that did not settle."""
+    import pandas as pd
+    from harness.report.bench_tables import bench_table, engines_finding
+    rows = []
+    for nu, own, ours, status in ((0.3, (0.20, 0.25), 0.05, "settled"), (0.49, (0.50, 0.70), 0.10, "not-settled")):
+        for engine, g in zip(("newton-tets", "mujoco-flex"), own):
+            rows += [dict(body="b", n_tets=100, nu=nu, engine=engine, model="own (E, nu)", load=load, G_norm=g,
+                          status="settled") for load in ("sag", "mean")]
+        rows += [dict(body="b", n_tets=100, nu=nu, engine="newton-springs", model="springbench rule: rule learned",
+                      load="sag", G_norm=ours, status=status),
+                 dict(body="b", n_tets=100, nu=nu, engine="newton-springs", model="springbench rule: rule learned",
+                      load="mean", G_norm=ours, status="see loads" if status != "settled" else "settled")]
+    df = pd.DataFrame(rows)
+    text = engines_finding(df)
+    assert "20-25 % from the FEM at nu = 0.3" in text and "50-70 % at nu = 0.49" in text
+    assert "are 5-10 % at every nu" in text and "5 of 6 engine runs settled" in text
+    table, note = bench_table("engines", df)
+    assert list(table.columns) == ["body", "tets", "nu", "newton-tets: own (E, nu)", "mujoco-flex: own (E, nu)",
+                                   "newton-springs: springbench rule"]
+    assert table.iloc[1]["newton-springs: springbench rule"] == "0.100 (see loads)" and text in note
