@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 
-from harness.engines.settle import Answer, lumped_masses, p1_omega_max, pack_omega, settle, unsupported
+from harness.engines.settle import Answer, p1_omega_max, pack_omega, settle, unsupported
+from harness.models.masses import lumped_masses
 
 DT_START = 0.2
 HALVINGS = 4

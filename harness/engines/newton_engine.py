@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.engines.settle import (Answer, float32_resolution, lumped_masses, p1_omega_max, pack_omega,
-                                    settle, unsupported)
+from harness.engines.settle import Answer, float32_resolution, p1_omega_max, pack_omega, settle, unsupported
 from harness.errors import SpringbenchError
+from harness.models.masses import lumped_masses
 
 DT_MARGIN = 0.8      # of the free model's explicit limit 2 / omega_max (float32 forces; no damping margin)
 

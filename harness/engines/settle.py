@@ -70,15 +70,6 @@ def unsupported(pack, why: str) -> Answer:
     return Answer(np.full((pack.n_nodes, pack.dim), np.nan), "unsupported", note=why)
 
 
-def lumped_masses(points: np.ndarray, tets: np.ndarray, density: float) -> np.ndarray:
-    """rho V / 4 of each tetrahedron to each of its vertices (kg)."""
-    e = points[tets[:, 1:]] - points[tets[:, :1]]
-    vol = np.abs(np.linalg.det(e)) / 6.0
-    m = np.zeros(len(points))
-    np.add.at(m, tets.ravel(), np.repeat(density * vol / 4.0, 4))
-    return m
-
-
 def rayleigh_omega(load, masses: np.ndarray) -> float:
     """omega (rad/s) of the load's static shape: omega^2 = f . u / (u . M u), close above
     the lowest mode the load excites (the FEM's u_fem and the pack's forces)."""

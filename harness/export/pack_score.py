@@ -26,7 +26,6 @@ import numpy as np
 from harness.errors import SpringbenchError
 
 UNIT_FACTORS = {1e3: "mm", 1e2: "cm", 1e-3: "km"}   # u / u_fem near these: the engine's length unit is not m
-REF_SHARE = 0.1
 
 
 def _bad(message, file, fix, field=None):
@@ -101,27 +100,26 @@ def _units(path, pack, fields: dict) -> None:
 
 def score_fields(pack, fields: dict, loads=None, limits: dict | None = None, max_g_norm: float | None = None) -> list:
     """Rows (dicts) per scored load and a total row; ``limits`` {load: gate}, ``max_g_norm``
-    the gate of the others (None: none)."""
+    the gate of the others (None: none). G_norm and G_ref are harness.scoring's with every
+    node weighing alike."""
+    from harness.scoring import g_arrays, g_ref_arrays, ref_status
     limits = dict(limits or {})
     names = list(loads) if loads is not None else [ld.name for ld in pack.loads]
-    rows, num, den = [], 0.0, 0.0
-    for name in names:
-        ld = pack.load(name)
-        d = fields[name] - ld.u_fem
-        r2 = float(np.sum(ld.u_fem ** 2))
-        g = math.sqrt(float(np.sum(d ** 2)) / r2) if r2 > 0 else (0.0 if not np.any(d) else math.inf)
-        err = np.asarray(ld.u_fem_error, float)
-        g_ref = math.sqrt(float(np.sum(err ** 2)) / r2) if np.all(np.isfinite(err)) and r2 > 0 else math.nan
-        umax = float(np.linalg.norm(ld.u_fem, axis=1).max())
+    u_fem = np.stack([pack.load(n).u_fem for n in names])
+    u = np.stack([fields[n] for n in names])
+    classes, ones = np.zeros(pack.n_nodes, int), (1.0, 1.0, 1.0)
+    scores = g_arrays(u_fem, u, classes, ones, names)
+    _, g_ref = g_ref_arrays(u_fem, np.stack([pack.load(n).u_fem_error for n in names]), classes, ones)
+    rows = []
+    for i, name in enumerate(names):
+        g = float(scores.per_load_norm[name])
+        umax = float(np.linalg.norm(u_fem[i], axis=1).max())
         gate = limits.get(name, max_g_norm)
-        status = ("miss" if gate is not None and g > gate else
-                  "ref-coarse" if math.isfinite(g_ref) and g_ref > REF_SHARE * g else "ok")
-        rows.append({"load": name, "role": ld.role, "G_norm": g,
-                     "max_error": float(np.linalg.norm(d, axis=1).max()) / umax if umax > 0 else math.nan,
-                     "G_ref": g_ref, "gate": math.nan if gate is None else float(gate), "status": status})
-        num, den = num + float(np.sum(d ** 2)), den + r2
-    total = math.sqrt(num / den) if den > 0 else math.nan
-    rows.append({"load": "total", "role": "", "G_norm": total,
+        rows.append({"load": name, "role": pack.load(name).role, "G_norm": g,
+                     "max_error": float(np.linalg.norm(u[i] - u_fem[i], axis=1).max()) / umax if umax > 0 else math.nan,
+                     "G_ref": float(g_ref[i]), "gate": math.nan if gate is None else float(gate),
+                     "status": "miss" if gate is not None and g > gate else ref_status(float(g_ref[i]), g, None)})
+    rows.append({"load": "total", "role": "", "G_norm": scores.G_norm,
                  "max_error": max((r["max_error"] for r in rows), default=math.nan),
                  "G_ref": math.nan, "gate": math.nan,
                  "status": "miss" if any(r["status"] == "miss" for r in rows) else "ok",

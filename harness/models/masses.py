@@ -150,3 +150,24 @@ def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None,
         raise ModelError(f"unknown mass rule '{rule}'", field="model.masses", fix=f"one of {', '.join(RULES)}")
     res = float(np.linalg.norm(A @ m - p) / np.linalg.norm(p))
     return MassResult(m * scale, rule, res, int(np.sum(m < 0)))
+
+
+def lumped_masses(points, cells, density: float) -> np.ndarray:
+    """Node masses (n,) of a constant density: each element's volume times ``density``
+    shared equally by its vertices (for a constant body force this is the consistent
+    P1 / Q1 load of a tetrahedron / parallelepiped, i.e. the FEM's linear load)."""
+    cells = np.asarray(cells)
+    per_cell = np.abs(sub_tet_volumes(points, cells)).sum(axis=1)
+    m = np.zeros(len(points))
+    np.add.at(m, cells.ravel(), np.repeat(density * per_cell / cells.shape[1], cells.shape[1]))
+    return m
+
+
+def sub_tet_volumes(points, cells) -> np.ndarray:
+    """Signed volumes (m, k) of each element's tetrahedra (k = 1 for a tet, the hex split
+    of harness.models.anisotropic.hex_to_tets for a hex)."""
+    from harness.models.anisotropic import hex_to_tets
+    tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
+    X = np.asarray(points, float)[tets]
+    v = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
+    return v.reshape(len(cells), -1)

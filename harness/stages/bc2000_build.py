@@ -14,6 +14,7 @@ from harness.case.fibres import named_field_angles
 from harness.io.meshfile import read_mesh
 from harness.models.anisotropic import angles_of, build_anisotropic
 from harness.models.massspring import build_massspring
+from harness.models.masses import lumped_masses, sub_tet_volumes as _sub_tet_volumes  # noqa: F401
 
 
 def _meshes(case, dyn):
@@ -83,26 +84,3 @@ def _dt(dyn, mesh, name):
     if name != "MS" and "hexahedron" in mesh.cells and dyn["hexa_model_dt"]:
         return dyn["hexa_model_dt"]
     return dyn["dt"]
-
-
-def lumped_masses(points, cells, density: float) -> np.ndarray:
-    """Node masses (n,) of a constant density: each element's volume times ``density``
-    shared equally by its vertices (for a constant body force this is the consistent
-    P1 / Q1 load of a tetrahedron / parallelepiped, i.e. the FEM's linear load)."""
-    cells = np.asarray(cells)
-    per_cell = np.abs(_sub_tet_volumes(points, cells)).sum(axis=1)
-    m = np.zeros(len(points))
-    np.add.at(m, cells.ravel(), np.repeat(density * per_cell / cells.shape[1], cells.shape[1]))
-    return m
-
-
-def _sub_tet_volumes(points, cells) -> np.ndarray:
-    """Signed volumes (m, k) of each element's tetrahedra (k = 1 for a tet, the hex split
-    of harness.models.anisotropic.hex_to_tets for a hex)."""
-    from harness.models.anisotropic import hex_to_tets
-    tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
-    X = np.asarray(points, float)[tets]
-    v = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6
-    return v.reshape(len(cells), -1)
-
-

@@ -16,6 +16,7 @@ from harness import cli
 from harness.export.pack import read_pack, write_pack
 
 import meshes
+from pack_solve import held_solve
 
 pytest.importorskip("gmsh")
 E, NU, RHO = 1e5, 0.3, 1000.0
@@ -120,7 +121,6 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     pack's score of that export's linear statics computed here (K assembled spring by
     spring, the pack's holds and forces)."""
     import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
     d, mesh, pack = packed
     assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
                      "--method", "rule", "--rule", "vangelder", "--out",
@@ -140,12 +140,7 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     K = sp.csr_matrix((vals, (rows, cols)), shape=(3 * n, 3 * n))
     fields = {}
     for ld in pack.loads:
-        held = np.zeros((n, 3), bool)
-        held[ld.held_nodes] = ld.held_components
-        free = np.flatnonzero(~held.ravel())
-        u = np.zeros(3 * n)
-        u[free] = spla.spsolve(K[free][:, free].tocsc(), ld.force.ravel()[free])
-        fields[ld.name] = u.reshape(n, 3)
+        fields[ld.name] = held_solve(K, ld, (n, 3))
     from harness.export.pack_score import score_fields
     got = {r["load"]: r["G_norm"] for r in score_fields(pack, fields)}
     for name, want in data["G_heldout_loads"].items():
