@@ -139,6 +139,8 @@ method = "lbfgs"            # adjoint-gradient L-BFGS-B over log k (and kv)
 start = "best"              # from the rule with the lowest G on the fitted loads
 
 [optimizer.select]          # springs: capacity by leave-one-family-out validation on the fitted loads
+candidates = ["springs-prior1", "springs-prior0.1", "springs-prior1+volume", "springs-prior0.1+volume"]
+criterion = "score"
 
 # max_seconds: a cap above what maxiter takes; the validated fit splits it over its fits
 [quick.optimizer]

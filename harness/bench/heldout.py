@@ -281,7 +281,8 @@ def truth(points, tets, groups, loads, nu, rho=RHO, refine=False):
 # -- the exported network's statics --------------------------------------------------------
 
 def network_stiffness(data: dict) -> sp.csr_matrix:
-    """K (3n, 3n) of an exported model at rest: springs, volume terms, kn terms."""
+    """K (3n, 3n) of an exported model at rest: springs, volume terms (per element or per node),
+    kn terms."""
     x = np.asarray(data["particle_q"], float)
     n = len(x)
     s = np.asarray(data["spring_indices"], int)
@@ -291,12 +292,19 @@ def network_stiffness(data: dict) -> sp.csr_matrix:
     G = _rows(np.c_[-b, b], s, n)                                  # (springs, 3n): dl/du
     K = G.T @ sp.diags(np.asarray(data["spring_stiffness"], float)) @ G
     if "volume_indices" in data:                                   # kv/2 (V - V0)^2 / V0 per element
-        t = np.asarray(data["volume_indices"], int)
-        e = x[t[:, 1:]] - x[t[:, :1]]
-        g = np.stack([np.cross(e[:, 1], e[:, 2]), np.cross(e[:, 2], e[:, 0]), np.cross(e[:, 0], e[:, 1])], 1) / 6
-        Gv = _rows(np.c_[-g.sum(1), g.reshape(len(t), 9)], t, n)   # dV/du
         kv = np.asarray(data["volume_stiffness"], float) / np.asarray(data["volume_rest"], float)
+        Gv = _volume_rows(x, np.asarray(data["volume_indices"], int))
         K = K + Gv.T @ sp.diags(kv) @ Gv
+    if "node_volume_elements" in data:                             # kv_a/2 dV_a^2 / V0_a per node
+        t = np.asarray(data["node_volume_elements"], int)
+        a = np.asarray(data["node_volume_nodes"], int)
+        where = np.full(n, -1)
+        where[a] = np.arange(len(a))
+        share = sp.csr_matrix((np.full(t.size, 0.25), (where[t.ravel()], np.repeat(np.arange(len(t)), 4))),
+                              shape=(len(a), len(t)))
+        Gn = share @ _volume_rows(x, t)                            # dV_a/du
+        kv = np.asarray(data["node_volume_stiffness"], float) / np.asarray(data["node_volume_rest"], float)
+        K = K + Gn.T @ sp.diags(kv) @ Gn
     if "kn_nodes" in data:                                         # kn_a/2 V_a d^2 s_a^2 per node
         a = np.asarray(data["kn_nodes"], int)
         where = np.full(n, -1)
@@ -308,6 +316,13 @@ def network_stiffness(data: dict) -> sp.csr_matrix:
         c = np.asarray(data["kn_stiffness"], float) * np.asarray(data["kn_node_volume"], float) * 9.0
         K = K + H.T @ sp.diags(c) @ H
     return sp.csr_matrix(K)
+
+
+def _volume_rows(x: np.ndarray, t: np.ndarray) -> sp.csr_matrix:
+    """(m, 3n): dV_e/du of the tetrahedra t at positions x."""
+    e = x[t[:, 1:]] - x[t[:, :1]]
+    g = np.stack([np.cross(e[:, 1], e[:, 2]), np.cross(e[:, 2], e[:, 0]), np.cross(e[:, 0], e[:, 1])], 1) / 6
+    return _rows(np.c_[-g.sum(1), g.reshape(len(t), 9)], t, len(x))
 
 
 def _rows(blocks: np.ndarray, nodes: np.ndarray, n: int) -> sp.csr_matrix:

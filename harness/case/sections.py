@@ -15,8 +15,10 @@ _COMPARE = tuple(m for m in OPTIMIZER_METHODS if m != "none")
 # harness/optimize/select.py's CANDIDATES must hold exactly these names (it checks at import)
 SELECT_CANDIDATES = ("scale", "groups", "springs-prior10", "springs-prior1", "springs-prior0.1",
                      "scale+volume", "springs-prior1+volume", "springs-prior0.1+volume",
-                     "features", "features+volume")
-SELECT_DEFAULT = ("springs-prior1", "springs-prior0.1", "springs-prior1+volume", "springs-prior0.1+volume")
+                     "features", "features+volume",
+                     "scale+node-volume", "springs-prior1+node-volume", "springs-prior0.1+node-volume")
+SELECT_CRITERIA = ("ratio", "score")     # how a candidate must beat the rule (harness/optimize/select.py choose)
+SELECT_DEFAULT = ("springs-prior1", "springs-prior0.1", "springs-prior1+node-volume", "springs-prior0.1+node-volume")
 
 # [model] kind = "sms": spring/mass systems of Deussen 1995 (harness/models/sms.py)
 PLACEMENTS = ("grid", "random", "lloyd", "mesh")
@@ -24,7 +26,8 @@ MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
 # [model] classes: the model classes one sms case scores on the same nodes;
 # harness/models/classes.py implements each (its CLASSES must hold exactly these names)
-MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt", "springs+kn")
+MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt", "springs+kn",
+                 "springs+node-volume")
 
 SMS = {
     "placement": Field("str", "grid", choices=PLACEMENTS,
@@ -48,10 +51,12 @@ SMS = {
     "mesh": Field("str", None, doc="placement = 'mesh': a mesh file (relative to the case file) whose nodes and "
                                    "edges form the network; default: the body's own mesh"),
     "mesh_format": Field("str", None, doc="meshio format name or 'bc2000' for model.mesh; guessed if absent"),
-    "volume": Field("str", "none", choices=("none", "element", "shared"),
+    "volume": Field("str", "none", choices=("none", "element", "shared", "node", "node-shared"),
                     doc="springs + volume (harness/models/volume.py): a volume energy (kv/2)(V - V0)^2/V0 per "
                         "tetrahedron (2-D: triangle) of the model's cells, kv fitted with the springs, one per "
-                        "element or shared by the body; needs cells (placement mesh, random or lloyd)"),
+                        "element or shared by the body; 'node', 'node-shared': per node, on its share of its "
+                        "elements' volume change (no locking under clamps); needs cells (placement mesh, "
+                        "random or lloyd)"),
     "kn": Field("str", "none", choices=("none", "node", "shared"),
                 doc="springs + the adjustable-Poisson term of Kot & Nagahashi 2015 (harness/models/kn.py): per "
                     "node (kn/2) V d^2 s^2, s the node's mean spring strain, kn (Pa; 2-D N/m) fitted with the "
@@ -60,7 +65,8 @@ SMS = {
                      doc="score several model classes on the same nodes, one after the other: springs, "
                          "springs+volume (volume = 'shared'), springs+volume-element, p1 (linear FEM on the "
                          "model's cells, no free constants), mt (Bourguignon & Cani's element model on the "
-                         "model's cells, 3-D), springs+kn (kn = 'shared'); overrides volume and kn; rows "
+                         "model's cells, 3-D), springs+kn (kn = 'shared'), springs+node-volume (volume = "
+                         "'node-shared'); overrides volume and kn; rows "
                          "carry model_class"),
     "kv": Field("float", None, min=0, min_exclusive=True,
                 doc="initial volume constant (Pa; 2-D N/m); default: the material's bulk modulus beyond its "
@@ -149,6 +155,11 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
             "maxiter": Field("int", 30, min=1, doc="L-BFGS-B iterations of each validation fit"),
             "starts": Field("int", 3, min=1, max=10, doc="starts of the final fit (the rule, its best global "
                                                            "scale, perturbed ones): the spread is reported"),
+            "criterion": Field("str", "ratio", choices=SELECT_CRITERIA,
+                               doc="ratio: the lowest geometric mean of a candidate's free-traction and clamped "
+                                   "validation errors each relative to the rule's, below 0.99; score: the lowest "
+                                   "mean of the two that beats the rule's by 1 % and is no worse on the clamped "
+                                   "states"),
         }, doc="choose the fit's capacity by leave-one-family-out validation on the fitted loads (families: "
                "the linear sets' and 'clamped'); the rule when nothing beats it (method = 'lbfgs' only)"),
         "frequency": Field("table", None, spec={

@@ -70,20 +70,14 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   own estimated error, relative: the worst of ``reference_error_fitted`` and
   ``reference_error_heldout``), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
-  ``--model springs+volume`` (one kv per element) or ``springs+volume-shared`` (one kv for
-  the body) adds a volume energy E = kv/2 (V - V0)^2 / V0 per tetrahedron (2-D: triangle;
-  hexahedra and quads split, harness/models/volume.py), fitted with the springs, and the
-  JSON keys ``volume_indices`` (m, 4) (2-D: (m, 3)) node ids ordered so V0 > 0,
-  ``volume_rest`` (m) V0 in m^3 (2-D: m^2), ``volume_stiffness`` (m) kv in Pa = N/m^2
-  (2-D: N/m, unit thickness), ``volume_shared``; forces f = -kv (V - V0) / V0 dV/dx.
-  ``dt_stable`` then includes the (undamped) volume term.
-  ``--model springs+kn`` (one kn for the body) or ``springs+kn-node`` (one per node) adds the
-  adjustable-Poisson term of Kot & Nagahashi 2015 (harness/models/kn.py): per node a,
-  E_a = kn_a/2 V_a d^2 s_a^2 with s_a the mean strain (l - l0)/l0 of the springs at a, and
-  the JSON keys ``kn_nodes`` (m) node ids, ``kn_node_volume`` (m) V_a in m^3 (2-D: m^2, the
-  node's lumped share of the cells), ``kn_spring_count`` (m) N_a, ``kn_stiffness`` (m) kn in
-  Pa (2-D: N/m), ``kn_shared``; forces: each spring carries the extra tension
-  T = sum over its ends a of kn_a V_a d^2 s_a / (N_a l0). ``dt_stable`` includes the term.
+  A model with an extra term adds its keys (docs/calibrate.md, "What it writes", gives each
+  energy; the JSON's ``units`` the forces): a volume term per element (``--model springs+volume``,
+  ``springs+volume-shared``; harness/models/volume.py) ``volume_*``, run in Newton as
+  tetrahedra with k_mu = 0, k_lambda = kv; one per node (``--model springs+node-volume``,
+  ``springs+node-volume-shared``, or a ``+node-volume`` choice of the validation)
+  ``node_volume_*``, run in Newton by harness/engines/newton_volume.py; Kot & Nagahashi's
+  term (``--model springs+kn``, ``springs+kn-node``; harness/models/kn.py) ``kn_*``.
+  ``dt_stable`` includes the term.
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
   the rest length from the particle positions, so add the particles at ``particle_q``.
@@ -123,7 +117,10 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               best_rule_heldout ({rule, G_heldout_mean}: the best rule on the held-out loads), opt_stop and
               opt_stops (the optimiser's whole stop message: the exported start's, and every start's),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds volume_indices,
-              volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared;
+              volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m), volume_shared; a volume
+              term per node (--model springs+node-volume, or a +node-volume choice) adds
+              node_volume_nodes, node_volume_rest (m^3; 2-D m^2), node_volume_stiffness (kv, Pa; 2-D N/m),
+              node_volume_shared, node_volume_elements, node_volume_element_rest (m^3; 2-D m^2);
               --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2), kn_spring_count,
               kn_stiffness (kn, Pa; 2-D N/m), kn_shared; for engines: dt_safe (s: the step to use,
               0.8 dt_stable, measured in NVIDIA Newton in float32), settle_damping ({c, omega_1, load,
@@ -140,14 +137,17 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               dt_safe (s), seconds, seed, opt_stop, opt_stops (every start's, " | " between)
 2-D meshes: unit thickness (k and masses per unit thickness).
 the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by default
-its capacity (the prior weight a, a volume term per element or none) is chosen by leave-one-family-out
-validation on the training states, and the rule is exported when no candidate beats it there (JSON
+its capacity (the prior weight a, a volume term per node or none) is chosen by leave-one-family-out
+validation on the training states (the lowest geometric mean of its free-traction and clamped errors
+relative to the rule's, below 0.99), and the rule is exported when no candidate beats it there (JSON
 choice, validation); --prior-weight a fixes a per-spring fit instead; MODEL.csv's opt_prior is a."""
 METHODS = {"rule": "none", "sa": "sa", "lbfgs": "lbfgs", "gauss-newton": "gauss-newton",
            "equilibrium-gap": "equilibrium-gap"}
 INITS = ("none", "equilibrium-gap")
-MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "springs+kn-node")
-VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared"}   # [model] volume
+MODELS = ("springs", "springs+volume", "springs+volume-shared", "springs+kn", "springs+kn-node",
+          "springs+node-volume", "springs+node-volume-shared")
+VOLUME = {"springs": "none", "springs+volume": "element", "springs+volume-shared": "shared",   # [model] volume
+          "springs+node-volume": "node", "springs+node-volume-shared": "node-shared"}
 KN = {"springs+kn": "shared", "springs+kn-node": "node"}                                     # [model] kn
 RULES = STIFFNESS_RULES     # every rule the harness has (harness/models/stiffness_rules.py)
 PRIOR_WEIGHT = 10.0     # the prior weight of lbfgs fits that validation does not choose (--model springs+volume, +kn)
@@ -167,7 +167,9 @@ def add_arguments(p):
                    help="springs (default); springs+volume: plus a volume energy per tetrahedron (2-D: triangle) "
                         "with its own fitted constant kv; springs+volume-shared: one kv for the whole body; "
                         "springs+kn: plus the adjustable-Poisson term of Kot & Nagahashi 2015, one constant kn "
-                        "for the body (springs+kn-node: one per node)")
+                        "for the body (springs+kn-node: one per node); springs+node-volume: plus a volume "
+                        "energy per node, on its share of its elements' volume change (no locking under "
+                        "clamps), kv per node (springs+node-volume-shared: one kv)")
     p.add_argument("--prior-weight", dest="prior_weight", type=float, default=None,
                    help="lbfgs: fit every spring with this weight a of the pull towards the start rule's constants, "
                         "Phi = G^2/G0^2 + a mean(log(k/k_rule)^2), instead of the capacity chosen by validation "

@@ -22,10 +22,17 @@ def validation_sentence(row, table) -> str:
         return (f"Validation skipped: its fits could not take enough steps on this mesh within "
                 f"{VALIDATION_BUDGET:g}x --budget, so the rule {row['stiffness']} is exported (as --method rule --rule "
                 f"{row['stiffness']}); --budget {math.ceil(skipped)} lets it run.")
+    ratios = {r["model"]: r["ratio"] for r in table if r.get("ratio") is not None and math.isfinite(r["ratio"])}
     if row.get("choice") == "rule":
+        best = min((m for m in ratios if m != "rule"), key=ratios.get, default=None)
+        near = f"; the best fit, {best}, {ratios[best]:.3g}x its errors" if best else ""
         return (f"Validation (each family of training states left out in turn: {fams}): no fit beat the rule "
-                f"{row['stiffness']} (score {by.get('rule', math.nan):.3g}), so its constants are exported "
+                f"{row['stiffness']} (score {by.get('rule', math.nan):.3g}{near}), so its constants are exported "
                 f"(as --method rule --rule {row['stiffness']}).")
+    if row["choice"] in ratios:
+        return (f"Validation (each family of training states left out in turn: {fams}) chose {row['choice']}: "
+                f"{ratios[row['choice']]:.3g}x the rule {row['stiffness']}'s errors (the geometric mean over "
+                f"the free-traction families and the clamped states).")
     return (f"Validation (each family of training states left out in turn: {fams}) chose {row['choice']}: "
             f"score {by.get(row['choice'], math.nan):.3g} against the rule {row['stiffness']}'s "
             f"{by.get('rule', math.nan):.3g}.")

@@ -6,7 +6,9 @@ Newton's own tetrahedral FEM (``newton-tets``) run to static equilibrium with
   (``spring_indices``, ``spring_stiffness`` as ke, ``spring_damping`` as kd), stepped at
   ``dt_safe`` with its ``settle_damping``, and, for
   springs+volume, its volume terms as tetrahedra with k_mu = 0, k_lambda = kv (Newton's
-  energy is then kv/2 V0 (J - 1)^2, the export's kv/2 (V - V0)^2 / V0 to first order).
+  energy is then kv/2 V0 (J - 1)^2, the export's kv/2 (V - V0)^2 / V0 to first order); a
+  volume term per node (``node_volume_*``) has no Newton counterpart and is added as forces
+  by Warp kernels each step (harness/engines/newton_volume.py).
   Its particles must be the pack's nodes (calibrate the pack's mesh).
 - newton-tets: Newton's tetrahedra are the stable Neo-Hookean of Smith et al. 2018 (psi =
   k_mu/2 (I_C - 3) + k_lambda/2 (J - alpha)^2 - k_mu/2 log(I_C + 1)); linearised at rest it is
@@ -38,7 +40,7 @@ DT_MARGIN = 0.8      # of the free model's explicit limit 2 / omega_max (float32
 class NewtonSim:
     """One Newton model; per load: forces, holds, damping; ``advance`` / ``measure`` for settle."""
 
-    def __init__(self, q, masses, springs=(), tets=(), dt=1e-4):
+    def __init__(self, q, masses, springs=(), tets=(), dt=1e-4, extra=None):
         import warp as wp
         wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)   # before Newton initialises Warp: no
         #                                                                   banner or module log on stdout
@@ -47,6 +49,7 @@ class NewtonSim:
         self.q0 = np.asarray(q, float)
         self.masses = np.asarray(masses, float)
         self.springs, self.tets, self.dt = springs, tets, dt
+        self.extra = None if extra is None else extra()     # forces Newton has no term for: apply(q, f)
 
     def load(self, held_nodes, held_components, force):
         """A fresh model and state at rest for this load's holds and forces."""
@@ -79,6 +82,8 @@ class NewtonSim:
         for _ in range(n):
             self.s0.clear_forces()
             wp.copy(self.s0.particle_f, self.fext)
+            if self.extra is not None:
+                self.extra.apply(self.s0.particle_q, self.s0.particle_f)
             self.solver.step(self.s0, self.s1, self.control, None, self.dt)
             last = self.s0
             self.s0, self.s1 = self.s1, self.s0
@@ -178,5 +183,10 @@ def run_springs(pack, options=None) -> dict:
         raise SpringbenchError("the model has no stable time step (masses not positive?)", file=str(options["model"]),
                                field="--model", fix="calibrate with --masses lumped")
     sd = data.get("settle_damping") or {}
-    return _solve(pack, NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt), masses, dt,
-                  sd.get("omega_1"))
+    extra = None
+    if data.get("node_volume_elements"):
+        def extra():
+            from harness.engines.newton_volume import NodeVolumeForces
+            return NodeVolumeForces(len(q), data)
+    return _solve(pack, NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt, extra=extra), masses,
+                  dt, sd.get("omega_1"))

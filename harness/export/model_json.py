@@ -44,7 +44,9 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
         **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
     }
-    if vol is not None and hasattr(vol, "nodes"):      # springs + kn (harness/models/kn.py)
+    from harness.models.kn import KNTerm
+    from harness.models.volume import NodeVolumeTerm
+    if isinstance(vol, KNTerm):      # springs + kn (harness/models/kn.py)
         data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
                              kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
                                           "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
@@ -53,6 +55,16 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         data.update(kn_nodes=vol.nodes.tolist(), kn_node_volume=vol.V.tolist(),
                     kn_spring_count=vol.N.astype(int).tolist(), kn_stiffness=vol.kv.tolist(),
                     kn_shared=bool(vol.shared))
+    elif isinstance(vol, NodeVolumeTerm):      # springs + one volume term per node (harness/models/volume.py)
+        data["units"].update(node_volume_rest="m^3 (2-D: m^2, unit thickness)",
+                             node_volume_element_rest="m^3 (2-D: m^2, unit thickness)",
+                             node_volume_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kv_a/2 dV_a^2 / V0_a, "
+                                                   "dV_a = sum over the node_volume_elements e that hold node a of "
+                                                   "(V_e - V0_e) / (dim + 1); f = -dE/dx: each element's nodes "
+                                                   "get -mean over its nodes a of (kv_a dV_a / V0_a) times dV_e/dx")
+        data.update(node_volume_nodes=vol.nodes.tolist(), node_volume_rest=vol.Vn.tolist(),
+                    node_volume_stiffness=vol.kv.tolist(), node_volume_shared=bool(vol.shared),
+                    node_volume_elements=vol.elements.tolist(), node_volume_element_rest=vol.V0.tolist())
     elif vol is not None:     # springs + volume (harness/models/volume.py)
         data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
                              volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "

@@ -18,6 +18,7 @@ CLASSES = {
     "p1": {"volume": "none", "kn": "none", "p1": True},             # linear FEM on the same cells, no constants
     "mt": {"volume": "none", "kn": "none", "mt": True},             # Bourguignon & Cani's elements (harness/models/mt.py)
     "springs+kn": {"volume": "none", "kn": "shared"},               # + Kot & Nagahashi 2015, one kn per body
+    "springs+node-volume": {"volume": "node-shared", "kn": "none"},  # + one volume term per node, one kv per body
 }
 
 if set(CLASSES) != set(MODEL_CLASSES):
@@ -37,7 +38,8 @@ def class_of(spec: dict) -> str:
         return "mt"
     if spec.get("kn", "none") != "none":
         return "springs+kn" if spec["kn"] == "shared" else "springs+kn-node"
-    return {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element"}[spec.get("volume", "none")]
+    return {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element",
+            "node-shared": "springs+node-volume", "node": "springs+node-volume-node"}[spec.get("volume", "none")]
 
 
 def build(case, spec: dict, seed: int = 0):

@@ -20,6 +20,21 @@ K = B diag(k) B^T) take [B C] and [k, kv] unchanged: the adjoint gradient of G^2
 2 (c_e . lambda)(c_e . u) per load, SA's rank-one updates apply per element.
 V is invariant under translations and rotations (det R = 1), so rigid motions carry
 no energy, exactly.
+
+One volume term per element locks: on linear simplices a clamp and a large kv leave too
+few displacement fields that keep every element's volume (at nu = 0.45, on coarse tets, a
+fit with it was 2-3x worse than the rule under a two-end clamp). ``NodeVolumeTerm`` puts
+the term on the nodes instead, the averaged nodal dilatation of Bonet & Burton 1998 ("A
+simple average nodal pressure tetrahedral element for incompressible and nearly
+incompressible dynamic explicit applications"): node a owns V0_a = sum_{e at a} V0_e /
+(dim + 1) and stores
+
+    E_a = (kv_a / 2) (dV_a)^2 / V0_a,      dV_a = sum_{e at a} (V_e - V0_e) / (dim + 1),
+
+a third as many constraints as displacement dofs, so no locking; under a homogeneous
+strain dV_a / V0_a = tr(eps) at every node, boundary nodes included, so the term adds
+exactly kv to the Lame constant lambda and nothing to mu. Its linearised column is
+c_a = sum_{e at a} grad V_e / ((dim + 1) sqrt(V0_a)); forces -kv_a dV_a / V0_a grad dV_a.
 """
 
 from __future__ import annotations
@@ -34,7 +49,9 @@ import scipy.sparse as sp
 from harness.errors import ModelError, naming
 from harness.models.sms import SpringNetwork
 
-MODES = ("none", "element", "shared")     # [model] volume (harness/case/sections.py): none, per element, per body
+# [model] volume (harness/case/sections.py): none; on the elements one kv each ('element')
+# or one per body ('shared'); on the nodes one kv each ('node') or one per body ('node-shared')
+MODES = ("none", "element", "shared", "node", "node-shared")
 
 
 def volumes(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -125,6 +142,76 @@ class VolumeTerm:
 
 
 @dataclass(frozen=True, eq=False)
+class NodeVolumeTerm:
+    """One volume term per node (module doc): elements (m, dim+1) with rest volumes V0
+    (m,); ``nodes`` (p,) the nodes that own volume, their rest volumes Vn (p,) and
+    constants kv (p,) (named as VolumeTerm's, so SpringVolumeNetwork fits them);
+    ``shared``: fitted as one constant per body."""
+    elements: np.ndarray
+    V0: np.ndarray
+    nodes: np.ndarray
+    Vn: np.ndarray
+    kv: np.ndarray
+    shared: bool = False
+
+    @classmethod
+    def build(cls, points, elements, kv, shared: bool = False) -> "NodeVolumeTerm":
+        points = np.asarray(points, float)
+        e = oriented(points, elements)
+        V0 = volumes(points, e)
+        owned = np.bincount(e.ravel(), np.repeat(V0 / e.shape[1], e.shape[1]), len(points))
+        nodes = np.flatnonzero(owned > 0)
+        kv = np.broadcast_to(np.asarray(kv, float), (len(nodes),)).copy()
+        return cls(e, V0, nodes, owned[nodes], kv, bool(shared))
+
+    @property
+    def n_elements(self) -> int:
+        """Parameters (one per node that owns volume), as SpringVolumeNetwork counts them."""
+        return len(self.nodes)
+
+    def _shares(self, n: int) -> sp.csr_matrix:
+        """A (m, p): A[e, a] = 1 / (dim + 1) for the nodes a of element e, so dV_n = A^T dV_e."""
+        where = np.full(n, -1)
+        where[self.nodes] = np.arange(len(self.nodes))
+        m, k = self.elements.shape
+        return sp.csr_matrix((np.full(m * k, 1.0 / k), (np.repeat(np.arange(m), k), where[self.elements.ravel()])),
+                             shape=(m, len(self.nodes)))
+
+    def node_changes(self, x: np.ndarray) -> np.ndarray:
+        """dV_a (p,): each node's share of its elements' volume change at positions x."""
+        return self._shares(len(x)).T @ (volumes(x, self.elements) - self.V0)
+
+    def energy(self, x: np.ndarray) -> float:
+        dV = self.node_changes(x)
+        return float(0.5 * np.sum(self.kv * dV * dV / self.Vn))
+
+    def forces(self, x: np.ndarray) -> np.ndarray:
+        """f = -dE/dx (n, dim): each element's nodes get its volume gradient times the mean
+        of its nodes' -kv dV / V0."""
+        s = self._shares(len(x)) @ (-self.kv * self.node_changes(x) / self.Vn)
+        g = volume_gradients(x, self.elements) * s[:, None, None]
+        out = np.zeros(x.shape)
+        for c in range(x.shape[1]):
+            out[:, c] = np.bincount(self.elements.ravel(), g[:, :, c].ravel(), len(x))
+        return out
+
+    def columns(self, points: np.ndarray) -> sp.csc_matrix:
+        """C (n*dim, p): column a = sum_{e at a} grad V_e / ((dim + 1) sqrt(V0_a)) at rest."""
+        points = np.asarray(points, float)
+        n, dim = points.shape
+        g = volume_gradients(points, self.elements)
+        rows = self.elements[:, :, None] * dim + np.arange(dim)
+        cols = np.repeat(np.arange(len(self.elements)), (dim + 1) * dim)
+        Ge = sp.csc_matrix((g.ravel(), (rows.ravel(), cols)), shape=(n * dim, len(self.elements)))
+        return (Ge @ self._shares(n) @ sp.diags(1.0 / np.sqrt(self.Vn))).tocsc()
+
+    def stiffness_matrix(self, points: np.ndarray, kv=None) -> sp.csc_matrix:
+        """Linearised K_v = sum_a kv_a c_a c_a^T at rest (n*dim square)."""
+        C = self.columns(points)
+        return (C @ sp.diags(self.kv if kv is None else np.asarray(kv, float)) @ C.T).tocsc()
+
+
+@dataclass(frozen=True, eq=False)
 class SpringVolumeNetwork(SpringNetwork):
     """A SpringNetwork plus a VolumeTerm; its parameters are [k (springs), kv (elements)]."""
     volume: VolumeTerm | None = None
@@ -200,14 +287,17 @@ def initial_kv(material, dim: int) -> float:
 
 def with_volume(net: SpringNetwork, mode: str, kv, elements=None) -> SpringNetwork:
     """``net`` with a volume term on its cells (or ``elements``): mode 'element' (one kv
-    per element) or 'shared' (one per body); 'none' returns net unchanged."""
+    per element), 'shared' (one per body), 'node' (one per node: NodeVolumeTerm) or
+    'node-shared'; 'none' returns net unchanged."""
     if mode not in MODES:
         raise ModelError(f"volume = '{mode}' is not one of {', '.join(MODES)}", field="model.volume",
-                         fix="volume = 'element' (one kv per element) or 'shared' (one per body)")
+                         fix="volume = 'element' (one kv per element), 'shared' (one per body), 'node' (one per "
+                             "node) or 'node-shared'")
     if mode == "none":
         return net
     el = simplices(net.cells, net.dim) if elements is None else np.asarray(elements, int)
-    vol = VolumeTerm.build(net.points, el, kv, shared=(mode == "shared"))
+    term = NodeVolumeTerm if mode.startswith("node") else VolumeTerm
+    vol = term.build(net.points, el, kv, shared=mode in ("shared", "node-shared"))
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     fields["info"] = MappingProxyType({**net.info, "volume": mode})
     return SpringVolumeNetwork(**fields, volume=vol)
@@ -224,16 +314,22 @@ def case_volume(net: SpringNetwork, case, spec: dict) -> SpringNetwork:
 
 
 def save(path, net) -> None:
-    """The volume term of ``net`` as .npz (elements, V0, kv, shared) beside its VTU."""
+    """The volume term of ``net`` as .npz (elements, V0, kv, shared, on: 'element' or
+    'node') beside its VTU."""
     v = net.volume
-    np.savez(path, elements=v.elements, V0=v.V0, kv=v.kv, shared=np.array(v.shared))
+    on = "node" if isinstance(v, NodeVolumeTerm) else "element"
+    np.savez(path, elements=v.elements, V0=v.V0, kv=v.kv, shared=np.array(v.shared), on=np.array(on))
 
 
 def load(path, net: SpringNetwork) -> SpringNetwork:
     """``net`` (read from a VTU) with the volume term saved by ``save``."""
     d = np.load(path)
     el = np.asarray(d["elements"], int)
-    vol = VolumeTerm(el, volumes(net.points, el), np.asarray(d["kv"], float), bool(d["shared"]))
+    if "on" in d and str(d["on"]) == "node":
+        vol = dataclasses.replace(NodeVolumeTerm.build(net.points, el, 1.0, bool(d["shared"])),
+                                  kv=np.asarray(d["kv"], float))
+    else:
+        vol = VolumeTerm(el, volumes(net.points, el), np.asarray(d["kv"], float), bool(d["shared"]))
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     return SpringVolumeNetwork(**fields, volume=vol)
 

@@ -8,23 +8,33 @@ the pull is. Leave-one-family-out validation makes them:
 every candidate is fitted without one fold of the training states and scored on it; the
 folds are the free-traction families (constant, bending, torsion, shear-gradient,
 gravity: harness/case/linear_states.py) and the clamped training states together. A
-candidate's score is the mean of its free-traction folds' mean and its clamped fold's;
-the rule itself (no fit) is scored the same way. A candidate is chosen only if it beats
-the rule's score (by more than MARGIN) and is no worse than the rule on the clamped
-fold (:func:`choose`): free-traction states alone cannot reveal that a fit got worse
-under a clamp, as springs at high nu do, and the clamped states hold faces at several
-places (harness/case/default_loads.py: the ends and the sides), since a fit that is
-better under one clamp can be worse under another. Else the rule is the choice. The chosen
-candidate is refitted on all training states from several starts. The held-out loads
-never choose anything: they are not in the problem given here.
+candidate's ``free`` error is the mean over its free-traction folds, its ``clamped`` the
+clamped fold's; the rule itself (no fit) is scored the same way. The criterion
+(:func:`choose`):
+
+- 'ratio' (the default): a candidate's ``ratio`` is the geometric mean of its free and
+  clamped errors each divided by the rule's, so a fit 1.6x better on the free-traction
+  states and 1.6x worse under the clamps ties with the rule, as it would in a geometric
+  mean of error ratios over loads users run; the lowest ratio below 1 - MARGIN wins.
+  Free-traction states alone cannot reveal that a fit got worse under a clamp, as
+  springs at high nu do, so the clamped fold weighs as much as all free families; the
+  clamped states hold faces at several places (harness/case/default_loads.py: the ends
+  and the sides), since a fit that is better under one clamp can be worse under another.
+- 'score': the lowest ``score`` (the arithmetic mean of free and clamped) that beats the
+  rule's by more than MARGIN and is no worse than the rule's on the clamped fold.
+
+Else the rule is the choice. The chosen candidate is refitted on all training states from
+several starts. The held-out loads never choose anything: they are not in the problem
+given here.
 
 Every training state counts alike: each load's misfit is divided by its own reference
 norm (``balanced``), so the fit and the scores see the relative error of each state, not
 the states with the largest displacements.
 
-The problem holds the springs' columns first and, for the volume candidates, one column
-per element after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T); the
-volume candidates fit one kv shared by the elements.
+The problem holds the springs' columns first and, for the volume candidates, the volume
+terms' columns after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T): one
+per element ('+volume') and one per node ('+node-volume', the averaged nodal dilatation,
+which does not lock under a clamp); the volume candidates fit one kv shared by the terms.
 """
 
 from __future__ import annotations
@@ -36,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.case.sections import SELECT_CANDIDATES
+from harness.case.sections import SELECT_CANDIDATES, SELECT_CRITERIA
 from harness.optimize.problem import FitProblem, per_matrix
 
 
@@ -46,21 +56,24 @@ class Candidate:
     (one per spring direction class and length tercile), 'spring' (per spring, pulled
     towards the rule with weight ``prior``), 'features' (log k = log k_rule + c0 + sum_j
     c_j phi_j, the learned rule's geometric features phi_j of each spring: a handful of
-    coefficients fitted on this mesh); ``volume``: the element volume columns join, with
-    one shared kv (its own parameter)."""
+    coefficients fitted on this mesh); ``volume``: '' (springs only), 'element' or 'node':
+    that volume term's columns join, with one shared kv (its own parameter)."""
     name: str
     groups: str
     prior: float = 0.0
-    volume: bool = False
+    volume: str = ""
 
 
 CANDIDATES = (Candidate("scale", "one"), Candidate("groups", "direction"),
               Candidate("springs-prior10", "spring", 10.0),
               Candidate("springs-prior1", "spring", 1.0), Candidate("springs-prior0.1", "spring", 0.1),
-              Candidate("scale+volume", "one", volume=True),
-              Candidate("springs-prior1+volume", "spring", 1.0, volume=True),
-              Candidate("springs-prior0.1+volume", "spring", 0.1, volume=True),
-              Candidate("features", "features"), Candidate("features+volume", "features", volume=True))
+              Candidate("scale+volume", "one", volume="element"),
+              Candidate("springs-prior1+volume", "spring", 1.0, volume="element"),
+              Candidate("springs-prior0.1+volume", "spring", 0.1, volume="element"),
+              Candidate("features", "features"), Candidate("features+volume", "features", volume="element"),
+              Candidate("scale+node-volume", "one", volume="node"),
+              Candidate("springs-prior1+node-volume", "spring", 1.0, volume="node"),
+              Candidate("springs-prior0.1+node-volume", "spring", 0.1, volume="node"))
 
 
 if tuple(c.name for c in CANDIDATES) != SELECT_CANDIDATES:
@@ -88,8 +101,9 @@ class Selection:
         return self.starts[0]
 
     @property
-    def volume(self) -> bool:
-        return self.choice != "rule" and next(c for c in CANDIDATES if c.name == self.choice).volume
+    def volume(self) -> str:
+        """The chosen model's volume term: '' (none), 'element' or 'node'."""
+        return "" if self.choice == "rule" else next(c for c in CANDIDATES if c.name == self.choice).volume
 
 
 def balanced(problem: FitProblem) -> FitProblem:
@@ -121,15 +135,25 @@ def direction_groups(directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return ids
 
 
-def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, groups: np.ndarray) -> FitProblem:
-    """The candidate's problem: its columns (springs, + volume), start and parameter groups."""
-    e = n_springs if not cand.volume else problem.n_springs
+def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, groups: np.ndarray,
+            volumes: dict | None = None) -> FitProblem:
+    """The candidate's problem: its columns (springs, + its volume term's), start and
+    parameter groups. ``volumes``: {'element' or 'node': (first, stop)}, where each volume
+    term's columns sit in the problem (default: every column after the springs is an
+    element's)."""
+    volumes = volumes or {"element": (n_springs, problem.n_springs)}
+    keep = np.arange(n_springs)
+    if cand.volume:
+        keep = np.concatenate([keep, np.arange(*volumes[cand.volume])])
+    e = len(keep)
+    whole = e == problem.n_springs
     sliced: dict = {}              # blocks with one B (the same free dofs) keep sharing one
     for b in problem.blocks:
         if id(b.B) not in sliced:
-            sliced[id(b.B)] = per_matrix(b.B, f"columns:{e}", lambda: b.B[:, :e].tocsc()) if e < b.B.shape[1] else b.B
+            sliced[id(b.B)] = b.B if whole else per_matrix(b.B, f"columns:{cand.volume or 'springs'}",
+                                                           lambda: b.B[:, keep].tocsc())
     blocks = tuple(dataclasses.replace(b, B=sliced[id(b.B)]) for b in problem.blocks)
-    k0 = problem.k0[:e].copy()
+    k0 = problem.k0[keep].copy()
     if cand.volume:
         k0[n_springs:] = kv0
     g = {"one": np.zeros(n_springs, int), "direction": groups, "spring": None, "features": None}[cand.groups]
@@ -243,20 +267,22 @@ def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
 def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np.ndarray,
            candidates=CANDIDATES, options: dict | None = None, final: dict | None = None, n_starts: int = 3,
            seed: int = 0, status=lambda msg: None, features: np.ndarray | None = None,
-           rule_solve: tuple | None = None) -> Selection:
+           rule_solve: tuple | None = None, volumes: dict | None = None, criterion: str = "ratio") -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
-    ``problem``: the training states, columns [springs | volume elements] (k0 the rule's
-    springs, anything positive for the elements); ``families`` (one per block);
+    ``problem``: the training states, columns [springs | volume terms] (k0 the rule's
+    springs, anything positive for the volume terms; ``volumes`` says where each term's
+    columns are, as :func:`columns`); ``families`` (one per block);
     ``options``: the validation fits' L-BFGS-B options, ``final``: the final fit's, from
     ``n_starts`` starts (seeded by ``seed``); ``features`` (springs, q): the learned rule's
     geometric features of the springs, which 'features' candidates need (None: skipped);
     ``rule_solve``: (each block's own normalised G at the rule, the seconds of one solve of
     all blocks) when the caller has solved them: a validation those seconds show to be
-    unaffordable is skipped without a solve here."""
+    unaffordable is skipped without a solve here; ``criterion``: how a candidate must beat
+    the rule (:func:`choose`)."""
     options = dict(options or {"maxiter": 40})
     problem = balanced(problem)
     folds = make_folds(families)
-    rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups)
+    rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
     n_fits, maxiter = len(candidates) * len(folds), int(options.get("maxiter") or 40)
     need = 0.0
@@ -271,7 +297,7 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
         need = affordable(n_fits, maxiter, step, options.get("max_seconds"))
     table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
     for cand in candidates if not need else ():
-        cp = columns(problem, n_springs, cand, kv0, groups)
+        cp = columns(problem, n_springs, cand, kv0, groups, volumes)
         row = {"model": cand.name}
         for f, out in folds.items() if len(folds) > 1 else ():
             status(f"validation: {cand.name} without {f}")
@@ -282,11 +308,13 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     names = tuple(folds)
     for row in table:
         row.update(summary(row, names))
-    best = choose(table)
+    for row in table:
+        row["ratio"] = ratio_to_rule(row, table[0])
+    best = choose(table, criterion)
     if best["model"] == "rule":
         return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names, need)
     cand = next(c for c in candidates if c.name == best["model"])
-    cp = columns(problem, n_springs, cand, kv0, groups)
+    cp = columns(problem, n_springs, cand, kv0, groups, volumes)
     fits = []
     M = basis(cp, n_springs, features) if cand.groups == "features" else None
     for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
@@ -348,15 +376,28 @@ def training_score(values, families) -> float:
     return summary({f: float(np.mean([values[i] for i in idx])) for f, idx in folds.items()}, folds)["score"]
 
 
-MARGIN = 0.01      # a candidate beats the rule by more than 1 % of its score (and 1e-9): less is a tie
+MARGIN = 0.01      # a candidate beats the rule by more than 1 % (of its score, or a ratio below 0.99): less is a tie
 
 
-def choose(table) -> dict:
-    """The row chosen: the lowest score among the candidates that beat the rule (the
-    table's first row) on the score and are no worse on the clamped states, where there
-    are any (a fit that is better on free-traction states but worse under a clamp, as
-    springs at high nu are, never wins: the loads users run hold a face); else the rule."""
+def ratio_to_rule(row: dict, rule: dict) -> float:
+    """The geometric mean of the row's free and clamped errors each divided by the rule's
+    (the parts the table has; NaN when a part the rule has is missing or a rule error is 0)."""
+    parts = [(row[k], rule[k]) for k in ("free", "clamped") if math.isfinite(rule[k])]
+    if not parts or any(not math.isfinite(a) or b <= 0 for a, b in parts):
+        return math.nan
+    return float(np.exp(np.mean([math.log(max(a, 1e-300) / b) for a, b in parts])))
+
+
+def choose(table, criterion: str = "ratio") -> dict:
+    """The row chosen (module doc): 'ratio', the lowest ``ratio`` below 1 - MARGIN; 'score',
+    the lowest score among the candidates that beat the rule (the table's first row) on
+    the score and are no worse on the clamped states, where there are any; else the rule."""
+    if criterion not in SELECT_CRITERIA:
+        raise ValueError(f"criterion {criterion!r} is not one of {SELECT_CRITERIA}")
     rule = table[0]
+    if criterion == "ratio":
+        ok = [r for r in table[1:] if math.isfinite(r["ratio"]) and r["ratio"] < 1.0 - MARGIN]
+        return min(ok, key=lambda r: r["ratio"]) if ok else rule
 
     def beats(a, b):
         return a < b - max(MARGIN * b, 1e-9)

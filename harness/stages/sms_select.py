@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sp
 
 from harness.errors import CaseError
 
@@ -45,15 +46,20 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
                         file=str(case.path) if case.path else None, field="optimizer.method", fix="method = 'lbfgs'")
     t0 = time.perf_counter()
     kv0 = initial_kv(case.material, case.dim)
-    vnet = with_volume(base, "element", kv0)
+    cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
+    terms, volumes, at = [], {}, base.n_springs        # the volume terms some candidate needs, after the springs
+    for on in dict.fromkeys(c.volume for c in cands if c.volume):
+        terms.append(with_volume(base, on, kv0).volume)
+        volumes[on] = (at, at + terms[-1].n_elements)
+        at += terms[-1].n_elements
     _, free, forces = statics.all_load_arrays(base, case)
     fit_names = [names[i] for i in fit]
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    problem = FitProblem.from_network(base.points, base.springs, np.concatenate([base.k, vnet.volume.kv]),
+    problem = FitProblem.from_network(base.points, base.springs, np.concatenate([base.k] + [t.kv for t in terms]),
                                       free[fit], forces[fit], u_ref[fit].reshape(len(fit), -1), wdof, fit_names,
-                                      extra_columns=vnet.volume.columns(base.points))
+                                      extra_columns=sp.hstack([t.columns(base.points) for t in terms]).tocsc()
+                                      if terms else None)
     d, L = spring_directions(base.points, base.springs)
-    cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
     fams = families(case, fit_names)
     budget = run_["options"].get("max_seconds")
     # validation fits stop at maxiter (so on small meshes the choice does not depend on the
@@ -71,13 +77,14 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     s = sel.select(problem, base.n_springs, fams, kv0, sel.direction_groups(d, L), cands, val, final,
                    int(spec["starts"]), int(base.info["seed"]), ctx.status,
                    features=geometry(base.points, base.springs, base.cells)
-                   if any(c.groups == "features" for c in cands) else None, rule_solve=rule_solve)
+                   if any(c.groups == "features" for c in cands) else None, rule_solve=rule_solve, volumes=volumes,
+                   criterion=spec["criterion"])
     seconds = time.perf_counter() - t0
     pd.DataFrame(list(s.table)).to_csv(ctx.file("validation.csv"), index=False)
 
     def network(k):
         net = base.with_k(k[:base.n_springs], stiffness=f"{base.info['stiffness']}+select")
-        return with_volume(net, "element", k[base.n_springs:]) if s.volume else net
+        return with_volume(net, s.volume, k[base.n_springs:]) if s.volume else net
     scored = []
     for k in s.starts:
         net = network(k)
@@ -102,5 +109,5 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     if s.stops:     # the exported start's stop, and every start's (" | " between them)
         row.update(opt_stop=s.stops[0], opt_stops=" | ".join(s.stops))
     if s.volume:
-        row.update(volume="element", n_volumes=net.volume.n_elements)
+        row.update(volume=s.volume, n_volumes=net.volume.n_elements)
     return row, net, None

@@ -113,6 +113,35 @@ def test_newton_runs_a_springbench_export_to_its_linear_statics(packs, tmp_path)
 
 
 @pytest.mark.slow
+def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_path):
+    """An export with one volume term per node (calibrate --model springs+node-volume) at nu
+    = 0.45: Newton has no such term, the adapter adds its forces by Warp kernels; its
+    equilibrium is the export's linear statics (K from the JSON's keys as written in
+    harness/bench/heldout.py) to <= 1e-3, and the term matters (the springs alone differ)."""
+    pytest.importorskip("newton")
+    from harness.bench.heldout import network_stiffness
+    from harness.engines import adapter
+    from harness.export.pack import Pack
+    _, by_size = packs
+    mesh, _, pack = by_size[0.06]
+    assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", "0.45", "--density", str(RHO), "--method", "rule",
+                     "--model", "springs+node-volume", "--quiet", "--out", str(tmp_path / "m.vtu")]) == 0
+    data = json.loads((tmp_path / "m.json").read_text())
+    assert len(data["node_volume_nodes"]) == len(pack.points) and min(data["node_volume_stiffness"]) > 0
+    K = network_stiffness(data).tocsr()
+    springs = network_stiffness({k: v for k, v in data.items() if not k.startswith("node_volume")}).tocsr()
+    names = ("tip", "sag", "bend-xy")
+    sub = Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, tuple(pack.load(n) for n in names),
+               pack.plane, pack.meta)
+    answers = adapter("newton-springs")(sub, {"model": tmp_path / "m.json"})
+    for name in names:
+        u = held_solve(K, pack.load(name), pack.points.shape)
+        assert answers[name].status == "settled", (name, answers[name])
+        assert rel(held_solve(springs, pack.load(name), pack.points.shape), u) > 0.05, name    # the term matters
+        assert rel(answers[name].u, u) <= 1e-3, name
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("engine", ["newton-tets", "mujoco-flex", "newton-springs"])
 def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engine):
     """From a pack of a gmsh mesh no other test shares, one command runs the engine and one

@@ -61,19 +61,44 @@ def test_folds_leave_families_out_and_the_clamped_states_together():
     assert sel.make_folds(FAMILIES) == {"constant": [0, 1], "bending": [2, 3], "clamped": [4, 5]}
 
 
-def test_choose_keeps_the_rule_unless_a_candidate_beats_it_under_the_clamps():
+def _row(name, a, b, rule=None):
     folds = ("constant", "clamped")
-    row = lambda name, a, b: {"model": name, "constant": a, "clamped": b, **sel.summary(  # noqa: E731
-        {"constant": a, "clamped": b}, folds)}
-    rule = row("rule", 0.40, 0.05)
-    free_only = row("free-only", 0.10, 0.08)         # far better without a clamp, worse with one: never
-    assert sel.choose([rule, free_only])["model"] == "rule"
-    both = row("both", 0.30, 0.04)
-    assert sel.choose([rule, free_only, both])["model"] == "both"
+    r = {"model": name, "constant": a, "clamped": b, **sel.summary({"constant": a, "clamped": b}, folds)}
+    r["ratio"] = sel.ratio_to_rule(r, rule or r)
+    return r
+
+
+def test_choose_by_score_keeps_the_rule_unless_a_candidate_beats_it_under_the_clamps():
+    rule = _row("rule", 0.40, 0.05)
+    free_only = _row("free-only", 0.10, 0.08, rule)        # far better without a clamp, worse with one: never
+    assert sel.choose([rule, free_only], "score")["model"] == "rule"
+    both = _row("both", 0.30, 0.04, rule)
+    assert sel.choose([rule, free_only, both], "score")["model"] == "both"
     assert both["score"] == pytest.approx(0.5 * (0.30 + 0.04))
     no_clamp = [{"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
                 {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))}]
-    assert sel.choose(no_clamp)["model"] == "c"
+    assert sel.choose(no_clamp, "score")["model"] == "c"
+
+
+def test_choose_by_ratio_weighs_the_clamps_as_much_as_every_free_family():
+    rule = _row("rule", 0.40, 0.05)
+    # 4x better without a clamp, 1.6x worse with one: sqrt(0.25 * 1.6) = 0.632 of the rule's errors
+    free_only = _row("free-only", 0.10, 0.08, rule)
+    assert free_only["ratio"] == pytest.approx(np.sqrt(0.10 / 0.40 * 0.08 / 0.05), rel=1e-12)
+    assert sel.choose([rule, free_only])["model"] == "free-only"
+    # 1.6x better free, 1.6x worse clamped: a tie, so the rule; and 0.5 % better is a tie too
+    tie = _row("tie", 0.25, 0.08, rule)
+    near = _row("near", 0.398, 0.0499, rule)
+    assert tie["ratio"] == pytest.approx(1.0) and sel.choose([rule, tie, near])["model"] == "rule"
+    better = _row("better", 0.30, 0.045, rule)
+    assert sel.choose([rule, tie, near, better, free_only])["model"] == "free-only"
+    no_clamp = [{"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
+                {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))}]
+    no_clamp[1]["ratio"] = sel.ratio_to_rule(no_clamp[1], no_clamp[0])
+    no_clamp[0]["ratio"] = 1.0
+    assert no_clamp[1]["ratio"] == pytest.approx(0.75) and sel.choose(no_clamp)["model"] == "c"
+    with pytest.raises(ValueError):
+        sel.choose([rule], "best")
 
 
 CANDS = [c for c in sel.CANDIDATES if c.name in ("scale", "springs-prior1")]
