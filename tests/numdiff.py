@@ -16,3 +16,15 @@ def force_jacobian(forces, pts: np.ndarray, h: float = 1e-6) -> np.ndarray:
         xm[j] -= h
         J[:, j] = -(forces(xp.reshape(pts.shape)) - forces(xm.reshape(pts.shape))).ravel() / (2 * h)
     return J
+
+
+def energy_forces(energy, x: np.ndarray, h: float = 1e-6) -> np.ndarray:
+    """-d energy / d x (n*dim,) at x (n, dim) by central differences: the forces an energy
+    implies."""
+    fd = np.zeros(x.size)
+    for j in range(x.size):
+        xp, xm = x.copy().ravel(), x.copy().ravel()
+        xp[j] += h
+        xm[j] -= h
+        fd[j] = -(energy(xp.reshape(x.shape)) - energy(xm.reshape(x.shape))) / (2 * h)
+    return fd

@@ -79,6 +79,24 @@ def volume_gradients(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
     return g
 
 
+def scaled_gradient_forces(x: np.ndarray, elements: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """(n, dim): sum over the elements of s_e grad V_e, gathered on their nodes."""
+    g = volume_gradients(x, elements) * s[:, None, None]
+    out = np.zeros(x.shape)
+    for c in range(x.shape[1]):
+        out[:, c] = np.bincount(elements.ravel(), g[:, :, c].ravel(), len(x))
+    return out
+
+
+def gradient_columns(points: np.ndarray, elements: np.ndarray) -> sp.csc_matrix:
+    """(n*dim, m): column e = grad V_e at ``points`` (dof = dim*node + component)."""
+    n, dim = points.shape
+    g = volume_gradients(np.asarray(points, float), elements)
+    rows = elements[:, :, None] * dim + np.arange(dim)
+    cols = np.repeat(np.arange(len(elements)), (dim + 1) * dim)
+    return sp.csc_matrix((g.ravel(), (rows.ravel(), cols)), shape=(n * dim, len(elements)))
+
+
 def oriented(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """The elements with two nodes swapped where the rest volume is negative (V0 > 0);
     a degenerate element (V0 = 0) is a ModelError naming it."""
@@ -120,20 +138,11 @@ class VolumeTerm:
 
     def forces(self, x: np.ndarray) -> np.ndarray:
         """f = -dE/dx (n, dim) at positions x (n, dim)."""
-        s = -self.kv * (volumes(x, self.elements) - self.V0) / self.V0
-        g = volume_gradients(x, self.elements) * s[:, None, None]
-        out = np.zeros(x.shape)
-        for c in range(x.shape[1]):
-            out[:, c] = np.bincount(self.elements.ravel(), g[:, :, c].ravel(), len(x))
-        return out
+        return scaled_gradient_forces(x, self.elements, -self.kv * (volumes(x, self.elements) - self.V0) / self.V0)
 
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
         """C (n*dim, m): column e = grad V_e / sqrt(V0_e) at the rest positions ``points``."""
-        n, dim = points.shape
-        g = volume_gradients(np.asarray(points, float), self.elements) / np.sqrt(self.V0)[:, None, None]
-        rows = self.elements[:, :, None] * dim + np.arange(dim)
-        cols = np.repeat(np.arange(self.n_elements), (dim + 1) * dim)
-        return sp.csc_matrix((g.ravel(), (rows.ravel(), cols)), shape=(n * dim, self.n_elements))
+        return (gradient_columns(points, self.elements) @ sp.diags(1.0 / np.sqrt(self.V0))).tocsc()
 
     def stiffness_matrix(self, points: np.ndarray, kv=None) -> sp.csc_matrix:
         """Linearised K_v = sum_e kv_e / V0_e grad V_e grad V_e^T at rest (n*dim square)."""
@@ -189,21 +198,13 @@ class NodeVolumeTerm:
         """f = -dE/dx (n, dim): each element's nodes get its volume gradient times the mean
         of its nodes' -kv dV / V0."""
         s = self._shares(len(x)) @ (-self.kv * self.node_changes(x) / self.Vn)
-        g = volume_gradients(x, self.elements) * s[:, None, None]
-        out = np.zeros(x.shape)
-        for c in range(x.shape[1]):
-            out[:, c] = np.bincount(self.elements.ravel(), g[:, :, c].ravel(), len(x))
-        return out
+        return scaled_gradient_forces(x, self.elements, s)
 
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
         """C (n*dim, p): column a = sum_{e at a} grad V_e / ((dim + 1) sqrt(V0_a)) at rest."""
         points = np.asarray(points, float)
-        n, dim = points.shape
-        g = volume_gradients(points, self.elements)
-        rows = self.elements[:, :, None] * dim + np.arange(dim)
-        cols = np.repeat(np.arange(len(self.elements)), (dim + 1) * dim)
-        Ge = sp.csc_matrix((g.ravel(), (rows.ravel(), cols)), shape=(n * dim, len(self.elements)))
-        return (Ge @ self._shares(n) @ sp.diags(1.0 / np.sqrt(self.Vn))).tocsc()
+        return (gradient_columns(points, self.elements) @ self._shares(len(points))
+                @ sp.diags(1.0 / np.sqrt(self.Vn))).tocsc()
 
     def stiffness_matrix(self, points: np.ndarray, kv=None) -> sp.csc_matrix:
         """Linearised K_v = sum_a kv_a c_a c_a^T at rest (n*dim square)."""
