@@ -123,10 +123,32 @@ DYNAMICS = {
     "repeats": Field("int", 3, min=1, doc="timing repeats (best of)"),
 }
 
+# [model] kind = "engines": engines' deformable bodies against the FEM (harness/stages/engines.py).
+# harness.engines implements each engine (its ENGINES registry must hold exactly these names)
+ENGINE_NAMES = ("newton-springs", "newton-tets", "mujoco-flex")
+EXPORTS = ("rule", "calibrated")
+PACK_LOADS = ("sag", "tip", "tip2", "torsion", "bridge")
+ENGINES = {
+    "body": Field("str", None, doc="the body's name in the table (default: the mesh file's stem)"),
+    "resolution": Field("str", "", doc="the mesh's resolution label in the table, e.g. coarse"),
+    "clamp": Field("str", doc="mesh group held in every load (springbench pack --clamp)"),
+    "load_region": Field("str", doc="mesh group the tip loads and the torsion act on (pack --load-region)"),
+    "loads": Field("strs", PACK_LOADS, choices=PACK_LOADS, doc="the pack's held-out loads run and scored"),
+    "peak_strain": Field("float", 1e-3, min=0, min_exclusive=True, doc="the loads' size (pack --peak-strain)"),
+    "engines": Field("strs", ("newton-tets", "mujoco-flex"), choices=tuple(n for n in ENGINE_NAMES
+                                                                          if n != "newton-springs"),
+                     doc="engines run with their own model from E and nu (springbench engines run ENGINE)"),
+    "exports": Field("strs", EXPORTS, choices=EXPORTS,
+                     doc="springbench's models of the mesh run by newton-springs: rule (calibrate --method rule, "
+                         "the best stiffness rule), calibrated (calibrate's default)"),
+    "budget": Field("float", 15.0, min=0, min_exclusive=True, doc="calibrate --budget (s) of the calibrated export"),
+}
+
 # [model] kind = "..." selects the spec of the other keys; each model owner adds its kind.
 MODEL_KINDS: dict[str, dict[str, Field]] = {
     "sms": SMS,      # spring/mass systems of Deussen 1995 (harness/models/sms.py)
     "bc2000": BC2000,  # the anisotropic element model of Bourguignon & Cani 2000
+    "engines": ENGINES,  # engines' own models and springbench's exports against the FEM
 }
 
 SECTIONS: dict[str, dict[str, Field] | str] = {

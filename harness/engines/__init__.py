@@ -15,6 +15,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 
+from harness.case.sections import ENGINE_NAMES
 from harness.errors import SpringbenchError
 
 ENGINES = {
@@ -26,6 +27,8 @@ ENGINES = {
                     "(young, poisson)"),
 }
 EXTRA = 'pip install -e ".[engines]"'
+if tuple(ENGINES) != ENGINE_NAMES:      # the case files' vocabulary (harness/case/sections.py)
+    raise ImportError(f"harness.engines.ENGINES {tuple(ENGINES)} != harness.case.sections.ENGINE_NAMES")
 
 
 def names() -> tuple[str, ...]:

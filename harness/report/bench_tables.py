@@ -6,7 +6,8 @@ summary's geometric mean of the stored ratios."""
 
 from __future__ import annotations
 
-from harness.report.headlines import fmt
+from harness.report.engines import ENGINES_NOTE, engines_finding, engines_summary
+from harness.report.numbers import fmt
 
 MAX_ROWS = 40
 COLUMNS = {   # bench name -> the columns shown, in order (those present)
@@ -48,50 +49,12 @@ def heldout_summary(df):
     return pd.DataFrame(rows) if rows else None
 
 
-def engines_summary(df):
-    """Per body, mesh and nu: each engine's (and springbench export's) mean G_norm over the
-    held-out loads; a cell says why when an engine found no equilibrium."""
-    import pandas as pd
-    if not {"body", "nu", "engine", "model", "load", "G_norm", "status"} <= set(df.columns):
-        return None
-    m = df[df["load"] == "mean"].copy()
-    m["who"] = m["engine"] + ": " + m["model"].str.replace(r"springbench (\w+):.*", r"springbench \1", regex=True)
-    rows = []
-    for (body, tets, nu), g in m.groupby(["body", "n_tets", "nu"], sort=False):
-        row = {"body": body, "tets": fmt(tets), "nu": f"{nu:g}"}
-        for _, r in g.iterrows():
-            row[r["who"]] = fmt(r["G_norm"]) if r["status"] == "settled" else f"{fmt(r['G_norm'])} ({r['status']})"
-        rows.append(row)
-    return pd.DataFrame(rows).fillna("") if rows else None
-
-
-def engines_finding(df) -> str:
-    """One sentence from the engine table: how far the engines' own models and
-    springbench's exports are from the FEM (mean G_norm over the held-out loads) at the
-    lowest and highest nu, and how many engine runs settled."""
-    m = df[df["load"] == "mean"]
-    runs = df[df["load"] != "mean"]
-    own = m[~m["model"].astype(str).str.startswith("springbench")]
-    ours = m[m["model"].astype(str).str.startswith("springbench")]
-    lo, hi = float(m["nu"].min()), float(m["nu"].max())
-
-    def span(g) -> str:
-        return f"{100 * g['G_norm'].min():.0f}-{100 * g['G_norm'].max():.0f} %"
-    engines = ", ".join(sorted(own["engine"].unique()))
-    return (f"The engines' own models ({engines}) are {span(own[own['nu'] == lo])} from the FEM at nu = {lo:g} and "
-            f"{span(own[own['nu'] == hi])} at nu = {hi:g}; springbench's exports run in Newton are {span(ours)} at "
-            f"every nu; {int((runs['status'] == 'settled').sum())} of {len(runs)} engine runs settled.")
-
-
 def bench_table(name: str, df):
     """(table of display strings, note) of one benchmark's CSV."""
     if name == "engines":
         t = engines_summary(df)
         if t is not None:
-            return t, ("Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the mean over "
-                       "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
-                       "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated model) run in "
-                       "Newton. " + engines_finding(df) + " Every load, step count and wall time is in engines.csv.")
+            return t, ENGINES_NOTE + engines_finding(df) + " Every load, step count and wall time is in engines.csv."
     if name == "heldout":
         t = heldout_summary(df)
         if t is not None:

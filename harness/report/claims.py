@@ -139,10 +139,16 @@ def nu_sweep(df) -> list[str]:
     return out
 
 
+def engines(df) -> list[str]:
+    """The engine table's sentence (harness/report/engines.py)."""
+    from harness.report.engines import engines_finding
+    return [f"Engines: {engines_finding(df)}"] if "engine" in df else []
+
+
 NAMES = {"deussen1995": "Deussen 1995", "bourguignon2000": "Bourguignon & Cani 2000", "verification": "verification",
-         "nu_sweep": "the Poisson-ratio map"}
+         "nu_sweep": "the Poisson-ratio map", "engines": "the engine table"}
 CLAIMS = {"deussen1995": deussen, "bourguignon2000": bourguignon, "verification": verification,
-          "nu_sweep": nu_sweep}
+          "nu_sweep": nu_sweep, "engines": engines}
 
 
 def headline_findings(suites) -> list[str]:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import math
 
+from harness.report.engines import engines_tables
 from harness.report.frames import REF_COARSE, SCORED, headline_frame, optimizer_frame
+from harness.report.numbers import fmt
 from harness.report.text import case_label
 
 ARROW = " \u2192 "
@@ -19,24 +21,6 @@ DASH = "\u2013"
 METHOD_NAMES = {"sa": "SA", "sa-refactor": "SA (refactor)", "lbfgs": "L-BFGS-B", "gauss-newton": "Gauss-Newton",
                 "nelder-mead": "Nelder-Mead", "equilibrium-gap": "equilibrium gap"}
 BC_MODELS = ("MS", "MT0", "MT")
-
-
-def fmt(v, digits: int = 3) -> str:
-    """A number to ``digits`` significant digits ("0.0230", "5.09", "270"); "" if missing."""
-    if v is None or isinstance(v, str):
-        return v or ""
-    try:
-        v = float(v)
-    except (TypeError, ValueError):
-        return str(v)
-    if not math.isfinite(v):
-        return ""
-    if abs(v) >= 10 ** digits:
-        return f"{v:,.0f}"
-    if v == int(v):   # counts: 72, not 72.0
-        return str(int(v))
-    s = f"{v:#.{digits}g}"
-    return s.rstrip(".") if "e" not in s else f"{v:.{digits - 1}e}"
 
 
 def given(v) -> str:
@@ -323,7 +307,8 @@ def generic_tables(df) -> list:
              "G_ref the reference's own error.")]
 
 
-BUILDERS = {"deussen1995": deussen_tables, "bourguignon2000": bc2000_tables, "verification": verification_tables}
+BUILDERS = {"deussen1995": deussen_tables, "bourguignon2000": bc2000_tables, "verification": verification_tables,
+            "engines": engines_tables}
 FINDINGS_ONLY = ("nu_sweep",)    # sections that show their figures and findings (harness/report/claims.py), no table
 
 

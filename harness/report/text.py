@@ -33,6 +33,13 @@ SUITES = {
         "scored on held-out loads it never saw (sag, tip, torsion, a two-end-clamped bridge). Held-out loads "
         "never choose a row; the findings below name the model with the lowest mean held-out error per body "
         "and nu, and call gaps inside a fit's spread over its starts ties."),
+    "engines": (
+        "Engines: how far each engine's deformable body is from linear elasticity",
+        "Three gmsh bodies (a box beam, a curved elbow, a holed tapered bar) at two resolutions and nu = 0.3, "
+        "0.45 and 0.49, clamped and loaded as a benchmark pack: each engine's own model from E and nu (NVIDIA "
+        "Newton's tetrahedral FEM, MuJoCo's flex elasticity) and springbench's exports of the same mesh (the "
+        "best stiffness rule, the calibrated model) run in Newton, all driven to static equilibrium on the CPU "
+        "and scored against the FEM on held-out loads (sag, tip, tip2, torsion, bridge)."),
     "verification": (
         "Verification of the FEM reference",
         "Every score above is only as good as the reference. These cases check the scikit-fem reference "
@@ -86,6 +93,10 @@ KEY_FIGURES = {
         ("fig-nu-sweep.png", "Normalised G against Poisson's ratio per model class, fitted and held-out loads; the "
                              "Cauchy ratio marked."),
     ],
+    "engines": [
+        ("fig-engines.png", "Mean G_norm over the held-out loads against Poisson's ratio, per body: each engine's "
+                            "own model and springbench's exports run in Newton; coarse mesh dashed, fine solid."),
+    ],
     "bourguignon2000": [
         ("volume_cube343/fig-volume.png",
          "Bourguignon & Cani Fig. 3: relative volume variation of MS, MT0 and MT on cube_343 under gravity; "
@@ -109,6 +120,7 @@ KINDS = [  # (file name pattern, caption of any figure of that kind)
     (r"fig-nu-sweep\.png", "Normalised G against Poisson's ratio per model class (fitted and held-out loads), Cauchy ratio marked."),
     (r"fig-nu-sweep-families\.png", "Held-out normalised G per load family (sag, tip, torsion, bridge) against "
                                      "Poisson's ratio: each class's fitted row solid, the unfitted stiffness rules dashed."),
+    (r"fig-(bench-)?engines\.png", "Each engine's mean G_norm over the held-out loads against Poisson's ratio."),
     (r"fig-volume\.png", "Relative volume variation against time (Bourguignon & Cani Fig. 3)."),
     (r"fig-bench-reference\.png", "Benchmarks: the FEM solve's time against its unknowns per element and solver "
                                    "(left); the reference's true error against an independent solve (right)."),

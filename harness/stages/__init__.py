@@ -33,6 +33,7 @@ STAGES = [
     "harness.stages.reference_check",   # FEM reference + its verification
     "harness.stages.sms",               # spring/mass build + score + optimise
     "harness.stages.bc2000",            # Bourguignon & Cani experiments
+    "harness.stages.engines",           # engines' deformable bodies against the FEM
 ]
 
 

@@ -196,3 +196,6 @@ def test_the_engine_tables_finding_and_summary_say_what_a_hand_made_table_holds(
     assert list(table.columns) == ["body", "tets", "nu", "newton-tets: own (E, nu)", "mujoco-flex: own (E, nu)",
                                    "newton-springs: springbench rule"]
     assert table.iloc[1]["newton-springs: springbench rule"] == "0.100 (see loads)" and text in note
+    from harness.report.engines import engines_tables            # the suite's summary.csv: engine_status
+    [(_, suite_table, suite_note)] = engines_tables(df.rename(columns={"status": "engine_status"}))
+    assert suite_table.equals(table) and text in suite_note

@@ -27,6 +27,7 @@ FIGURES = [
     "harness.report.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
     "harness.report.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
     "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class (summary.csv)
+    "harness.report.figures.engines",      # each engine's G_norm against nu (the engines suite's summary.csv)
     "harness.report.figures.bench_reference",   # the benchmarks' plot: FEM solve time and error (bench/reference.csv)
     "harness.report.figures.bench_engines",     # the engine table: each engine's G_norm against nu (bench/engines.csv)
 ]
