@@ -21,9 +21,9 @@ conservative, with two levels), the error of u_k at a point is
 (the second term: the previous step carried forward, for points where the last change
 happens to vanish), F Roache's factor of safety: 1.25 when three levels give the order,
 3 with two. Consecutive adaptive levels add only 25-40 % dofs (r ~ 1.1 in 3-D), so
-1 / (r^p - 1) amplified their erratic pointwise changes ~10x: on the B&C tetra cube_333
-shears the old estimate was 0.12-0.15 of max |u| where the true error, against an
-independent graded Q2 solve, is 0.012-0.014; over wide steps it is 1.3-2.7x the true
+1 / (r^p - 1) would amplify their erratic pointwise changes ~10x (on the B&C tetra cube_333
+shears: 0.12-0.15 of max |u| where the true error, against an independent graded Q2
+solve, is 0.012-0.014), so the estimate is taken over wide steps: there it is 1.3-2.7x the true
 error at the worst point and above it at every vertex (tests/reference/test_adaptive.py checks a
 cube body the same way). On nested meshes a coarser level's field lies in the finest
 level's space, so both changes are kept as dof vectors of the finest mesh and the
@@ -58,13 +58,20 @@ from reference.fem import Discretisation
 from reference.locate import Locator
 from reference.mesh import base_mesh
 from reference.meshparts import UserMeshParts
-from reference.problem import body_bbox, fixed_dofs, homogeneous_field, load_vector, solve_mesh, solve_system
+from reference.problem import (
+    body_bbox,
+    fixed_dofs,
+    homogeneous_field,
+    load_vector,
+    solve_mesh,
+    solve_system,
+)
 
 THETA = 0.5          # Dörfler's bulk parameter: the marked elements carry this share of eta^2, ...
 LEAST = 0.1          # ... and are at least this share of the elements: a step then adds >= ~25 %
 # dofs (Dörfler's set alone added 2 % on a 10k-tet cylinder), and the estimate's
-# 1 / (r^p - 1) does not blow a step's noise up (measured there, three steps, while the
-# safety factor was 1.25: 53k dofs and a 1.7 % estimate without LEAST, 103k and 0.3 % with)
+# 1 / (r^p - 1) does not blow a step's noise up (there, three steps at a safety factor of
+# 1.25: 53k dofs and a 1.7 % estimate without LEAST, 103k and 0.3 % with)
 STEPS_PER_REFINE = {2: 2, 3: 3}   # bisection steps per [reference] max_refine: dim bisections
 # of every element halve its size, so max_refine uniform refinements' worth of levels
 MAX_DOFS = {2: 400_000, 3: 200_000}   # the finest level's dofs at most, ...

@@ -62,12 +62,12 @@ def extrapolate(values, h, p: float):
     Two or more levels and a finite p: the extrapolant of the last two, and as estimate
     the pointwise norm of its difference from the previous extrapolant times
     SAFETY / ((h_old / h_new)^p - 1) (needs three levels; with two, the plain difference
-    of the levels). Until the levels' values were averaged over a window of cells
-    (reference/gridvalues.py) the estimate was at least the correction made to the finest
-    level, for points where the two extrapolants happened to agree; that floor kept the
-    estimate at the finest level's own error (4.7e-4 where the truth was 7.6e-5, Sec. 6
-    cube, n = 8). With the window the extrapolants converge smoothly and the GCI alone
-    bounds the truth where a point's levels converge at order p; the floor is kept only
+    of the levels). The levels' values are averaged over a window of cells
+    (reference/gridvalues.py), so the extrapolants converge smoothly and the GCI alone
+    bounds the truth where a point's levels converge at order p. A floor at the correction
+    made to the finest level (for points where the two extrapolants happen to agree) would
+    hold the estimate at the finest level's own error (4.7e-4 where the truth is 7.6e-5,
+    Sec. 6 cube, n = 8), so it applies only
     where they do not (its ratio of consecutive differences is off the expected one by
     more than ASYMPTOTIC, or oscillates). Without a usable p (the
     levels agree to rounding: an exactly represented solution) the finest values with

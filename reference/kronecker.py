@@ -168,7 +168,6 @@ class KroneckerStiffness:
 
     def diagonal(self) -> np.ndarray:
         """diag K as a lattice field."""
-        dim = len(self.axes)
         out = np.zeros(self.shape)
         for a, b, pattern, coef in self.terms:
             if a != b:

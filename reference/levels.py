@@ -22,7 +22,14 @@ import numpy as np
 from harness.linalg.sparse import single_thread_blas
 from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import axis_maps, graded_axes, graded_mesh, probe_points, q2_doflocs, tensor_mesh
+from reference.graded import (
+    axis_maps,
+    graded_axes,
+    graded_mesh,
+    probe_points,
+    q2_doflocs,
+    tensor_mesh,
+)
 from reference.gridvalues import GridField
 from reference.problem import solve_mesh
 from reference.symmetry import Mirror, lower_half, mirror_of, unfold

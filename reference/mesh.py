@@ -97,6 +97,7 @@ def file_mesh(body, cell: str) -> skfem.Mesh:
     """A mesh file as a scikit-fem mesh of the requested cell type (via skfem.io)."""
     import meshio
     from skfem.io.meshio import from_meshio
+
     from harness.io.meshfile import read_mesh
     m = read_mesh(body.file, body.format)
     kind = MESHIO_TYPES[cell]

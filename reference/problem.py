@@ -8,10 +8,10 @@ import time
 import numpy as np
 
 from harness.case.elasticity import densities, element_stiffness
-from harness.errors import ModelError
 from harness.case.linear_states import linear_closed_form
 from harness.case.loadsets import stress_field, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
+from harness.errors import ModelError
 from reference import linearfield, solvers, tensorpre, tensorsolve, twolevel
 from reference.fem import Discretisation
 from reference.symmetry import Mirror, plane_dofs

@@ -184,6 +184,7 @@ class ReferenceSolution:
             lam, vec = lam[:k], vec[:, :k]
         else:
             from scipy.sparse.linalg import LinearOperator, eigsh
+
             from reference.solvers import inverse
             from reference.twolevel import prolongation
             P = prolongation(d)

@@ -13,44 +13,17 @@ system, see FLOOR); otherwise the next method is tried: ``amg`` -> ``amg-strong`
 convergence rate cannot reach RTOL within their iteration budget. A singular or
 non-finite system is one ModelError line.
 
-Measured (``/tmp`` script, the project's Discretisation as the bench uses it: a cube
-[0, 1]^3 clamped at x = 0, traction on x = 1, E = 1e3, nu = 0.3, two right-hand sides;
-CPU seconds of one process, the machine was shared and 2-core, wall times were 1-4x
-these; * = wall only). Cholesky = harness.linalg.multifrontal (single-threaded
-BLAS), AMG = pyamg SA + CG to RTOL (its = iterations):
-
-    mesh          dofs     SuperLU   Cholesky (Gflop, peak RSS)   AMG (its, peak RSS)
-    tet P2  8^3   13,872     9.4*       2.4* (11, 0.40 GB)          8.7* (38)
-    hex Q2  8^3   13,872     4.9        2.0  (  , 0.45 GB)          8.6  (32)
-    tet P2 10^3   26,460    27.7        4.9  (  , 0.74 GB)         12.9  (42)
-    tet P2 12^3   45,000   171*        23.2* (123, 1.43 GB)        34.5* (45)
-    hex Q2 12^3   45,000     -         13.8  (134, 1.57 GB)        22.8  (38)
-    tet P2 14^3   70,644     -         23.5  (271, 2.37 GB)        25.9  (42, 0.51 GB)
-    tet P2 16^3  104,544     -         51.1  (   , 3.9 GB)         29.3  (44, 0.64 GB)
-    hex Q2 16^3  104,544     -           -                         48.6  (37, 1.27 GB)
-    tet P2 18^3  147,852     -         87.7  (   , 5.8 GB)         38.1  (45, 0.86 GB)
-    tri P2 2-D   262,656  (95 s, old   11.5  (20, 1.5 GB)           15.5  (58)
-                            bench)
-
-Harder systems (tet P2, one right-hand side): 10:1 bar nu = 0.49, 19,440 dofs:
-Cholesky 1.8 s; AMG gives up after 40 iterations (rate 0.96), AMG-strong 95 its, 17.9 s
-in all. 2 x 1 x 0.5 box nu = 0.49, 14,688 dofs: Cholesky 1.4 s, AMG -> AMG-strong 13.9 s.
-The same box in units of 100 with E = 1e5 (nu = 0.45): Cholesky 1.4 s, AMG 7.2 s (76 its).
-10:1 bar nu = 0.49, 138,720 dofs (313 Gflop, so 'auto' starts with AMG): AMG gives up
-(28 s), AMG-strong is skipped (Cholesky estimated 32 s), Cholesky: 56 s CPU in all,
-2.6 GB (before the skip rule: AMG-strong 88 its, 142 s).
-
-P2/Q2 systems handed their P1/Q1 subspace (reference/twolevel.py) take 'two-level' where
-'auto' would take AMG: the 50k-tet cylinder of ``bench calibrate`` (nu = 0.45, 202,869 free
-dofs, 1,730 Gflop for the Cholesky, three loads): AMG 15 s setup + 99 iterations and
-~59 s CPU per load; two-level 23 iterations, 33 s CPU for all three (setup included).
-
-Crossovers: the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and
+Crossovers (``springbench bench reference`` measures them in one process,
+results/bench/reference.csv; the measurements behind these numbers are in CHANGELOG.md):
+the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and
 always in 2-D and on thin or nearly incompressible bodies (where AMG needs its strong
 setup); 'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at
 50-150k dofs, reused by the factorisation) and factorises when it predicts <= 300 Gflop
 and <= 2.5 GB, else starts with AMG (a 150k-dof 3-D cube: AMG, 0.9 GB). Without
-coordinates SuperLU is the direct method, up to 15k dofs in 3-D (150k in 2-D).
+coordinates SuperLU is the direct method, up to 15k dofs in 3-D (150k in 2-D). P2/Q2
+systems handed their P1/Q1 subspace (reference/twolevel.py) take 'two-level' where 'auto'
+would take AMG (the 50k-tet cylinder of ``bench calibrate``: 23 iterations, a third of
+AMG's CPU time).
 """
 
 from __future__ import annotations

@@ -35,6 +35,7 @@ def prolongation(d) -> sp.csr_matrix | None:
     None when d is P1/Q1. Each element's local interpolation matrix is the P1/Q1 basis at
     the P2/Q2 element's reference dof locations (the same for every element)."""
     import skfem
+
     from reference.mesh import element
     if d.order != "P2":
         return None

@@ -358,7 +358,7 @@ def quarter_mesh(size, n: int, beta: float = 2.5, knot: float | None = None, lon
     ``knot`` = s_k: the points a third of each side from a face (the 4 x 4 x 4 grid) are the
     nodes s = s_k of their graded end zones (needs n s_k integer). ``long_axes``: an axis
     longer than the shortest side gets the shortest's power zone and a stretch to its own
-    third (``_long_axis``). Without it a 10:1 box's end-face cells were 2.5x coarser: at the
+    third (``_long_axis``). Without it a 10:1 box's end-face cells are 2.5x coarser: at the
     loaded end edges order 2.19-2.28, extrapolant (n = 16, 20, 24) 6e-5 of max |u| off; with
     it (nu 0.49) orders 2.62, 2.60, 2.59 on the triples of n = 12..28, within 4.8e-6."""
     a, b, c = size

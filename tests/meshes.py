@@ -3,9 +3,8 @@ Each function writes a linear-element mesh as VTU (via meshio) and returns its p
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import signal
+from pathlib import Path
 
 import meshio
 import numpy as np

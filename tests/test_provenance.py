@@ -19,8 +19,8 @@ import pytest
 HERE = Path(__file__).resolve().parent
 if str(HERE / "run") not in sys.path:
     sys.path.insert(0, str(HERE / "run"))
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture)
 from test_report_clean import fake_bench  # noqa: E402
+from test_runner import fake, write_case  # noqa: E402,F401  (fixture)
 
 from harness import cli, provenance  # noqa: E402
 

@@ -3,11 +3,12 @@
     python cases/engines/_generate.py          # rewrites cases/engines/<body>-<resolution>_nu<nu>.toml
     python cases/engines/_generate.py --mesh   # first remakes meshes/<body>-<resolution>.msh (needs gmsh)
 
-Three gmsh bodies, each meshed at two resolutions (about 400 and 1,200 tetrahedra; the
+Four gmsh bodies, each meshed at two resolutions (about 400 and 1,200 tetrahedra; the
 elbow about 1,000 and 2,500, its curvature sets the coarsest; gmsh OCC, one thread,
 seed 0) with the physical surfaces ``clamp`` and ``load``:
 
 - ``beam``: a box beam 0.5 x 0.1 x 0.1 m, clamped at x = 0, loaded at x = 0.5;
+- ``cylinder``: a round bar, radius 0.05 m, length 0.5 m along x, clamped and loaded the same;
 - ``elbow``: a 120-degree torus sector (a curved part), one end clamped, the other loaded;
 - ``taper``: the tapered bar bolted through its hole (a holed part).
 
@@ -31,6 +32,7 @@ TARGETS = {"elbow": {"coarse": 400, "fine": 2500}}
 E, DENSITY = 1e5, 1000.0
 DESCRIPTIONS = {
     "beam": "box beam 0.5 x 0.1 x 0.1 m",
+    "cylinder": "cylinder, radius 0.05 m, length 0.5 m",
     "elbow": "elbow, a 120-degree torus sector (curved part)",
     "taper": "tapered bar bolted through its hole (holed part)",
 }
@@ -71,7 +73,9 @@ def bodies() -> dict:
     from harness.bench.heldout import BODIES, Body, _near
     beam = Body("beam", lambda occ: occ.addBox(0, 0, 0, 0.5, 0.1, 0.1), _near(0, 0.05, 0.05),
                 _near(0.5, 0.05, 0.05), ((0, -1, 0), (0, 0, -1)), (0, -1, 0))
-    return {"beam": beam, **{b.name: b for b in BODIES if b.name in ("elbow", "taper")}}
+    cylinder = Body("cylinder", lambda occ: occ.addCylinder(0, 0, 0, 0.5, 0, 0, 0.05), _near(0, 0, 0),
+                    _near(0.5, 0, 0), ((0, -1, 0), (0, 0, -1)), (0, -1, 0))
+    return {"beam": beam, "cylinder": cylinder, **{b.name: b for b in BODIES if b.name in ("elbow", "taper")}}
 
 
 def mesh_path(body: str, resolution: str) -> Path:

@@ -49,8 +49,8 @@ def _best_wall_cpu(fn, repeats):
 
 
 def table1(quick: bool) -> list[dict]:
-    from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
     from harness.io.meshfile import read_mesh
+    from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
     from harness.models.anisotropic import build_anisotropic
     from harness.models.massspring import build_massspring
     rows = []
@@ -97,7 +97,13 @@ def lattice(n: int):
 
 def springs(quick: bool) -> list[dict]:
     import numba
-    from harness.models.bc2000.parallel import node_index, spring_forces, spring_forces_parallel, spring_plan
+
+    from harness.models.bc2000.parallel import (
+        node_index,
+        spring_forces,
+        spring_forces_parallel,
+        spring_plan,
+    )
     from harness.models.massspring import MassSpring
     n = 48                                                # 961k springs
     pts, sp = lattice(n)

@@ -63,7 +63,7 @@ import pandas as pd
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from harness.models.stiffness_rules import RULES        # the rule names calibrate's --rule takes
+from harness.models.stiffness_rules import RULES  # the rule names calibrate's --rule takes
 from harness.progress import steps
 
 E, RHO = 1e5, 1000.0

@@ -19,10 +19,10 @@ import pandas as pd
 import skfem
 
 from harness.case.elasticity import isotropic_compliance, plane
+from harness.progress import steps
 from reference import solvers
 from reference.fem import Discretisation
 from reference.locate import Locator
-from harness.progress import steps
 
 
 def _system(cell: str, n: int):
@@ -109,6 +109,7 @@ def graded_solve_rows(quick: bool = False) -> list[dict]:
     CG with the fast-diagonalisation preconditioner ('tensor', K applied without assembly),
     solver seconds (and, apart, the rest of the call: assembly, loads, constraints)."""
     import dataclasses
+
     from reference.graded import graded_axes, tensor_mesh
     from reference.problem import solve_mesh
     from reference.symmetry import lower_half, mirror_of
@@ -280,7 +281,7 @@ def accuracy_rows(quick: bool = False) -> list[dict]:
 # thin and nearly incompressible boxes at default settings; the
 # truth's levels are those at which the independent solver still converges there. The truth
 # grades a long axis like the short ones near its end faces (long_axes): with one power zone
-# over a third of the 10:1 box's length its cells there were 2.5x coarser, the order at the
+# over a third of the 10:1 box's length its cells there are 2.5x coarser, the order at the
 # loaded end edges 2.19-2.28 and its extrapolant 6e-5 off; with it, orders 2.62, 2.60, 2.59 on
 # the triples of n = 12..28 and extrapolants within 4.8e-6 of each other
 SHAPES = (((10.0, 1.0, 1.0), 0.49, (16, 20, 24)), ((3.0, 3.0, 3.0), 0.49, (8, 12, 16)))
@@ -291,6 +292,7 @@ def _nine_loads(size, nu, points) -> dict:
     of ``size`` and ``nu`` (sec6's E and s): wall seconds, the process's peak RSS, and
     shear-xz with its estimate at ``points``."""
     import resource
+
     import reference
     with tempfile.TemporaryDirectory() as tmp:
         case, _ = _shear_case(Path(tmp), "nine", {}, size, nu, nine=True)
@@ -308,6 +310,7 @@ def shape_rows() -> list[dict]:
     seconds and peak memory, the issue's "<= 120 s, <= 4 GB per case"."""
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
+
     import reference
     ie = _independent()
     if ie is None:

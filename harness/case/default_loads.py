@@ -37,9 +37,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness.case.moments import EXPONENTS, mesh_moments
 from harness.errors import SpringbenchError
 from harness.io.end_faces import BAND, COS, end_facets, outward_normals
-from harness.case.moments import EXPONENTS, mesh_moments
 from harness.io.meshfile import boundary_facets
 
 PEAK_STRAIN = 1e-3

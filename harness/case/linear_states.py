@@ -26,8 +26,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.case.loadsets import (AXES, VOIGT, Frame, LoadCase, _box_stress, homogeneous, minimal_constraints,
-                                   stress_tensor)
+from harness.case.loadsets import (
+    AXES,
+    VOIGT,
+    Frame,
+    LoadCase,
+    _box_stress,
+    homogeneous,
+    minimal_constraints,
+    stress_tensor,
+)
 
 
 def _voigt_index(dim: int, i: int, j: int) -> int:

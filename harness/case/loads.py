@@ -11,10 +11,18 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from harness.errors import CaseError, SpringbenchError
-from harness.case.loadsets import ANCHORS, AXES, Constraint, Frame, LoadCase, Traction, anchor_points
-from harness.case.sets import ANCHORED, LOAD_SETS
+from harness.case.loadsets import (
+    ANCHORS,
+    AXES,
+    Constraint,
+    Frame,
+    LoadCase,
+    Traction,
+    anchor_points,
+)
 from harness.case.parts import parse_face_name, part_exists
+from harness.case.sets import ANCHORED, LOAD_SETS
+from harness.errors import CaseError, SpringbenchError
 
 if TYPE_CHECKING:
     from harness.case.reader import Body

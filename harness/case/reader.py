@@ -18,15 +18,15 @@ from typing import Mapping
 import numpy as np
 
 from harness.case import sections as case_sections
-from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.case.fibres import NAMED_FIELDS
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.loadsets import LoadCase
-from harness.case.sets import LOAD_SETS
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
+from harness.case.schema import Field, check, describe, did_you_mean
+from harness.case.sets import LOAD_SETS
+from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
-from harness.case.schema import Field, describe, check, did_you_mean
 
 MODES = ("quick", "full")
 

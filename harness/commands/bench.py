@@ -7,7 +7,6 @@ from __future__ import annotations
 import importlib
 from pathlib import Path
 
-
 HELP = ("run a benchmark (reference, sa, fit, dynamics, ...) and write runs/bench/NAME.csv "
         "(--results results: the published results/bench/)")
 
@@ -26,8 +25,8 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.bench import BENCHES
-    from harness.paths import DEFAULT_RESULTS, DEFAULT_RUNS
     from harness.outputs import atomic_write, check_out_dir, check_out_file
+    from harness.paths import DEFAULT_RESULTS, DEFAULT_RUNS
     out = args.out or Path(getattr(args, "results", None) or DEFAULT_RUNS) / "bench"
     flag = "--out" if args.out else "--results" if getattr(args, "results", None) else None
     path = out / f"{args.name}.csv"

@@ -312,8 +312,8 @@ def main(args) -> int:
 def mesh_case(args, mesh, tmp: Path):
     """The in-memory case of ``args`` for the read ``mesh`` (its file written to tmp when
     it must be scaled to m), printing the clamp and load faces it chose."""
-    from harness.case.reader import load_case
     from harness.case.default_loads import end_loads
+    from harness.case.reader import load_case
     from harness.io.mesh_groups import require_group, scaled_copy
     for flag, group in (("--clamp", args.clamp), ("--load-region", args.load_region)):
         if group is not None and args.heldout == "none":
@@ -389,9 +389,10 @@ def _capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     """The exported constants capped at ratio x their median, scored like the stage does
     (fitted and held-out loads), with the stable step of both (what the cap gains)."""
     import numpy as np
+
     import reference
-    from harness.mechanics import statics
     from harness.export.engine import spring_damping, stable_step
+    from harness.mechanics import statics
     from harness.scoring import case_weights, fit_and_heldout, reference_displacements
     k = np.asarray(net.k, float)
     capped = net.with_k(np.minimum(k, ratio * np.median(k)))
@@ -444,10 +445,10 @@ def positive(net) -> bool:
 def _report(args, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     import pandas as pd
-    from harness.commands.calibrate_verdict import (finite, fitted_sentence, heldout_sentence, records,
-                                                    reference_sentence, validation_sentence, verdict)
-    from harness.report.findings import heldout_error
+
+    from harness.commands import calibrate_verdict as cv
     from harness.export.model_json import export
+    from harness.report.findings import heldout_error
     from harness.stages.sms_measures import rank
     exported = next(r for r in rows if r["exported"])
     from_row = dict(G_norm="G_norm_final", G_norm_heldout="G_heldout", G_heldout_mean="G_heldout_mean",
@@ -457,17 +458,17 @@ def _report(args, rows, net, case):
     meta = dict(E=args.E, nu=args.nu, density=args.density, damping_ratio=args.damping_ratio,
                 loads_fitted=list(case.fit_loads), loads_heldout=list(case.heldout),
                 **{key: exported.get(col, math.nan) for key, col in from_row.items()},
-                G_heldout_loads={n: finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
+                G_heldout_loads={n: cv.finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
                 reference_error=_worst(exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)),
-                choice=_choice(args, exported), validation=records(exported.pop("_validation", None)),
+                choice=_choice(args, exported), validation=cv.records(exported.pop("_validation", None)),
                 masses=args.masses, prior_weight=(exported.get("opt_prior", math.nan) if "choice" in exported else
                                                   prior_weight(args) if args.method == "lbfgs" else math.nan))
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
-    said, rule = verdict(exported, rules) if case.heldout else (None, None)
+    said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)
     stops = exported.get("opt_stops") or exported.get("opt_stop")
     meta.update(status=str(exported.get("status", "ok")), verdict=said,
                 best_rule_heldout=None if rule is None else {"rule": rule["stiffness"],
-                                                             "G_heldout_mean": finite(heldout_error(rule))},
+                                                             "G_heldout_mean": cv.finite(heldout_error(rule))},
                 opt_stop=exported.get("opt_stop") if isinstance(exported.get("opt_stop"), str) else None,
                 opt_stops=stops.split(" | ") if isinstance(stops, str) else [])
     from harness.export.engine_loads import load_records, settle_recipe
@@ -487,11 +488,11 @@ def _report(args, rows, net, case):
         df = pd.DataFrame(rows).reindex(columns=cols)
         df.to_csv(csv, index=False)
     print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
-    print(heldout_sentence(exported, rules, case.heldout))
-    print(fitted_sentence(exported, min(rules, key=rank)))
-    print(reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
+    print(cv.heldout_sentence(exported, rules, case.heldout))
+    print(cv.fitted_sentence(exported, min(rules, key=rank)))
+    print(cv.reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
     if "choice" in exported:
-        print(validation_sentence(exported, meta["validation"] or []))
+        print(cv.validation_sentence(exported, meta["validation"] or []))
     step = (f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s, safe {data['dt_safe']:.3g} s)"
             if data["dt_stable"] is not None else data.get("warning", ""))
     print(f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, masses {args.masses}, "

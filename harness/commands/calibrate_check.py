@@ -46,7 +46,7 @@ def check(args, prior_weight: float) -> None:
         bad("--k-ratio", f"{args.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
     if args.seed < 0:
         bad("--seed", f"{args.seed} is negative", "a seed >= 0, e.g. --seed 0")
-    from harness.case.schema import LARGEST, SMALLEST     # what the case-file numbers may be
+    from harness.case.schema import LARGEST, SMALLEST  # what the case-file numbers may be
     # E's lower end leaves room for the default traction, 1e-3 E
     for flag, v, lo in (("--E", args.E, 1e3 * SMALLEST), ("--density", args.density, SMALLEST),
                         ("--magnitude", args.magnitude, SMALLEST)):

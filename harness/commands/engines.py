@@ -8,9 +8,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.errors import SpringbenchError
-
 from harness.engines.settle import CHECK, KE_TOL, RES_TOL, RTOL, STALL
+from harness.errors import SpringbenchError
 
 HELP = "run a physics engine (NVIDIA Newton, MuJoCo) to equilibrium on a benchmark pack; list the engines"
 EPILOG = f"""stopping rule (harness/engines/settle.py): every {CHECK} steps, settled when the displacement's

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import sys
 import tempfile
 import time
@@ -177,6 +176,7 @@ def errors(s: Sample, c, grad: bool = False, objective: str = "mean"):
     sample's mean error (``log``: mean log error)."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
+
     from harness.models.learned_rule import correction
     k = s.k0 * correction(s.X, c)
     n_loads = len(s.loads)

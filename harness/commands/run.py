@@ -58,6 +58,7 @@ def main(args) -> int:
                     scheduler=args.scheduler, force=args.force, figures=args.figures,
                     progress=False if getattr(args, "quiet", False) else None)
     import pandas as pd
+
     from harness.report.findings import case_lines, legend, summary_text
     seen = []
     for suite in rep.suites:

@@ -46,8 +46,15 @@ def score_table(net, case, ref, weights=None):
     import pandas as pd
 
     from harness.mechanics import statics
-    from harness.scoring import (case_weights, g_arrays, g_ref_arrays, met_tol_here, ref_status,
-                                 reference_displacements, reference_error)
+    from harness.scoring import (
+        case_weights,
+        g_arrays,
+        g_ref_arrays,
+        met_tol_here,
+        ref_status,
+        reference_displacements,
+        reference_error,
+    )
     w = case_weights(case, weights)
     res = statics.solve(net, case)
     u_ref = reference_displacements(ref, net.points, res.names)
@@ -74,8 +81,8 @@ def main(args) -> int:
                                fix="springbench score MODEL.vtu CASE, or springbench score --displacements U.npz DIR")
 
     import reference
-    from harness.errors import SpringbenchError
     from harness.case.schema import LARGEST, SMALLEST
+    from harness.errors import SpringbenchError
     if args.weights is not None and not (all(math.isfinite(w) and w >= 0 for w in args.weights)
                                          and sum(args.weights) > 0):
         raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
@@ -95,8 +102,8 @@ def main(args) -> int:
 
     from harness.case.reader import load_case
     from harness.errors import ModelError
-    from harness.geometry import body_geometry
     from harness.export.vtu import read_vtu
+    from harness.geometry import body_geometry
     from harness.models.sms import node_classes
     case = load_case(args.case, args.mode)
     if args.out:

@@ -12,6 +12,7 @@ from pathlib import Path
 def export(net, out: Path, meta: dict | None = None) -> dict:
     """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
     import numpy as np
+
     from harness.export.engine import spring_damping, stable_step
     from harness.export.vtu import write_vtu
     meta = dict(meta or {})

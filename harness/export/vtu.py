@@ -24,6 +24,7 @@ def _pad3(a: np.ndarray) -> np.ndarray:
 def write_vtu(path, network, displacements: dict | None = None) -> Path:
     """Write ``network`` (and {load name: (n, dim)} displacements) to ``path``."""
     import meshio
+
     from harness.outputs import staged
     path = Path(path)
     point_data = {"mass": np.asarray(network.masses, float), "class": np.asarray(network.classes, np.int32)}
@@ -45,6 +46,7 @@ def read_vtu(path):
     import io
 
     import meshio
+
     from harness.models.sms import make_network
     path = Path(path)
     if not path.exists():

@@ -18,6 +18,7 @@ built once per load set; ``factor(K)`` is numeric only.
 from __future__ import annotations
 
 import contextlib
+
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp

@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.errors import ModelError
 from harness.case.loadsets import Constraint, LoadCase, Traction
 from harness.case.parts import part_predicate
+from harness.errors import ModelError
 
 HOLD = (Constraint("x0y0z0", (0, 1, 2)), Constraint("x1y0z0", (1, 2)), Constraint("x0y1z0", (2,)))
 

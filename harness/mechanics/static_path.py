@@ -15,9 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from harness.mechanics.dynamics import Loading, _solve_regularised, stiffness
 from harness.errors import SimulationError
-
+from harness.mechanics.dynamics import Loading, _solve_regularised, stiffness
 
 # -- statics --------------------------------------------------------------------------------
 

@@ -23,9 +23,9 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from harness.errors import ModelError, naming
 from harness.case.facet_loads import facet_forces, part_facets
 from harness.case.parts import part_predicate
+from harness.errors import ModelError, naming
 from harness.models.springs import incidence, stiffness_matrix
 
 
@@ -359,6 +359,7 @@ SYMBOLIC_KEEP = 2
 def _symbolic(K, coords):
     """The multifrontal Symbolic of K's pattern with these dof locations (cached, see _SYMBOLIC)."""
     import hashlib
+
     from harness.linalg.multifrontal import Symbolic
     A = sp.csr_matrix(K)
     A.sort_indices()

@@ -22,10 +22,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import lsq_linear
 
+from harness.case.moments import (  # noqa: F401
+    _quadrature,
+    _simplices,
+    box_moments,
+    mesh_moments,
+    monomials,
+    polygon_moments,
+)
 from harness.errors import ModelError
-from harness.geometry.bodies import BodyGeom, clip_box, polygon as make_polygon
-from harness.case.moments import (_quadrature, _simplices, box_moments, mesh_moments,  # noqa: F401
-                                      monomials, polygon_moments)
+from harness.geometry.bodies import BodyGeom, clip_box
+from harness.geometry.bodies import polygon as make_polygon
 
 RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 

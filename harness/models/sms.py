@@ -9,14 +9,14 @@ rule. ``spec`` is the case's ``[model]`` table (kind = "sms", keys in MODEL_SPEC
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
-from harness.case.sections import SMS as MODEL_SPEC   # the [model] keys of kind = "sms"
+from harness.case.sections import SMS as MODEL_SPEC  # the [model] keys of kind = "sms"
 from harness.errors import ModelError
 
 

@@ -55,8 +55,8 @@ from scipy.optimize import nnls
 
 from harness.case.elasticity import element_stiffness
 from harness.errors import ModelError
-from harness.models.topology import element_pairs
 from harness.models.springs import spring_directions
+from harness.models.topology import element_pairs
 
 RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
 

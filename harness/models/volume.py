@@ -23,7 +23,7 @@ no energy, exactly.
 
 One volume term per element locks: on linear simplices a clamp and a large kv leave too
 few displacement fields that keep every element's volume (at nu = 0.45, on coarse tets, a
-fit with it was 2-3x worse than the rule under a two-end clamp). ``NodeVolumeTerm`` puts
+fit with it is 2-3x worse than the rule under a two-end clamp). ``NodeVolumeTerm`` puts
 the term on the nodes instead, the averaged nodal dilatation of Bonet & Burton 1998 ("A
 simple average nodal pressure tetrahedral element for incompressible and nearly
 incompressible dynamic explicit applications"): node a owns V0_a = sum_{e at a} V0_e /

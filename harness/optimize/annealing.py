@@ -23,7 +23,8 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.optimize.incremental import IncrementalG, RefactorG
-from harness.optimize.options import check_options as check_numbers, static_only
+from harness.optimize.options import check_options as check_numbers
+from harness.optimize.options import static_only
 from harness.optimize.problem import FitProblem
 
 DEFAULTS = dict(

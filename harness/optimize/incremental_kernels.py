@@ -77,7 +77,7 @@ def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, C
 def _accept(m, j, delta, gi_e, gv_e, T, Hz, sig, Cv, PV, AV, YY, Yt, Zt, acc_i, acc_v,
             ct, Hct, bz, sv, zWz, zR0):
     """Append the proposed z = y - V ct as basis column m (compiled by numba)."""
-    S, L, q, n = T.shape[0], Cv.shape[1], AV.shape[2], Zt.shape[2]
+    S, L, q = T.shape[0], Cv.shape[1], AV.shape[2]
     for s in range(S):
         cs = ct[s]
         for i in range(m):                       # T column m = [-T ct; 1]

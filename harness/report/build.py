@@ -64,7 +64,8 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 from harness.report.frames import REF_COARSE, SCORED, optimizer_frame
-from harness.report.markdown import cell as _cell, markdown_table  # noqa: F401  (markdown_table: report's API)
+from harness.report.markdown import cell as _cell  # noqa: F401  (markdown_table: report's API)
+from harness.report.markdown import markdown_table
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
@@ -73,9 +74,9 @@ HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "
         "G_s_final", "G_abc_initial", "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final",
         "freq_error_heldout", "error_estimate",
         "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
-        "static_status"]
+        "static_status", "engine", "G_norm", "max_error", "engine_status", "wall_s"]
 TAIL = ["seconds", "error"]
-TIMING = re.compile(r"^(seconds|time|wall)$|^seconds_|_(seconds|ms|per_s|per_second)$")
+TIMING = re.compile(r"^(seconds|time|wall|wall_s)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
 
 
@@ -253,7 +254,7 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     md = [f"# {suite_dir.name}\n",
           f"{len(manifests)} results, {len(df)} rows, {n_err} errors, {n_coarse} ref-coarse. The key columns "
           f"are shown; all {len(df.columns)} (per-load G, stage details) are in summary.csv; column meanings in "
-          "harness/report/build.py. The papers' absolute G depends on units they do not state: compare "
+          "docs/columns.md. The papers' absolute G depends on units they do not state: compare "
           "`improvement` with `paper_improvement`, and trends.\n"]
     if n_coarse:
         md.append(f"**{n_coarse} rows are `ref-coarse`**: the reference's own estimated error at the row's "
@@ -312,9 +313,9 @@ def suites_under(results_root) -> list[Path]:
 def build_index(results_root) -> Path:
     """``<results_root>/index.html``, the page a person reads (:mod:`harness.report.page`),
     and ``README.md``, its tables as Markdown (:mod:`harness.report.readme`)."""
+    from harness.outputs import write_changed
     from harness.report.page import index_html, page_suites
     from harness.report.readme import readme_md
-    from harness.outputs import write_changed
     root = Path(results_root)
     out = root / "index.html"
     write_changed(out, index_html(root).encode())

@@ -14,10 +14,17 @@ import struct
 import sys
 from pathlib import Path
 
-from harness.report.frames import REF_COARSE
 from harness.report.claims import suite_lists
+from harness.report.frames import REF_COARSE
 from harness.report.headlines import headline_tables
-from harness.report.text import BENCH, GLOSSARY, KEY_FIGURES, SUITES, UNITS, case_label, figure_caption
+from harness.report.text import (
+    BENCH,
+    KEY_FIGURES,
+    SUITES,
+    UNITS,
+    case_label,
+    figure_caption,
+)
 
 ORDER = ("deussen1995", "bourguignon2000", "verification")
 CSS = """
@@ -196,6 +203,7 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
 
 def _bench_section(root: Path, files: list[Path]) -> list[str]:
     import pandas as pd
+
     from harness.report.bench_tables import bench_table, provenance_line
     parts = ["<section id='bench'><h2>Benchmarks</h2>",
              "<p>Each benchmark is measured by <code>springbench bench NAME</code> (speeds as ratios against a "
@@ -226,8 +234,10 @@ def _findings(suites: list[Path]) -> list[str]:
 
 
 def _glossary() -> list[str]:
-    items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in GLOSSARY)
-    return ["<section id='glossary'><h2>Columns</h2>", f"<dl>{items}</dl></section>"]
+    from harness.report.columns import glossary
+    items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in glossary())
+    return ["<section id='glossary'><h2>Columns</h2>", "<p class='note'>The columns a reader meets first; "
+            "every column of every summary.csv is explained in docs/columns.md.</p>", f"<dl>{items}</dl></section>"]
 
 
 def page_suites(root: Path) -> tuple[list[Path], list[Path]]:

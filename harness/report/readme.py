@@ -82,6 +82,7 @@ def readme_md(root, suites, bench, extra=None) -> str:
 
 def _bench(root: Path, files) -> list[str]:
     import pandas as pd
+
     from harness.report.bench_tables import bench_table, provenance_line
     out = ["## Benchmarks\n", "Measured by `springbench bench NAME`; speeds as ratios against a baseline measured "
                               "in the same run.\n"]

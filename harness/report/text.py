@@ -95,7 +95,8 @@ KEY_FIGURES = {
     ],
     "engines": [
         ("fig-engines.png", "Mean G_norm over the held-out loads against Poisson's ratio, per body: each engine's "
-                            "own model and springbench's exports run in Newton; coarse mesh dashed, fine solid."),
+                            "own model and springbench's exports run in Newton; coarse mesh dashed, fine solid (Newton's and "
+                            "MuJoCo's tetrahedra coincide)."),
     ],
     "bourguignon2000": [
         ("volume_cube343/fig-volume.png",
@@ -149,36 +150,3 @@ BENCH = {
     "heldout": "calibrate against every stiffness rule on held-out gmsh bodies, loads and clamps it never saw",
 }
 
-GLOSSARY = [
-    ("G_initial, G_final", "G_{a:b:c} = sqrt(sum over loads and nodes of w_p |u_ref - u|^2), with the case's "
-                           "weights a:b:c for inner, border and corner nodes (Deussen 1995 eq. 12), before and "
-                           "after the fit; in the case's length unit (m)."),
-    ("G_norm_initial, G_norm_final (G_norm)", "G divided by sqrt(sum w_p |u_ref|^2): dimensionless and "
-                                              "comparable across cases (0.05 = 5 % RMS error)."),
-    ("G_heldout", "normalised G on the held-out loads (sag, tip), which no fit ever used; G_heldout_initial "
-                  "before the fit."),
-    ("G_heldout_mean, G_heldout_<load>", "the mean over the held-out loads of each load's own normalised G "
-                                         "(a small load counts as much as a large one), and each load's."),
-    ("G_heldout_mean_spread, choice", "a validated fit ([optimizer.select]): max - min of G_heldout_mean over "
-                                      "its starts (gaps inside it are ties), and the capacity validation chose "
-                                      "('rule': the rule's constants kept)."),
-    ("G_ref", "the reference's own estimated error as a normalised G at the row's nodes: a G below a few "
-              "times G_ref says more about the reference than about the model."),
-    ("ref_error_max", "the reference's largest estimated point error, relative to its largest displacement."),
-    ("status", "ok; ref-coarse: scored, but G_ref is above 10 % of the row's G or the reference missed its "
-               "tol (kept in every table, flagged); error: the row failed (its message is in summary.csv)."),
-    ("improvement, paper_improvement", "G_initial / G_final, ours and the paper's: comparable although the "
-                                       "paper's G is in unstated units."),
-    ("paper_<col>, ratio_<col>", "the paper's number for <col> and ours / paper."),
-    ("weights", "a:b:c of G_{a:b:c} (inner, border, corner)."),
-    ("n_params", "constants the fit varies (3 when grouped, else one per spring)."),
-    ("evals_to_sa_G", "G evaluations a fit needed to reach SA's final G."),
-    ("freq_error", "RMS relative error of the first natural frequencies against the FEM's."),
-    ("peak_abs_dV_percent", "largest |V - V0| / V0 over the run, in percent."),
-    ("pull_stiffness_spread", "max / min of the effective Young's modulus over 12 pull directions (1 = "
-                              "isotropic)."),
-    ("tip_ratio", "model tip deflection / FEM tip deflection, linearised at rest."),
-    ("error_estimate, closed_form_error", "the reference's estimated and (where a closed form exists) true "
-                                          "error, relative to its largest displacement."),
-    ("mode", "quick or full: the budgets the row ran with (the published results are full)."),
-]

@@ -12,7 +12,6 @@ from harness.errors import CaseError, SpringbenchError
 from harness.run.jobs import Job, JobResult, _error_row, _jsonable, loaded_sources
 from harness.run.lock import scratch_dir
 
-
 # -- executing one job (in a worker) ----------------------------------------------------
 
 class _Throttled:

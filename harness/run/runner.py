@@ -37,9 +37,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from harness.errors import SpringbenchError
+from harness.paths import DEFAULT_RESULTS
 from harness.run.execute import DaskSink, QueueSink, _ignore_sigint, _init_worker, execute
 from harness.run.jobs import Job, JobResult, _error_row, code_unchanged, plan
-from harness.paths import DEFAULT_RESULTS
 from harness.run.lock import clean_stale_scratch, run_lock
 from harness.run.store import _prune_seeds, read_result, result_path, store
 
@@ -75,6 +75,7 @@ class _Progress:
 
     def __init__(self, total: int, enabled):
         import shutil
+
         from tqdm import tqdm
         tty = sys.stderr.isatty() if enabled is None else bool(enabled)
         size = shutil.get_terminal_size((0, 0))  # a pty without a size (0 x 0) hides tqdm bars
@@ -219,7 +220,6 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
     import queue as queue_mod
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     from concurrent.futures.process import BrokenProcessPool
-
     from multiprocessing.managers import SyncManager
 
     ctx = mp.get_context("spawn")

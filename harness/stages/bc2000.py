@@ -24,10 +24,19 @@ import time
 import numpy as np
 import pandas as pd
 
-from harness.mechanics.dynamics import simulate
 from harness.errors import CaseError, SimulationError
-from harness.stages.bc2000_build import (_cells, _dt, _label, _meshes, _sub_tet_volumes, build,  # noqa: F401
-                                          fibre_angles, loading, lumped_masses)
+from harness.mechanics.dynamics import simulate
+from harness.stages.bc2000_build import (  # noqa: F401
+    _cells,
+    _dt,
+    _label,
+    _meshes,
+    _sub_tet_volumes,
+    build,
+    fibre_angles,
+    loading,
+    lumped_masses,
+)
 from harness.stages.bc2000_fem import _fem
 
 NAME = "bc2000"
@@ -43,8 +52,8 @@ def run(case, ctx) -> list[dict]:
     model = dict(case.section("model"))
     dyn = dict(case.section("dynamics") or {})
     if not dyn:
-        from harness.case.sections import DYNAMICS
         from harness.case.schema import check
+        from harness.case.sections import DYNAMICS
         dyn = check({}, DYNAMICS, str(case.path), "dynamics.")
     exp = dyn["experiment"]
     return EXPERIMENTS[exp](case, ctx, model, dyn)
@@ -149,10 +158,16 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
     scale (the shape error alone), with ``G_ref`` / ``ref_error_max`` of that load and a
     "ref-coarse" status when G_ref exceeds 10 % of the scaled G or the reference missed
     its tol."""
-    from harness.mechanics.dynamics import stiffness
-    from harness.stages import bc2000_linear as linear
     from harness.case.parts import classify_nodes
-    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
+    from harness.mechanics.dynamics import stiffness
+    from harness.scoring import (
+        case_weights,
+        g_arrays,
+        ref_columns,
+        ref_status,
+        reference_displacements,
+    )
+    from harness.stages import bc2000_linear as linear
     P = mesh.points
     masses = lumped_masses(P, _cells(mesh), case.material.density)
     loads = linear.case_loads(P, case, masses)
@@ -197,9 +212,10 @@ def inverted_elements(model, x) -> int:
 def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
     """The nonlinear static equilibrium under the program's load (Newton, load stepping,
     continuation past limit points) beside the linearised response to the same load."""
+    import scipy.sparse.linalg as spla
+
     from harness.mechanics.dynamics import stiffness
     from harness.mechanics.static_path import solve_static_path
-    import scipy.sparse.linalg as spla
     free = np.repeat(~ld.fixed, 3)
     K = stiffness(m).tocsr()[free][:, free]
     u = np.zeros(3 * len(points))

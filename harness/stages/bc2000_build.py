@@ -8,13 +8,13 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.mechanics.dynamics import Loading
-from harness.errors import CaseError, SpringbenchError
 from harness.case.fibres import named_field_angles
+from harness.errors import CaseError, SpringbenchError
 from harness.io.meshfile import read_mesh
+from harness.mechanics.dynamics import Loading
 from harness.models.anisotropic import angles_of, build_anisotropic
+from harness.models.masses import lumped_masses  # noqa: F401
 from harness.models.massspring import build_massspring
-from harness.models.masses import lumped_masses, sub_tet_volumes as _sub_tet_volumes  # noqa: F401
 
 
 def _meshes(case, dyn):

@@ -23,9 +23,15 @@ def _fem(case, ctx, model, dyn):
     its tol), the fitted constants, the pull columns; anisotropy.csv per direction. Loads
     held out (``[loads] heldout``) are neither scaled to nor fitted: ``G_heldout``
     (``_initial``: with the scaled constants), ``G_ref_heldout``, ``ref_error_heldout``."""
-    from harness.stages import bc2000_linear as linear
     from harness.case.parts import classify_nodes
-    from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
+    from harness.scoring import (
+        case_weights,
+        g_arrays,
+        ref_columns,
+        ref_status,
+        reference_displacements,
+    )
+    from harness.stages import bc2000_linear as linear
     from reference import solve as reference_solve
     path, mesh = _meshes(case, dyn)[0]
     P = mesh.points
@@ -159,6 +165,7 @@ def _fem_directions(case, ref_solve, P):
     """The FEM reference under the direction pulls (one reference solve of a copy of the
     case whose loads are the pulls), measured at the model's nodes."""
     import dataclasses
+
     from harness.mechanics import anisotropy as an
     loads = tuple(an.pull_load(d, name=f"pull-{a}") for a, d in zip(ANGLES, an.directions_xy(ANGLES)))
     sub = dataclasses.replace(case, loads=loads)

@@ -17,8 +17,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.optimize import least_squares
 
-from harness.mechanics.dynamics import stiffness
 from harness.errors import ModelError
+from harness.mechanics.dynamics import stiffness
 
 
 def parameter_names(model) -> list[str]:

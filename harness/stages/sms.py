@@ -31,8 +31,7 @@ import pandas as pd
 
 from harness.case.loads import modal_load
 from harness.errors import CaseError, ModelError, SpringbenchError
-from harness.stages.sms_measures import (engine_columns, error_modes, fem_frequencies, freq_error, heldout_columns,
-                                         model_frequencies, fit_score, per_load_columns, rank)
+from harness.stages import sms_measures as measures
 
 NAME = "sms"
 
@@ -87,6 +86,7 @@ def run(case, ctx) -> list[dict]:
     """The case's rows; with ``[model] classes``, each class's rows in turn (its files in
     the sub-folder named after it)."""
     import dataclasses
+
     from harness.models.classes import class_spec
     from harness.models.sms import model_spec
     spec = model_spec(case)
@@ -101,12 +101,11 @@ def run(case, ctx) -> list[dict]:
 
 
 def _run(case, ctx, spec) -> list[dict]:
+    from harness import scoring
     from harness.mechanics import statics
     from harness.mechanics.homogenize import case_report
     from harness.models.classes import build, class_of
     from harness.models.stiffness_rules import spring_constants
-    from harness.scoring import case_weights, fit_and_heldout, ref_columns, ref_status, reference_displacements
-
     from harness.stages import sms_mt
     p1, mt = bool(spec.get("p1")), bool(spec.get("mt"))
     opt = case.section("optimizer") or {}
@@ -116,7 +115,7 @@ def _run(case, ctx, spec) -> list[dict]:
     if skip:
         return [skip]                       # 2-D: B&C have no element
     n_modes = _check_modes(case, opt)
-    weights = case_weights(case)
+    weights = scoring.case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
     label = model_label(spec, case)
     t0 = time.perf_counter()
@@ -135,7 +134,7 @@ def _run(case, ctx, spec) -> list[dict]:
     names = tuple(l.name for l in case.loads)
     fit = [names.index(n) for n in case.fit_loads]
     held = [names.index(n) for n in case.heldout]
-    u_ref = reference_displacements(ref, base.points, names) if ref is not None else None
+    u_ref = scoring.reference_displacements(ref, base.points, names) if ref is not None else None
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
@@ -163,7 +162,7 @@ def _run(case, ctx, spec) -> list[dict]:
         res = statics.solve(net, case) if res is None else res
         if u_ref is None:
             return res, None, None
-        sc, sh = fit_and_heldout(u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout)
+        sc, sh = scoring.fit_and_heldout(u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout)
         return res, sc, sh
 
     def write(net, res, tag):
@@ -217,19 +216,19 @@ def _run(case, ctx, spec) -> list[dict]:
                **(sms_mt.constants(net) if mt else {})}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
-                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **per_load_columns(sc, sh), **fit_score(case, sc),
-                       **heldout_columns(sh))
+                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc),
+                       **measures.heldout_columns(sh))
         else:
             row.update(G_initial=math.nan, G_final=math.nan, G_norm_initial=math.nan, G_norm_final=math.nan,
                        note=f"no reference ({why})")
         rows.append(row)
 
     optimize = _optimizer()
-    fem_f = fem_frequencies(ref, n_modes, modal_load(case).name)
+    fem_f = measures.fem_frequencies(ref, n_modes, modal_load(case).name)
     opt_nets, traces = {}, []
     start_row, start = rows[0], base
     if opt.get("start", "first") == "best" and u_ref is not None:
-        start_row = min(rows, key=rank)
+        start_row = min(rows, key=measures.rank)
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
         for run_ in runs:
@@ -253,33 +252,33 @@ def _run(case, ctx, spec) -> list[dict]:
         rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
 
     if u_ref is not None:   # every net shares base's nodes, loads and weights: one G_ref for all rows
-        refcols = ref_columns(ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights)
+        refcols = scoring.ref_columns(ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights)
         heldcols = {}
         if held:
-            hc = ref_columns(ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights)
+            hc = scoring.ref_columns(ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights)
             heldcols = {"G_ref_heldout": hc["G_ref"], "ref_error_heldout": hc["ref_error_max"]}
         for row in rows:
             if "G_norm_final" in row:
                 row.update(refcols, **heldcols)
-                row["status"] = ref_status(row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol"))
-                if held and ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
+                row["status"] = scoring.ref_status(row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol"))
+                if held and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
                     row["status"] = "ref-coarse"     # the held-out score is the reference's error too
 
-    freqs = model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
-    m = error_modes(opt, n_modes)
+    freqs = measures.model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
+    m = measures.error_modes(opt, n_modes)
     all_nets = {**nets, **opt_nets}
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
         if tag in all_nets:
-            row.update(engine_columns(all_nets[tag], p1))
+            row.update(measures.engine_columns(all_nets[tag], p1))
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
             row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
-            row["freq_error_final"] = freq_error(freqs[tag], freqs["fem"], m)
+            row["freq_error_final"] = measures.freq_error(freqs[tag], freqs["fem"], m)
             start = row["stiffness"]         # the rule (an optimised row's start)
-            row["freq_error_initial"] = freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
+            row["freq_error_initial"] = measures.freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
             fitted = int(row.get("freq_modes", 0) or 0)     # modes the fit saw; the others are held out
             if len(freqs["fem"]) > fitted:
-                row["freq_error_heldout"] = freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
+                row["freq_error_heldout"] = measures.freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
     return rows
 
 
@@ -434,7 +433,7 @@ def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec,
            "G_s_initial": first.get("G_s_initial", math.nan),
            "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
            "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **per_load_columns(sc, sh), **fit_score(case, sc), **heldout_columns(sh, first),
+           **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc), **measures.heldout_columns(sh, first),
            "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
            "_tag": tag}
     if freq_kw:

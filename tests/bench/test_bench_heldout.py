@@ -101,6 +101,7 @@ def _case(folder, mesh, normal):
 @pytest.mark.parametrize("model", ["springs", "springs+volume", "springs+kn"])
 def test_network_statics_equals_springbench(bar, tmp_path, model):
     from scipy.spatial import cKDTree
+
     from harness.case.reader import load_case
     from harness.export.vtu import read_vtu
     from harness.mechanics import statics

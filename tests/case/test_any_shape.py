@@ -6,20 +6,19 @@ import signal
 import textwrap
 from pathlib import Path
 
+import meshes
 import meshio
 import numpy as np
 import pytest
 import skfem
 
 import reference
-from harness.case.reader import load_case
 from harness.case.elasticity import isotropic_compliance, plane
-from harness.errors import CaseError
 from harness.case.linear_states import linear_closed_form as homogeneous_closed_form
 from harness.case.loadsets import ANCHORS, stress_tensor
+from harness.case.reader import load_case
+from harness.errors import CaseError
 from harness.io.meshfile import boundary_facets, read_mesh
-
-import meshes
 
 gmsh = pytest.importorskip("gmsh")
 
@@ -85,6 +84,7 @@ def test_the_reference_takes_the_closed_form_only_where_it_is_exact(tmp_path, bo
     sol = reference.solve(case, cache=False)
     assert sol.solver == []
     import dataclasses
+
     from harness.case.reader import Region
     stiff = dataclasses.replace(case, material=dataclasses.replace(
         case.material, regions=(Region((0.0, 0.0, 0.0), (0.2, 0.3, 0.2), 3e5),)))

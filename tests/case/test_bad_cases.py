@@ -164,9 +164,10 @@ def test_validate_names_file_field_and_fix(case, tmp_path, capsys):
 @pytest.fixture(scope="module")
 def run_lines(tmp_path_factory):
     """Every case the loader sees, through one `springbench run` with the fake stage."""
-    from harness import stages as stage_registry
     import contextlib
     import io
+
+    from harness import stages as stage_registry
     d = tmp_path_factory.mktemp("cases") / "bad"
     d.mkdir()
     for name, edits, *_ in CASES:

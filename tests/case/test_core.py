@@ -3,8 +3,13 @@
 import numpy as np
 import pytest
 
-from harness.case.elasticity import (isotropic_compliance, lame, plane, rotate,
-                                transversely_isotropic_compliance)
+from harness.case.elasticity import (
+    isotropic_compliance,
+    lame,
+    plane,
+    rotate,
+    transversely_isotropic_compliance,
+)
 from harness.case.loadsets import basic2d, basic3d, stretch_closed_form
 from harness.case.parts import classify_nodes, part_predicate
 
@@ -90,7 +95,8 @@ def test_transverse_isotropy_rotation():
     eps = np.linalg.solve(Cg, voigt)
     E3 = np.array([[eps[0], eps[5] / 2, eps[4] / 2], [eps[5] / 2, eps[1], eps[3] / 2], [eps[4] / 2, eps[3] / 2, eps[2]]])
     assert np.isclose(d @ E3 @ d, 2.0 / 10.0)
-    t = np.cross(d, [0, 0, 1.0]); t /= np.linalg.norm(t)
+    t = np.cross(d, [0, 0, 1.0])
+    t /= np.linalg.norm(t)
     assert np.isclose(t @ E3 @ t, -0.3 * 2.0 / 10.0)
     # rotating about the fibre changes nothing: frames differ only by that rotation
     assert np.allclose(rotate(C, np.array([d, d]))[1], Cg)

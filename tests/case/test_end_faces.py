@@ -5,10 +5,10 @@ traction on the same facets as the FEM's, and the clamp holds the same nodes in 
 
 import argparse
 
+import meshes
 import numpy as np
 import pytest
 
-import meshes
 from harness.case.default_loads import end_loads
 from harness.case.reader import load_case
 from harness.errors import CaseError
@@ -54,10 +54,10 @@ def calibrate_case(tmp_path, mesh, groups=False):
 
 def fem_load(case, load):
     """The FEM's load vector (ns, dim) and dof locations (ns, dim) on the P2 mesh."""
-    from reference.mesh import file_mesh
-    from reference.fem import Discretisation
-    from reference.problem import body_bbox, load_vector
     from harness.case.elasticity import densities
+    from reference.fem import Discretisation
+    from reference.mesh import file_mesh
+    from reference.problem import body_bbox, load_vector
     sk = file_mesh(case.body, case.reference.cell)
     d = Discretisation(sk, case.reference.cell, "P2")
     F = load_vector(d, case, load, body_bbox(case, sk), densities(case.material, d.centroids()))
@@ -157,9 +157,9 @@ def test_the_clamp_holds_the_same_nodes_in_both(tmp_path, bodies):
     the vertices: the same nodes, the face and nothing behind it."""
     case, m, _ = calibrate_case(tmp_path, bodies["tube"])
     from harness.models.sms import build_network
+    from reference.fem import Discretisation
     from reference.mesh import file_mesh
     from reference.problem import body_bbox, fixed_dofs
-    from reference.fem import Discretisation
     net = build_network(case)
     load = next(l for l in case.loads if l.name == "tip")
     held = np.flatnonzero(statics.fixed_mask(net.points, case, load).any(axis=1))

@@ -5,6 +5,7 @@ an independent P1 assembly, the reference's closed-form shortcut, the case file.
 
 import textwrap
 
+import meshes
 import numpy as np
 import pytest
 import skfem
@@ -12,12 +13,10 @@ import skfem
 from harness.case.elasticity import isotropic_compliance, plane
 from harness.case.linear_states import divergence, gradient_states, linear_closed_form
 from harness.case.loadsets import ANCHORS, family, stress_field, stress_tensor
-from harness.case.sets import LOAD_SETS
 from harness.case.reader import load_case
+from harness.case.sets import LOAD_SETS
 from harness.io.meshfile import read_mesh
 from reference.fem import Discretisation
-
-import meshes
 
 gmsh = pytest.importorskip("gmsh")
 
@@ -200,10 +199,10 @@ def test_the_reference_takes_the_closed_form_on_p2_and_solves_on_p1(tmp_path, bo
     solved (the constant ones stay exact). The residual estimator of the closed form on
     P2 is zero to rounding: its Neumann term reads the linear traction."""
     import reference
+    from harness.case.elasticity import densities, element_stiffness
     from reference.estimator import indicators
     from reference.mesh import base_mesh
     from reference.problem import fixed_dofs, solve_mesh
-    from harness.case.elasticity import densities, element_stiffness
     case = mesh_case(tmp_path, bodies["ellipse"], 2)
     sol = reference.solve(case, cache=False)
     assert sol.solver == [] and all(v == 0.0 for v in sol.error_estimate.values())

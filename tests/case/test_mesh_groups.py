@@ -6,18 +6,16 @@ one-line error naming the mesh and the groups it has."""
 
 import textwrap
 
+import meshes
 import meshio
 import numpy as np
 import pytest
 
 from harness import cli
+from harness.case.parts import part_predicate
 from harness.case.reader import load_case
 from harness.io.mesh_groups import GroupPart, group_predicate
-from harness.io.meshfile import read_groups
-from harness.io.meshfile import read_mesh
-from harness.case.parts import part_predicate
-
-import meshes
+from harness.io.meshfile import read_groups, read_mesh
 
 pytest.importorskip("gmsh")
 R, L = 0.1, 0.5
@@ -126,8 +124,8 @@ def test_clamp_and_traction_on_groups_in_fem_and_model(tmp_path, cyl):
     import dataclasses
 
     import reference
-    from harness.mechanics import statics
     from harness.case.elasticity import densities, element_stiffness
+    from harness.mechanics import statics
     from harness.models.sms import build_network
     from reference.fem import Discretisation
     from reference.mesh import base_mesh

@@ -7,14 +7,13 @@ import dataclasses
 import json
 import textwrap
 
+import meshes
 import numpy as np
 import pytest
 
 from harness import cli
 from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
-
-import meshes
 
 pytest.importorskip("gmsh")
 R, L, E, NU = 0.1, 0.5, 1e5, 0.3
@@ -191,9 +190,9 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     torsion as held out, and the case calibrate runs clamps the group's nodes (u = 0)
     in the FEM and the spring model."""
     import reference
-    from harness.mechanics import statics
-    from harness.commands import calibrate as cal
     from harness.case.default_loads import end_loads
+    from harness.commands import calibrate as cal
+    from harness.mechanics import statics
     from harness.models.sms import build_network
     mesh = cyls[0.05]
     out = tmp_path / "m.vtu"
@@ -221,6 +220,7 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
 
 def cal_args(mesh, out):
     import argparse
+
     from harness.commands import calibrate as cal
     p = argparse.ArgumentParser()
     cal.add_arguments(p)

@@ -5,15 +5,14 @@ against a dense eigen-solve written here), and a finite held-out G."""
 
 import json
 
+import meshes
 import numpy as np
 import pandas as pd
 import pytest
 
 from harness import cli
-from harness.case.loadsets import VOIGT
 from harness.case.linear_states import gradient_states
-
-import meshes
+from harness.case.loadsets import VOIGT
 
 pytest.importorskip("gmsh")
 RHO = 1000.0
@@ -124,9 +123,9 @@ def test_rule_prints_and_exports_the_same_constants(tmp_path, made, capsys):
 def test_every_rule_of_the_harness_is_a_row_and_can_be_exported(tmp_path, made):
     """--rule cauchy exports the harness's cauchy constants for the mesh; every rule is a
     row of the table."""
-    from harness.models.stiffness_rules import RULES, spring_constants
     from harness.case.reader import Material
     from harness.io.meshfile import read_mesh
+    from harness.models.stiffness_rules import RULES, spring_constants
     data, df = calibrate(made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "cauchy")
     assert set(df.stiffness) == set(RULES) and df[df.exported].iloc[0].stiffness == "cauchy"
     m = read_mesh(made["cylinder"])

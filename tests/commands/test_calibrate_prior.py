@@ -11,7 +11,6 @@ import pandas as pd
 import pytest
 
 from harness import cli
-
 from harness.bench.calibrate import cylinder
 
 pytest.importorskip("gmsh")

@@ -177,6 +177,7 @@ def test_commands_reference_lists_every_command_and_flag():
     """The generator itself: every command registered in the CLI and every option string of
     its parser (sub-commands included) is in the page."""
     import argparse
+
     from harness.cli import build_parser
     from harness.report.docs_gen import commands_reference
     page = commands_reference(build_parser())

@@ -8,18 +8,17 @@ same network and the FEM."""
 import argparse
 import json
 
+import meshes
 import numpy as np
 import pytest
 
 from harness import cli
-from harness.mechanics import statics
+from harness.case.default_loads import end_loads
 from harness.case.reader import load_case
 from harness.commands import calibrate as cal
-from harness.case.default_loads import end_loads
 from harness.export.vtu import read_vtu
 from harness.io.meshfile import read_mesh
-
-import meshes
+from harness.mechanics import statics
 
 pytest.importorskip("gmsh")
 newton = pytest.importorskip("newton")

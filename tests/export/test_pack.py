@@ -5,18 +5,16 @@ codes, a JUnit report a standard parser reads, one line for every bad input, and
 pack's scores of springbench's own statics against calibrate's own held-out scores."""
 
 import json
-import math
 from xml.etree import ElementTree as ET
 
+import meshes
 import meshio
 import numpy as np
 import pytest
+from pack_solve import held_solve
 
 from harness import cli
 from harness.export.pack import read_pack, write_pack
-
-import meshes
-from pack_solve import held_solve
 
 pytest.importorskip("gmsh")
 E, NU, RHO = 1e5, 0.3, 1000.0
@@ -152,6 +150,7 @@ def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, cap
     its held-out ones marked, on the mesh's own nodes in the case's units; a box body is
     one line (an engine needs a mesh)."""
     from pathlib import Path
+
     from harness.case.reader import load_case
     root = Path(__file__).resolve().parents[2]
     case_file = root / "cases" / "bourguignon2000" / "fem_cube333_tetra.toml"

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.errors import SimulationError
 from harness.mechanics.dynamics import Loading, jacobian, simulate, stable_step, stiffness
 from harness.mechanics.static_path import solve_static
-from harness.errors import SimulationError
 from harness.models.anisotropic import build_anisotropic
 from harness.models.massspring import MassSpring, build_massspring
 

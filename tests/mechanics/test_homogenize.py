@@ -5,13 +5,19 @@ import numpy as np
 import pytest
 from scipy.spatial import Delaunay
 
-from harness.mechanics import statics
-from harness.case.reader import Body, Case, Material
 from harness.case.elasticity import isotropic_compliance, plane
-from harness.geometry import grid_points
-from harness.mechanics.homogenize import (boundary_share, case_report, cauchy_report, engineering_constants, group_stiffness,
-                                lattice_stiffness)
 from harness.case.loadsets import basic2d, basic3d
+from harness.case.reader import Body, Case, Material
+from harness.geometry import grid_points
+from harness.mechanics import statics
+from harness.mechanics.homogenize import (
+    boundary_share,
+    case_report,
+    cauchy_report,
+    engineering_constants,
+    group_stiffness,
+    lattice_stiffness,
+)
 from harness.models.sms import make_network
 from harness.models.topology import grid_structure
 

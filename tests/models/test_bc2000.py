@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
 from harness.case.fibres import azimuth_elevation, named_field_angles
 from harness.io.meshfile import read_mesh
+from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
 from harness.models.anisotropic import build_anisotropic, find_axes, frame
 from harness.models.massspring import build_massspring, mesh_edges
 
@@ -334,8 +334,7 @@ def test_case_files_load():
 
 def test_volume_stage_writes_the_curves(tmp_path):
     from harness.case.reader import load_case
-    from harness.stages import StageContext
-    from harness.stages import bc2000
+    from harness.stages import StageContext, bc2000
     case = load_case(ROOT / "cases/bourguignon2000/volume_cube343.toml")
     assert bc2000.applies(case)
     rows = bc2000.run(case, StageContext(out_dir=tmp_path))
@@ -409,8 +408,7 @@ def test_face_pull_anisotropy_hexa_vs_tetra():
 def test_fem_stage_calibration_never_worsens_G(tmp_path):
     """The FEM-scoring experiment end to end (solves the FEM reference: minutes uncached)."""
     from harness.case.reader import load_case
-    from harness.stages import StageContext
-    from harness.stages import bc2000
+    from harness.stages import StageContext, bc2000
     case = load_case(ROOT / "cases/bourguignon2000/fem_cube333_tetra.toml")
     rows = bc2000.run(case, StageContext(out_dir=tmp_path))
     assert [r["model"] for r in rows] == ["MS", "MT0", "MT"]
@@ -426,10 +424,10 @@ def test_fem_stage_heldout_loads_are_not_fitted(tmp_path, monkeypatch):
     same constants and G on the fitted loads; with them, G_heldout is reported. (The
     reference itself may refine further for the held-out loads: that is why it is shared.)"""
     import dataclasses
+
     import reference
     from harness.case.reader import load_case
-    from harness.stages import StageContext
-    from harness.stages import bc2000
+    from harness.stages import StageContext, bc2000
     case = load_case(ROOT / "cases/bourguignon2000/fem_cube333_hexa.toml")
     assert case.heldout == ("sag", "tip")
     ref, solve = reference.solve(case), reference.solve

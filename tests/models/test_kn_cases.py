@@ -6,8 +6,10 @@ documented formula)."""
 
 import json
 
+import meshes
 import numpy as np
 import pytest
+from test_sms import TINY, ClosedFormRef, _dense_K
 
 from harness import cli
 from harness.case.reader import load_case
@@ -16,9 +18,6 @@ from harness.mechanics import statics
 from harness.models.classes import build, class_of, class_spec
 from harness.models.kn import KNTerm
 from harness.models.sms import build_network, model_spec
-
-import meshes
-from test_sms import TINY, ClosedFormRef, _dense_K
 
 BOX = TINY.replace('dim = 2', 'dim = 3').replace('shape = "rectangle"\nsize = [2.0, 2.0]',
                                                  'shape = "box"\nsize = [2.0, 1.0, 1.0]').replace('basic2d', 'basic3d')

@@ -6,8 +6,14 @@ import pytest
 
 from harness.case.reader import Material, Region
 from harness.geometry import box, grid_points, polygon, random_points, rectangle
-from harness.models.masses import (body_moments, box_moments, compute_masses, mesh_moments, monomials,
-                                   polygon_moments)
+from harness.models.masses import (
+    body_moments,
+    box_moments,
+    compute_masses,
+    mesh_moments,
+    monomials,
+    polygon_moments,
+)
 
 L_SHAPE = np.array([[1, 2], [3, 2], [3, 3], [2, 3], [2, 4], [1, 4]], float)   # away from the origin
 

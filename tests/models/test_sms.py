@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from harness import cli
-from harness.mechanics import statics
+from harness.case.loadsets import basic2d, basic3d, stretch_closed_form
 from harness.case.reader import Body, Case, Material, load_case
 from harness.errors import ModelError
-from harness.geometry import grid_points
 from harness.export.vtu import read_vtu, write_vtu
-from harness.case.loadsets import basic2d, basic3d, stretch_closed_form
+from harness.geometry import grid_points
+from harness.mechanics import statics
 from harness.mechanics.modal import frequencies_arrays
 from harness.models.sms import build_network, make_network
 from harness.models.stiffness_rules import spring_constants
@@ -478,8 +478,8 @@ def test_seed_means_and_optimiser_table_keep_optimisers_apart():
 def test_fit_diagnostics_jacobian_matches_finite_differences(grouped):
     """jac_* columns: the dense Jacobian of the weighted residual over log k (or log group
     factor) against central differences of the problem's own sparse re-solve."""
-    from harness.optimize.problem import FitProblem
     from harness.optimize.diagnostics import fit_diagnostics, weighted_jacobian
+    from harness.optimize.problem import FitProblem
     rng = np.random.default_rng(3)
     p = grid_points([0, 0], [2, 2], (3, 3))
     top = grid_structure((3, 3), "structure1")
@@ -616,6 +616,7 @@ def test_large_3d_statics_use_the_multifrontal_cholesky_and_still_name_mechanism
     Cholesky: the same displacements as scipy's spsolve (independent), and a mechanism
     is still a ModelError naming nodes, not a traceback."""
     import scipy.sparse.linalg as spla
+
     from harness.geometry import grid_points
     from harness.models.springs import incidence, stiffness_matrix
     shape = (14, 14, 36)
@@ -643,6 +644,7 @@ def test_cauchy_rule_on_a_tet_mesh_equals_a_cell_by_cell_least_squares():
     NNLS where that is negative), summed over the cells sharing an edge, floored."""
     from scipy.optimize import nnls
     from scipy.spatial import Delaunay
+
     from harness.case.elasticity import element_stiffness
     from harness.models.stiffness_rules import voigt_dyad
     rng = np.random.default_rng(3)

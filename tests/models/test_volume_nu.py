@@ -1,4 +1,4 @@
-"""Issue 15: as nu -> 0.5 the calibrated springs + volume model's bulk modulus grows with
+"""As nu -> 0.5 the calibrated springs + volume model's bulk modulus grows with
 the FEM's, where springs alone stay near the lattice's. On a small tetrahedral bar fitted
 to the FEM on the homogeneous stress loads, the hydrostatic response (sxx + syy + szz, by
 superposition: the loads share their constraints) gives K = p / (dV/V); the FEM's must be
@@ -7,9 +7,9 @@ the closed form E / (3 (1 - 2 nu)) (its homogeneous solution is exact at the nod
 import numpy as np
 import pytest
 
-from harness.mechanics import statics
 from harness.case.reader import load_case
 from harness.export.vtu import read_vtu
+from harness.mechanics import statics
 from harness.models.volume import effective_bulk_modulus, load
 from harness.stages import StageContext
 from harness.stages import sms as stage
@@ -44,6 +44,7 @@ method = "gauss-newton"
 @pytest.fixture(scope="module")
 def bar(tmp_path_factory):
     import meshio
+
     from harness.geometry import grid_points
     from harness.models.anisotropic import hex_to_tets
     from harness.models.topology import grid_structure

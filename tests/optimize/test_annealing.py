@@ -5,10 +5,10 @@ improvement on recoverable problems."""
 import numpy as np
 import pytest
 
+from harness.linalg.sparse import single_thread_blas
 from harness.optimize import optimize
 from harness.optimize.incremental import IncrementalG
 from harness.optimize.synthetic import recoverable_problem
-from harness.linalg.sparse import single_thread_blas
 
 
 @pytest.fixture(autouse=True)

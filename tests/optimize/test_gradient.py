@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from harness.linalg.sparse import single_thread_blas
 from harness.optimize import FitProblem, optimize
 from harness.optimize.gradient import freq_term_and_grad, frequencies, value_and_grad
 from harness.optimize.synthetic import basic_loads, grid_network, recoverable_problem, solve_network
-from harness.linalg.sparse import single_thread_blas
 
 
 @pytest.fixture(autouse=True)

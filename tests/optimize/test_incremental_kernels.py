@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as spla
 
+from harness.linalg.sparse import single_thread_blas
 from harness.optimize import incremental as inc
 from harness.optimize.incremental import IncrementalG
-from harness.linalg.sparse import single_thread_blas
 from harness.optimize.synthetic import recoverable_problem
 
 
@@ -106,6 +106,7 @@ def test_loads_sharing_K_with_different_weights(mode):
     """Two loads on the same free dofs but with different dof weights: one factorisation,
     two stacked Gram sets; G still matches the full re-solve."""
     from dataclasses import replace
+
     from harness.optimize.problem import FitProblem
     base, _ = recoverable_problem((5, 4), sigma=0.3, seed=6)
     b0 = base.blocks[0]

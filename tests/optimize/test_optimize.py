@@ -7,10 +7,9 @@ import numpy as np
 import pytest
 
 from harness.errors import SpringbenchError
+from harness.linalg.sparse import Factor, nested_dissection, single_thread_blas
 from harness.optimize import OPTIMIZERS, FitProblem, optimize
-from harness.linalg.sparse import Factor, nested_dissection
 from harness.optimize.synthetic import basic_loads, grid_network, recoverable_problem
-from harness.linalg.sparse import single_thread_blas
 
 
 @pytest.fixture(autouse=True)
@@ -128,6 +127,7 @@ def test_multifrontal_cholesky_matches_direct_solve(shape, big, monkeypatch):
     """Against SuperLU; ``big`` = 1: every front takes the threaded path (BLAS threads
     restored inside the single-thread block), which must give the same factor."""
     import scipy.sparse.linalg as spla
+
     from harness.linalg import multifrontal
     from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
     if big is not None:

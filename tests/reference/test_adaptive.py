@@ -12,8 +12,8 @@ import skfem
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 import reference
-from harness.case.reader import load_case
 from harness.case.elasticity import densities, element_stiffness
+from harness.case.reader import load_case
 from reference import estimator
 from reference.adaptive import solve_adaptive
 from reference.fem import Discretisation

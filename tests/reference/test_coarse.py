@@ -5,13 +5,13 @@ against independent fine solves (plain scikit-fem, the user's mesh refined)."""
 import numpy as np
 import pytest
 import skfem
+from test_adaptive import CANTILEVER, at_vertices, independent, mesh_case
 
 import reference
 import reference.adaptive as adaptive
 from reference import coarse
 from reference.fem import Discretisation
 from reference.mesh import base_mesh
-from test_adaptive import CANTILEVER, at_vertices, independent, mesh_case
 
 
 def test_transfer_reproduces_the_coarse_polynomials_and_lies_in_the_fine_space():

@@ -12,11 +12,10 @@ import textwrap
 
 import numpy as np
 import pytest
+from independent_elasticity import extrapolated_shear
 
 import reference
 from harness.case.reader import load_case
-
-from independent_elasticity import extrapolated_shear
 
 E, NU, S = 1000.0, 0.3, 1.0
 
@@ -63,7 +62,7 @@ def test_graded_reference_against_the_independent_solve(tmp_path, size):
     assert np.all(est >= err), (err / scale, est / scale)           # the estimate bounds the error
     assert est.max() < 10 * max(err.max(), 1e-4 * scale)            # and is not vacuous
     assert sol.error_estimate["shear-xz"] >= err.max() / scale * 0.5
-    # the uniform P2 tets of the old default are much worse at similar cost
+    # uniform P2 tets are much worse at similar cost
     base = shear_case(tmp_path, size, 0)
     tets = dataclasses.replace(base, reference=dataclasses.replace(base.reference, cell="tet", divisions=6,
                                                                    method="refine"))

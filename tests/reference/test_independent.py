@@ -154,9 +154,9 @@ def test_long_axes_grade_the_end_faces_like_the_short_ones():
         np.testing.assert_allclose(x[:k + 1], y[:k + 1], atol=1e-15)    # the face zone of the short axis
         h = np.diff(x)
         assert h[k] / h[k - 1] < (h[k - 1] / h[k - 2]) * 1.5            # no jump in cell size at the junction
-        old = ie.quarter_mesh(size, n, 2.5, knot=0.75)
-        assert all(np.array_equal(a, b) for a, b in zip((y, z), old[1:]))
-        assert x[1] < old[0][1] / 5                                     # the old long axis: 2.5x+ coarser
+        plain = ie.quarter_mesh(size, n, 2.5, knot=0.75)
+        assert all(np.array_equal(a, b) for a, b in zip((y, z), plain[1:]))
+        assert x[1] < plain[0][1] / 5                                   # one power zone: 2.5x+ coarser
     cube = (3.0, 3.0, 3.0)
     assert all(np.array_equal(a, b) for a, b in zip(ie.quarter_mesh(cube, 8, 2.5, 0.75, True),
                                                     ie.quarter_mesh(cube, 8, 2.5, 0.75)))

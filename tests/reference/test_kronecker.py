@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import skfem
 from skfem.helpers import sym_grad
+from test_tensorpre import _orthotropic  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
 from reference.graded import graded_axes, tensor_mesh
 from reference.gridvalues import GridField
 from reference.kronecker import KroneckerStiffness, axis_matrices
-from test_tensorpre import _orthotropic  # noqa: E402
 
 
 def test_axis_matrices_are_the_q2_element_matrices():

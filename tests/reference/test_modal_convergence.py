@@ -6,8 +6,8 @@ import pytest
 
 import reference
 from harness.case.reader import load_case
-from harness.models.sms import build_network
 from harness.mechanics.modal import frequencies
+from harness.models.sms import build_network
 
 CASE = """
 name = "modal-lattice"

@@ -75,8 +75,10 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     assembled here with scikit-fem's own forms, and converge fast over the levels
     (h^(2p): the next level's change is a fraction of this one's)."""
     import dataclasses
+
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
+
     from reference import solution
 
     case = _case(tmp_path)

@@ -14,9 +14,9 @@ import pytest
 import skfem
 
 import reference
+from harness.case.loadsets import stretch_closed_form
 from harness.case.reader import load_case
 from harness.errors import ModelError
-from harness.case.loadsets import stretch_closed_form
 from reference.fem import Discretisation
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -69,6 +69,7 @@ def rel_err(u, exact):
 @pytest.mark.parametrize("order", ["P1", "P2"])
 def test_voigt_assembly_equals_scikit_fem_linear_elasticity(cell, order):
     from skfem.models.elasticity import lame_parameters, linear_elasticity
+
     from harness.case.elasticity import isotropic_compliance
     M = {"tri": skfem.MeshTri, "quad": skfem.MeshQuad, "tet": skfem.MeshTet, "hex": skfem.MeshHex}[cell]
     dim = 2 if cell in ("tri", "quad") else 3
@@ -141,9 +142,11 @@ G_fibre = {GLT}
     a, e = (np.deg2rad(30.0), np.deg2rad(25.0)) if dim == 3 else (np.deg2rad(35.0), 0.0)
     f = np.array([np.cos(a) * np.cos(e), np.sin(e), np.sin(a) * np.cos(e)]) if dim == 3 else \
         np.array([np.cos(a), np.sin(a), 0.0])
-    t2 = np.cross(f, [0.3, 0.2, 1.0]); t2 /= np.linalg.norm(t2)
+    t2 = np.cross(f, [0.3, 0.2, 1.0])
+    t2 /= np.linalg.norm(t2)
     Q = np.array([f, t2, np.cross(f, t2)])  # any frame with the fibre first (transverse isotropy)
-    sigma = np.zeros((3, 3)); sigma[0, 0] = s
+    sigma = np.zeros((3, 3))
+    sigma[0, 0] = s
     eps = _rotated_strain(S, Q, sigma)
     # u = L (x - x0): u_x = eps_xx x (rollers at x0); the pinned corners fix the rotation
     L = np.zeros((3, 3))
@@ -515,14 +518,15 @@ def test_iterative_solvers_match_direct(tmp_path, method):
 
 
 def test_mass_matrix_total_mass_with_region_density(tmp_path):
-    from reference.mesh import base_mesh
     from harness.case.elasticity import densities
+    from reference.mesh import base_mesh
     extra = "[[material.regions]]\nbox = [[0.3, -1.2], [1.55, -0.4]]\nE = 200.0\ndensity = 5.0"
     case = rect_case(tmp_path, "quad", "P2", extra=extra + "\n", divisions=2)
     d = Discretisation(base_mesh(case), "quad", "P2")
     rho = densities(case.material, d.centroids())
     M = d.mass(rho)
-    ones_x = np.zeros(d.ndof); ones_x[0::2] = 1  # a unit translation along x
+    ones_x = np.zeros(d.ndof)
+    ones_x[0::2] = 1  # a unit translation along x
     total = ones_x @ M @ ones_x
     assert total == pytest.approx(5.0 * 1.25 * 0.8 + 1.0 * 1.25 * 0.8, rel=1e-12)
 

@@ -142,7 +142,7 @@ def test_thin_nearly_incompressible_bar_closed_form(method):
 
 
 def test_thin_bar_bending_matches_dense():
-    """The same bar clamped and bent (nu = 0.49): the system AMG used to give up on."""
+    """The same bar clamped and bent (nu = 0.49): a system plain AMG gives up on."""
     A, b, R, X, _, _ = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
     for method in ("amg", "auto"):
@@ -285,7 +285,7 @@ def test_auto_chooses_by_the_cholesky_estimate(small, monkeypatch):
     solvers.solve(A, b, "auto", R, coords=X, info=info)
     assert info["method"] == "cholesky" and 0 < info["estimate"]["gflop"] < solvers.CHOLESKY_GFLOP
     monkeypatch.setattr(solvers, "CHOLESKY_GFLOP", info["estimate"]["gflop"] / 2)
-    x = solvers.solve(A, b, "auto", R, coords=X, info=info)
+    solvers.solve(A, b, "auto", R, coords=X, info=info)
     assert info["method"] == "amg" and info["fallbacks"] == []
     assert info["residual"] <= info["rtol"]
     assert solvers.choose("auto", 1000, 3) == "direct" and solvers.choose("auto", 10 ** 6, 3) == "amg"

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_graded import box_case  # noqa: E402
+from test_kronecker import _skfem_stiffness  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
 from reference import levels, tensorsolve
 from reference.graded import graded_axes, q2_doflocs, tensor_mesh
 from reference.gridvalues import GridField
-from test_graded import box_case  # noqa: E402
-from test_kronecker import _skfem_stiffness  # noqa: E402
 
 
 def _problem():

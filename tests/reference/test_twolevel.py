@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import skfem
+from test_solvers import elasticity
 
 from reference import solvers, twolevel
 from reference.fem import Discretisation
-from test_solvers import elasticity
 
 CELLS = {"tet": skfem.MeshTet, "hex": skfem.MeshHex, "tri": skfem.MeshTri, "quad": skfem.MeshQuad}
 
@@ -126,8 +126,8 @@ def test_thin_nearly_incompressible_bar_closed_form():
 def test_solve_system_hands_the_coarse_space_over():
     """reference.problem.solve_system with 'two-level' on a Discretisation: the same
     displacements as with the Cholesky."""
-    from reference.problem import solve_system
     from harness.case.elasticity import isotropic_compliance
+    from reference.problem import solve_system
     mesh = skfem.MeshTet.init_tensor(*[np.linspace(0, L, k + 1) for L, k in zip((2.0, 1.0, 1.0), (4, 2, 2))])
     d = Discretisation(mesh, "tet", "P2")
     K = d.stiffness(np.tile(np.linalg.inv(isotropic_compliance(1e5, 0.45)), (d.nelems, 1, 1)))

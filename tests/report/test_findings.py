@@ -97,6 +97,7 @@ def test_case_lines_pick_the_fitters_row_and_flag_it():
     """A hand-made summary: two seeds of a case whose L-BFGS-B fit (lowest fitted G) is
     memorised and worse than the rule lloyd held out; a case of rules only; a case without G."""
     import pandas as pd
+
     from harness.report.findings import case_lines, legend, summary_text
     rows = []
     for seed in (0, 1):
@@ -131,6 +132,7 @@ def test_case_lines_pick_the_fitters_row_and_flag_it():
 def test_headline_sentences_carry_the_numbers_of_hand_made_tables():
     """The page's findings on small summaries whose answers are worked out here."""
     import pandas as pd
+
     from harness.report.claims import deussen, nu_sweep, verification
     d = pd.DataFrame([
         dict(case="f8", seed=0, optimizer="sa", objective="G", G_initial=2.0, G_final=0.5, paper_G_initial=2.8,
@@ -178,6 +180,7 @@ def test_the_engine_tables_finding_and_summary_say_what_a_hand_made_table_holds(
     chosen here: the sentence gives the spans at each nu and the settled count; the
     summary has one column per engine and model and names a load that did not settle."""
     import pandas as pd
+
     from harness.report.bench_tables import bench_table, engines_finding
     rows = []
     for nu, own, ours, status in ((0.3, (0.20, 0.25), 0.05, "settled"), (0.49, (0.50, 0.70), 0.10, "not-settled")):
@@ -196,6 +199,6 @@ def test_the_engine_tables_finding_and_summary_say_what_a_hand_made_table_holds(
     assert list(table.columns) == ["body", "tets", "nu", "newton-tets: own (E, nu)", "mujoco-flex: own (E, nu)",
                                    "newton-springs: springbench rule"]
     assert table.iloc[1]["newton-springs: springbench rule"] == "0.100 (see loads)" and text in note
-    from harness.report.engines import engines_tables            # the suite's summary.csv: engine_status
+    from harness.report.engines import engines_tables  # the suite's summary.csv: engine_status
     [(_, suite_table, suite_note)] = engines_tables(df.rename(columns={"status": "engine_status"}))
     assert suite_table.equals(table) and text in suite_note

@@ -4,8 +4,7 @@ import math
 
 import pandas as pd
 
-from harness import cli
-from harness import paths
+from harness import cli, paths
 from harness.report.frames import headline_frame
 
 

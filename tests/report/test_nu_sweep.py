@@ -93,7 +93,7 @@ def family_rows(spread=0.01, choice="springs-prior1"):
 
 
 def test_family_frame_takes_fitted_rows_never_the_heldout_best_and_rules_as_rows():
-    from harness.report.nu_sweep import family_frame, families_of
+    from harness.report.nu_sweep import families_of, family_frame
     f = family_frame(family_rows())
     assert list(f["model"]) == ["springs", "springs+volume", "p1", "rule: lloyd", "rule: vangelder"]
     assert list(f["kind"]) == ["class"] * 3 + ["rule"] * 2

@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def fake_bench(folder: Path, monkeypatch, frame: str):
     """``bench reference`` runs a module written here whose run() returns ``frame`` (Python source)."""
     import re
+
     from harness.bench import BENCHES
     name = "fake_bench_" + re.sub(r"\W", "_", folder.name)      # one module per test (imports are cached)
     (folder / f"{name}.py").write_text(f"import pandas\ndef run(quick):\n    return {frame}\n")
@@ -93,6 +94,7 @@ def test_report_and_bench_write_into_runs_by_default(tmp_path, monkeypatch, caps
     assert "--quick run would overwrite them" in capsys.readouterr().err
     args = cli.build_parser().parse_args(["bench", "reference", "--quick"])
     import pandas as pd
+
     from harness.commands import bench
     fake_bench(tmp_path, monkeypatch, "pandas.DataFrame({'n': [1]})")
     assert bench.main(args) == 0

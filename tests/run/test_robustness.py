@@ -26,7 +26,7 @@ from test_runner import fake  # noqa: E402,F401  (fixture: the fake stage)
 
 from harness import cli  # noqa: E402
 from harness.case.reader import Case, load_case  # noqa: E402
-from harness.errors import CaseError, SpringbenchError  # noqa: E402
+from harness.errors import CaseError  # noqa: E402
 
 CATALOGUE = sorted((HERE / "bad_inputs").glob("*.toml"))
 ERROR = re.compile(r"^springbench( \w+)?: (error: )?")
@@ -52,7 +52,7 @@ def cli_run(argv, capsys) -> tuple[int, list[str], str]:
 
 
 def test_catalogue_is_large_and_annotated():
-    """Issue 13: >= 150 distinct bad inputs, each tested for exit 2 and one line: the case
+    """>= 150 distinct bad inputs, each tested for exit 2 and one line: the case
     files here, the CLI flag cases below, and the tables of tests/test_bad_*.py (calibrate
     flags and meshes, case-file edits per section, score/reference/build/report inputs,
     unwritable outputs and full disks)."""
@@ -92,8 +92,9 @@ def catalogue_run(tmp_path_factory):
     [full]-only file with --full): every file fails on its own, the suite carries on."""
     import contextlib
     import io
-    from harness import stages as stage_registry
     import shutil
+
+    from harness import stages as stage_registry
     work = tmp_path_factory.mktemp("catalogue")
     cat = work / "bad_inputs"  # a copy: the fake stage writes calls.log beside the case files
     shutil.copytree(HERE / "bad_inputs", cat)
@@ -205,7 +206,8 @@ nu = 0.25
 # -- property test: the parser returns a Case or raises CaseError, nothing else -----------------
 
 hypothesis = pytest.importorskip("hypothesis")
-from hypothesis import HealthCheck, given, settings, strategies as st  # noqa: E402
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st
 
 KEYS = ["name", "dim", "description", "tags", "body", "shape", "size", "origin", "vertices", "file",
         "format", "parts", "box", "material", "E", "nu", "density", "plane", "fibre", "E_fibre",

@@ -22,10 +22,12 @@ if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 FAKE = "test_runner_fakestages"
 
-from harness import cli, stages as stage_registry  # noqa: E402
+from plate_case import plate_case  # noqa: E402
+
+from harness import cli  # noqa: E402
+from harness import stages as stage_registry
 from harness.report.build import TIMING  # noqa: E402
 from harness.run.runner import run_suite  # noqa: E402
-from plate_case import plate_case  # noqa: E402
 
 
 def write_case(folder: Path, name: str, desc: str = "", extra: str = "", tags=(), file=None) -> Path:

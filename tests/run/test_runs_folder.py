@@ -6,8 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from harness import cli
-from harness import paths
+from harness import cli, paths
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -45,6 +44,7 @@ def test_a_quick_run_into_the_published_folder_is_refused(folders, capsys):
 def test_a_second_run_into_a_locked_folder_is_refused_and_a_stale_lock_taken_over(folders, tmp_path, capsys):
     import subprocess
     import sys
+
     from harness.run.lock import LOCK
     _, runs, case = folders
     runs.mkdir()
@@ -65,6 +65,7 @@ def test_a_second_run_into_a_locked_folder_is_refused_and_a_stale_lock_taken_ove
 def test_stale_scratch_folders_are_removed(tmp_path):
     import subprocess
     import sys
+
     from harness.run.lock import clean_stale_scratch
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()

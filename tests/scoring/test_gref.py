@@ -18,11 +18,9 @@ if str(HERE) not in sys.path:
 
 from test_sms import TINY, ClosedFormRef  # noqa: E402
 
-from harness.report import build as report  # noqa: E402
 from harness.case.reader import load_case  # noqa: E402
-from harness.scoring import (g_arrays, g_ref_arrays, ref_error_max, ref_status,  # noqa: E402
-                             reference_error)
-
+from harness.report import build as report  # noqa: E402
+from harness.scoring import g_arrays, g_ref_arrays, ref_error_max, ref_status, reference_error  # noqa: E402
 
 # -- the function ---------------------------------------------------------------------------
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
+from harness.case.loadsets import basic2d, stretch_closed_form
 from harness.case.reader import Body, Case, Material
 from harness.geometry import grid_points
 from harness.mechanics.homogenize import boundary_share
-from harness.case.loadsets import basic2d, stretch_closed_form
 from harness.models.sms import make_network
 from harness.models.topology import grid_structure
 from harness.scoring import g_arrays, node_weights, score

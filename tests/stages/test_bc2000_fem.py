@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.case.elasticity import isotropic_compliance, rotate, transversely_isotropic_compliance
+from harness.io.meshfile import read_mesh
 from harness.mechanics import anisotropy as an
 from harness.mechanics.dynamics import Loading, jacobian
 from harness.mechanics.static_path import solve_static_path
-from harness.case.elasticity import isotropic_compliance, rotate, transversely_isotropic_compliance
-from harness.io.meshfile import read_mesh
 from harness.models.anisotropic import build_anisotropic
 from harness.models.massspring import MassSpring
 
@@ -75,6 +75,7 @@ def test_fem_reference_under_pulls_matches_the_closed_form():
     """The FEM reference of a transversely isotropic cube (fibre at 45 degrees in x-y) under
     the direction pulls: E_d equals the closed-form modulus (uniform stress: exact)."""
     import dataclasses
+
     from harness.case.reader import load_case
     from reference import solve
     case = load_case(ROOT / "cases/bourguignon2000/fem_cube333_tetra_fibre.toml")
@@ -213,7 +214,6 @@ def test_linearised_model_is_the_small_load_limit_of_the_statics():
     """tip_deflection_linear_program_load is the derivative of the nonlinear statics."""
     from harness.case.reader import load_case
     from harness.stages import bc2000
-    from harness.mechanics.static_path import solve_static
     case = load_case(ROOT / "cases/bourguignon2000/cantilever_beam336.toml")
     model, dyn = dict(case.section("model")), dict(case.section("dynamics"))
     mesh = read_mesh(REF / "meshes/tetra/beam_336/cube.mesh")
@@ -250,7 +250,7 @@ def test_pull_on_a_body_without_corner_nodes_is_a_one_line_error():
 
 
 def test_cantilever_load_without_force_is_a_case_error(tmp_path):
-    """A [loads] case with no force gave NaN tip ratios; now a one-line CaseError before any solve."""
+    """A [loads] case with no force is a one-line CaseError before any solve (not NaN tip ratios)."""
     from harness.case.reader import load_case
     from harness.errors import CaseError
     from harness.stages import StageContext, bc2000
@@ -267,6 +267,7 @@ def test_inverted_elements_by_hand():
     """One of two tets mirrored through its base plane is inside out; a hex with one
     corner pushed through the opposite face has a negative sub-tetrahedron."""
     from types import SimpleNamespace
+
     from harness.stages.bc2000 import inverted_elements
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0, 0, -1]], float)
     m = SimpleNamespace(points=pts, cells=np.array([[0, 1, 2, 3], [0, 2, 1, 4]]))

@@ -12,9 +12,9 @@ import scipy.sparse as sp
 
 from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
+from harness.mechanics.modal import matrix_eigenvalues, matrix_frequencies
 from harness.stages import bc2000_linear as linear
 from harness.stages.bc2000 import build
-from harness.mechanics.modal import matrix_eigenvalues, matrix_frequencies
 from harness.stages.bc2000_modes import heldout_modes
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -135,13 +135,13 @@ class _FEM:
 
 @needs_data
 def test_hexa_MT_modes_under_the_clamp_are_not_zero():
-    """Issue 12: the hexa MT rows had f1_ratio 0. The element model's linearised K (the
+    """The hexa MT rows' f1_ratio is not 0. The element model's linearised K (the
     stage's complex-step unit stiffnesses) equals a central finite-difference Jacobian of
     its nonlinear forces; that K is not symmetric (the hexa volume springs act on the
     vertices only), has no zero singular value under the sag's x0 clamp, and the general
     eigen-solve of (K, M) written here gives real positive eigenvalues; the stage's modes
-    match it. A symmetric solver, which reads one triangle of K, gave a negative lowest
-    eigenvalue (the old 0)."""
+    match it. A symmetric solver, which reads one triangle of K, gives a negative lowest
+    eigenvalue (read as a zero frequency)."""
     case = load_case(HEXA)
     assert case.heldout[0] == "sag"
     mesh = read_mesh(case.body.file, case.body.format)
@@ -174,4 +174,4 @@ def test_hexa_MT_modes_under_the_clamp_are_not_zero():
     assert cols["freq_error_heldout"] == pytest.approx(rms(f, np.ones(n)), rel=1e-6)
     Kf = Kfd[free][:, free]
     s = 1 / np.sqrt(np.repeat(mass, 3)[free])
-    assert sl.eigh(Kf * s[:, None] * s[None, :], eigvals_only=True)[0] < 0   # the old reading
+    assert sl.eigh(Kf * s[:, None] * s[None, :], eigvals_only=True)[0] < 0   # a symmetric solver's reading

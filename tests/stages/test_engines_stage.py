@@ -11,12 +11,12 @@ import importlib.util
 import numpy as np
 import pandas as pd
 import pytest
+from pack_solve import held_solve
 
 from harness.case.reader import load_case
 from harness.paths import ROOT
 from harness.stages import STAGES
 from harness.stages import engines as S
-from pack_solve import held_solve
 
 FOLDER = ROOT / "cases" / "engines"
 
@@ -30,7 +30,7 @@ def _generator():
 
 def test_case_files_are_the_generators_output_and_valid():
     gen = _generator()
-    assert len(list(FOLDER.glob("*.toml"))) == len(gen.DESCRIPTIONS) * len(gen.SIZES) * len(gen.NUS) == 18
+    assert len(list(FOLDER.glob("*.toml"))) == len(gen.DESCRIPTIONS) * len(gen.SIZES) * len(gen.NUS) == 24
     for body in gen.DESCRIPTIONS:
         tets = []
         for resolution in gen.SIZES:
@@ -77,6 +77,14 @@ def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_pa
 
 def test_an_engine_not_installed_leaves_rows_naming_the_extra(monkeypatch, tmp_path):
     monkeypatch.setattr(S, "_installed", lambda engine: False)
+    calls = []
+    monkeypatch.setattr(S, "cli", lambda *argv: calls.append(argv[0]) or type("P", (), {"returncode": 0})())
+    monkeypatch.setattr("harness.export.pack.read_pack", lambda folder: None)
+    spec = dict(load_case(FOLDER / "beam-coarse_nu0.30.toml").section("model"), loads=("tip",))
+    rows = S.study(tmp_path / "m.msh", 1e5, 0.3, 1e3, spec, tmp_path)
+    assert calls == ["pack"]                              # no export made for an engine that is missing
+    assert [(r["engine"], r["engine_status"]) for r in rows] == [
+        ("newton-tets", "not-installed"), ("mujoco-flex", "not-installed"), ("newton-springs", "not-installed")]
     rows = S.engine_rows(None, tmp_path, "mujoco-flex", ["tip", "sag"], tmp_path / "run")
     assert [r["load"] for r in rows] == ["tip", "sag"]
     assert all(r["engine_status"] == "not-installed" and '".[engines]"' in r["note"] for r in rows)

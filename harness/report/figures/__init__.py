@@ -84,6 +84,7 @@ def _stamped(folder: Path, mods, redraw: bool) -> list[Path]:
     and its code) differs from the one recorded in the folder's STAMP file with the PNGs it
     drew; the file is rewritten only when something changed (byte-identical otherwise)."""
     import json
+
     from harness.outputs import write_changed
     sfile = folder / STAMP
     try:
