@@ -26,12 +26,12 @@ import pandas as pd
 
 from harness.errors import CaseError, SimulationError
 from harness.mechanics.dynamics import simulate
+from harness.models.masses import sub_tet_volumes
 from harness.stages.bc2000_build import (  # noqa: F401
     _cells,
     _dt,
     _label,
     _meshes,
-    _sub_tet_volumes,
     build,
     fibre_angles,
     loading,
@@ -205,7 +205,7 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
 def inverted_elements(model, x) -> int:
     """Elements with a sub-tetrahedron of negative signed volume at x (turned inside out)."""
     cells = np.asarray(model.cells)
-    flipped = np.sign(_sub_tet_volumes(x, cells)) != np.sign(_sub_tet_volumes(model.points, cells))
+    flipped = np.sign(sub_tet_volumes(x, cells)) != np.sign(sub_tet_volumes(model.points, cells))
     return int(flipped.any(axis=1).sum())
 
 
