@@ -40,7 +40,25 @@ def node_weights(classes: np.ndarray, weights) -> np.ndarray:
 
 
 def g_arrays(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names=None) -> ScoreResult:
-    """Scores from plain arrays: u_ref, u (L, n, dim), classes (n,), weights (a, b, c)."""
+    """The G criteria of a model's displacements against the reference's.
+
+    Parameters
+    ----------
+    u_ref, u : ndarray, shape (L, n, dim)
+        The reference's and the model's displacements of L loads at the n nodes (m).
+    classes : ndarray of int, shape (n,)
+        Each node's class: 0 inner, 1 border, 2 corner (harness.case.parts).
+    weights : (float, float, float)
+        a:b:c of G_{a:b:c}: the weight of inner, border and corner nodes.
+    names : list of str, optional
+        The loads' names (default load0, load1, ...).
+
+    Returns
+    -------
+    ScoreResult
+        G (m), G_s (every node weighing alike, m), G_norm (G / the reference's weighted
+        norm), and per load G and G_norm.
+    """
     u_ref = np.asarray(u_ref, float)
     u = np.asarray(u, float)
     if u_ref.shape != u.shape or u.ndim != 3:
@@ -91,9 +109,26 @@ def case_weights(case, weights=None) -> tuple[float, float, float]:
 
 
 def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
-    """G of a spring network on a case against a ``ReferenceSolution`` (``weights``
-    default to the case's [score] weights). ``statics``: an already solved
-    ``harness.mechanics.statics.StaticsResult`` to reuse."""
+    """G of a spring network on a case against its reference.
+
+    Parameters
+    ----------
+    network : harness.models.springs.Network
+        Points, springs, constants, masses and node classes.
+    case : harness.case.reader.Case
+        The loads and constraints the network is solved under.
+    ref : reference.ReferenceSolution
+        The FEM reference of the same case.
+    weights : (float, float, float), optional
+        a:b:c of G_{a:b:c} (default: the case's ``[score] weights``).
+    statics : harness.mechanics.statics.StaticsResult, optional
+        An already solved linear statics of the network to reuse.
+
+    Returns
+    -------
+    ScoreResult
+        As :func:`g_arrays`.
+    """
     from harness.mechanics import statics as st
     res = statics or st.solve(network, case)
     u_ref = reference_displacements(ref, network.points, res.names)

@@ -225,7 +225,24 @@ class ReferenceSolution:
 # -- solve ----------------------------------------------------------------------------
 
 def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolution:
-    """The reference solution of every load case of ``case`` (harness.case.reader.Case)."""
+    """The reference solution of every load case of a case.
+
+    Parameters
+    ----------
+    case : harness.case.reader.Case
+        The body, material, loads and ``[reference]`` settings (element, cell, tol,
+        max_refine, solver, method).
+    cache : bool
+        Read a stored solution of the same inputs and code, and store a new one.
+    status : callable
+        Called with short progress messages during long solves.
+
+    Returns
+    -------
+    ReferenceSolution
+        Displacements of every load at any point (``evaluate``), with the estimated
+        error there (``estimate``), the solve history, the solvers used and the modes.
+    """
     if not case.loads:
         raise ModelError("the case has no load cases", file=str(case.path), field="loads",
                          fix="add loads.set or [[loads.case]]")

@@ -248,7 +248,19 @@ def _merge(base: dict, over: dict) -> dict:
 
 
 def load_case(path, mode: str = "quick") -> Case:
-    """Read and validate a case file; ``mode`` merges its ``[quick]``/``[full]`` table."""
+    """Read and validate a case file; any mistake is a one-line CaseError.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML case file (schema: docs/case-files.md).
+    mode : {"quick", "full"}
+        The table merged over the base: the case's ``[quick]`` or ``[full]``.
+
+    Returns
+    -------
+    Case
+    """
     path = Path(path)
     file = str(path)
     try:

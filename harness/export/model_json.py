@@ -10,7 +10,23 @@ from pathlib import Path
 
 
 def export(net, out: Path, meta: dict | None = None) -> dict:
-    """MODEL.vtu and MODEL.json (units in the module docstring); returns the JSON data."""
+    """Write a model for engines: MODEL.vtu and MODEL.json (SI units, the module docstring).
+
+    Parameters
+    ----------
+    net : harness.models.springs.Network
+        The spring/mass model (with its volume or kn term, if any).
+    out : Path
+        MODEL.vtu; the JSON goes beside it with the suffix .json.
+    meta : dict, optional
+        Extra keys for the JSON (material, loads, the fit's record); ``damping_ratio``
+        sets the springs' damping.
+
+    Returns
+    -------
+    dict
+        The JSON's data.
+    """
     import numpy as np
 
     from harness.export.engine import spring_damping, stable_step

@@ -80,8 +80,22 @@ def _bad(message: str, file, fix: str, field: str | None = None):
 
 
 def write_pack(pack: Pack, out_dir) -> Path:
-    """Write ``pack`` into the folder ``out_dir`` (mesh.vtu, loads/<name>.npz,
-    problem.json last, each file atomically); returns the manifest's path."""
+    """Write a benchmark pack: mesh.vtu, loads/<name>.npz and problem.json (written
+    last), each file atomically.
+
+    Parameters
+    ----------
+    pack : Pack
+        The mesh, material and loads (held nodes, nodal forces, FEM displacements and
+        their error estimates).
+    out_dir : str or Path
+        The pack's folder (made if missing).
+
+    Returns
+    -------
+    Path
+        problem.json, the manifest.
+    """
     import meshio
 
     from harness.outputs import atomic_write
@@ -118,8 +132,22 @@ def write_pack(pack: Pack, out_dir) -> Path:
 
 
 def read_pack(folder) -> Pack:
-    """The Pack in ``folder`` (or given its problem.json), every array checked against
-    the manifest: one-line errors naming the file and the fix."""
+    """Read a benchmark pack, every array checked against its manifest.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The pack's folder or its problem.json.
+
+    Returns
+    -------
+    Pack
+
+    Raises
+    ------
+    SpringbenchError
+        One line naming the file and the fix (missing file, wrong shape, bad manifest).
+    """
     import meshio
     folder = Path(folder)
     if folder.name == "problem.json":

@@ -22,7 +22,22 @@ def _pad3(a: np.ndarray) -> np.ndarray:
 
 
 def write_vtu(path, network, displacements: dict | None = None) -> Path:
-    """Write ``network`` (and {load name: (n, dim)} displacements) to ``path``."""
+    """Write a spring network as VTU (ParaView), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The .vtu file.
+    network : harness.models.springs.Network
+        Points, springs (line cells with ``stiffness`` and ``group``), masses, classes.
+    displacements : dict of str to ndarray (n, dim), optional
+        Point data ``u_<load>`` per load.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     import meshio
 
     from harness.outputs import staged
@@ -41,7 +56,20 @@ def write_vtu(path, network, displacements: dict | None = None) -> Path:
 
 
 def read_vtu(path):
-    """(network, displacements {load: (n, dim)}) from a VTU file."""
+    """Read a spring network written by :func:`write_vtu` (or any VTU of line cells with
+    cell data ``stiffness``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The .vtu file.
+
+    Returns
+    -------
+    network : harness.models.springs.Network
+    displacements : dict of str to ndarray (n, dim)
+        Its ``u_<load>`` point data by load name.
+    """
     import contextlib
     import io
 

@@ -107,7 +107,27 @@ def check_method_options(method: str, options: dict) -> dict:
 
 def optimize(problem: FitProblem, method: str, options: dict | None = None, seed: int = 0,
              status=None) -> FitResult:
-    """Run optimiser ``method`` on ``problem``; randomness comes only from ``seed``."""
+    """Fit a model's constants to the reference.
+
+    Parameters
+    ----------
+    problem : harness.optimize.problem.FitProblem
+        The model, its loads and the reference displacements it is fitted to.
+    method : str
+        A name of ``OPTIMIZERS`` (the case files' ``[optimizer] method``).
+    options : dict, optional
+        The method's options (checked: unknown keys are one-line errors).
+    seed : int
+        The only source of the fit's randomness.
+    status : callable, optional
+        Called with short progress messages.
+
+    Returns
+    -------
+    FitResult
+        The constants found, G before and after, the trace, wall seconds, and ``info``
+        (method, seed, why it stopped, evaluations).
+    """
     if method not in OPTIMIZERS:
         raise SpringbenchError(f"unknown optimizer method '{method}'", field="optimizer.method",
                                fix=f"use one of {sorted(OPTIMIZERS)}")

@@ -35,7 +35,7 @@ SUITES = {
         "and nu, and call gaps inside a fit's spread over its starts ties."),
     "engines": (
         "Engines: how far each engine's deformable body is from linear elasticity",
-        "Three gmsh bodies (a box beam, a curved elbow, a holed tapered bar) at two resolutions and nu = 0.3, "
+        "Four gmsh bodies (a box beam, a round bar, a curved elbow, a holed tapered bar) at two resolutions and nu = 0.3, "
         "0.45 and 0.49, clamped and loaded as a benchmark pack: each engine's own model from E and nu (NVIDIA "
         "Newton's tetrahedral FEM, MuJoCo's flex elasticity) and springbench's exports of the same mesh (the "
         "best stiffness rule, the calibrated model) run in Newton, all driven to static equilibrium on the CPU "

@@ -40,6 +40,6 @@ def test_the_page_shows_the_key_columns_and_the_docs_all():
     assert {"G_norm", "G_heldout", "G_ref", "status"} <= set(page) and len(page) < len(COLUMNS) / 2
     from harness.report.docs_gen import COL_BEGIN, COL_END, block, columns_reference
     text = (ROOT / "docs" / "columns.md").read_text(encoding="utf-8")
-    assert block(text, COL_BEGIN, COL_END) == columns_reference(), \
+    assert block(text, COL_BEGIN, COL_END).strip() == columns_reference().strip(), \
         "docs/columns.md differs from harness/report/columns.py: run python docs/generate.py"
     assert all(f"| `{c.name}` |" in text for c in COLUMNS)
