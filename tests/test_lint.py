@@ -9,14 +9,16 @@ import sys
 from harness.paths import ROOT
 
 CODE = ("harness", "reference", "tests", "cases", "examples", "docs")
-HISTORY = [r"\bissues? ?#?\d+", r"\bpreviously\b", r"\bformerly\b", r"\bthe old (?!file|one)", r"\bused to be\b",
-           r"\bthe former\b", r"\bwas changed\b", r"\bhad been\b", r"\bthe new default\b",
-           r"\bbefore this (?:session|change)\b", r"\bany ?more\b", r"\bearlier runs\b"]
+# the patterns spell their words with a character class, so this file does not match itself
+HISTORY = [r"\biss[u]es? ?#?\d+", r"\bprev[i]ously\b", r"\bform[e]rly\b", r"\bthe o[l]d (?!file|one)",
+           r"\bused t[o] be\b", r"\bthe for[m]er\b", r"\bwas ch[a]nged\b", r"\bhad be[e]n\b",
+           r"\bthe new def[a]ult\b", r"\bbefore this (?:sess[i]on|ch[a]nge)\b", r"\bany ?mo[r]e\b",
+           r"\bearlier r[u]ns\b"]
 EXTERNAL = re.compile(r"\b(numba|scikit-fem|meshio|newton|warp|mujoco|pyamg|scipy) issue", re.I)   # others' trackers
 
 
 def history_lines(text: str) -> list[str]:
-    """The lines of ``text`` that tell how the code used to be."""
+    """The lines of ``text`` that tell the code's past rather than what it is."""
     pattern = re.compile("|".join(HISTORY), re.I)
     return [ln.strip() for ln in text.splitlines() if pattern.search(ln) and not EXTERNAL.search(ln)]
 
@@ -31,14 +33,14 @@ def test_no_history_or_issue_numbers_in_the_code():
     found = []
     for folder in CODE:
         for path in sorted((ROOT / folder).rglob("*.py")):
-            if path.name in ("test_lint.py", "test_docs.py"):     # they hold the patterns
+            if path.name == "test_docs.py":     # it holds the docs' patterns
                 continue
             found += [f"{path.relative_to(ROOT)}: {ln}" for ln in history_lines(path.read_text())]
     assert not found, "\n".join(found)
 
 
 def test_the_history_scan_finds_history_and_spares_other_trackers():
-    text = ("# issue 12: the hexa rows had f1 0\nx = 1  # previously 2\n"
-            "# a crash in numba issue 8578\n# the old estimate was 0.12\n# the old file stays\n")
-    assert history_lines(text) == ["# issue 12: the hexa rows had f1 0", "x = 1  # previously 2",
-                                    "# the old estimate was 0.12"]
+    issue, before, old = "iss" + "ue 12", "prev" + "iously", "the o" + "ld"
+    lines = [f"# {issue}: the hexa rows had f1 0", f"x = 1  # {before} 2", "# a crash in numba iss" + "ue 8578",
+             f"# {old} estimate was 0.12", f"# {old} file stays"]
+    assert history_lines("\n".join(lines)) == [lines[0], lines[1], lines[3]]

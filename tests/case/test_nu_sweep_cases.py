@@ -5,12 +5,12 @@ training states; held out: sag, tip, tip2, torsion, bridge at a peak strain of ~
 every rule a row; the springs class's fit validated); the cylinder resolves its
 diameter."""
 
-import importlib.util
 import json
 import math
 
 import numpy as np
 import pytest
+from generator import generator
 
 from harness.case.reader import load_case
 from harness.case.sections import STIFFNESS_RULES
@@ -19,15 +19,8 @@ from harness.paths import ROOT
 FOLDER = ROOT / "cases" / "nu_sweep"
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location("nu_sweep_generate", FOLDER / "_generate.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_case_files_are_the_generators_output_and_valid():
-    gen = _generator()
+    gen = generator("nu_sweep")
     files = sorted(FOLDER.glob("*.toml"))
     assert len(files) == len(gen.BODIES) * len(gen.NUS)
     for body in gen.BODIES:
@@ -72,7 +65,7 @@ def test_heldout_magnitudes_give_a_peak_strain_of_1e3_by_beam_theory():
     """By hand, for the box 2 x 1 x 1 (E 1000, density 1): bending M = eps E I / c with
     I = 1/12, c = 1/2; sag w L^2 / 2 = M, w = rho g A; tip P L = M; bridge w L^2 / 12 = M;
     torsion w r / (2 G) = eps with r the corner's distance sqrt(1/2)."""
-    gen = _generator()
+    gen = generator("nu_sweep")
     eps, E, nu = 1e-3, 1000.0, 0.3
     M = eps * E * (1 / 12) / 0.5
     G = E / (2 * (1 + nu))

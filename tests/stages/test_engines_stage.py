@@ -6,11 +6,11 @@ springbench's rule export run in Newton scores what the export's own linear stat
 solved here, score; the mean rows are the means of the load rows. An engine that is not
 installed leaves rows that say which extra installs it."""
 
-import importlib.util
 
 import numpy as np
 import pandas as pd
 import pytest
+from generator import generator
 from pack_solve import held_solve
 
 from harness.case.reader import load_case
@@ -21,15 +21,8 @@ from harness.stages import engines as S
 FOLDER = ROOT / "cases" / "engines"
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location("engines_generate", FOLDER / "_generate.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
 def test_case_files_are_the_generators_output_and_valid():
-    gen = _generator()
+    gen = generator("engines")
     assert len(list(FOLDER.glob("*.toml"))) == len(gen.DESCRIPTIONS) * len(gen.SIZES) * len(gen.NUS) == 24
     for body in gen.DESCRIPTIONS:
         tets = []
