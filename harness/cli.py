@@ -1,17 +1,15 @@
 """The ``springbench`` command. Each subcommand is one module in ``harness.commands``
-registered in ``COMMANDS``; it defines ``HELP``, ``add_arguments(parser)`` and
+registered in ``harness.registry.COMMANDS``; it defines ``HELP``, ``add_arguments(parser)`` and
 ``main(args) -> int``. Bad input becomes one line on stderr and exit status 2."""
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 
 from harness.errors import SpringbenchError, error_lines
 from harness.outputs import os_error
-
-COMMANDS = ["run", "validate", "reference", "build", "score", "calibrate", "pack", "engines", "bench", "report", "rules"]
+from harness.registry import COMMANDS
 
 
 class _Parser(argparse.ArgumentParser):
@@ -19,17 +17,12 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: {message} (see '{self.prog} --help')\n")
 
 
-def _modules():
-    for name in COMMANDS:
-        yield name, importlib.import_module(f"harness.commands.{name}")
-
-
 def build_parser() -> argparse.ArgumentParser:
     from harness import __version__
     parser = _Parser(prog="springbench", description="Score and calibrate spring/mass models against linear elasticity.")
     parser.add_argument("--version", action="version", version=f"springbench {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
-    for name, mod in _modules():
+    for name, mod in COMMANDS.items():
         p = sub.add_parser(name, help=mod.HELP, description=mod.HELP, epilog=getattr(mod, "EPILOG", None),
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         mod.add_arguments(p)

@@ -1,16 +1,7 @@
-"""Benchmarks: name -> module with ``run(quick: bool) -> pandas.DataFrame``.
+"""Benchmarks: modules with ``run(quick: bool) -> pandas.DataFrame``, registered by name in
+``harness.registry.BENCHES``.
 
 Each reports speeds as ratios against a baseline measured in the same process; the
 CSV goes to runs/bench/<name>.csv (``--results results``: the published
-results/bench/). A new benchmark is one module added here.
+results/bench/). A new benchmark is one module and its name in the registry.
 """
-
-BENCHES = {
-    "reference": "harness.bench.reference",
-    "sa": "harness.bench.sa",
-    "fit": "harness.bench.fit",
-    "dynamics": "harness.bench.dynamics",
-    "calibrate": "harness.bench.calibrate",
-    "heldout": "harness.bench.heldout",
-    "engines": "harness.bench.engines",
-}

@@ -140,3 +140,13 @@ def linear_closed_form(load: LoadCase, points, compliance, anchors) -> np.ndarra
     a, w = coef[:dim], coef[dim:]
     spin = np.cross(w, points) if dim == 3 else w[0] * np.stack([-points[:, 1], points[:, 0]], axis=1)
     return field(points) + a + spin
+
+
+def linear2d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
+    """The load set "linear2d": the 2-D homogeneous and equilibrated linear stress states."""
+    return linear_states(2, s, anchors, frame)
+
+
+def linear3d(s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
+    """The load set "linear3d": the 3-D homogeneous and equilibrated linear stress states."""
+    return linear_states(3, s, anchors, frame)

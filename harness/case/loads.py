@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from harness import registry
 from harness.case.loadsets import (
     ANCHORS,
     AXES,
@@ -21,11 +22,12 @@ from harness.case.loadsets import (
     anchor_points,
 )
 from harness.case.parts import parse_face_name, part_exists
-from harness.case.sets import ANCHORED, LOAD_SETS
 from harness.errors import CaseError, SpringbenchError
 
 if TYPE_CHECKING:
     from harness.case.reader import Body
+
+ANCHORED = ("homogeneous", "linear")   # sets whose loads are held at anchor points (boxes: only linear)
 
 
 def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tuple[int, ...]:
@@ -41,7 +43,7 @@ def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tupl
 def parse_loads(l: dict, dim: int, body: Body, file: str):
     cases: list[LoadCase] = []
     if l["set"] is not None:
-        want, make = LOAD_SETS[l["set"]]
+        want, make = registry.LOAD_SETS.about[l["set"]], registry.LOAD_SETS.load(l["set"])
         if want != dim:
             raise CaseError(f"load set '{l['set']}' is {want}-D but dim = {dim}", file=file,
                             field="loads.set", fix=f"use basic{dim}d")

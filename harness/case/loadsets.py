@@ -3,7 +3,7 @@
 The standard sets ``basic2d`` (Deussen 1995 Fig. 4) and ``basic3d`` (Fig. 7) are
 defined here once (docs/design.md, "Load sets for boxes"), and every consumer (the
 FEM reference, the spring networks, the anisotropic model) applies these objects.
-The registry of the sets by name is harness/case/sets.py.
+The sets are registered by name in ``harness.registry.LOAD_SETS``.
 """
 
 from __future__ import annotations

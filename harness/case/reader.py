@@ -17,13 +17,13 @@ from typing import Mapping
 
 import numpy as np
 
+from harness import registry
 from harness.case import sections as case_sections
 from harness.case.fibres import NAMED_FIELDS
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.loadsets import LoadCase
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean
-from harness.case.sets import LOAD_SETS
 from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
@@ -95,7 +95,7 @@ USER_LOAD = {
     "body_force": Field("floats", None, length=(2, 3), doc="force per volume"),
 }
 LOADS = {
-    "set": Field("str", None, choices=tuple(LOAD_SETS)),
+    "set": Field("str", None, choices=registry.LOAD_SETS.names()),
     "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units), not 0",
                        check=lambda v: "a zero traction moves nothing (G would be 0/0)" if v == 0 else None),
     "case": Field("tables", (), spec=USER_LOAD),

@@ -2,12 +2,12 @@
 the stage that reads a section owns its spec here. Free-form keys ("any") are
 validated by their owner when the stage runs."""
 
+from harness import registry
 from harness.case.schema import Field
 
-# [optimizer] method / compare: the case file's vocabulary of optimisers. harness.optimize
-# implements each (its OPTIMIZERS registry must hold exactly these names; it checks at
-# import), so reading a case never imports an optimiser.
-OPTIMIZER_METHODS = ("sa", "sa-refactor", "lbfgs", "nelder-mead", "gauss-newton", "equilibrium-gap", "none")
+# The vocabularies of the pluggable parts are the registries' names (harness/registry.py):
+# reading a case imports none of them.
+OPTIMIZER_METHODS = registry.OPTIMIZERS.names()    # [optimizer] method / compare
 _METHODS = OPTIMIZER_METHODS
 _COMPARE = tuple(m for m in OPTIMIZER_METHODS if m != "none")
 
@@ -23,11 +23,8 @@ SELECT_DEFAULT = ("springs-prior1", "springs-prior0.1", "springs-prior1+node-vol
 # [model] kind = "sms": spring/mass systems of Deussen 1995 (harness/models/sms.py)
 PLACEMENTS = ("grid", "random", "lloyd", "mesh")
 MASS_RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
-STIFFNESS_RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
-# [model] classes: the model classes one sms case scores on the same nodes;
-# harness/models/classes.py implements each (its CLASSES must hold exactly these names)
-MODEL_CLASSES = ("springs", "springs+volume", "springs+volume-element", "p1", "mt", "springs+kn",
-                 "springs+node-volume")
+STIFFNESS_RULES = registry.STIFFNESS_RULES.names()
+MODEL_CLASSES = registry.MODEL_CLASSES.names()     # [model] classes: scored on the same nodes
 
 SMS = {
     "placement": Field("str", "grid", choices=PLACEMENTS,
@@ -102,7 +99,7 @@ BC2000 = {
 
 # [dynamics]: time integration of the bc2000 experiments (harness/stages/bc2000.py)
 DYNAMICS = {
-    "experiment": Field("str", "run", choices=("run", "volume", "pull", "cantilever", "fibres", "timing", "fem")),
+    "experiment": Field("str", "run", choices=registry.EXPERIMENTS.names()),
     "calibrate": Field("bool", True, doc="fem: fit the model's constants to the FEM reference"),
     "dt": Field("float", 0.01, min=0, min_exclusive=True, doc="time step (s)"),
     "hexa_model_dt": Field("float", None, min=0, min_exclusive=True,
@@ -123,9 +120,8 @@ DYNAMICS = {
     "repeats": Field("int", 3, min=1, doc="timing repeats (best of)"),
 }
 
-# [model] kind = "engines": engines' deformable bodies against the FEM (harness/stages/engines.py).
-# harness.engines implements each engine (its ENGINES registry must hold exactly these names)
-ENGINE_NAMES = ("newton-springs", "newton-tets", "mujoco-flex")
+# [model] kind = "engines": engines' deformable bodies against the FEM (harness/stages/engines.py)
+ENGINE_NAMES = registry.ENGINES.names()
 EXPORTS = ("rule", "calibrated")
 PACK_LOADS = ("sag", "tip", "tip2", "torsion", "bridge")
 ENGINES = {

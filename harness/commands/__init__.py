@@ -1,1 +1,1 @@
-"""Subcommands of ``springbench`` (see harness.cli.COMMANDS)."""
+"""Subcommands of ``springbench`` (see harness.registry.COMMANDS)."""

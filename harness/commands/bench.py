@@ -1,19 +1,19 @@
-"""springbench bench NAME: benchmarks registered in harness.bench.BENCHES. Every row of the
+"""springbench bench NAME: benchmarks registered in harness.registry.BENCHES. Every row of the
 CSV carries the provenance of the run (harness/provenance.py FIELDS: format version, git
 commit and dirty flag, library versions, CPU model, cores, load average at the start)."""
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
+
+from harness import registry
 
 HELP = ("run a benchmark (reference, sa, fit, dynamics, ...) and write runs/bench/NAME.csv "
         "(--results results: the published results/bench/)")
 
 
 def add_arguments(p):
-    from harness.bench import BENCHES
-    p.add_argument("name", choices=sorted(BENCHES), help="which benchmark")
+    p.add_argument("name", choices=sorted(registry.BENCHES), help="which benchmark")
     p.add_argument("--out", type=Path, default=None, help="output folder (default: RESULTS/bench)")
     p.add_argument("--results", type=Path, default=None,
                    help="results root whose bench/ folder gets the CSV (default: runs/; results/ holds the "
@@ -24,7 +24,6 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from harness.bench import BENCHES
     from harness.outputs import atomic_write, check_out_dir, check_out_file
     from harness.paths import DEFAULT_RESULTS, DEFAULT_RUNS
     out = args.out or Path(getattr(args, "results", None) or DEFAULT_RUNS) / "bench"
@@ -40,7 +39,7 @@ def main(args) -> int:
     from harness.provenance import collect, columns
     configure(getattr(args, "quiet", False))
     started = collect()                 # the load average at the start, before the bench loads the machine
-    mod = importlib.import_module(BENCHES[args.name])
+    mod = registry.BENCHES.load(args.name)
     df = mod.run(quick=args.quick)
     df = df.assign(**{k: v for k, v in columns(started).items() if k not in df.columns})
     atomic_write(path, df.to_csv(index=False).encode(), flag)

@@ -46,7 +46,7 @@ def main(args) -> int:
     from harness.engines import ENGINES, adapter
     from harness.outputs import atomic_write, check_out_file
     if args.action == "list":
-        for name, (_, package, what) in ENGINES.items():
+        for name, (package, what) in ENGINES.about.items():
             print(f"{name:18s} {what} (needs {package})")
         return 0
     if args.out.suffix.lower() != ".npz":

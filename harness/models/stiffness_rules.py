@@ -57,8 +57,9 @@ from harness.case.elasticity import element_stiffness
 from harness.errors import ModelError
 from harness.models.springs import spring_directions
 from harness.models.topology import element_pairs
+from harness.registry import STIFFNESS_RULES
 
-RULES = ("deussen", "vangelder", "lloyd", "uniform", "cauchy", "learned")
+RULES = STIFFNESS_RULES.names()      # each rule(points, springs, cells, material) -> k, registered by name
 
 
 def voigt_dyad(n: np.ndarray) -> np.ndarray:
@@ -299,15 +300,11 @@ def learned(points, springs, cells, material) -> np.ndarray:
     return rule(points, springs, cells, material, base=vangelder(points, springs, cells, material))
 
 
-RULE_FUNCTIONS = {"deussen": deussen, "vangelder": vangelder, "lloyd": lloyd, "uniform": uniform, "cauchy": cauchy,
-                  "learned": learned}
-
-
 def spring_constants(rule: str, points, springs, cells, material) -> np.ndarray:
     """k (e,) by the named rule."""
-    if rule not in RULE_FUNCTIONS:
+    if rule not in STIFFNESS_RULES:
         raise ModelError(f"unknown stiffness rule '{rule}'", field="model.stiffness", fix=f"one of {', '.join(RULES)}")
-    k = RULE_FUNCTIONS[rule](np.asarray(points, float), np.asarray(springs, int), cells or {}, material)
+    k = STIFFNESS_RULES.load(rule)(np.asarray(points, float), np.asarray(springs, int), cells or {}, material)
     if np.any(k <= 0):
         bad = np.flatnonzero(k <= 0)[:5]
         raise ModelError(f"rule '{rule}' gives zero stiffness to springs {bad.tolist()} (no cell contains them)",

@@ -209,3 +209,13 @@ def run_chains(problem: FitProblem, options: dict, seed: int, status=None, refac
     best["info"] = {**best["info"], "chains": chains, "chain_seeds": seeds,
                     "chain_G_final": [r["G_final"] for r in results]}
     return best
+
+
+def sa(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
+    """Deussen 1995 Fig. 6 annealing with incremental (rank-1) G (registry name "sa")."""
+    return run_chains(problem, options, seed, status)
+
+
+def sa_refactor(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
+    """The same chains, every proposal re-factorised: the paper's cost (the baseline)."""
+    return run_chains(problem, options, seed, status, refactor=True)

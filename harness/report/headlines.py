@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from harness.report.engines import engines_tables
+from harness.registry import REPORT_TABLES
 from harness.report.frames import REF_COARSE, SCORED, headline_frame, optimizer_frame
 from harness.report.numbers import fmt
 from harness.report.text import case_label
@@ -307,8 +307,6 @@ def generic_tables(df) -> list:
              "G_ref the reference's own error.")]
 
 
-BUILDERS = {"deussen1995": deussen_tables, "bourguignon2000": bc2000_tables, "verification": verification_tables,
-            "engines": engines_tables}
 FINDINGS_ONLY = ("nu_sweep",)    # sections that show their figures and findings (harness/report/claims.py), no table
 
 
@@ -316,5 +314,6 @@ def headline_tables(suite: str, df) -> list:
     """[(title, DataFrame of strings, note)] for the suite folder named ``suite``."""
     if df.empty or "case" not in df or suite in FINDINGS_ONLY:
         return []
-    tables = BUILDERS.get(suite, generic_tables)(df)
+    build = REPORT_TABLES.load(suite) if suite in REPORT_TABLES else generic_tables
+    tables = build(df)
     return tables or generic_tables(df)

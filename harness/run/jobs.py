@@ -180,10 +180,10 @@ def _rel(path: Path) -> str:
 
 def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
     """Case files -> jobs (one per seed); case files that do not load become error results."""
-    from harness import stages as stage_registry
     from harness.case.reader import find_cases, load_case
+    from harness.stages import stage_modules
 
-    stage_names = tuple(stage_registry.STAGES if stages is None else stages)
+    stage_names = stage_modules() if stages is None else tuple(stages)
     files, seen = [], set()
     for given in find_cases(paths or [DEFAULT_CASES]):
         r = Path(given).resolve()

@@ -130,7 +130,7 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
               figures: bool = True, stages=None, progress=None) -> RunReport:
     """Run case files / suites; write results, tables, figures and the index.
 
-    ``stages`` overrides ``harness.stages.STAGES`` (module names); ``progress`` None
+    ``stages`` overrides the registered stages (module names); ``progress`` None
     shows the bar only on a terminal."""
     results = Path(results or DEFAULT_RESULTS)
     jobs_n = jobs or _default_jobs()

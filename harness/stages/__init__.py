@@ -4,7 +4,7 @@ A stage is a module with ``NAME``, ``applies(case) -> bool`` and
 ``run(case, ctx) -> list[dict]`` (rows of the suite's summary table; every row has
 ``case`` and ``model``; the runner fills ``case``, ``stage``, ``seed``, ``status`` and
 ``seconds`` when a row leaves them out). ``ctx`` is a :class:`StageContext`. A new stage
-is one module added to ``STAGES``; a case's ``[run] stages = [NAME, ...]`` restricts it
+is one module and its line in ``harness.registry.STAGES``; a case's ``[run] stages = [NAME, ...]`` restricts it
 to those stages. A stage may also have ``check(case)``: the case mistakes it can see
 without solving anything (raised as CaseError); ``springbench validate`` calls it.
 
@@ -28,13 +28,6 @@ import importlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
-
-STAGES = [
-    "harness.stages.reference_check",   # FEM reference + its verification
-    "harness.stages.sms",               # spring/mass build + score + optimise
-    "harness.stages.bc2000",            # Bourguignon & Cani experiments
-    "harness.stages.engines",           # engines' deformable bodies against the FEM
-]
 
 
 @dataclass
@@ -60,9 +53,15 @@ class StageContext:
         return np.random.default_rng([self.seed, stream])
 
 
+def stage_modules() -> tuple[str, ...]:
+    """The registered stages' module names, in pipeline order."""
+    from harness import registry  # read at call time: a run may restrict the registry
+    return tuple(registry.STAGES.module(name) for name in registry.STAGES)
+
+
 def load_stages(names=None):
-    """Import the stage modules named in ``names`` (default: ``STAGES``)."""
-    return [importlib.import_module(name) for name in (STAGES if names is None else names)]
+    """Import the stage modules named in ``names`` (default: every registered stage)."""
+    return [importlib.import_module(name) for name in (stage_modules() if names is None else names)]
 
 
 def check_case(case, stages=None):

@@ -1,6 +1,6 @@
 """Stage "bc2000": the experiments of Bourguignon & Cani 2000 on the original meshes.
 
-``[dynamics] experiment`` picks one:
+``[dynamics] experiment`` picks one (functions registered in ``harness.registry.EXPERIMENTS``):
 - ``volume`` (Fig. 3): MS, MT0, MT under gravity; writes ``volume.csv`` (t, MS, MT0, MT in
   percent); rows: peak and final |dV/V|, and the deviation from the original program's
   curve when ``[dynamics] original`` names its file (relative to the case).
@@ -24,6 +24,7 @@ import time
 import numpy as np
 import pandas as pd
 
+from harness import registry
 from harness.errors import CaseError, SimulationError
 from harness.mechanics.dynamics import simulate
 from harness.models.masses import sub_tet_volumes
@@ -37,7 +38,6 @@ from harness.stages.bc2000_build import (  # noqa: F401
     loading,
     lumped_masses,
 )
-from harness.stages.bc2000_fem import _fem
 
 NAME = "bc2000"
 PAPER_RATIO = {"tetra": 14.5, "hexa": 3.6}   # Table 1: model time / MS time
@@ -56,7 +56,7 @@ def run(case, ctx) -> list[dict]:
         from harness.case.sections import DYNAMICS
         dyn = check({}, DYNAMICS, str(case.path), "dynamics.")
     exp = dyn["experiment"]
-    return EXPERIMENTS[exp](case, ctx, model, dyn)
+    return registry.EXPERIMENTS.load(exp)(case, ctx, model, dyn)
 
 
 def _steps(dyn, dt) -> int:
@@ -78,7 +78,7 @@ def _simulate(case, ctx, model, dyn, mesh, name, field=None, **kw):
     return m, ld, tr, time.perf_counter() - t0
 
 
-def _volume(case, ctx, model, dyn):
+def volume(case, ctx, model, dyn):
     rows, curves = [], {}
     path, mesh = _meshes(case, dyn)[0]
     ref = None
@@ -125,7 +125,7 @@ def _pulled_measures(mesh, tr):
             "drift_ratio": drift / max(abs(float(u[1])), 1e-300)}
 
 
-def _pull(case, ctx, model, dyn):
+def pull(case, ctx, model, dyn):
     rows = []
     for path, mesh in _meshes(case, dyn):
         for name in model["models"]:
@@ -237,7 +237,7 @@ def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
     return row
 
 
-def _cantilever(case, ctx, model, dyn):
+def cantilever(case, ctx, model, dyn):
     """Tip deflection (mean y displacement of the nodes at the far end z = max), averaged
     over the second half of the run, its swing there, and the static equilibrium; with
     [loads] in the case, the linearised model against the FEM reference
@@ -289,7 +289,7 @@ def _twist_thinning(mesh, x):
     return float(np.degrees(np.mean(ang))), float(w1 / w0)
 
 
-def _fibres(case, ctx, model, dyn):
+def fibres(case, ctx, model, dyn):
     rows = []
     path, mesh = _meshes(case, dyn)[0]
     fields = model["fibre_fields"] or ((model["fibre_field"],) if model["fibre_field"] else ("vertical",))
@@ -312,7 +312,7 @@ def _fibres(case, ctx, model, dyn):
     return rows
 
 
-def _timing(case, ctx, model, dyn):
+def timing(case, ctx, model, dyn):
     rows = []
     for path, mesh in _meshes(case, dyn):
         kind = "hexa" if "hexahedron" in mesh.cells else "tetra"
@@ -340,7 +340,7 @@ def _timing(case, ctx, model, dyn):
     return rows
 
 
-def _plain(case, ctx, model, dyn):
+def plain(case, ctx, model, dyn):
     rows = []
     for path, mesh in _meshes(case, dyn):
         for name in model["models"]:
@@ -351,5 +351,3 @@ def _plain(case, ctx, model, dyn):
     return rows
 
 
-EXPERIMENTS = {"volume": _volume, "pull": _pull, "cantilever": _cantilever, "fibres": _fibres,
-               "timing": _timing, "run": _plain, "fem": _fem}

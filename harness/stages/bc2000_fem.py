@@ -12,7 +12,7 @@ from harness.stages.bc2000_build import _cells, _label, _meshes, build, lumped_m
 from harness.stages.bc2000_modes import heldout_modes
 
 
-def _fem(case, ctx, model, dyn):
+def fem(case, ctx, model, dyn):
     """Static G of MS / MT0 / MT against the FEM reference under the case's loads (small:
     the models are linearised at rest), first with the case's constants scaled by the best
     single factor, then calibrated (all constants, least squares); also the anisotropy

@@ -66,8 +66,8 @@ def material_args(E: float, nu: float, density: float) -> tuple:
 
 
 def _installed(engine: str) -> bool:
-    from harness.engines import ENGINES
-    return importlib.util.find_spec(ENGINES[engine][1]) is not None
+    from harness.registry import ENGINES
+    return importlib.util.find_spec(ENGINES.about[engine][0]) is not None
 
 
 def engine_rows(pack, pack_dir: Path, engine: str, loads, folder: Path, model_json=None) -> list[dict]:

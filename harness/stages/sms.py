@@ -23,15 +23,18 @@ against optimiser steps, one ``model`` per run).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
 import numpy as np
 import pandas as pd
 
+from harness import registry
 from harness.case.loads import modal_load
-from harness.errors import CaseError, ModelError, SpringbenchError
+from harness.errors import CaseError, SpringbenchError
 from harness.stages import sms_measures as measures
+from harness.stages.classes.base import Setting
 
 NAME = "sms"
 
@@ -70,64 +73,40 @@ def _expect(case) -> dict:
     return {"paper_G_initial": vals.get("G_initial", math.nan), "paper_G_final": vals.get("G_final", math.nan)}
 
 
-def model_label(spec, case) -> str:
-    p = spec["placement"]
-    if p == "grid":
-        structure = spec["structure"] or ("structure1" if case.dim == 2 else "edges+face+body")
-        return f"sms-grid{'x'.join(map(str, spec['grid']))}-{structure}"
-    if p == "lloyd":
-        return f"sms-lloyd{spec['lloyd_iterations']}-n{spec['n_points']}"
-    if p == "random":
-        return f"sms-random-n{spec['n_points']}"
-    return "sms-mesh"
-
-
 def run(case, ctx) -> list[dict]:
     """The case's rows; with ``[model] classes``, each class's rows in turn (its files in
     the sub-folder named after it)."""
-    import dataclasses
-
-    from harness.models.classes import class_spec
     from harness.models.sms import model_spec
+    from harness.stages.classes.springs import of_spec
     spec = model_spec(case)
-    classes = list(spec.get("classes") or ())
-    if not classes:
-        return _run(case, ctx, spec)
+    names = list(spec.get("classes") or ())
+    if not names:
+        return _run(case, ctx, spec, of_spec(spec))
     rows = []
-    for name in classes:
-        sub = dataclasses.replace(ctx, out_dir=ctx.out_dir / name)
-        rows += _run(case, sub, class_spec(spec, name))
+    for name in names:
+        cls = registry.MODEL_CLASSES.load(name)
+        rows += _run(case, dataclasses.replace(ctx, out_dir=ctx.out_dir / name), cls.spec(spec), cls)
     return rows
 
 
-def _run(case, ctx, spec) -> list[dict]:
+def _run(case, ctx, spec, cls) -> list[dict]:
+    """The rows of model class ``cls`` (harness/stages/classes/) on the case."""
     from harness import scoring
     from harness.mechanics import statics
-    from harness.mechanics.homogenize import case_report
-    from harness.models.classes import build, class_of
     from harness.models.stiffness_rules import spring_constants
-    from harness.stages import sms_mt
-    p1, mt = bool(spec.get("p1")), bool(spec.get("mt"))
     opt = case.section("optimizer") or {}
-    runs = optimiser_runs(case, opt)        # case mistakes first, before any solve
-    runs = [] if p1 else sms_mt.runs(runs) if mt else runs     # P1 has no constants; MT: its own fit
-    skip = sms_mt.skip_row(case, model_label(spec, case)) if mt else None
+    runs = cls.fit_runs(optimiser_runs(case, opt))      # case mistakes first, before any solve
+    label = cls.label(spec, case)
+    skip = cls.skip(case, label)
     if skip:
-        return [skip]                       # 2-D: B&C have no element
+        return [skip]
     n_modes = _check_modes(case, opt)
     weights = scoring.case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
-    label = model_label(spec, case)
     t0 = time.perf_counter()
-    ctx.status("building the P1 model" if p1 else "building the MT model" if mt else "building the spring/mass system")
-    base = build(case, spec, seed=ctx.seed)     # springs, + volume (models/volume.py) or kn (models/kn.py), P1 or MT
-    if spec["volume"] != "none":
-        label += f"+volume-{spec['volume']}"
-    if spec.get("kn", "none") != "none":
-        label += f"+kn-{spec['kn']}"
-    if p1 or mt:
-        label = ("p1-" if p1 else "mt-") + label
-    rules = ["p1"] if p1 else ["mt"] if mt else spec["stiffness"]
+    ctx.status(cls.building)
+    base = cls.build(case, spec, seed=ctx.seed)
+    rules = cls.rules(spec)
     build_seconds = time.perf_counter() - t0
     ctx.status("reference solve")
     ref, why = _reference(case, ctx)
@@ -138,16 +117,10 @@ def _run(case, ctx, spec) -> list[dict]:
     common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
               "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
               "negative_masses": base.info["negative_masses"], **_expect(case)}
-    common.update(model_class=class_of(spec), nu=float(case.material.nu), dim=case.dim)
-    if spec["volume"] != "none":
-        common.update(volume=spec["volume"], n_volumes=base.volume.n_elements)
-    if mt:
-        common["n_elements"] = len(base.volume.body.cells)      # B&C's elements (the springs: connectivity)
-    if spec.get("kn", "none") != "none":
-        common.update(kn=spec["kn"], n_kn=base.volume.n_elements)
+    common.update(model_class=cls.name, nu=float(case.material.nu), dim=case.dim, **cls.columns(case, spec, base))
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
-    cauchy = None if p1 or mt else case_report(case, spec)     # the springs' lattice; P1 and MT have none
+    cauchy = cls.lattice(case, spec)
     if cauchy is not None:
         common.update(cauchy_misfit=cauchy["misfit"], cauchy_reachable=bool(cauchy["reachable"]),
                       cauchy_nu=cauchy["cauchy_nu"])
@@ -171,23 +144,13 @@ def _run(case, ctx, spec) -> list[dict]:
         if res is None:
             write_vtu(ctx.file(f"model-{tag}.vtu"), net, {})
             return
-        if mt:          # theta and the element constants; the springs are only its connectivity
-            sms_mt.save(ctx.file(f"mt-{tag}.npz"), net)
-        elif not p1:    # a VTU holds springs; P1's are only its connectivity
-            write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
+        cls.save(ctx, net, res, tag)
         if u_ref is not None:
             arrays = {"points": net.points, "springs": net.springs}
             for i, n in enumerate(res.names):
                 arrays[f"u_ref_{n}"] = u_ref[i]
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
-        if getattr(net, "volume", None) is not None and not p1 and not mt:    # the VTU holds the springs only
-            if spec.get("kn", "none") != "none":
-                from harness.models.kn import save as save_kn
-                save_kn(ctx.file(f"kn-{tag}.npz"), net)
-            else:
-                from harness.models.volume import save
-                save(ctx.file(f"volume-{tag}.npz"), net)
 
     rows, nets, made = [], {}, {}
     for rule in rules:
@@ -213,7 +176,7 @@ def _run(case, ctx, spec) -> list[dict]:
         write(net, res, rule)
         row = {**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
                "seconds": build_seconds + made[rule] + res.seconds + time.perf_counter() - t1,
-               **(sms_mt.constants(net) if mt else {})}
+               **cls.constants(net)}
         if sc is not None:
             row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
                        G_s_initial=sc.G_s, G_s_final=sc.G_s, **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc),
@@ -231,16 +194,13 @@ def _run(case, ctx, spec) -> list[dict]:
         start_row = min(rows, key=measures.rank)
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
+        setting = Setting(case, ctx, spec, label, common, u_ref, names, fit, weights, fem_f, optimize, evaluate, write)
         for run_ in runs:
-            if run_.get("select") and not mt and not p1 and getattr(start, "volume", None) is None:
+            if run_.get("select") and cls.selects and getattr(start, "volume", None) is None:
                 from harness.stages import sms_select
-                row, net, trace = sms_select.optimise(case, ctx, run_, start, u_ref, names, fit, weights, label,
-                                                      common, start_row, evaluate, write,
-                                                      solved.get(start_row["stiffness"]))
+                row, net, trace = sms_select.optimise(setting, run_, start, start_row, solved.get(start_row["stiffness"]))
             else:
-                row, net, trace = (sms_mt.optimise if mt else _optimise)(
-                    case, ctx, optimize, run_, start, u_ref, names, fit, weights, spec, label, common, start_row,
-                    evaluate, write, fem_f)
+                row, net, trace = cls.fit(setting, run_, start, start_row)
             rows.append(row)
             opt_nets[row["_tag"]] = net
             if trace is not None:
@@ -270,7 +230,7 @@ def _run(case, ctx, spec) -> list[dict]:
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
         if tag in all_nets:
-            row.update(measures.engine_columns(all_nets[tag], p1))
+            row.update(measures.engine_columns(all_nets[tag], not cls.spring_constants))
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
             row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
             row["freq_error_final"] = measures.freq_error(freqs[tag], freqs["fem"], m)
@@ -282,11 +242,7 @@ def _run(case, ctx, spec) -> list[dict]:
     return rows
 
 
-# -- optimisers -------------------------------------------------------------------------
-
-BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", "target", "tol", "ftol", "gtol",
-               "xatol", "fatol", "cg_maxiter", "chains")
-
+# -- the case's optimiser runs ---------------------------------------------------------
 
 def _file(case) -> str | None:
     """The case file, for error messages (None for an in-memory case)."""
@@ -370,93 +326,6 @@ def _check_modes(case, opt) -> int:
     return n
 
 
-def budget_label(options: dict) -> str:
-    """The options that bound an optimiser's effort, as 'key=value, ...' ('default' if none)."""
-    parts = [f"{k}={options[k]}" for k in BUDGET_KEYS if options.get(k) is not None]
-    return ", ".join(parts) or "default"
-
-
-def _optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label, common, first, evaluate, write,
-              fem_f):
-    """One optimiser run on the fitted loads (indices ``fit`` of ``names``) and its row."""
-    from harness.mechanics import statics
-    from harness.optimize.diagnostics import fit_diagnostics
-    from harness.optimize.problem import FitProblem
-    from harness.scoring import node_weights
-    method, objective = run_["method"], run_["objective"]
-    stiff = base.info["stiffness"]
-    tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
-    _, free, forces = statics.all_load_arrays(base, case)
-    free, forces, u_fit, names = free[fit], forces[fit], u_ref[fit], [names[i] for i in fit]
-    wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    file = _file(case)
-    freq_kw = {}
-    if objective != "G":
-        if fem_f is None or len(fem_f) < run_["modes"]:
-            raise SpringbenchError("the frequency term needs the reference's natural frequencies", file=file,
-                                   field="optimizer.frequency", fix="use a reference with modes, or remove [optimizer.frequency]")
-        if np.any(base.masses <= 0):
-            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies", file=file,
-                             field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
-        modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
-        freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
-                       freq_weight=run_["weight"], modal_free=modal_free)
-    k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
-    if getattr(base, "volume", None) is not None:    # springs + volume / kn: [k, kv], columns beside B
-        k0, groups, extra = base.params(), base.param_groups(spec["grouped"]), base.volume.columns(base.points)
-    problem = FitProblem.from_network(base.points, base.springs, k0, free, forces,
-                                      u_fit.reshape(len(names), -1), wdof, list(names),
-                                      groups=groups, extra_columns=extra, **freq_kw)
-    t0 = time.perf_counter()
-    ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
-    seed = int(base.info["seed"])
-    try:
-        res = optimize(problem, method, dict(run_["options"]), seed, status=ctx.status)
-    except SpringbenchError as exc:      # name the case file, and compare_options / frequency where they apply
-        if exc.file is not None:
-            raise
-        field = exc.field or "optimizer"
-        if field.startswith("optimizer.options"):
-            field = run_["where"] + field[len("optimizer.options"):]
-        elif field == "optimizer.method" and run_["where"] != "optimizer.options":   # the method came from there
-            field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
-        raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
-    seconds = time.perf_counter() - t0
-    name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
-    net = base.with_k(res.k, stiffness=name)
-    sres, sc, sh = evaluate(net)
-    write(net, sres, tag)
-    info = dict(getattr(res, "info", {}) or {})
-    row = {**common, "model": f"{label}[{stiff}]", "stiffness": stiff,
-           "optimizer": method, "grouped": bool(spec["grouped"]), "seconds": seconds,
-           "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
-           "G_s_initial": first.get("G_s_initial", math.nan),
-           "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
-           "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc), **measures.heldout_columns(sh, first),
-           "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
-           "_tag": tag}
-    if freq_kw:
-        row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
-    for key in ("n_steps", "accepted"):
-        if hasattr(res, key):
-            row[f"opt_{key}"] = getattr(res, key)
-    row["opt_seed"] = seed                   # the optimiser's random stream (SA); = model_seed
-    if "stop" in info:
-        row["opt_stop"] = str(info["stop"])
-    if info.get("init", "none") != "none":
-        row["opt_init"] = str(info["init"]) + (" (rejected: worse than k0)" if info.get("init_rejected") else "")
-    if "prior" in info:     # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
-        row["opt_prior"] = float(info["prior"])
-    row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
-    if "iterations" in info:
-        row["opt_iterations"] = int(info["iterations"])
-    if "solves" in info:  # gauss-newton: linear solves (one evaluation of G is one per load set)
-        row["opt_solves"] = int(info["solves"])
-    row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
-    return row, net, _trace_frame(getattr(res, "trace", None), name)
-
-
 def _time_to_reach(rows, traces):
     """``evals_to_sa_G`` / ``seconds_to_sa_G``: when each other optimiser's trace first
     reaches the G_final of the case's SA row (seconds pro rata of its evaluations);
@@ -475,25 +344,3 @@ def _time_to_reach(rows, traces):
         steps = float(t["step"].iloc[-1])
         r["evals_to_sa_G"] = float(t["step"].iloc[hit[0]]) if len(hit) else math.nan
         r["seconds_to_sa_G"] = r["seconds"] * r["evals_to_sa_G"] / steps if len(hit) and steps > 0 else math.nan
-
-
-def _trace_frame(trace, name):
-    """An optimiser's trace ((step, G) rows, a G column or a DataFrame) as trace.csv rows
-    with ``model`` = name; None if there is none or it has no recognisable shape."""
-    if trace is None or not len(trace):
-        return None
-    try:
-        if isinstance(trace, pd.DataFrame):
-            df = trace.copy()
-        else:
-            arr = np.asarray(trace, float)
-            arr = arr[:, None] if arr.ndim == 1 else arr
-            df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
-        if "G" not in df.columns and df.shape[1] == 1:
-            df.columns = ["G"]
-        if "step" not in df.columns:
-            df.insert(0, "step", np.arange(len(df)))
-        df["model"] = name
-        return df
-    except (ValueError, TypeError):
-        return None

@@ -25,7 +25,7 @@ def skip_row(case, label: str) -> dict | None:
     why = unsupported(case.dim)
     if why is None:
         return None
-    return {"case": case.name, "model": f"mt-{label}", "model_class": "mt", "nu": float(case.material.nu),
+    return {"case": case.name, "model": label, "model_class": "mt", "nu": float(case.material.nu),
             "dim": case.dim, "stiffness": "mt", "optimizer": "none", "status": "skip", "note": why}
 
 
@@ -47,9 +47,12 @@ def fit_theta(base, case, u_ref, names, fit, weights):
     return linear.fit(list(term.units), term.kv, u_ref[fit], loads, node_weights(base.classes, weights))
 
 
-def optimise(case, ctx, optimize, run_, base, u_ref, names, fit, weights, spec, label, common, first, evaluate,
-             write, fem_f):
-    """The fitted row (the signature of harness.stages.sms._optimise)."""
+def optimise(setting, run_, base, first):
+    """The fitted row, its network and no trace (``setting``: the class's
+    :class:`harness.stages.classes.base.Setting`)."""
+    case, ctx, u_ref, names, fit, weights = (setting.case, setting.ctx, setting.u_ref, setting.names, setting.fit,
+                                             setting.weights)
+    label, common, evaluate, write = setting.label, setting.common, setting.evaluate, setting.write
     ctx.status(f"mt: fitting {', '.join(PARAMS)} ({METHOD})")
     t0 = time.perf_counter()
     theta, g0, g1 = fit_theta(base, case, u_ref, names, fit, weights)

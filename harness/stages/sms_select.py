@@ -26,11 +26,11 @@ from harness.errors import CaseError
 VALIDATION_BUDGET = 2.0     # the validation fits together: at most this many times the fit's budget
 
 
-def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, first, evaluate, write,
-             first_res=None):
+def optimise(setting, run_, base, first, first_res=None):
     """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
-    stage gives the other model classes its plain fit); ``first_res``: base's statics, when
-    the stage has them (a validation they show unaffordable then costs no solve, and the
+    stage gives the other model classes their plain fit); ``setting``: the class's
+    :class:`harness.stages.classes.base.Setting`; ``first_res``: base's statics, when the
+    stage has them (a validation they show unaffordable then costs no solve, and the
     rule's row reuses them)."""
     from harness.mechanics import statics
     from harness.models.learned_rule import geometry
@@ -40,6 +40,9 @@ def optimise(case, ctx, run_, base, u_ref, names, fit, weights, label, common, f
     from harness.optimize.problem import FitProblem
     from harness.scoring import node_weights
     from harness.stages.sms_measures import families, fit_score, heldout_columns, per_load_columns
+    case, ctx, u_ref, names, fit, weights = (setting.case, setting.ctx, setting.u_ref, setting.names, setting.fit,
+                                             setting.weights)
+    label, common, evaluate, write = setting.label, setting.common, setting.evaluate, setting.write
     spec = run_["select"]
     if run_["method"] != "lbfgs":
         raise CaseError(f"[optimizer.select] fits by lbfgs, not {run_['method']}",

@@ -167,14 +167,14 @@ def run_lines(tmp_path_factory):
     import contextlib
     import io
 
-    from harness import stages as stage_registry
+    from harness import registry
     d = tmp_path_factory.mktemp("cases") / "bad"
     d.mkdir()
     for name, edits, *_ in CASES:
         (d / f"{name}.toml").write_text(render(f"name = \"{name}\"; {edits}"))
     err = io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        mp.setattr(stage_registry, "STAGES", ["test_runner_fakestages"])
+        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "test_runner_fakestages"}))
         code = cli.main(["run", str(d), "--results", str(d.parent / "results"), "--jobs", "1", "--no-figures"])
     return code, err.getvalue().splitlines()
 

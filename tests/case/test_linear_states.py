@@ -14,8 +14,8 @@ from harness.case.elasticity import isotropic_compliance, plane
 from harness.case.linear_states import divergence, gradient_states, linear_closed_form
 from harness.case.loadsets import ANCHORS, family, stress_field, stress_tensor
 from harness.case.reader import load_case
-from harness.case.sets import LOAD_SETS
 from harness.io.meshfile import read_mesh
+from harness.registry import LOAD_SETS
 from reference.fem import Discretisation
 
 gmsh = pytest.importorskip("gmsh")
@@ -258,4 +258,4 @@ def test_a_linear_case_file_loads(tmp_path, bodies):
     np.testing.assert_allclose(poly.loads[-1].frame.centroid, [5 / 6, 13 / 12], rtol=1e-14)   # trapezoid, by hand
     box = write_case(tmp_path, 'shape = "rectangle"\norigin = [1, 2]\nsize = [4, 2]', 2, name="b.toml")
     assert box.loads[0].stress is not None and box.loads[-1].frame.centroid == (3.0, 3.0)
-    assert LOAD_SETS["linear2d"][0] == 2 and LOAD_SETS["linear3d"][0] == 3
+    assert LOAD_SETS.about["linear2d"] == 2 and LOAD_SETS.about["linear3d"] == 3

@@ -15,9 +15,10 @@ from harness import cli
 from harness.case.reader import load_case
 from harness.errors import CaseError, ModelError
 from harness.mechanics import statics
-from harness.models.classes import build, class_of, class_spec
 from harness.models.kn import KNTerm
 from harness.models.sms import build_network, model_spec
+from harness.registry import MODEL_CLASSES
+from harness.stages.classes.springs import of_spec
 
 BOX = TINY.replace('dim = 2', 'dim = 3').replace('shape = "rectangle"\nsize = [2.0, 2.0]',
                                                  'shape = "box"\nsize = [2.0, 1.0, 1.0]').replace('basic2d', 'basic3d')
@@ -50,9 +51,10 @@ def _dense_kn_K(q, springs, nodes, V, kn):
 @pytest.mark.parametrize("text, grid, size", [(TINY, "[3, 4]", 4.0), (BOX, "[3, 3, 3]", 2.0)], ids=["2d", "3d"])
 def test_case_kn_term_and_statics_match_a_dense_solve(tmp_path, text, grid, size):
     case = _case(tmp_path, text, f"grid = {grid}")
-    spec = class_spec(model_spec(case), "springs+kn")
-    assert class_of(spec) == "springs+kn"
-    net = build(case, spec)
+    kn = MODEL_CLASSES.load("springs+kn")
+    spec = kn.spec(model_spec(case))
+    assert of_spec(spec) == kn             # the case's own keys name the same class
+    net = kn.build(case, spec)
     t = net.volume
     assert isinstance(t, KNTerm) and t.shared and t.n_elements == net.n_nodes
     assert t.V.sum() == pytest.approx(size, rel=1e-12) and np.all(t.V > 0)
@@ -91,7 +93,7 @@ def test_bad_kn_keys_are_one_line_errors(tmp_path):
     assert exc.value.field == "model.kn" and "\n" not in str(exc.value)
     case = _case(tmp_path, TINY, 'grid = [3, 3]\nkn = "shared"\nvolume = "shared"')
     with pytest.raises(ModelError) as exc:
-        build(case, {**model_spec(case), "p1": False})
+        of_spec(model_spec(case)).build(case, model_spec(case))
     assert exc.value.field == "model.kn" and "\n" not in str(exc.value) and exc.value.file.endswith("kn.toml")
 
 

@@ -15,15 +15,21 @@ from harness.case.reader import load_case
 from harness.mechanics import statics
 from harness.models.bc2000 import kernels
 from harness.models.bc2000.pack import kernel_arrays
-from harness.models.classes import build, class_spec
 from harness.models.mt import PARAMS, MTTerm, size_factors
 from harness.models.sms import model_spec
 from harness.paths import ROOT
+from harness.registry import MODEL_CLASSES
 from harness.stages import StageContext
 from harness.stages import sms as stage
 from harness.stages.sms_mt import fit_theta
 
 SWEEP = ROOT / "cases" / "nu_sweep"
+
+
+def _mt(case):
+    """The case's network of model class "mt" (the stage's build)."""
+    mt = MODEL_CLASSES.load("mt")
+    return mt.build(case, mt.spec(model_spec(case)))
 
 
 def _case(tmp_path, body, classes='["mt"]', **replace):
@@ -52,7 +58,7 @@ def _kernel_forces(model, x):
 @pytest.mark.parametrize("body", ["box", "cylinder"])
 def test_class_stiffness_is_the_central_difference_of_the_compiled_kernels(tmp_path, body):
     case = _case(tmp_path, body)
-    net = build(case, class_spec(model_spec(case), "mt"))
+    net = _mt(case)
     theta = {"box": [700.0, 300.0, 900.0], "cylinder": [7e4, 3e4, 9e4]}[body]     # any theta
     net = net.with_k(np.concatenate([net.k, theta]))
     K = net.stiffness_matrix().toarray()
@@ -127,7 +133,7 @@ def test_stage_rows_on_the_nu_sweep_box(tmp_path):
     d = np.load(out / "mt" / "mt-mt-least-squares.npz")
     theta = d["theta"]
     assert [fitted[f"mt_{k}"] for k in PARAMS] == list(theta)
-    net = build(case, class_spec(model_spec(case), "mt"))
+    net = _mt(case)
     model = net.volume.model(theta)
     assert np.allclose(model.ks, d["ks"]) and np.allclose(model.kvs, d["kvs"])
     K = model.tangent_stiffness().toarray()
@@ -154,7 +160,7 @@ def test_fit_recovers_its_own_constants(tmp_path):
     off by factors 0.5 to 3 returns theta_true and G ~ 0 (to the finite-difference
     Jacobian's precision: 1e-6 here)."""
     case = _case(tmp_path, "box")
-    base = build(case, class_spec(model_spec(case), "mt"))
+    base = _mt(case)
     true = np.array([800.0, 300.0, 500.0])
     names = tuple(l.name for l in case.loads)
     u_true = statics.solve(base.with_k(np.concatenate([base.k, true])), case).u
@@ -181,7 +187,7 @@ def test_statics_of_the_class_never_take_the_cholesky_path(tmp_path, monkeypatch
     """With every system above the multifrontal threshold, the class's statics still equal
     a dense solve of its (non-symmetric) K: a Cholesky would read one triangle."""
     case = _case(tmp_path, "box")
-    net = build(case, class_spec(model_spec(case), "mt"))
+    net = _mt(case)
     monkeypatch.setattr(statics, "MULTIFRONTAL_MIN", 1)
     res = statics.solve(net, case)
     K = net.stiffness_matrix().toarray()

@@ -29,11 +29,12 @@ def fake_bench(folder: Path, monkeypatch, frame: str):
     """``bench reference`` runs a module written here whose run() returns ``frame`` (Python source)."""
     import re
 
-    from harness.bench import BENCHES
+    from harness import registry
     name = "fake_bench_" + re.sub(r"\W", "_", folder.name)      # one module per test (imports are cached)
     (folder / f"{name}.py").write_text(f"import pandas\ndef run(quick):\n    return {frame}\n")
     monkeypatch.syspath_prepend(str(folder))
-    monkeypatch.setitem(BENCHES, "reference", name)
+    monkeypatch.setattr(registry, "BENCHES", registry.BENCHES.with_entries({**registry.BENCHES.entries,
+                                                                             "reference": name}))
 
 
 def snapshot(folder: Path) -> dict:

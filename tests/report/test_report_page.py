@@ -132,8 +132,8 @@ def built(site):
     """The folder with a fake-stage suite added (every figure kind, two seeds, a failing
     case), rebuilt by `springbench report`: (index.html, its text)."""
     mp = pytest.MonkeyPatch()
-    from harness import stages as stage_registry
-    mp.setattr(stage_registry, "STAGES", ["test_runner_fakestages"])
+    from harness import registry
+    mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "test_runner_fakestages"}))
     try:
         suite = site.parent / "cases" / "demo"
         write_case(suite, "a", "rows=2 files=1")

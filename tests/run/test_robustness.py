@@ -94,14 +94,14 @@ def catalogue_run(tmp_path_factory):
     import io
     import shutil
 
-    from harness import stages as stage_registry
+    from harness import registry
     work = tmp_path_factory.mktemp("catalogue")
     cat = work / "bad_inputs"  # a copy: the fake stage writes calls.log beside the case files
     shutil.copytree(HERE / "bad_inputs", cat)
     res = work / "results"
     out = {}
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(stage_registry, "STAGES", ["test_runner_fakestages"])
+        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "test_runner_fakestages"}))
         for mode, paths in (("--quick", [cat]),
                             ("--full", [cat / p.name for p in CATALOGUE if header(p, "only") == ["full"]])):
             err = io.StringIO()

@@ -24,8 +24,10 @@ FAKE = "test_runner_fakestages"
 
 from plate_case import plate_case  # noqa: E402
 
-from harness import cli  # noqa: E402
-from harness import stages as stage_registry
+from harness import (
+    cli,  # noqa: E402
+    registry,
+)
 from harness.report.build import TIMING  # noqa: E402
 from harness.run.runner import run_suite  # noqa: E402
 
@@ -51,7 +53,7 @@ def strip_timing(csv_text: str) -> str:
 
 @pytest.fixture
 def fake(monkeypatch):
-    monkeypatch.setattr(stage_registry, "STAGES", [FAKE])
+    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": FAKE}))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]))
 
 
@@ -102,7 +104,7 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     src = mods / f"{name}.py"
     shutil.copy(HERE / f"{FAKE}.py", src)
     monkeypatch.syspath_prepend(str(mods))
-    monkeypatch.setattr(stage_registry, "STAGES", [name])
+    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": name}))
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     res = tmp_path / "results"
@@ -331,8 +333,8 @@ def test_sigkill_loses_no_finished_case(tmp_path):
     write_case(suite, "a_fast", "rows=1")
     write_case(suite, "b_slow", "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.stages as s; "
-              f"s.STAGES = [{FAKE!r}]; from harness.cli import main; "
+    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.registry as r; "
+              f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main; "
               f"sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '1']))")
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -367,8 +369,8 @@ def test_ctrl_c_stops_workers_quietly(tmp_path):
     for n in ("b_slow", "c_slow"):
         write_case(suite, n, "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.stages as s; "
-              f"s.STAGES = [{FAKE!r}]; from harness.cli import main\n"
+    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.registry as r; "
+              f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main\n"
               f"if __name__ == '__main__':\n"
               f"    sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '2']))\n")
     (tmp_path / "go.py").write_text(script)

@@ -15,7 +15,7 @@ from pack_solve import held_solve
 
 from harness.case.reader import load_case
 from harness.paths import ROOT
-from harness.stages import STAGES
+from harness.registry import STAGES
 from harness.stages import engines as S
 
 FOLDER = ROOT / "cases" / "engines"
@@ -41,7 +41,7 @@ def test_case_files_are_the_generators_output_and_valid():
 def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_path):
     pytest.importorskip("newton")
     pytest.importorskip("mujoco")
-    assert "harness.stages.engines" in STAGES
+    assert STAGES.target("engines") == "harness.stages.engines"
     case = load_case(FOLDER / "beam-coarse_nu0.30.toml", "full")
     spec = dict(case.section("model"), budget=2.0)
     df = S.case_rows(case, tmp_path, spec)
@@ -87,9 +87,9 @@ def test_an_engine_not_installed_leaves_rows_naming_the_extra(monkeypatch, tmp_p
 
 
 def test_the_bench_is_the_suite_with_the_engine_status_as_status(monkeypatch):
-    from harness.bench import BENCHES
     from harness.bench import engines as B
-    assert BENCHES["engines"] == "harness.bench.engines"
+    from harness.registry import BENCHES
+    assert BENCHES.target("engines") == "harness.bench.engines"
     seen = []
 
     def fake(case, scratch, spec=None, status=None):

@@ -13,8 +13,8 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from harness.case.reader import load_case
 from harness.export.vtu import read_vtu
-from harness.models.classes import build, class_spec
 from harness.models.sms import model_spec
+from harness.registry import MODEL_CLASSES
 from harness.stages import StageContext
 from harness.stages import sms as stage
 
@@ -82,8 +82,8 @@ def test_classes_share_the_model_and_springs_equals_the_plain_case(tmp_path):
     net, _ = read_vtu(tmp_path / "out" / "springs" / "model-lloyd-lbfgs.vtu")
     assert by["springs"][1]["k_spread"] == pytest.approx(net.k.max() / np.median(net.k), rel=1e-12)
     # dt_stable of P1: dense eigen-solve of M^-1 K with scikit-fem's plane-stress P1 stiffness
-    spec = class_spec(model_spec(case), "p1")
-    model = build(case, spec)
+    cls = MODEL_CLASSES.load("p1")
+    model = cls.build(case, cls.spec(model_spec(case)))
     tri = model.volume.elements
     m = skfem.MeshTri(model.points.T, tri.T)
     lam, mu = lame_parameters(E, NU)

@@ -1,0 +1,132 @@
+"""The fit of a springs network in the sms stage (harness/stages/sms.py): one optimiser
+run of the case on the fitted loads, re-scored by a statics solve, as a table row."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pandas as pd
+
+from harness.case.loads import modal_load
+from harness.errors import ModelError, SpringbenchError
+from harness.stages import sms_measures as measures
+from harness.stages.classes.base import Setting
+
+BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", "target", "tol", "ftol", "gtol",
+               "xatol", "fatol", "cg_maxiter", "chains")
+
+
+def _file(case) -> str | None:
+    return str(case.path) if case.path is not None else None
+
+
+def budget_label(options: dict) -> str:
+    """The options that bound an optimiser's effort, as 'key=value, ...' ('default' if none)."""
+    parts = [f"{k}={options[k]}" for k in BUDGET_KEYS if options.get(k) is not None]
+    return ", ".join(parts) or "default"
+
+
+def optimise(setting: Setting, run_: dict, base, first: dict):
+    """One optimiser run of a springs network on the fitted loads and its row."""
+    from harness.mechanics import statics
+    from harness.optimize.diagnostics import fit_diagnostics
+    from harness.optimize.problem import FitProblem
+    from harness.scoring import node_weights
+    case, ctx, optimize, spec = setting.case, setting.ctx, setting.optimize, setting.spec
+    u_ref, names, fit, weights, fem_f = setting.u_ref, setting.names, setting.fit, setting.weights, setting.fem_f
+    method, objective = run_["method"], run_["objective"]
+    stiff = base.info["stiffness"]
+    tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
+    _, free, forces = statics.all_load_arrays(base, case)
+    free, forces, u_fit, names = free[fit], forces[fit], u_ref[fit], [names[i] for i in fit]
+    wdof = np.repeat(node_weights(base.classes, weights), base.dim)
+    file = _file(case)
+    freq_kw = {}
+    if objective != "G":
+        if fem_f is None or len(fem_f) < run_["modes"]:
+            raise SpringbenchError("the frequency term needs the reference's natural frequencies", file=file,
+                                   field="optimizer.frequency", fix="use a reference with modes, or remove [optimizer.frequency]")
+        if np.any(base.masses <= 0):
+            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies", file=file,
+                             field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
+        modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
+        freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
+                       freq_weight=run_["weight"], modal_free=modal_free)
+    k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
+    if getattr(base, "volume", None) is not None:    # springs + volume / kn: [k, kv], columns beside B
+        k0, groups, extra = base.params(), base.param_groups(spec["grouped"]), base.volume.columns(base.points)
+    problem = FitProblem.from_network(base.points, base.springs, k0, free, forces,
+                                      u_fit.reshape(len(names), -1), wdof, list(names),
+                                      groups=groups, extra_columns=extra, **freq_kw)
+    t0 = time.perf_counter()
+    ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
+    seed = int(base.info["seed"])
+    try:
+        res = optimize(problem, method, dict(run_["options"]), seed, status=ctx.status)
+    except SpringbenchError as exc:      # name the case file, and compare_options / frequency where they apply
+        if exc.file is not None:
+            raise
+        field = exc.field or "optimizer"
+        if field.startswith("optimizer.options"):
+            field = run_["where"] + field[len("optimizer.options"):]
+        elif field == "optimizer.method" and run_["where"] != "optimizer.options":   # the method came from there
+            field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
+        raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
+    seconds = time.perf_counter() - t0
+    name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
+    net = base.with_k(res.k, stiffness=name)
+    sres, sc, sh = setting.evaluate(net)
+    setting.write(net, sres, tag)
+    info = dict(getattr(res, "info", {}) or {})
+    row = {**setting.common, "model": f"{setting.label}[{stiff}]", "stiffness": stiff,
+           "optimizer": method, "grouped": bool(spec["grouped"]), "seconds": seconds,
+           "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
+           "G_s_initial": first.get("G_s_initial", math.nan),
+           "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
+           "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
+           **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc), **measures.heldout_columns(sh, first),
+           "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
+           "_tag": tag}
+    if freq_kw:
+        row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
+    for key in ("n_steps", "accepted"):
+        if hasattr(res, key):
+            row[f"opt_{key}"] = getattr(res, key)
+    row["opt_seed"] = seed                   # the optimiser's random stream (SA); = model_seed
+    if "stop" in info:
+        row["opt_stop"] = str(info["stop"])
+    if info.get("init", "none") != "none":
+        row["opt_init"] = str(info["init"]) + (" (rejected: worse than k0)" if info.get("init_rejected") else "")
+    if "prior" in info:     # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
+        row["opt_prior"] = float(info["prior"])
+    row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
+    if "iterations" in info:
+        row["opt_iterations"] = int(info["iterations"])
+    if "solves" in info:  # gauss-newton: linear solves (one evaluation of G is one per load set)
+        row["opt_solves"] = int(info["solves"])
+    row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
+    return row, net, trace_frame(getattr(res, "trace", None), name)
+
+
+def trace_frame(trace, name):
+    """An optimiser's trace ((step, G) rows, a G column or a DataFrame) as trace.csv rows
+    with ``model`` = name; None if there is none or it has no recognisable shape."""
+    if trace is None or not len(trace):
+        return None
+    try:
+        if isinstance(trace, pd.DataFrame):
+            df = trace.copy()
+        else:
+            arr = np.asarray(trace, float)
+            arr = arr[:, None] if arr.ndim == 1 else arr
+            df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
+        if "G" not in df.columns and df.shape[1] == 1:
+            df.columns = ["G"]
+        if "step" not in df.columns:
+            df.insert(0, "step", np.arange(len(df)))
+        df["model"] = name
+        return df
+    except (ValueError, TypeError):
+        return None
