@@ -15,7 +15,11 @@ from types import MappingProxyType
 
 import numpy as np
 
-_CODE = ("case", "io", "linalg")   # the harness folders the reference imports (the layers before it)
+from harness.sources import digest, tree_shas
+
+# what a reference solution can depend on: the reference and the layers before it (the case,
+# its load sets and their registry, mesh files, the sparse solvers)
+CODE = ("reference", "harness/case", "harness/io", "harness/linalg", "harness/registry.py")
 
 
 def cache_dir() -> Path:
@@ -24,15 +28,8 @@ def cache_dir() -> Path:
 
 
 def code_version() -> str:
-    """Hash of the source files whose change could change a reference solution."""
-    here = Path(__file__).resolve().parent
-    harness = here.parent / "harness"
-    files = sorted(here.glob("*.py")) + sorted(f for d in _CODE for f in (harness / d).glob("*.py"))
-    h = hashlib.sha256()
-    for f in files:
-        h.update(f.name.encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
+    """Digest of the source files whose change could change a reference solution."""
+    return digest(tree_shas(CODE))
 
 
 def _canon(x):

@@ -3,6 +3,7 @@ solves (loads that share constraints share one factorisation)."""
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -12,9 +13,12 @@ from harness.case.linear_states import linear_closed_form
 from harness.case.loadsets import stress_field, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
 from harness.errors import ModelError
-from reference import linearfield, solvers, tensorpre, tensorsolve, twolevel
 from reference.fem import Discretisation
-from reference.symmetry import Mirror, plane_dofs
+from reference.graded.lattice import Lattice
+from reference.graded.symmetry import Mirror, plane_dofs
+from reference.solvers import linearfield, sparse, tensorpre, tensorsolve, twolevel
+from reference.solvers.plan import System, choose_plan
+from reference.solvers.record import SolveRecord
 
 
 def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -25,7 +29,7 @@ def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
 
 def predicate(case, name: str, bbox, parts=None):
     """The part's point predicate: harness.case.parts', or ``parts(name, bbox)`` when given
-    (reference/meshparts.py: a mesh body's parts resolved on the user's mesh)."""
+    (reference/adaptive/meshparts.py: a mesh body's parts resolved on the user's mesh)."""
     return part_predicate(name, bbox, case.body.parts) if parts is None else parts(name, bbox)
 
 
@@ -83,24 +87,20 @@ def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mi
     return F
 
 
-TWO_LEVEL_MIN = 20_000   # dofs: below, 'auto' always factorises (reference/solvers.py)
-
-
 def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
-                 prescribed: dict | None = None, info: list | None = None, C: np.ndarray | None = None,
+                 prescribed: dict | None = None, records: list | None = None, C: np.ndarray | None = None,
                  guess: dict | None = None) -> dict:
     """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
-    Loads sharing a constraint set share one factorisation; ``info`` (a list) gets the
-    solver's record of each (method, residual, fallbacks, seconds) with the loads named.
-    ``K``: the stiffness, or a function that assembles it (called only when needed).
-    A group whose solution is a linear field (a stretch) is found without a solve
-    (reference/linearfield.py, method 'linear').
-    A P2/Q2 system of at least TWO_LEVEL_MIN dofs (or ``method`` 'two-level') hands the
-    solver its P1/Q1 subspace for the two-level method (reference/twolevel.py). A Q2
-    system on a tensor mesh with its Voigt stiffness ``C`` per element (method 'auto' or
-    'tensor') is solved by the fast-diagonalisation CG (reference/tensorpre.py): without
-    assembling K when C is one tensor (reference/tensorsolve.py, from the initial
-    guesses ``guess`` {load: dof vector} when given), else on the assembled K."""
+    Loads sharing a constraint set share one factorisation; ``records`` (a list) gets a
+    SolveRecord of each (reference/solvers/record.py) with the loads named. ``K``: the
+    stiffness, or a function that assembles it (called only when needed). The plan of
+    each (reference/solvers/plan.py) decides: a group whose solution is a linear field (a
+    stretch) is found without a solve (reference/solvers/linearfield.py, method
+    'linear'); a Q2 system on a tensor mesh with one elastic tensor ``C`` is solved
+    without assembling K (reference/solvers/tensorsolve.py, from the initial guesses
+    ``guess`` {load: dof vector} when given) and else gets the fast-diagonalisation
+    preconditioner (reference/solvers/tensorpre.py); a large P2/Q2 system gets its P1/Q1
+    subspace for the two-level method (reference/solvers/twolevel.py)."""
     out = {}
     groups: dict[bytes, list[str]] = {}
     for name in loads:
@@ -112,13 +112,18 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
             assembled[0] = K()
         return assembled[0]
 
+    def record(rec, names, n, **more):
+        if records is not None:
+            records.append(dataclasses.replace(rec, loads=tuple(names), n=n, **more))
+
     tensor_mesh = C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex")
-    lat = tensorsolve.lattice_of(d.doflocs) if tensor_mesh and not prescribed else None
+    lat = Lattice.q2(d.doflocs) if tensor_mesh and not prescribed else None
     C0 = None if lat is None else tensorsolve.homogeneous(C)
     op = None if C0 is None else tensorsolve.operator(lat, C0)
     for names in groups.values():
         fx = fixed[names[0]]
         nfree = d.ndof - len(fx)
+        plan = choose_plan(System(nfree, d.dim, method, ndof=d.ndof, matrix_free=op is not None))
         tried = None
         if not prescribed:
             t0 = time.perf_counter()
@@ -128,22 +133,18 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
                 apply, norm = stiffness().__matmul__, float(abs(stiffness()).sum(axis=1).max())
             found = linearfield.solve(apply, d.doflocs, np.column_stack([loads[n] for n in names]), fx, norm)
             if found is not None:
-                if info is not None:
-                    info.append(dict(method="linear", residual=found[1], rtol=solvers.RTOL, iterations=0,
-                                     fallbacks=[], seconds=time.perf_counter() - t0, loads=list(names), n=nfree))
+                record(SolveRecord("linear", found[1], sparse.RTOL, 0, time.perf_counter() - t0), names, nfree)
                 out.update({n: found[0][:, i] for i, n in enumerate(names)})
                 continue
-        if C0 is not None and (method == "tensor" or nfree >= tensorsolve.MIN_DOFS[d.dim]):
-            rec = {}
+        if plan.matrix_free:
             x0 = None if not guess or any(n not in guess for n in names) else \
                 np.column_stack([guess[n] for n in names])
-            x = tensorsolve.solve(op, np.column_stack([loads[n] for n in names]), fx, rec, x0)
+            x, rec = tensorsolve.solve(op, np.column_stack([loads[n] for n in names]), fx, x0)
             if x is not None:
-                if info is not None:
-                    info.append(dict(rec, loads=list(names), n=nfree))
+                record(rec, names, nfree)
                 out.update({n: x[:, i] for i, n in enumerate(names)})
                 continue
-            tried = rec or None
+            tried = rec
         Kf = stiffness()
         free = np.setdiff1d(np.arange(d.ndof), fx)
         A = Kf[free][:, free]
@@ -156,17 +157,17 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
         if R is None:
             R = d.rigid_modes()
             coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
-            P = twolevel.prolongation(d) if d.ndof >= TWO_LEVEL_MIN or method == "two-level" else None
-        rec = {}
+            P = twolevel.prolongation(d) if plan.coarse else None
         tensor = None
         if tensor_mesh and tried is None:
             tensor = tensorpre.preconditioner(d.doflocs, free, C)
-        x = solvers.solve(A, np.column_stack(rhs), "auto" if tried else method, R[free], info=rec,
-                          coords=coords[free], coarse=None if P is None else P[free], tensor=tensor)
+        done: list = []
+        x = sparse.solve(A, np.column_stack(rhs), "auto" if tried else method, R[free], records=done,
+                         coords=coords[free], coarse=None if P is None else P[free], tensor=tensor)
+        rec = done[0]
         if tried:
-            rec["fallbacks"].insert(0, {k: tried[k] for k in ("method", "residual", "reason", "seconds")})
-        if info is not None:
-            info.append(dict(rec, loads=list(names), n=len(free)))
+            rec = dataclasses.replace(rec, fallbacks=(tried,) + rec.fallbacks)
+        record(rec, names, len(free))
         for i, n in enumerate(names):
             u = np.zeros(d.ndof)
             u[free] = x[:, i]
@@ -176,14 +177,14 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
     return out
 
 
-def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror = Mirror(),
+def solve_mesh(case, mesh, loads=None, records: list | None = None, mirror: Mirror = Mirror(),
                disc: Discretisation | None = None, parts=None, stiffness: dict | None = None,
                guess: dict | None = None) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
-    those named in ``loads``). ``info``: a list that gets one solver record per
-    factorisation (reference/solvers.py). ``mirror``: ``mesh`` is the lower part of the
+    those named in ``loads``). ``records``: a list that gets one SolveRecord per
+    factorisation (reference/solvers/record.py). ``mirror``: ``mesh`` is the lower part of the
     case's box cut at these mid-planes, and every load named has that parity
-    (reference/symmetry.py). ``disc``: the mesh's Discretisation if already built.
+    (reference/graded/symmetry.py). ``disc``: the mesh's Discretisation if already built.
     ``parts``: part predicates in place of harness.case.parts' (see :func:`predicate`).
     ``stiffness``: a dict that keeps K (once assembled) and C under ``id(disc)`` for the
     next call on the same discretisation (the graded levels' shears cut the box alike in
@@ -210,7 +211,7 @@ def solve_mesh(case, mesh, loads=None, info: list | None = None, mirror: Mirror 
 
     if stiffness is not None:
         stiffness[id(d)] = (held, C)
-    return {**solve_system(K, F, fixed, case.reference.solver, d, info=info, C=C, guess=guess), **exact}
+    return {**solve_system(K, F, fixed, case.reference.solver, d, records=records, C=C, guess=guess), **exact}
 
 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:

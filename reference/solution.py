@@ -3,18 +3,18 @@ own error estimate is below the case's tolerance, cached on disk.
 
 Two methods (``[reference] method``): ``graded`` (rectangles and boxes; the default for
 boxes) solves Q2 meshes graded towards the faces on several levels and extrapolates
-(reference/levels.py): the reference field is the extrapolant and the estimate is
+(reference/graded/levels.py): the reference field is the extrapolant and the estimate is
 per point. ``refine`` (any body) refines the case's mesh: a mesh body of triangles or
-tetrahedra adaptively (reference/adaptive.py: residual indicators, Dörfler marking; the
+tetrahedra adaptively (reference/adaptive/adapt.py: residual indicators, Dörfler marking; the
 estimate is per point, from the last changes between levels and their observed order),
-any other body uniformly (reference/refine.py: the relative change from the previous
-level, the same at every point). The finest solve is kept.
+any other body uniformly (reference/adaptive/refine.py: the relative change from the previous
+level, the same at every point). The finest solve is kept. Each is one object of
+reference/methods.py, which the solution asks for its values and estimates.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
 from functools import cached_property
 
 import numpy as np
@@ -23,19 +23,11 @@ import skfem
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from reference import cache as _cache
-from reference.adaptive import Changes, applies, solve_adaptive
 from reference.fem import Discretisation
-from reference.levels import Levels, n_dofs, solve_graded
 from reference.locate import Locator
-from reference.mesh import MESHES
+from reference.methods import method_of
 from reference.problem import body_bbox, fixed_dofs
-from reference.refine import solve_refined
-
-MODAL_DOFS = {2: 400_000, 3: 120_000}   # graded: the modes come from the finest level at most this
-# large (the Sec. 6 cube's 108k-dof level factorises in ~3 GB; its 152k one would pass 6 GB, and its
-# shift-invert CG took > 15 min). Frequencies converge like h^(2p), far faster than the scored
-# displacements that need the finer levels.
-
+from reference.solvers.record import SolveRecord
 
 # -- the solution --------------------------------------------------------------------
 
@@ -58,54 +50,54 @@ class ReferenceSolution:
 
     Attributes: ``loads`` (names), ``error_estimate`` ({load: relative estimate}, and
     callable per point), ``met_tol``, ``n_dofs``, ``level`` (levels after the first),
-    ``history`` (rows of n_dofs and the estimates per level), ``solver`` (one record
-    per factorisation: method, residual), ``mesh`` (the finest), ``basis`` (scalar) and
-    ``vector_basis`` for plots. With ``levels`` (the graded method), ``displacement``
-    is the extrapolated field and ``nodal`` the finest level's. With ``changes`` (the
-    adaptive method) the per-point estimate comes from the last changes between levels.
+    ``history`` (rows of n_dofs and the estimates per level), ``solver`` (one
+    SolveRecord per factorisation), ``method`` (the object of reference/methods.py that
+    holds the fields: its values and estimates are the solution's), ``mesh`` (the
+    finest), ``basis`` (scalar) and ``vector_basis`` for plots.
     """
 
-    def __init__(self, case, mesh, U: dict, estimates: dict, history: list, key: str,
-                 from_cache: bool = False, seconds: float = 0.0, solver: list | None = None,
-                 levels: Levels | None = None, changes: Changes | None = None):
+    def __init__(self, case, method, estimates: dict, history: list, key: str,
+                 from_cache: bool = False, seconds: float = 0.0, solver: list | None = None):
         self.case = case
-        self.mesh = mesh
+        self.method = method
+        self.mesh = method.mesh
         self.dim = case.dim
         self.cell, self.order = case.reference.cell, case.reference.element
-        self._U = U
-        self.loads = tuple(U)
-        self.levels = levels
+        self._U = method.fields
+        self.loads = tuple(self._U)
         self.solver = list(solver or [])
-        self.changes = changes
-        point = self._level_estimate if levels is not None else (
-            self._change_estimate if changes is not None else self._uniform_estimate)
-        self.error_estimate = ErrorEstimate(estimates, point)
+        self.error_estimate = ErrorEstimate(estimates, self._estimate)
         self.history = history
         self.key = key
         self.from_cache = from_cache
         self.seconds = seconds
         self.level = len(history) - 1
-        self.n_dofs = (n_dofs(levels.meshes[-1], self.dim) if levels is not None
-                       else int(next(iter(U.values())).size) if U else 0)
+        self.n_dofs = method.n_dofs
         self._modal: dict = {}
 
-    @cached_property
+    @property
+    def levels(self):
+        """The graded method's levels (None for the others)."""
+        return getattr(self.method, "levels", None)
+
+    @property
+    def changes(self):
+        """The adaptive method's last changes between levels (None for the others)."""
+        return getattr(self.method, "changes", None)
+
+    @property
     def disc(self) -> Discretisation:
-        return Discretisation(self.mesh, self.cell, self.order)
+        return self.method.disc
 
     @property
     def basis(self) -> skfem.CellBasis:
         return self.disc.basis
 
-    @cached_property
+    @property
     def modal_disc(self) -> Discretisation:
         """The discretisation of the modal solves: the finest mesh, or for the graded
-        method the finest level with at most MODAL_DOFS dofs (the coarsest if none is)."""
-        if self.levels is None:
-            return self.disc
-        sizes = [n_dofs(m, self.dim) for m in self.levels.meshes]
-        k = max([i for i, n in enumerate(sizes) if n <= MODAL_DOFS[self.dim]], default=0)
-        return self.disc if k == len(sizes) - 1 else self.levels.disc(self.levels.meshes[k])
+        method the finest level with at most its MODAL_DOFS dofs."""
+        return self.method.modal_disc
 
     @property
     def modal_mesh(self):
@@ -116,9 +108,9 @@ class ReferenceSolution:
     def vector_basis(self) -> skfem.CellBasis:
         return skfem.Basis(self.mesh, skfem.ElementVector(self.disc.elem), intorder=self.disc.q_mass)
 
-    @cached_property
+    @property
     def locator(self) -> Locator:
-        return Locator(self.mesh)
+        return self.method.locator
 
     def _check_load(self, load) -> str:
         if load not in self._U:
@@ -135,9 +127,7 @@ class ReferenceSolution:
 
     def displacement(self, points, load: str) -> np.ndarray:
         """Displacement (n, dim) at points (n, dim) inside or on the body."""
-        if self.levels is not None:
-            return self.levels.evaluate(points, self._check_load(load))[0]
-        return self.locator.evaluate(self.basis, self.nodal(load), points)
+        return self.method.evaluate(points, self._check_load(load))
 
     def u_max(self, load: str) -> float:
         return float(np.linalg.norm(self.vertex_displacement(load), axis=1).max())
@@ -148,17 +138,8 @@ class ReferenceSolution:
         (False when there is no estimate: a single level is never trusted)."""
         return all(np.isfinite(v) and v < self.case.reference.tol for v in self.error_estimate.values())
 
-    def _level_estimate(self, points, load: str) -> np.ndarray:
-        return self.levels.evaluate(points, self._check_load(load))[1]
-
-    def _change_estimate(self, points, load: str) -> np.ndarray:
-        return self.changes.at(self.locator, self.basis, points, self._check_load(load))
-
-    def _uniform_estimate(self, points, load: str) -> np.ndarray:
-        """The load's relative estimate times its largest displacement at every point:
-        the refinement estimate is a maximum over the probes, so it bounds each of them."""
-        e = float(self.error_estimate[self._check_load(load)]) * self.u_max(load)
-        return np.full(len(points), e)
+    def _estimate(self, points, load: str) -> np.ndarray:
+        return self.method.estimate(np.asarray(points, float), self._check_load(load))
 
     # -- modal analysis ---------------------------------------------------------------
 
@@ -185,8 +166,8 @@ class ReferenceSolution:
         else:
             from scipy.sparse.linalg import LinearOperator, eigsh
 
-            from reference.solvers import inverse
-            from reference.twolevel import prolongation
+            from reference.solvers.sparse import inverse
+            from reference.solvers.twolevel import prolongation
             P = prolongation(d)
             solve = inverse(Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free], None if P is None else P[free])
             opinv = None if solve is None else LinearOperator(Kf.shape, matvec=solve, dtype=float)
@@ -248,69 +229,23 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
                          fix="add loads.set or [[loads.case]]")
     key = _cache.case_key(case) if cache else ""
     names = [l.name for l in case.loads]
-    graded = case.reference.method == "graded"
+    method = method_of(case)
     if cache:
         hit = _cache.load(key)
         if hit is not None:
             est = {n: float(hit["estimate"][i]) for i, n in enumerate(names)}
             hist = [dict(zip(["n_dofs"] + names, row)) for row in hit["history"]]
-            solver = [dict(method=str(m), residual=float(r)) for m, r in zip(hit["solver"], hit["residual"])]
-            if graded:
-                levels = Levels.from_arrays(case, names, hit)
-                return _graded_solution(case, levels, est, hist, key, float(hit["seconds"]), solver, True)
-            mesh = MESHES[case.reference.cell](hit["p"], hit["t"])
-            U = {n: hit["u"][i] for i, n in enumerate(names)}
-            return ReferenceSolution(case, mesh, U, est, hist, key, from_cache=True,
-                                     seconds=float(hit["seconds"]), solver=solver,
-                                     changes=Changes.from_arrays(names, hit))
+            solver = [SolveRecord(str(m), float(r)) for m, r in zip(hit["solver"], hit["residual"])]
+            return ReferenceSolution(case, method.from_arrays(case, names, hit, est), est, hist, key,
+                                     from_cache=True, seconds=float(hit["seconds"]), solver=solver)
     t0 = time.perf_counter()
-    info: list = []
-    changes = None
-    if graded:
-        levels, est, history = solve_graded(case, status, info)
-    elif applies(case):
-        mesh, U, est, history, changes = solve_adaptive(case, status, info)
-    else:
-        mesh, U, est, history = solve_refined(case, status, info)
+    records: list = []
+    solved, est, history = method.solve(case, status, records)
     seconds = time.perf_counter() - t0
-    solver = [dict(method=str(r.get("method", "")), residual=float(r.get("residual", np.nan))) for r in info]
-    common = dict(estimate=np.array([est[n] for n in names]),
-                  history=np.array([[h["n_dofs"]] + [h[n] for n in names] for h in history], float),
-                  seconds=seconds, solver=np.array([r["method"] for r in solver]),
-                  residual=np.array([r["residual"] for r in solver], float))
-    if graded:
-        if cache:
-            _cache.save(key, **levels.to_arrays(names), **common)
-        return _graded_solution(case, levels, est, history, key, seconds, solver, False)
+    solver = [SolveRecord(r.method, r.residual) for r in records]
     if cache:
-        _cache.save(key, p=mesh.p, t=mesh.t, u=np.stack([U[n] for n in names]), **common,
-                    **(changes.to_arrays(names) if changes is not None else {}))
-    return ReferenceSolution(case, mesh, U, est, history, key, seconds=seconds, solver=solver, changes=changes)
-
-
-class _FinestFields(Mapping):
-    """{load: dof vector on the finest graded level}, each made when first asked for: a load
-    that stopped early (a stretch) is interpolated onto the finest mesh, ~2 s a load on the
-    10:1 box's million dofs, and most runs only evaluate the extrapolant at points."""
-
-    def __init__(self, levels: Levels):
-        self._levels, self._done = levels, {}
-
-    def __getitem__(self, name):
-        if name not in self._done:
-            if name not in self._levels.fields:
-                raise KeyError(name)
-            self._done[name] = self._levels.finest_field(name)
-        return self._done[name]
-
-    def __iter__(self):
-        return iter(self._levels.fields)
-
-    def __len__(self):
-        return len(self._levels.fields)
-
-
-def _graded_solution(case, levels: Levels, est, history, key, seconds, solver, from_cache):
-    U = _FinestFields(levels)
-    return ReferenceSolution(case, levels.meshes[-1], U, est, history, key, from_cache=from_cache,
-                             seconds=seconds, solver=solver, levels=levels)
+        _cache.save(key, **solved.to_arrays(names), estimate=np.array([est[n] for n in names]),
+                    history=np.array([[h["n_dofs"]] + [h[n] for n in names] for h in history], float),
+                    seconds=seconds, solver=np.array([r.method for r in solver]),
+                    residual=np.array([r.residual for r in solver], float))
+    return ReferenceSolution(case, solved, est, history, key, seconds=seconds, solver=solver)

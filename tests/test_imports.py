@@ -128,7 +128,7 @@ def test_no_import_circles():
 # The pipeline, first to last: a module may import its own layer and the layers before it.
 # The base (the registry of names, errors, paths, atomic outputs, sparse linear algebra, provenance, progress bars) is
 # below everything; the report reads stored results and never imports the runner, which calls it.
-LAYERS = ("harness harness.registry harness.errors harness.paths harness.outputs harness.linalg harness.provenance harness.progress",
+LAYERS = ("harness harness.registry harness.sources harness.errors harness.paths harness.outputs harness.linalg harness.provenance harness.progress",
           "harness.io", "harness.case", "reference", "harness.geometry", "harness.models",
           "harness.mechanics", "harness.optimize", "harness.scoring", "harness.export", "harness.engines",
           "harness.stages", "harness.report", "harness.run", "harness.bench", "harness.commands",

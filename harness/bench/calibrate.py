@@ -15,9 +15,9 @@ not), the start rule's G_fit_score, the exported model's G_heldout_mean beside t
 rule's in hindsight, the reference's own error on the fitted and held-out loads, and the
 ratios of seconds to the 1k mesh's and to the rule alone. The reference's error: meshes
 up to ~10k tets are refined adaptively (up to 200k dofs); larger ones are estimated from
-coarse levels of their body (reference/coarse.py, their own system solved in the coarse
+coarse levels of their body (reference/adaptive/coarse.py, their own system solved in the coarse
 levels' subspaces), the solve on the mesh itself by the two-level method
-(reference/twolevel.py).
+(reference/solvers/twolevel.py).
 """
 
 from __future__ import annotations

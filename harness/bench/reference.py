@@ -20,9 +20,9 @@ import skfem
 
 from harness.case.elasticity import isotropic_compliance, plane
 from harness.progress import steps
-from reference import solvers
 from reference.fem import Discretisation
 from reference.locate import Locator
+from reference.solvers import sparse
 
 
 def _system(cell: str, n: int):
@@ -43,7 +43,7 @@ def _system(cell: str, n: int):
 
 def _time_solve(A, b, R, method):
     t0 = time.perf_counter()
-    x = solvers.solve(A, b, method, R)
+    x = sparse.solve(A, b, method, R)
     sec = time.perf_counter() - t0
     return sec, float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
 
@@ -110,9 +110,9 @@ def graded_solve_rows(quick: bool = False) -> list[dict]:
     solver seconds (and, apart, the rest of the call: assembly, loads, constraints)."""
     import dataclasses
 
-    from reference.graded import graded_axes, tensor_mesh
+    from reference.graded.meshes import graded_axes, tensor_mesh
+    from reference.graded.symmetry import lower_half, mirror_of
     from reference.problem import solve_mesh
-    from reference.symmetry import lower_half, mirror_of
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         case, _ = _shear_case(Path(tmp), "thin", {}, (10.0, 1.0, 1.0), 0.49)
@@ -126,17 +126,17 @@ def graded_solve_rows(quick: bool = False) -> list[dict]:
                 c = dataclasses.replace(case, reference=dataclasses.replace(case.reference, solver=method))
                 info: list = []
                 t0 = time.perf_counter()
-                solve_mesh(c, d.mesh, loads={LOAD}, info=info, mirror=mirror, disc=d)
+                solve_mesh(c, d.mesh, loads={LOAD}, records=info, mirror=mirror, disc=d)
                 wall = time.perf_counter() - t0
                 rec = info[0]
-                base = rec["seconds"] if method == "direct" else base
-                rows.append(dict(task="solve", dim=3, element="Q2 hex graded", n_dofs=rec["n"], solver=rec["method"],
-                                 seconds=rec["seconds"], assembly_seconds=wall - rec["seconds"], residual=rec["residual"],
-                                 ratio=1.0 if method == "direct" else base / rec["seconds"],
+                base = rec.seconds if method == "direct" else base
+                rows.append(dict(task="solve", dim=3, element="Q2 hex graded", n_dofs=rec.n, solver=rec.method,
+                                 seconds=rec.seconds, assembly_seconds=wall - rec.seconds, residual=rec.residual,
+                                 ratio=1.0 if method == "direct" else base / rec.seconds,
                                  note=(f"baseline: direct; 10:1 box nu 0.49 {LOAD} quarter, n = {n}; assembly_seconds: "
                                        "K, loads, constraints" if method == "direct"
-                                       else f"ratio = direct / tensor time; {rec['iterations']} iterations; n = {n}; "
-                                       + ("matrix-free (K never assembled)" if rec.get("matrix_free") else "assembled")
+                                       else f"ratio = direct / tensor time; {rec.iterations} iterations; n = {n}; "
+                                       + ("matrix-free (K never assembled)" if rec.matrix_free else "assembled")
                                        + ("" if with_direct else ", direct skipped (too slow)"))))
     return rows
 
@@ -301,7 +301,7 @@ def _nine_loads(size, nu, points) -> dict:
         seconds = time.perf_counter() - t0
     return dict(seconds=seconds, peak_gb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6,
                 u=sol.displacement(points, LOAD), estimate=sol.error_estimate(points, LOAD), n_dofs=sol.n_dofs,
-                ns=list(sol.levels.ns), methods=sorted({r["method"] for r in sol.solver}))
+                ns=list(sol.levels.ns), methods=sorted({r.method for r in sol.solver}))
 
 
 def shape_rows() -> list[dict]:

@@ -106,7 +106,7 @@ LOADS = {
 GRADED_LEVELS = 8   # default max_refine of the graded method: n = 2..10 cells per end zone. A cube's
 # shears reach 7e-5 at n = 8 (tests/reference/test_graded_vs_independent.py) and stop there (tol);
 # a 10:1 box at nu = 0.49 reaches 6.6e-5 at n = 10 against the independent truth (2.5e-4 at n = 6);
-# the dof budget (reference/levels.py) stops earlier where a level would not fit
+# the dof budget (reference/graded/levels.py) stops earlier where a level would not fit
 
 REFERENCE = {
     "element": Field("str", "P2", choices=("P1", "P2")),

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from harness.errors import CaseError, SpringbenchError
 from harness.paths import DEFAULT_CASES, ROOT
+from harness.sources import file_sha, relative
 
 HASH_VERSION = "springbench-job-1"
 # loaded sources that cannot change a result (drawing, tables, command-line plumbing)
@@ -56,21 +57,6 @@ class JobResult:
     code: dict = field(default_factory=dict)  # {source file: sha256} the job loaded
 
 
-_SHA_CACHE: dict[tuple, str] = {}
-
-
-def file_sha(path: Path) -> str | None:
-    """SHA-256 of a file (cached by path, size and mtime); None if it is gone."""
-    try:
-        st = path.stat()
-    except OSError:
-        return None
-    key = (str(path), st.st_size, st.st_mtime_ns)
-    if key not in _SHA_CACHE:
-        _SHA_CACHE[key] = hashlib.sha256(path.read_bytes()).hexdigest()
-    return _SHA_CACHE[key]
-
-
 def loaded_sources(stage_modules=()) -> dict[str, str]:
     """{file: sha256} of the code this process has loaded that a result can depend on:
     modules under ``harness/`` and ``reference/`` (paths relative to the checkout) and the
@@ -84,7 +70,7 @@ def loaded_sources(stage_modules=()) -> dict[str, str]:
         p = Path(f).resolve()
         inside = any(p.is_relative_to(r) for r in roots)
         if inside or name in stage_modules:
-            key = p.relative_to(ROOT).as_posix() if inside else str(p)
+            key = relative(p)
             if any(key.startswith(n) if n.endswith("/") else key == n for n in _NOT_CODE):
                 continue
             sha = file_sha(p)

@@ -85,8 +85,8 @@ def test_p2_solves_meet_the_closed_form_on_curved_meshes(tmp_path, bodies, name,
     monkeypatch.setattr(reference.problem, "homogeneous_field", lambda *a: None)
     d = Discretisation(base_mesh(case), case.reference.cell, "P2")
     info = []
-    U = reference.problem.solve_mesh(case, d.mesh, info=info, disc=d)
-    assert sum(len(r["loads"]) for r in info) == len(case.loads)       # all solved, none taken as exact
+    U = reference.problem.solve_mesh(case, d.mesh, records=info, disc=d)
+    assert sum(len(r.loads) for r in info) == len(case.loads)       # all solved, none taken as exact
     x = d.doflocs.T
     errors = {}
     for load in case.loads:
@@ -200,7 +200,7 @@ def test_the_reference_takes_the_closed_form_on_p2_and_solves_on_p1(tmp_path, bo
     P2 is zero to rounding: its Neumann term reads the linear traction."""
     import reference
     from harness.case.elasticity import densities, element_stiffness
-    from reference.estimator import indicators
+    from reference.adaptive.estimator import indicators
     from reference.mesh import base_mesh
     from reference.problem import fixed_dofs, solve_mesh
     case = mesh_case(tmp_path, bodies["ellipse"], 2)
@@ -221,8 +221,8 @@ def test_the_reference_takes_the_closed_form_on_p2_and_solves_on_p1(tmp_path, bo
 
     p1 = mesh_case(tmp_path, bodies["ellipse"], 2, element="P1")
     info = []
-    U1 = solve_mesh(p1, base_mesh(p1), info=info)
-    solved = {n for r in info for n in r["loads"]}
+    U1 = solve_mesh(p1, base_mesh(p1), records=info)
+    solved = {n for r in info for n in r.loads}
     assert solved == {l.name for l in p1.loads if l.stress_gradient is not None}
     d1 = Discretisation(base_mesh(p1), "tri", "P1")
     for load in p1.loads:

@@ -1,4 +1,4 @@
-"""Adaptive refinement of mesh bodies (reference/adaptive.py, estimator.py, meshparts.py):
+"""Adaptive refinement of mesh bodies (reference/adaptive/adapt.py, estimator.py, meshparts.py):
 the residual indicators against hand-computed fields and an exact solution, adaptive
 against uniform refinement and the per-point estimate against independent fine solves
 (plain scikit-fem elasticity, not the product's assembly), a 3-D gmsh body."""
@@ -14,11 +14,11 @@ from skfem.models.elasticity import lame_parameters, linear_elasticity
 import reference
 from harness.case.elasticity import densities, element_stiffness
 from harness.case.reader import load_case
-from reference import estimator
-from reference.adaptive import solve_adaptive
+from reference.adaptive import estimator
+from reference.adaptive.adapt import solve_adaptive
+from reference.adaptive.meshparts import UserMeshParts
 from reference.fem import Discretisation
 from reference.mesh import base_mesh
-from reference.meshparts import UserMeshParts
 from reference.problem import body_bbox, fixed_dofs, load_vector, solve_mesh
 
 E, NU = 1000.0, 0.3

@@ -1,4 +1,4 @@
-"""The estimate of a mesh too large to refine (reference/coarse.py, adaptive.py's
+"""The estimate of a mesh too large to refine (reference/adaptive/coarse.py, adaptive.py's
 COARSE levels): coarser meshes of the body, the user's system solved in their subspaces,
 against independent fine solves (plain scikit-fem, the user's mesh refined)."""
 
@@ -8,8 +8,8 @@ import skfem
 from test_adaptive import CANTILEVER, at_vertices, independent, mesh_case
 
 import reference
-import reference.adaptive as adaptive
-from reference import coarse
+import reference.adaptive.adapt as adaptive
+from reference.adaptive import coarse
 from reference.fem import Discretisation
 from reference.mesh import base_mesh
 
@@ -78,7 +78,7 @@ def test_galerkin_levels_solved_by_the_two_level_method_equal_the_cholesky():
     kw = dict(coarse=cd, fine=d)
     direct = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "direct", **kw)["a"]
     info = []
-    two = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "two-level", info=info, **kw)["a"]
-    assert info[0]["method"] == "two-level"
+    two = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "two-level", records=info, **kw)["a"]
+    assert info[0].method == "two-level"
     assert np.abs(two - direct).max() <= 1e-8 * np.abs(direct).max()
     assert np.abs(direct).max() > 0

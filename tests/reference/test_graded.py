@@ -1,4 +1,4 @@
-"""The graded reference of boxes and rectangles (reference/graded.py, extrapolate.py,
+"""The graded reference of boxes and rectangles (reference/graded/meshes.py, extrapolate.py,
 levels.py): meshes, Richardson extrapolation on sequences with a known limit, closed
 forms, the case keys, the cache."""
 
@@ -10,8 +10,15 @@ import pytest
 import reference
 from harness.case.reader import load_case
 from harness.errors import CaseError
-from reference.extrapolate import extrapolate, observed_order, richardson
-from reference.graded import AxisMap, axis_nodes, graded_mesh, zone_inverse, zone_map, zone_slope
+from reference.graded.extrapolate import extrapolate, observed_order, richardson
+from reference.graded.meshes import (
+    AxisMap,
+    axis_nodes,
+    graded_mesh,
+    zone_inverse,
+    zone_map,
+    zone_slope,
+)
 
 
 @pytest.fixture(autouse=True)
@@ -185,7 +192,7 @@ def test_graded_solution_round_trips_through_the_cache(tmp_path):
         np.testing.assert_array_equal(a.displacement(x, name), b.displacement(x, name))
         np.testing.assert_array_equal(a.error_estimate(x, name), b.error_estimate(x, name))
     assert a.levels.orders == b.levels.orders
-    assert [r["method"] for r in a.solver] == [r["method"] for r in b.solver]
+    assert [r.method for r in a.solver] == [r.method for r in b.solver]
 
 
 @pytest.mark.parametrize("size,nu", [((10.0, 1.0, 1.0), 0.49), ((2.0, 1.0, 0.5), 0.28), ((1000.0, 200.0, 200.0), 0.45)])
@@ -198,7 +205,7 @@ def test_thin_soft_and_millimetre_boxes_solve_at_default_settings(tmp_path, size
                     loads='set = "basic3d"\nmagnitude = 1.0')
     sol = reference.solve(case, cache=False)
     # 3 stretches + 6 shears on their quarters (one mirror each); all to the solver's acceptance
-    assert len(sol.solver) == 9 and all(r["residual"] < 1e-6 for r in sol.solver)
+    assert len(sol.solver) == 9 and all(r.residual < 1e-6 for r in sol.solver)
     lo, hi = case.body.bbox()
     x = np.random.default_rng(5).uniform(lo, hi, (50, 3))
     want = -nu / E * (x - lo)
@@ -233,7 +240,7 @@ def test_box_cell_stiffness_is_the_general_quadrature(monkeypatch):
                                              (2, 8, [2, 3, 4, 6, 7, 8]), (2, 6, [2, 3, 4, 5, 6]),
                                              (3, 4, [3, 4]), (1, 12, [1, 2, 3, 5, 7, 9, 10, 11, 12])])
 def test_levels_skip_every_second_n_between_the_first_and_last_three(first, last, want):
-    from reference.levels import next_divisions
+    from reference.graded.levels import next_divisions
     ns = [first]
     while ns[-1] < last:
         ns.append(next_divisions(ns[-1], first, last))

@@ -1,4 +1,4 @@
-"""reference/kronecker.py (the graded boxes' Q2 stiffness as Kronecker products, applied
+"""reference/solvers/kronecker.py (the graded boxes' Q2 stiffness as Kronecker products, applied
 without assembly) against independent truths: the 1-D matrices against the Q2 element
 matrices written out by hand; K u against the stiffness scikit-fem assembles from a
 bilinear form written here (isotropic and orthotropic, 3-D hexahedra and 2-D
@@ -14,9 +14,9 @@ from skfem.helpers import sym_grad
 from test_tensorpre import _orthotropic  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
-from reference.graded import graded_axes, tensor_mesh
-from reference.gridvalues import GridField
-from reference.kronecker import KroneckerStiffness, axis_matrices
+from reference.graded.lattice import Lattice
+from reference.graded.meshes import graded_axes, tensor_mesh
+from reference.solvers.kronecker import KroneckerStiffness, axis_matrices
 
 
 def test_axis_matrices_are_the_q2_element_matrices():
@@ -64,7 +64,7 @@ def test_apply_equals_the_assembled_stiffness(dim, material):
     basis, K = _skfem_stiffness(mesh, C)
     # scikit-fem's vector dofs: component c of scalar node i at basis.nodal_dofs / ... (interleaved)
     locs = basis.doflocs[:, ::dim]
-    grid = GridField(locs)
+    grid = Lattice.of(locs)
     op = KroneckerStiffness.of(grid.axes, C)
     u = np.random.default_rng(3).standard_normal(K.shape[0])
     U = np.zeros((dim, int(np.prod(grid.shape))))

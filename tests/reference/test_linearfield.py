@@ -1,4 +1,4 @@
-"""reference/linearfield.py (loads whose FE solution is linear, found by a Galerkin solve
+"""reference/solvers/linearfield.py (loads whose FE solution is linear, found by a Galerkin solve
 over the linear fields and accepted by the solvers' residual test) against the closed
 form of a stretch (u_a = s (a - a0) / E, u_b = -nu s (b - b0) / E), on P2 tetrahedra
 (assembled K) and on a graded Q2 box (the Kronecker operator); a shear, whose solution
@@ -11,10 +11,10 @@ import pytest
 import skfem
 
 from harness.case.elasticity import isotropic_compliance
-from reference import linearfield
 from reference.fem import Discretisation
-from reference.graded import graded_axes, tensor_mesh
+from reference.graded.meshes import graded_axes, tensor_mesh
 from reference.problem import solve_system
+from reference.solvers import linearfield
 
 E, NU, S = 210.0, 0.49, 2.0
 SIZE = np.array([4.0, 1.0, 0.7])
@@ -44,10 +44,10 @@ def test_a_stretch_is_its_closed_form_without_a_solve(cell):
     C = np.tile(np.linalg.inv(isotropic_compliance(E, NU)), (d.nelems, 1, 1))
     fixed, F = _stretch(d)
     info: list = []
-    U = solve_system(lambda: d.stiffness(C), {"stretch": F}, {"stretch": fixed}, "auto", d, info=info, C=C)
+    U = solve_system(lambda: d.stiffness(C), {"stretch": F}, {"stretch": fixed}, "auto", d, records=info, C=C)
     want = -NU * S / E * d.doflocs.T
     want[:, 0] = S / E * d.doflocs[0]
-    assert info[0]["method"] == "linear" and info[0]["residual"] <= 1e-10
+    assert info[0].method == "linear" and info[0].residual <= 1e-10
     assert np.abs(U["stretch"] - want.ravel()).max() <= 1e-11 * np.abs(want).max()
 
 
@@ -59,9 +59,9 @@ def test_a_shear_is_not_linear_and_goes_to_the_solver():
     F = d.traction_load(d.part_facets(lambda p: p[2] > SIZE[2] - 1e-9), (S, 0.0, 0.0))
     assert linearfield.solve(lambda V: K @ V, d.doflocs, F[:, None], fixed, float(abs(K).sum(axis=1).max())) is None
     info: list = []
-    U = solve_system(K, {"shear": F}, {"shear": fixed}, "auto", d, info=info, C=C)
+    U = solve_system(K, {"shear": F}, {"shear": fixed}, "auto", d, records=info, C=C)
     free = np.setdiff1d(np.arange(d.ndof), fixed)
     want = np.zeros(d.ndof)
     want[free] = np.linalg.solve(K[free][:, free].toarray(), F[free])
-    assert info[0]["method"] != "linear"
+    assert info[0].method != "linear"
     assert np.abs(U["shear"] - want).max() <= 1e-8 * np.abs(want).max()

@@ -1,5 +1,5 @@
 """The reference's natural frequencies through the shift-invert operator
-(reference.solvers.inverse: the multifrontal Cholesky, or the two-level CG where the
+(reference.solvers.sparse.inverse: the multifrontal Cholesky, or the two-level CG where the
 Cholesky would not fit) equal a dense generalised eigen-solve of the same K and M."""
 
 import textwrap
@@ -11,8 +11,8 @@ import scipy.sparse.linalg as spla
 
 import reference
 from harness.case.reader import load_case
-from reference import solvers
 from reference.problem import body_bbox, fixed_dofs
+from reference.solvers import sparse
 
 
 def _case(tmp_path):
@@ -43,10 +43,10 @@ def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch, ope
     operator is the CG on the P1 subspace (the large-mesh path), set up once."""
     case = _case(tmp_path)
     if operator == "two-level":
-        monkeypatch.setattr(solvers, "INVERSE_GBYTES", 0.0)
+        monkeypatch.setattr(sparse, "INVERSE_GBYTES", 0.0)
     used = []
-    real = solvers.inverse
-    monkeypatch.setattr(solvers, "inverse", lambda *a: used.append(real(*a)) or used[-1])
+    real = sparse.inverse
+    monkeypatch.setattr(sparse, "inverse", lambda *a: used.append(real(*a)) or used[-1])
     sol = reference.solve(case, cache=False)
     f = sol.frequencies(5)
     assert len(used) == 1 and used[0] is not None                    # eigsh never fell back to SuperLU
@@ -79,7 +79,7 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
-    from reference import solution
+    from reference import methods
 
     case = _case(tmp_path)
     load = "shear-xy"                                   # face y0 clamped; the one load solved
@@ -90,8 +90,8 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     assert sizes[0] < sizes[1] < sizes[2] == sol.disc.ndof
 
     def modal_with(budget):
-        monkeypatch.setattr(solution, "MODAL_DOFS", {3: budget})
-        sol.__dict__.pop("modal_disc", None)
+        monkeypatch.setattr(methods, "MODAL_DOFS", {3: budget})
+        sol.method.__dict__.pop("modal_disc", None)
         sol._modal.clear()
         return sol.frequencies(5, load=load)
 

@@ -1,4 +1,4 @@
-"""reference.solvers against independent truths: dense numpy solves of small systems,
+"""reference.solvers.sparse against independent truths: dense numpy solves of small systems,
 a closed-form stretch of a thin nearly incompressible bar (a linear field, which P1/P2
 reproduce exactly), the same body in millimetres with E in Pa (the solution scales
 exactly), residuals ||b - A x|| / ||b||, forced AMG failures that must end in the
@@ -13,8 +13,9 @@ import skfem
 
 from harness.case.elasticity import isotropic_compliance
 from harness.errors import ModelError
-from reference import solvers
 from reference.fem import Discretisation
+from reference.solvers import plan, sparse
+from reference.solvers.record import SolveRecord
 
 METHODS = ["auto", "direct", "cholesky", "superlu", "amg", "cg"]
 
@@ -56,21 +57,21 @@ def small():
 
 
 @pytest.mark.parametrize("method", METHODS)
-def test_matches_dense_solve_and_fills_info(small, method):
+def test_matches_dense_solve_and_records_it(small, method):
     A, b, R, X, _, _ = small
     truth = np.linalg.solve(A.toarray(), b)
-    info = {}
-    x = solvers.solve(A, b, method, R, coords=X, info=info)
+    info = []
+    x = sparse.solve(A, b, method, R, coords=X, records=info)
     assert x.shape == b.shape
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
-    assert set(info) >= {"method", "fallbacks", "residual", "seconds"}
-    assert info["method"] in ("amg", "amg-strong", "cholesky", "superlu", "cg")
-    assert info["residual"] == pytest.approx(np.linalg.norm(b - A @ x) / np.linalg.norm(b), rel=1e-6, abs=1e-16)
-    assert info["residual"] <= info["rtol"]
-    assert info["seconds"] > 0
+    assert len(info) == 1 and isinstance(info[0], SolveRecord)       # one record a solve
+    assert info[-1].method in ("amg", "amg-strong", "cholesky", "superlu", "cg")
+    assert info[-1].residual == pytest.approx(np.linalg.norm(b - A @ x) / np.linalg.norm(b), rel=1e-6, abs=1e-16)
+    assert info[-1].residual <= info[-1].rtol
+    assert info[-1].seconds > 0
     expected = {"direct": "cholesky", "cholesky": "cholesky", "superlu": "superlu", "amg": "amg", "auto": "cholesky"}
     if method in expected:
-        assert info["method"] == expected[method] and info["fallbacks"] == []
+        assert info[-1].method == expected[method] and info[-1].fallbacks == ()
 
 
 def test_positional_call_without_info_or_coords(small):
@@ -79,23 +80,23 @@ def test_positional_call_without_info_or_coords(small):
     A, b, R, _, _, _ = small
     truth = np.linalg.solve(A.toarray(), b)
     for method, near_null, used in [("direct", R, "cholesky"), ("direct", None, "superlu"), ("amg", R, "amg")]:
-        info = {}
-        x = solvers.solve(A, b, method, near_null, info=info)
-        assert info["method"] == used
+        info = []
+        x = sparse.solve(A, b, method, near_null, records=info)
+        assert info[-1].method == used
         np.testing.assert_allclose(x, truth, rtol=0, atol=1e-9 * np.abs(truth).max())
-    assert np.allclose(solvers.solve(A, b, "direct", R), truth, rtol=0, atol=1e-9 * np.abs(truth).max())
+    assert np.allclose(sparse.solve(A, b, "direct", R), truth, rtol=0, atol=1e-9 * np.abs(truth).max())
 
 
 def test_coordinates_from_rigid_modes(small):
     A, _, R, X, d, _ = small
-    Y = solvers._coords_from_modes(A, R)
+    Y = sparse._coords_from_modes(A, R)
     # rigid_modes uses centred coordinates divided by their largest magnitude
     c = d.doflocs.mean(axis=1)
     s = np.abs(d.doflocs - c[:, None]).max()
     np.testing.assert_allclose(Y, (X - c) / s, atol=1.0)    # filled ones: neighbour means (within an element)
     exact = np.abs(Y - (X - c) / s) < 1e-12
     assert exact.sum(axis=1).min() >= 2                      # each dof carries 2 of its 3
-    assert solvers._coords_from_modes(A, np.ones((A.shape[0], 6))) is None
+    assert sparse._coords_from_modes(A, np.ones((A.shape[0], 6))) is None
 
 
 def test_many_right_hand_sides_share_one_setup(small, monkeypatch):
@@ -105,7 +106,7 @@ def test_many_right_hand_sides_share_one_setup(small, monkeypatch):
     calls = {"sym": 0, "amg": 0}
     from harness.linalg import multifrontal
     sym = multifrontal.Symbolic
-    hier = solvers._hierarchy
+    hier = sparse._hierarchy
 
     def counting_sym(*a, **k):
         calls["sym"] += 1
@@ -116,13 +117,13 @@ def test_many_right_hand_sides_share_one_setup(small, monkeypatch):
         return hier(*a, **k)
 
     monkeypatch.setattr(multifrontal, "Symbolic", counting_sym)
-    monkeypatch.setattr(solvers, "_hierarchy", counting_hier)
+    monkeypatch.setattr(sparse, "_hierarchy", counting_hier)
     for method in ("cholesky", "amg"):
-        info = {}
-        x = solvers.solve(A, B, method, R, coords=X, info=info)
+        info = []
+        x = sparse.solve(A, B, method, R, coords=X, records=info)
         assert x.shape == B.shape and not np.any(x[:, 1])
         assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
-        assert info["residual"] <= info["rtol"]
+        assert info[-1].residual <= info[-1].rtol
     assert calls == {"sym": 1, "amg": 1}
 
 
@@ -133,12 +134,12 @@ def test_thin_nearly_incompressible_bar_closed_form(method):
     E, nu, sig = 2.0e3, 0.49, 3.0
     A, b, R, X, d, free = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), E=E, nu=nu, clamp="symmetry",
                                      traction=(sig, 0.0, 0.0))
-    info = {}
-    x = solvers.solve(A, b, method, R, coords=X, info=info)
+    info = []
+    x = sparse.solve(A, b, method, R, coords=X, records=info)
     p = d.doflocs
     exact = (np.stack([sig * p[0], -nu * sig * p[1], -nu * sig * p[2]]) / E).T.ravel()[free]
     assert np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
-    assert info["residual"] <= info["rtol"]
+    assert info[-1].residual <= info[-1].rtol
 
 
 def test_thin_bar_bending_matches_dense():
@@ -146,10 +147,10 @@ def test_thin_bar_bending_matches_dense():
     A, b, R, X, _, _ = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
     for method in ("amg", "auto"):
-        info = {}
-        x = solvers.solve(A, b, method, R, coords=X, info=info)
+        info = []
+        x = sparse.solve(A, b, method, R, coords=X, records=info)
         assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max(), info
-        assert info["residual"] <= info["rtol"]
+        assert info[-1].residual <= info[-1].rtol
 
 
 @pytest.mark.parametrize("method", ["auto", "amg", "direct", "cg", "superlu"])
@@ -160,31 +161,31 @@ def test_millimetres_and_pascal_give_the_metre_solution(method):
     A, b, R, X, _, _ = elasticity(**kw)
     Amm, bmm, Rmm, Xmm, _, _ = elasticity(**kw, scale=1e3)
     np.testing.assert_allclose(Xmm, 1e3 * X)
-    x = solvers.solve(A, b, method, R, coords=X)
-    info = {}
-    xmm = solvers.solve(Amm, bmm, method, Rmm, coords=Xmm, info=info)
+    x = sparse.solve(A, b, method, R, coords=X)
+    info = []
+    xmm = sparse.solve(Amm, bmm, method, Rmm, coords=Xmm, records=info)
     assert np.abs(xmm / 1e3 - x).max() <= 1e-8 * np.abs(x).max()
     truth = np.linalg.solve(A.toarray(), b)
     assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
-    assert info["residual"] <= info["rtol"]
+    assert info[-1].residual <= info[-1].rtol
 
 
 def test_amg_that_fails_falls_back_to_cholesky(monkeypatch):
     A, b, R, X, _, _ = elasticity(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
-    monkeypatch.setattr(solvers, "AMG_MAXITER", 2)
-    monkeypatch.setattr(solvers, "STRONG_MAXITER", 3)
-    monkeypatch.setattr(solvers, "SECONDS_PER_GFLOP", 1e6)      # never skip the strong AMG
+    monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
+    monkeypatch.setattr(sparse, "STRONG_MAXITER", 3)
+    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 1e6)      # never skip the strong AMG
     for method in ("auto", "amg", "cg"):
         if method == "auto":
-            monkeypatch.setattr(solvers, "CHOLESKY_GFLOP", 0.0)
-        info = {}
-        x = solvers.solve(A, np.column_stack([b, 3 * b]), method, R, coords=X, info=info)
-        assert info["method"] == "cholesky"
-        tried = [f["method"] for f in info["fallbacks"]]
+            monkeypatch.setattr(plan, "CHOLESKY_GFLOP", 0.0)
+        info = []
+        x = sparse.solve(A, np.column_stack([b, 3 * b]), method, R, coords=X, records=info)
+        assert info[-1].method == "cholesky"
+        tried = [f.method for f in info[-1].fallbacks]
         assert tried == (["cg"] if method == "cg" else []) + ["amg", "amg-strong"]
-        assert all(f["residual"] > solvers.RTOL and f["reason"] for f in info["fallbacks"])
-        assert info["residual"] <= info["rtol"]
+        assert all(f.residual > sparse.RTOL and f.reason for f in info[-1].fallbacks)
+        assert info[-1].residual <= info[-1].rtol
         np.testing.assert_allclose(x[:, 1], 3 * truth, rtol=0, atol=1e-9 * np.abs(3 * truth).max())
 
 
@@ -198,21 +199,21 @@ def test_broken_hierarchy_falls_back(monkeypatch, small):
     def raising(*a, **k):
         raise np.linalg.LinAlgError("broken")
 
-    monkeypatch.setattr(solvers, "_hierarchy", raising)
-    info = {}
-    x = solvers.solve(A, b, "amg", R, coords=X, info=info)
-    assert info["method"] == "cholesky" and [f["method"] for f in info["fallbacks"]] == ["amg", "amg-strong"]
-    assert "setup failed" in info["fallbacks"][0]["reason"]
+    monkeypatch.setattr(sparse, "_hierarchy", raising)
+    info = []
+    x = sparse.solve(A, b, "amg", R, coords=X, records=info)
+    assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["amg", "amg-strong"]
+    assert "setup failed" in info[-1].fallbacks[0].reason
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
 
     class Negative:
         def aspreconditioner(self, cycle="V"):
             return sp.linalg.aslinearoperator(-sp.identity(A.shape[0]))
 
-    monkeypatch.setattr(solvers, "_hierarchy", lambda *a, **k: Negative())
-    info = {}
-    x = solvers.solve(A, b, "amg", None, info=info)          # no modes, no coords: SuperLU
-    assert info["method"] == "superlu" and "breakdown" in info["fallbacks"][0]["reason"]
+    monkeypatch.setattr(sparse, "_hierarchy", lambda *a, **k: Negative())
+    info = []
+    x = sparse.solve(A, b, "amg", None, records=info)          # no modes, no coords: SuperLU
+    assert info[-1].method == "superlu" and "breakdown" in info[-1].fallbacks[0].reason
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
 
 
@@ -221,7 +222,7 @@ def test_singular_system_is_one_model_error(method):
     A, b, R, X, _, _ = elasticity(divs=(2, 1, 1), clamp="none")
     rng = np.random.default_rng(1)
     with pytest.raises(ModelError, match="the stiffness matrix is singular") as err:
-        solvers.solve(A, rng.standard_normal(len(b)), method, R, coords=X)
+        sparse.solve(A, rng.standard_normal(len(b)), method, R, coords=X)
     assert "check the constraints" in str(err.value) and "\n" not in str(err.value)
 
 
@@ -238,15 +239,15 @@ def test_non_finite_or_empty_row_is_singular(small, bad):
         A[4, :] = 0
         A[:, 4] = 0
     with pytest.raises(ModelError, match="singular"):
-        solvers.solve(A.tocsr(), b, "auto", R, coords=X)
+        sparse.solve(A.tocsr(), b, "auto", R, coords=X)
 
 
 def test_zero_and_empty_right_hand_sides(small):
     A, b, R, X, _, _ = small
-    info = {}
-    assert not np.any(solvers.solve(A, np.zeros_like(b), "auto", R, coords=X, info=info))
-    assert info["residual"] == 0
-    x = solvers.solve(A, np.zeros((len(b), 0)), "amg", R)
+    info = []
+    assert not np.any(sparse.solve(A, np.zeros_like(b), "auto", R, coords=X, records=info))
+    assert info[-1].residual == 0
+    x = sparse.solve(A, np.zeros((len(b), 0)), "amg", R)
     assert x.shape == (len(b), 0)
 
 
@@ -255,51 +256,51 @@ def test_two_dimensional_quad_p2():
     truth = np.linalg.solve(A.toarray(), b)
     assert R.shape[1] == 3
     for method, coords in [("auto", X), ("direct", None), ("amg", None)]:
-        info = {}
-        x = solvers.solve(A, b, method, R, coords=coords, info=info)
-        assert info["method"] in ("cholesky", "amg", "amg-strong")
+        info = []
+        x = sparse.solve(A, b, method, R, coords=coords, records=info)
+        assert info[-1].method in ("cholesky", "amg", "amg-strong")
         assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
 
 
 def test_unknown_method_is_a_value_error(small):
     A, b, R, _, _, _ = small
     with pytest.raises(ValueError, match="unknown solver"):
-        solvers.solve(A, b, "lu", R)
+        sparse.solve(A, b, "lu", R)
 
 
 @pytest.mark.slow
 def test_medium_3d_q2_hex_all_paths_agree():
     """~7k dofs of Q2 hex, nu = 0.45: Cholesky, SuperLU, AMG agree to 1e-8."""
     A, b, R, X, _, _ = elasticity(cell="hex", size=(2.0, 1.0, 0.5), divs=(8, 4, 3), nu=0.45)
-    ref = solvers.solve(A, b, "superlu")
+    ref = sparse.solve(A, b, "superlu")
     for method in ("auto", "cholesky", "amg"):
-        info = {}
-        x = solvers.solve(A, b, method, R, coords=X, info=info)
-        assert info["residual"] <= info["rtol"]
+        info = []
+        x = sparse.solve(A, b, method, R, coords=X, records=info)
+        assert info[-1].residual <= info[-1].rtol
         assert np.abs(x - ref).max() <= 1e-8 * np.abs(ref).max(), (method, info)
 
 
 def test_auto_chooses_by_the_cholesky_estimate(small, monkeypatch):
     A, b, R, X, _, _ = small
-    info = {}
-    solvers.solve(A, b, "auto", R, coords=X, info=info)
-    assert info["method"] == "cholesky" and 0 < info["estimate"]["gflop"] < solvers.CHOLESKY_GFLOP
-    monkeypatch.setattr(solvers, "CHOLESKY_GFLOP", info["estimate"]["gflop"] / 2)
-    solvers.solve(A, b, "auto", R, coords=X, info=info)
-    assert info["method"] == "amg" and info["fallbacks"] == []
-    assert info["residual"] <= info["rtol"]
-    assert solvers.choose("auto", 1000, 3) == "direct" and solvers.choose("auto", 10 ** 6, 3) == "amg"
-    assert solvers.choose("cg", 10, 2) == "cg"
+    info = []
+    sparse.solve(A, b, "auto", R, coords=X, records=info)
+    assert info[-1].method == "cholesky" and 0 < info[-1].estimate["gflop"] < plan.CHOLESKY_GFLOP
+    monkeypatch.setattr(plan, "CHOLESKY_GFLOP", info[-1].estimate["gflop"] / 2)
+    sparse.solve(A, b, "auto", R, coords=X, records=info)
+    assert info[-1].method == "amg" and info[-1].fallbacks == ()
+    assert info[-1].residual <= info[-1].rtol
+    assert plan.choose("auto", 1000, 3) == "direct" and plan.choose("auto", 10 ** 6, 3) == "amg"
+    assert plan.choose("cg", 10, 2) == "cg"
 
 
 def test_strong_amg_is_skipped_when_the_cholesky_is_cheaper(monkeypatch):
     A, b, R, X, _, _ = elasticity(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
-    monkeypatch.setattr(solvers, "AMG_MAXITER", 2)
-    monkeypatch.setattr(solvers, "SECONDS_PER_GFLOP", 0.0)
-    monkeypatch.setattr(solvers, "CHOLESKY_OVERHEAD", -1.0)
-    info = {}
-    x = solvers.solve(A, b, "amg", R, coords=X, info=info)
-    assert info["method"] == "cholesky" and [f["method"] for f in info["fallbacks"]] == ["amg"]
-    assert info["estimate"]["gflop"] > 0
+    monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
+    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 0.0)
+    monkeypatch.setattr(sparse, "CHOLESKY_OVERHEAD", -1.0)
+    info = []
+    x = sparse.solve(A, b, "amg", R, coords=X, records=info)
+    assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["amg"]
+    assert info[-1].estimate["gflop"] > 0
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()

@@ -1,4 +1,4 @@
-"""Mirror-symmetric solves of boxes (reference/symmetry.py): which loads are cut where,
+"""Mirror-symmetric solves of boxes (reference/graded/symmetry.py): which loads are cut where,
 and a solve on the cut box, unfolded, equals the solve of the whole box."""
 
 import textwrap
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from harness.case.reader import load_case
-from reference.graded import graded_axes, tensor_mesh
-from reference.levels import Levels
+from reference.graded.levels import Levels
+from reference.graded.meshes import graded_axes, tensor_mesh
+from reference.graded.symmetry import Mirror, mirror_of
 from reference.problem import solve_mesh
-from reference.symmetry import Mirror, mirror_of
 
 USER_LOADS = """
 [[loads.case]]
@@ -148,6 +148,6 @@ def test_cut_solve_equals_the_whole_box(tmp_path, which):
 
 
 def test_odd_graded_axes_cannot_be_cut():
-    from reference.symmetry import lower_half
+    from reference.graded.symmetry import lower_half
     with pytest.raises(ValueError):
         lower_half([np.array([0.0, 0.3, 1.0, 2.0])], Mirror((0,), (1,)))

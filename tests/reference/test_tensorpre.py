@@ -1,4 +1,4 @@
-"""reference/tensorpre.py (the fast-diagonalisation preconditioner of the graded boxes'
+"""reference/solvers/tensorpre.py (the fast-diagonalisation preconditioner of the graded boxes'
 Q2 systems) against independent truths: with whole planes fixed and an orthotropic material the
 preconditioner is exactly the inverse of the per-component diagonal blocks of the
 stiffness scikit-fem assembles (a sparse direct solve of those blocks here); with
@@ -13,10 +13,11 @@ import scipy.sparse.linalg as spla
 import skfem
 
 from harness.case.elasticity import isotropic_compliance
-from reference import solvers, tensorpre, tensorsolve
 from reference.fem import Discretisation
-from reference.graded import graded_axes, tensor_mesh
+from reference.graded.lattice import Lattice
+from reference.graded.meshes import graded_axes, tensor_mesh
 from reference.problem import solve_system
+from reference.solvers import plan, sparse, tensorpre
 
 
 def _orthotropic(dim: int) -> np.ndarray:
@@ -37,7 +38,8 @@ def _box(size, n, cell):
 
 def test_lattice_recognises_q2_tensor_meshes_only():
     d = _box((3.0, 1.0, 1.0), 2, "hex")
-    axes, index = tensorpre.lattice(d.doflocs)
+    lat = Lattice.q2(d.doflocs)
+    axes, index = lat.axes, lat.index
     ijk = np.unravel_index(index, [len(x) for x in axes])      # x slowest
     for a in range(3):
         np.testing.assert_allclose(axes[a][ijk[a]], d.doflocs[a], atol=1e-12)
@@ -45,7 +47,7 @@ def test_lattice_recognises_q2_tensor_meshes_only():
     p = mesh.p.copy()
     inner = np.flatnonzero(np.all((p > 1e-9) & (p < mesh.p.max(axis=1, keepdims=True) - 1e-9), axis=0))[0]
     p[:, inner] += 0.01                                       # one vertex off the lattice
-    assert tensorpre.lattice(Discretisation(skfem.MeshHex(p, mesh.t), "hex", "P2").doflocs) is None
+    assert Lattice.q2(Discretisation(skfem.MeshHex(p, mesh.t), "hex", "P2").doflocs) is None
 
 
 @pytest.mark.parametrize("cell", ["hex", "quad"])
@@ -107,10 +109,10 @@ def _shear_problem(nu=0.49, n=2, regions=False):
 def test_tensor_solves_match_the_cholesky(regions):
     d, C, K, F, fx = _shear_problem(regions=regions)
     info: list = []
-    U = solve_system(K, F, fx, "tensor", d, info=info, C=C)
+    U = solve_system(K, F, fx, "tensor", d, records=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
-    assert info[0]["method"] == "tensor" and not info[0]["fallbacks"]
-    assert info[0].get("matrix_free", False) == (not regions)      # one tensor: K never assembled
+    assert info[0].method == "tensor" and not info[0].fallbacks
+    assert info[0].matrix_free == (not regions)      # one tensor: K never assembled
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -120,15 +122,15 @@ def test_a_failed_tensor_cg_falls_back(monkeypatch, how):
     """Three iterations allowed; or moduli jumping 20x along the bar at nu = 0.49
     (measured: the mean moduli's CG stalls above the tolerance)."""
     if how == "budget":
-        monkeypatch.setattr(solvers, "TENSOR_MAXITER", 3)
+        monkeypatch.setattr(sparse, "TENSOR_MAXITER", 3)
     d, C, K, F, fx = _shear_problem(nu=0.3 if how == "budget" else 0.49)
     if how == "contrast":
         C[d.centroids()[:, 0] > 2.0] *= 20.0
         K = d.stiffness(C)
     info: list = []
-    U = solve_system(K, F, fx, "tensor", d, info=info, C=C)
+    U = solve_system(K, F, fx, "tensor", d, records=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
-    assert info[0]["fallbacks"][0]["method"] == "tensor" and info[0]["method"] != "tensor"
+    assert info[0].fallbacks[0].method == "tensor" and info[0].method != "tensor"
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -136,16 +138,16 @@ def test_a_failed_tensor_cg_falls_back(monkeypatch, how):
 @pytest.mark.parametrize("regions", [False, True])
 @pytest.mark.parametrize("smallest", [0, 10 ** 9])
 def test_auto_takes_it_from_its_smallest_size(monkeypatch, smallest, regions):
-    """One tensor: the matrix-free CG from tensorsolve.MIN_DOFS; two: the assembled one
-    from solvers.TENSOR_MIN."""
-    monkeypatch.setattr(solvers, "TENSOR_MIN", {3: smallest})
-    monkeypatch.setattr(tensorsolve, "MIN_DOFS", {3: smallest})
+    """One tensor: the matrix-free CG from plan.MATRIX_FREE_MIN; two: the assembled one
+    from plan.TENSOR_MIN."""
+    monkeypatch.setattr(plan, "TENSOR_MIN", {3: smallest})
+    monkeypatch.setattr(plan, "MATRIX_FREE_MIN", {3: smallest})
     d, C, K, F, fx = _shear_problem(regions=regions)
     info: list = []
-    U = solve_system(K, F, fx, "auto", d, info=info, C=C)
+    U = solve_system(K, F, fx, "auto", d, records=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
-    assert (info[0]["method"] == "tensor") == (smallest == 0)
-    assert info[0].get("matrix_free", False) == (smallest == 0 and not regions)
+    assert (info[0].method == "tensor") == (smallest == 0)
+    assert info[0].matrix_free == (smallest == 0 and not regions)
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -154,17 +156,17 @@ def test_a_drifted_cg_is_restarted_from_the_true_residual(monkeypatch):
     """The first CG returns a solution off by 1e-6 while reporting success (a recursive
     residual that drifted from the true one): the restart from the true residual brings
     it to the tolerance, and the solve stays 'tensor'."""
-    real, calls = solvers._pcg, []
+    real, calls = sparse._pcg, []
 
     def drifting(A, b, M, rtol, maxiter, window=20, seconds=None):
         x, k, why = real(A, b, M, rtol, maxiter, window, seconds)
         calls.append(rtol)
         return (x * (1 + 1e-6) if len(calls) == 1 else x), k, why
 
-    monkeypatch.setattr(solvers, "_pcg", drifting)
+    monkeypatch.setattr(sparse, "_pcg", drifting)
     d, C, K, F, fx = _shear_problem(nu=0.3)
     info: list = []
-    U = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "tensor", d, info=info, C=C)
+    U = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "tensor", d, records=info, C=C)
     V = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "cholesky", d)
-    assert info[0]["method"] == "tensor" and not info[0]["fallbacks"] and len(calls) >= 2
+    assert info[0].method == "tensor" and not info[0].fallbacks and len(calls) >= 2
     assert np.abs(U["shear"] - V["shear"]).max() <= 1e-8 * np.abs(V["shear"]).max()

@@ -1,4 +1,4 @@
-"""reference/tensorsolve.py (the graded boxes' CG without an assembled matrix) against a
+"""reference/solvers/tensorsolve.py (the graded boxes' CG without an assembled matrix) against a
 dense solve of the stiffness scikit-fem assembles from a form written in
 tests/reference/test_kronecker.py: whole faces clamped and a mirror plane fixing one
 component, two loads at once; an exact initial guess needs no iteration; and the graded
@@ -12,9 +12,10 @@ from test_graded import box_case  # noqa: E402
 from test_kronecker import _skfem_stiffness  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
-from reference import levels, tensorsolve
-from reference.graded import graded_axes, q2_doflocs, tensor_mesh
-from reference.gridvalues import GridField
+from reference.graded import levels
+from reference.graded.lattice import Lattice
+from reference.graded.meshes import graded_axes, q2_doflocs, tensor_mesh
+from reference.solvers import plan, tensorsolve
 
 
 def _problem():
@@ -37,38 +38,38 @@ def test_the_matrix_free_solve_is_the_dense_solve():
     free = np.setdiff1d(np.arange(K.shape[0]), fixed)
     want = np.zeros_like(b)
     want[free] = np.linalg.solve(K[free][:, free].toarray(), b[free])
-    A = tensorsolve.operator(tensorsolve.lattice_of(x), C)
-    info: dict = {}
-    got = tensorsolve.solve(A, b, fixed, info)
-    assert info["matrix_free"] and info["residual"] <= info["rtol"] and info["iterations"] > 10
+    A = tensorsolve.operator(Lattice.q2(x), C)
+    got, rec = tensorsolve.solve(A, b, fixed)
+    assert rec.matrix_free and rec.residual <= rec.rtol and rec.iterations > 10
     assert np.abs(got - want).max() <= 1e-8 * np.abs(want).max()
     assert np.all(got[fixed] == 0)
-    again: dict = {}
-    exact = tensorsolve.solve(A, b, fixed, again, x0=want)          # from the solution: nothing to do
-    assert again["iterations"] == 0 and np.abs(exact - want).max() <= 1e-12 * np.abs(want).max()
+    exact, again = tensorsolve.solve(A, b, fixed, x0=want)          # from the solution: nothing to do
+    assert again.iterations == 0 and np.abs(exact - want).max() <= 1e-12 * np.abs(want).max()
 
 
 def test_lattice_fields_round_trip():
     x = q2_doflocs(tensor_mesh(graded_axes(np.zeros(3), np.array([3.0, 1.0, 1.0]), 2)))
-    lat = tensorsolve.lattice_of(x)
+    lat = Lattice.q2(x)
     v = np.random.default_rng(0).standard_normal((3 * x.shape[1], 2))
-    assert lat.to_lattice(v).shape == (2,) + lat.shape
+    assert lat.to_lattice(v).shape == (2, 3) + lat.shape and lat.field_shape == (3,) + lat.shape
     np.testing.assert_array_equal(lat.from_lattice(lat.to_lattice(v)), v)
     np.testing.assert_array_equal(lat.from_lattice(lat.to_lattice(v[:, 0])), v[:, 0])
-    grid = GridField(x)
+    grid = Lattice.of(x)        # any tensor grid; q2 checks the midpoints besides
+    assert all(np.array_equal(a, b) for a, b in zip(grid.axes, lat.axes))
     np.testing.assert_array_equal(lat.to_lattice(v[:, 0])[1].ravel()[grid.index], v[1::3, 0])
+    np.testing.assert_array_equal(grid.grid(v[1::3, :1])[..., 0], lat.to_lattice(v[:, 0])[1])
 
 
 @pytest.mark.slow
 def test_levels_in_one_thread_or_two_agree(tmp_path, monkeypatch):
-    monkeypatch.setattr(tensorsolve, "MIN_DOFS", {3: 0})       # the coarse levels through the CG too
+    monkeypatch.setattr(plan, "MATRIX_FREE_MIN", {3: 0})       # the coarse levels through the CG too
     case = box_case(tmp_path, size=(2.0, 1.0, 1.0), nu=0.45, reference_keys="max_refine = 0")
     runs = []
     for workers in (1, 2):
         monkeypatch.setattr(levels, "WORKERS", workers)
         info: list = []
-        lev, est, _ = levels.solve_graded(case, info=info)
-        runs.append((lev, est, [(r["method"], r["loads"]) for r in info]))
+        lev, est, _ = levels.solve_graded(case, records=info)
+        runs.append((lev, est, [(r.method, r.loads) for r in info]))
     (a, ea, ra), (b, eb, rb) = runs
     assert ra == rb and ea.keys() == eb.keys()
     assert any(m == "tensor" for m, _ in ra)

@@ -1,4 +1,4 @@
-"""reference/twolevel.py (the two-level method of reference/solvers.py) against
+"""reference/solvers/twolevel.py (the two-level method of reference/solvers/sparse.py) against
 independent truths: the P1/Q1 prolongation reproduces the lower-order fields it claims
 to (evaluated from their formula at the P2/Q2 dof locations), and the two-level solves
 match dense numpy solves of small systems (several right-hand sides, a zero one, the
@@ -12,8 +12,8 @@ import scipy.sparse as sp
 import skfem
 from test_solvers import elasticity
 
-from reference import solvers, twolevel
 from reference.fem import Discretisation
+from reference.solvers import plan, sparse, twolevel
 
 CELLS = {"tet": skfem.MeshTet, "hex": skfem.MeshHex, "tri": skfem.MeshTri, "quad": skfem.MeshQuad}
 
@@ -60,12 +60,12 @@ def test_two_level_matches_dense_solve(monkeypatch, coarse_solver):
     A, b, R, X, P = _system(size=(2.0, 1.0, 1.0), divs=(4, 2, 2), E=1e5, nu=0.45)
     B = np.column_stack([b, np.zeros_like(b), np.random.default_rng(1).standard_normal(len(b))])
     truth = np.linalg.solve(A.toarray(), B)
-    info = {}
-    x = solvers.solve(A, B, "two-level", R, coords=X, info=info, coarse=P)
-    assert info["method"] == "two-level" and info["fallbacks"] == [] and info["iterations"] > 0
+    info = []
+    x = sparse.solve(A, B, "two-level", R, coords=X, records=info, coarse=P)
+    assert info[-1].method == "two-level" and info[-1].fallbacks == () and info[-1].iterations > 0
     assert not np.any(x[:, 1])
     res = np.linalg.norm(B[:, [0, 2]] - A @ x[:, [0, 2]], axis=0) / np.linalg.norm(B[:, [0, 2]], axis=0)
-    assert res.max() <= info["rtol"] and info["residual"] == pytest.approx(res.max(), rel=1e-6)
+    assert res.max() <= info[-1].rtol and info[-1].residual == pytest.approx(res.max(), rel=1e-6)
     assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
 
 
@@ -82,30 +82,30 @@ def test_preconditioner_is_symmetric_positive_definite():
 def test_auto_takes_two_level_where_it_took_amg(small_estimate_limit):
     A, b, R, X, P = _system(size=(2.0, 1.0, 1.0), divs=(4, 2, 2), nu=0.3)
     truth = np.linalg.solve(A.toarray(), b)
-    info = {}
-    x = solvers.solve(A, b, "auto", R, coords=X, info=info, coarse=P)
-    assert info["method"] == "two-level"
+    info = []
+    x = sparse.solve(A, b, "auto", R, coords=X, records=info, coarse=P)
+    assert info[-1].method == "two-level"
     assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
-    solvers.solve(A, b, "auto", R, coords=X, info=info)          # no coarse space: AMG as before
-    assert info["method"] == "amg"
+    sparse.solve(A, b, "auto", R, coords=X, records=info)          # no coarse space: AMG as before
+    assert info[-1].method == "amg"
 
 
 @pytest.fixture
 def small_estimate_limit(monkeypatch):
-    monkeypatch.setattr(solvers, "CHOLESKY_GFLOP", 0.0)
+    monkeypatch.setattr(plan, "CHOLESKY_GFLOP", 0.0)
 
 
 def test_two_level_that_fails_falls_back(monkeypatch):
     """Too few iterations allowed: recorded as a fallback, the answer from the Cholesky."""
     A, b, R, X, P = _system(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
-    monkeypatch.setattr(solvers, "TWO_LEVEL_MAXITER", 2)
-    monkeypatch.setattr(solvers, "SECONDS_PER_GFLOP", 0.0)      # skip the strong AMG
-    monkeypatch.setattr(solvers, "CHOLESKY_OVERHEAD", -1.0)
-    info = {}
-    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=P)
-    assert info["method"] == "cholesky" and [f["method"] for f in info["fallbacks"]] == ["two-level"]
-    assert info["fallbacks"][0]["residual"] > solvers.RTOL
+    monkeypatch.setattr(sparse, "TWO_LEVEL_MAXITER", 2)
+    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 0.0)      # skip the strong AMG
+    monkeypatch.setattr(sparse, "CHOLESKY_OVERHEAD", -1.0)
+    info = []
+    x = sparse.solve(A, b, "two-level", R, coords=X, records=info, coarse=P)
+    assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["two-level"]
+    assert info[-1].fallbacks[0].residual > sparse.RTOL
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
 
 
@@ -115,12 +115,12 @@ def test_thin_nearly_incompressible_bar_closed_form():
     E, nu, sig = 2.0e3, 0.49, 3.0
     A, b, R, X, d, free = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), E=E, nu=nu, clamp="symmetry",
                                      traction=(sig, 0.0, 0.0))
-    info = {}
-    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=twolevel.prolongation(d)[free])
+    info = []
+    x = sparse.solve(A, b, "two-level", R, coords=X, records=info, coarse=twolevel.prolongation(d)[free])
     p = d.doflocs
     exact = (np.stack([sig * p[0], -nu * sig * p[1], -nu * sig * p[2]]) / E).T.ravel()[free]
     assert np.abs(x - exact).max() <= 1e-8 * np.abs(exact).max()
-    assert info["method"] == "two-level"
+    assert info[-1].method == "two-level"
 
 
 def test_solve_system_hands_the_coarse_space_over():
@@ -136,9 +136,9 @@ def test_solve_system_hands_the_coarse_space_over():
          "sag": d.body_load(np.tile([0.0, 0.0, -9.81], (d.nelems, 1)))}
     fx = {n: fixed for n in F}
     info: list = []
-    U = solve_system(K, F, fx, "two-level", d, info=info)
+    U = solve_system(K, F, fx, "two-level", d, records=info)
     V = solve_system(K, F, fx, "cholesky", d)
-    assert info[0]["method"] == "two-level" and info[0]["loads"] == ["tip", "sag"]
+    assert info[0].method == "two-level" and info[0].loads == ("tip", "sag")
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -151,11 +151,11 @@ def test_auto_weighs_the_cholesky_against_the_two_level(monkeypatch):
     truth = np.linalg.solve(A.toarray(), b)
     for per_nonzero, first, expected in ((1.0, 10 ** 9, "cholesky"), (0.0, 10 ** 9, "two-level"),
                                          (1.0, 1, "two-level")):
-        monkeypatch.setattr(solvers, "TWO_LEVEL_GFLOP_PER_NONZERO", per_nonzero)
-        monkeypatch.setattr(solvers, "TWO_LEVEL_FIRST", {2: first, 3: first})
-        info = {}
-        x = solvers.solve(A, b, "auto", R, coords=X, info=info, coarse=P)
-        assert info["method"] == expected and ("estimate" in info) == (first > 1)
+        monkeypatch.setattr(plan, "TWO_LEVEL_GFLOP_PER_NONZERO", per_nonzero)
+        monkeypatch.setattr(plan, "TWO_LEVEL_FIRST", {2: first, 3: first})
+        info = []
+        x = sparse.solve(A, b, "auto", R, coords=X, records=info, coarse=P)
+        assert info[-1].method == expected and (info[-1].estimate is not None) == (first > 1)
         assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()
 
 
@@ -164,7 +164,7 @@ def test_auto_weighs_the_cholesky_against_the_two_level(monkeypatch):
 def test_two_level_on_q2_and_2d_matches_dense_solve(cell, size, divs):
     A, b, R, X, P = _system(cell=cell, size=size, divs=divs, nu=0.45)
     truth = np.linalg.solve(A.toarray(), b)
-    info = {}
-    x = solvers.solve(A, b, "two-level", R, coords=X, info=info, coarse=P)
-    assert info["method"] == "two-level" and info["residual"] <= info["rtol"]
+    info = []
+    x = sparse.solve(A, b, "two-level", R, coords=X, records=info, coarse=P)
+    assert info[-1].method == "two-level" and info[-1].residual <= info[-1].rtol
     assert np.abs(x - truth).max() <= 1e-8 * np.abs(truth).max()

@@ -1,14 +1,14 @@
 """The ``graded`` reference of rectangles and boxes: Q2 quadrilaterals/hexahedra graded
-towards every face (reference/graded.py), solved on levels of n = divisions / 2,
+towards every face (reference/graded/meshes.py), solved on levels of n = divisions / 2,
 + 1, + 2, ... cells per end zone (every second n skipped between the first three and
 the last three, see :func:`next_divisions`), and Richardson-extrapolated over the last
-three levels (reference/extrapolate.py). The extrapolant is the reference field; the difference of
+three levels (reference/graded/extrapolate.py). The extrapolant is the reference field; the difference of
 the last two extrapolants is its per-point error estimate. A load whose last two levels
 agree to rounding (a field the mesh represents exactly, like the stretches' linear
 closed form) stops refining; the others go on until every estimate at the probe points
 is below ``reference.tol``, ``reference.max_refine`` levels are done, or the next level
 would pass the dof budget. A load with mirror symmetry is solved on the half, quarter or
-eighth of the box it determines and unfolded (reference/symmetry.py).
+eighth of the box it determines and unfolded (reference/graded/symmetry.py).
 """
 
 from __future__ import annotations
@@ -20,9 +20,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness.linalg.sparse import single_thread_blas
-from reference.extrapolate import FORMAL_ORDER, extrapolate, observed_order
 from reference.fem import Discretisation
-from reference.graded import (
+from reference.graded.extrapolate import FORMAL_ORDER, extrapolate, observed_order
+from reference.graded.lattice import Lattice
+from reference.graded.meshes import (
     axis_maps,
     graded_axes,
     graded_mesh,
@@ -30,15 +31,14 @@ from reference.graded import (
     q2_doflocs,
     tensor_mesh,
 )
-from reference.gridvalues import GridField
+from reference.graded.symmetry import Mirror, lower_half, mirror_of, unfold
 from reference.problem import solve_mesh
-from reference.symmetry import Mirror, lower_half, mirror_of, unfold
 
 FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
 # (divisions counts cells along the shortest side: two end zones)
 MAX_DOFS = {2: 400_000, 3: 64_000}     # the largest system one level may solve (3-D: ~15 s a factorisation)
-# ... with the fast-diagonalisation CG (solver 'auto' or 'tensor', reference/tensorpre.py): no
-# factorisation, K applied without assembly (reference/tensorsolve.py), ~80-110 iterations at
+# ... with the fast-diagonalisation CG (solver 'auto' or 'tensor', reference/solvers/tensorpre.py): no
+# factorisation, K applied without assembly (reference/solvers/tensorsolve.py), ~80-110 iterations at
 # nu = 0.49; the limit is time (the 10:1 box's nine loads: 103 s to n = 10, 252k-dof quarters)
 TENSOR_MAX_DOFS = {2: 2_000_000, 3: 400_000}
 WORKERS = min(2, len(os.sched_getaffinity(0)))   # threads solving a cut's load groups side by side
@@ -79,15 +79,15 @@ class Levels:
     def disc(self, mesh) -> Discretisation:
         return Discretisation(mesh, "quad" if self.dim == 2 else "hex", "P2")
 
-    def _evaluator(self, k: int) -> GridField:
+    def _evaluator(self, k: int) -> Lattice:
         if k not in self._eval:
-            self._eval[k] = GridField(q2_doflocs(self.meshes[k]))
+            self._eval[k] = Lattice.of(q2_doflocs(self.meshes[k]))
         return self._eval[k]
 
-    def solve(self, case, k: int, axes: list, mirrors: dict, info=None) -> dict:
+    def solve(self, case, k: int, axes: list, mirrors: dict, records=None) -> dict:
         """Level k's displacements {load: whole-box dof vector} of the loads in
         ``mirrors`` ({name: Mirror}): each group of loads with the same mirror solved on
-        its cut of the box (reference/symmetry.py) and unfolded. Groups that cut the box
+        its cut of the box (reference/graded/symmetry.py) and unfolded. Groups that cut the box
         alike (the shears come in pairs) share one discretisation, built when their cut
         comes and dropped after it, and are solved side by side in WORKERS threads (the
         CG's compiled products and BLAS release the GIL; each keeps its own records, so
@@ -99,18 +99,18 @@ class Levels:
         out = {}
         for mirror, names in groups.items():
             if not mirror:
-                out.update(solve_mesh(case, self.meshes[k], loads=set(names), info=info))
+                out.update(solve_mesh(case, self.meshes[k], loads=set(names), records=records))
             else:
                 cuts.setdefault(tuple(sorted(mirror.axes)), []).append((mirror, sorted(names)))
         for cut in sorted(cuts):
             members = sorted(cuts[cut], key=lambda m: m[1])
             d = self.disc(tensor_mesh(lower_half(axes, members[0][0])))
-            half, stiffness = GridField(d.doflocs), {}
+            half, stiffness = Lattice.of(d.doflocs), {}
 
             def one(member):
                 mirror, names = member
                 rec: list = []
-                U = solve_mesh(case, d.mesh, loads=set(names), info=rec, mirror=mirror, disc=d,
+                U = solve_mesh(case, d.mesh, loads=set(names), records=rec, mirror=mirror, disc=d,
                                stiffness=stiffness, guess=self.guess(d.doflocs, names))
                 return {n: unfold(self._evaluator(k), half, U[n], mirror) for n in names}, rec
 
@@ -122,8 +122,8 @@ class Levels:
                 done = [one(m) for m in members]
             for U, rec in done:
                 out.update(U)
-                if info is not None:
-                    info.extend(rec)
+                if records is not None:
+                    records.extend(rec)
         return out
 
     def guess(self, doflocs: np.ndarray, names) -> dict:
@@ -133,7 +133,7 @@ class Levels:
 
     def at(self, points, k: int, u: np.ndarray, average: np.ndarray | None = None) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
-        (reference/gridvalues.py: O(h^4) everywhere), averaged over a window of cells
+        (reference/graded/lattice.py: O(h^4) everywhere), averaged over a window of cells
         along the axes ``average`` (m, dim) marks (the swing with the point's place in
         its cell then averages out, so the levels extrapolate cleanly)."""
         ev = self._evaluator(k)
@@ -194,7 +194,7 @@ class Levels:
         return lev
 
 
-def solve_graded(case, status=lambda msg: None, info: list | None = None):
+def solve_graded(case, status=lambda msg: None, records: list | None = None):
     """(Levels, {load: relative estimate}, history rows) of a rectangle or box case."""
     spec = case.reference
     lo, hi = case.body.bbox()
@@ -224,7 +224,7 @@ def solve_graded(case, status=lambda msg: None, info: list | None = None):
         status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest(n)}, "
                f"{len(active)} loads)")
         lev.add_mesh(n, mesh)
-        U = lev.solve(case, k, axes, {name: mirrors[name] for name in active}, info=info)
+        U = lev.solve(case, k, axes, {name: mirrors[name] for name in active}, records=records)
         for name in active:
             lev.fields[name] = (lev.fields[name] + [(k, U[name])])[-3:]
         for name in list(active):

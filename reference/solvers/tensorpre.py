@@ -1,5 +1,5 @@
 """A fast-diagonalisation preconditioner for Q2 systems on tensor meshes (the graded
-boxes and rectangles of reference/graded.py).
+boxes and rectangles of reference/graded/meshes.py).
 
 On a tensor mesh of axis-aligned cells the Q2 basis is a product of 1-D quadratic
 Lagrange functions, phi_I = X_i(x) Y_j(y) Z_k(z), so for a homogeneous material the
@@ -18,7 +18,7 @@ off such planes (corner or edge points, part of a face) are masked out, P = R B^
 still symmetric positive definite. A component with no Dirichlet end on any axis (the
 stretches' rollers and corner points) has no preconditioner here: its B_c is singular,
 and shifted it took 200+ iterations where the Cholesky is quick (and its rounding small
-enough for two levels of a linear field to agree, reference/levels.py EXACT). A piecewise
+enough for two levels of a linear field to agree, reference/graded/levels.py EXACT). A piecewise
 or anisotropic material is preconditioned by its mean elastic tensor's diagonal moduli
 (the CG solves the true system). Measured: results/bench/reference.csv (solver 'tensor').
 """
@@ -31,27 +31,10 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from reference.gridvalues import GridField
-from reference.kronecker import axis_matrices
+from reference.graded.lattice import Lattice
+from reference.solvers.kronecker import axis_matrices
 
 _PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}   # Voigt index of a shear pair
-
-
-def lattice(doflocs: np.ndarray):
-    """(per-axis node coordinates, flat lattice index of every scalar dof (x slowest)) when
-    the dof locations (dim, ns) are the Q2 nodes of a tensor mesh (a grid,
-    reference/gridvalues.py, whose odd nodes are midway), else None. The locations alone:
-    P2 on a tensor mesh's tetrahedra fills the same lattice, so the caller checks the
-    element."""
-    try:
-        grid = GridField(doflocs)
-    except ValueError:
-        return None
-    for x in grid.axes:
-        tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
-        if len(x) % 2 == 0 or len(x) < 3 or np.abs(x[1:-1:2] - 0.5 * (x[:-2:2] + x[2::2])).max() > tol:
-            return None
-    return grid.axes, grid.index
 
 
 def moduli(C: np.ndarray, dim: int) -> np.ndarray:
@@ -131,11 +114,10 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
     Voigt stiffness; None if the dofs are not such a lattice or a component has no
     plane fixed as a whole."""
     dim, ns = doflocs.shape
-    found = lattice(doflocs)
-    if found is None:
+    lat = Lattice.q2(doflocs)
+    if lat is None:
         return None
-    axes, index = found
-    shape = tuple(len(x) for x in axes)
+    axes, index, shape = lat.axes, lat.index, lat.shape
     node, comp = np.divmod(np.asarray(free), dim)
     at = comp * int(np.prod(shape)) + index[node]      # each free dof's place in a lattice field
     mask = np.zeros(dim * int(np.prod(shape)), bool)
@@ -158,7 +140,7 @@ RESTARTS = 3   # CG restarts from the true residual (its recursive one drifts be
 
 
 def cg(As, bs, s, apply, pcg, rtol: float, maxiter: int, y0=None):
-    """(Y, iterations, reason): CG (``pcg``, reference/solvers.py's) on the equilibrated
+    """(Y, iterations, reason): CG (``pcg``, reference/solvers/sparse.py's) on the equilibrated
     system As = S A S, columns bs, with the preconditioner ``apply`` ~ A^-1 turned into one
     of As: S^-1 P S^-1, from the initial guesses ``y0`` (columns like bs) or zero. The
     recursive residual of a long CG drifts from the true one (measured on the 10:1 box's

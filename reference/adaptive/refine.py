@@ -13,7 +13,7 @@ from reference.problem import solve_mesh
 
 GRADE_PASSES = {2: 4, 3: 0}  # per level: extra halvings of the smallest element near a singular corner
 # (2-D). In 3-D, grading towards the 12 box edges cost 9x the dofs for a 1.5x smaller
-# estimate (unit cube, shear, P2), so 3-D refines uniformly (boxes use reference/levels.py).
+# estimate (unit cube, shear, P2), so 3-D refines uniformly (boxes use reference/graded/levels.py).
 MAX_DOFS = {2: 400_000, 3: 200_000}  # refinement stops before a level would exceed this
 GRADE_SLOPE = 0.5  # element size / distance to the singular set in the graded zone
 
@@ -75,7 +75,7 @@ def _relative_change(U, V, nv, dim) -> float:
     return float(np.linalg.norm(a - b, axis=1).max() / scale) if scale > 0 else 0.0
 
 
-def solve_refined(case, status=lambda msg: None, info: list | None = None):
+def solve_refined(case, status=lambda msg: None, records: list | None = None):
     """(finest mesh, {load: dofs}, {load: relative estimate}, history rows): the case's
     mesh refined until the change at the level-0 vertices is below ``reference.tol``
     (the finest solve is kept; its estimate is that of the coarser one: conservative)."""
@@ -85,7 +85,7 @@ def solve_refined(case, status=lambda msg: None, info: list | None = None):
     nv0 = mesh.p.shape[1]
     p0 = mesh.p.copy()
     status(f"FEM level 0 ({case.dim * mesh.p.shape[1]} vertex dofs)")
-    U = solve_mesh(case, mesh, info=info)
+    U = solve_mesh(case, mesh, records=records)
     est = {n: float("nan") for n in names}
     history = [dict(n_dofs=next(iter(U.values())).size, **est)]
     for level in range(1, case.reference.max_refine + 1):
@@ -97,7 +97,7 @@ def solve_refined(case, status=lambda msg: None, info: list | None = None):
         if not np.allclose(finer.p[:, :nv0], p0):
             raise RuntimeError("refinement renumbered the vertices")  # scikit-fem contract
         status(f"FEM level {level} ({case.dim * finer.p.shape[1]} vertex dofs)")
-        V = solve_mesh(case, finer, info=info)
+        V = solve_mesh(case, finer, records=records)
         est = {n: _relative_change(U[n], V[n], nv0, case.dim) for n in names}
         mesh, U = finer, V
         history.append(dict(n_dofs=next(iter(U.values())).size, **est))

@@ -44,7 +44,7 @@ class AxisMap:
         w = min(zone * shortest, 0.5 * length)
         middle = length - 2 * w
         # largest graded cell ~ zone_slope w / n (the zone's end slope; the count is proportional to n);
-        # an even count puts a vertex on the mid-plane, where reference/symmetry.py cuts the box
+        # an even count puts a vertex on the mid-plane, where reference/graded/symmetry.py cuts the box
         m = 0 if middle <= 1e-12 * length else 2 * max(1, int(np.ceil(middle * n / (2 * zone_slope(beta) * w) - 1e-9)))
         return cls(float(length), float(w) if m else 0.5 * float(length), int(n), m, float(beta))
 
@@ -70,7 +70,7 @@ def zone_map(s, beta: float = GRADE_EXPONENT) -> np.ndarray:
     = beta (beta - 1) / (2 beta + 2), which makes its curvature vanish where the zone
     ends. A plain s^beta has curvature there, and at a cube's mid-plane the mirrored zone
     has the opposite: a kink in the cell sizes that the averaging window of
-    reference/gridvalues.py straddles for points near the mid-plane, whose level values
+    reference/graded/lattice.py straddles for points near the mid-plane, whose level values
     then swing again. Near the face it is s^beta, the grading the edges need."""
     s = np.asarray(s, float)
     c = beta * (beta - 1) / (2 * beta + 2)

@@ -1,12 +1,12 @@
 """Adaptive refinement of a user's mesh of triangles or tetrahedra (the ``refine``
 method of mesh bodies): solve, compute the residual indicators of every load that is not
-represented exactly (reference/estimator.py), mark by Dörfler's bulk criterion on their
+represented exactly (reference/adaptive/estimator.py), mark by Dörfler's bulk criterion on their
 sum (each load's indicators normalised by its total, so every load counts alike; at
 least LEAST of the elements), bisect the marked elements (scikit-fem's longest-edge
 bisection: nested meshes, the user's vertices keep their numbers) and repeat until the
 estimate at the user's vertices is below ``reference.tol``, the steps are used up
 (``max_refine`` times dim bisection steps) or the next mesh would pass the dof budget.
-The parts are resolved on the user's mesh on every level (reference/meshparts.py).
+The parts are resolved on the user's mesh on every level (reference/adaptive/meshparts.py).
 
 The estimate is Richardson's over the levels, with the number of dofs N in place of
 the mesh size (h = N^(-1/dim)), taken over *wide* steps: the finest level k, the last
@@ -30,7 +30,7 @@ level's space, so both changes are kept as dof vectors of the finest mesh and th
 estimate is exact to evaluate at any point.
 
 A mesh no refinement of fits in the dof budget (a 50k-tet cylinder: 214k dofs) gets its
-levels i and j from coarser meshes of its body instead (reference/coarse.py: a tensor
+levels i and j from coarser meshes of its body instead (reference/adaptive/coarse.py: a tensor
 grid of the bounding box with COARSE of its vertices, the cells whose centroid lies
 outside dropped), on which the user's own system is solved in the subspace of the
 coarse fields interpolated into its space (its geometry, parts and loads exactly;
@@ -51,13 +51,13 @@ import numpy as np
 
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
-from reference.coarse import galerkin_solve, grid_mesh
-from reference.estimator import doerfler, indicators
-from reference.extrapolate import ORDER_RANGE, SAFETY
+from reference.adaptive.coarse import galerkin_solve, grid_mesh
+from reference.adaptive.estimator import doerfler, indicators
+from reference.adaptive.meshparts import UserMeshParts
 from reference.fem import Discretisation
+from reference.graded.extrapolate import ORDER_RANGE, SAFETY
 from reference.locate import Locator
 from reference.mesh import base_mesh
-from reference.meshparts import UserMeshParts
 from reference.problem import (
     body_bbox,
     fixed_dofs,
@@ -84,7 +84,7 @@ EXACT = 1e-9          # a change below this share of the largest displacement is
 FIT = 4               # changes the order is fitted to at most
 COARSE = (1 / (3 * WIDE ** 2), 1 / WIDE ** 2)   # a mesh no refinement of fits in the budget:
 # the estimate's levels i and j are coarser meshes of its body with about these shares of
-# its vertices (reference/coarse.py; ~1/30 and ~1/10 of its dofs). Their Galerkin matrices
+# its vertices (reference/adaptive/coarse.py; ~1/30 and ~1/10 of its dofs). Their Galerkin matrices
 # couple dofs a cell further than a native stiffness (~465 nonzeros a row, ~5x), so at
 # 1/4 of the vertices (72k dofs on the 50k-tet cylinder) the direct solve ran > 6 min
 # and 5.7 GB; at 1/16, 20k dofs, ~20 s. A refinement adds at least ~25 % dofs:
@@ -191,12 +191,12 @@ def _marked(case, d: Discretisation, U: dict, loads, parts) -> np.ndarray:
 
 def applies(case) -> bool:
     """Whether the ``refine`` reference of ``case`` refines adaptively: a mesh body of
-    triangles or tetrahedra (boxes, rectangles and polygons keep reference/refine.py's
+    triangles or tetrahedra (boxes, rectangles and polygons keep reference/adaptive/refine.py's
     uniform and graded refinement)."""
     return case.body.shape == "mesh" and case.reference.cell in ("tri", "tet")
 
 
-def solve_adaptive(case, status=lambda msg: None, info: list | None = None):
+def solve_adaptive(case, status=lambda msg: None, records: list | None = None):
     """(finest mesh, {load: dofs}, {load: relative estimate}, history rows, Changes or
     None with a single level)."""
     spec = case.reference
@@ -219,7 +219,7 @@ def solve_adaptive(case, status=lambda msg: None, info: list | None = None):
     if steps and GROWTH_MIN * d.ndof > budget:       # too large to refine: coarser meshes of its body
         status(f"FEM on the mesh ({d.ndof} dofs, {d.nelems} elements; too large to refine within "
                f"{budget} dofs: the estimate comes from coarser meshes of its body)")
-        U, kept = _with_coarse(case, d, parts, status, info)
+        U, kept = _with_coarse(case, d, parts, status, records)
         if kept:
             changes = _wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
             changes = Changes(changes.d1, changes.d2, changes.coef,
@@ -228,7 +228,7 @@ def solve_adaptive(case, status=lambda msg: None, info: list | None = None):
         return d.mesh, U, est, history, changes
     for k in range(steps + 1):
         status(f"FEM adaptive level {k} ({d.ndof} dofs, {d.nelems} elements)")
-        U = solve_mesh(case, d.mesh, info=info, disc=d, parts=parts)
+        U = solve_mesh(case, d.mesh, records=records, disc=d, parts=parts)
         if kept:
             changes = _wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
         history.append(dict(n_dofs=int(d.ndof), **est))
@@ -247,10 +247,10 @@ def solve_adaptive(case, status=lambda msg: None, info: list | None = None):
     return d.mesh, U, est, history, changes
 
 
-def _with_coarse(case, d: Discretisation, parts, status, info):
+def _with_coarse(case, d: Discretisation, parts, status, records):
     """({load: dofs} on d's mesh, [(dofs, {load: field at d's dofs})] of the COARSE
     levels): d's system assembled once, solved, and solved again in the subspaces of the
-    coarser meshes of its body (reference/coarse.py: its geometry, parts and loads
+    coarser meshes of its body (reference/adaptive/coarse.py: its geometry, parts and loads
     exactly); no coarse level when a coarse mesh cannot be made."""
     spec = case.reference
     cent = d.centroids()
@@ -261,7 +261,7 @@ def _with_coarse(case, d: Discretisation, parts, status, info):
     fixed = {l.name: fixed_dofs(d, case, l, bbox, parts=parts) for l in chosen}
     F = {l.name: load_vector(d, case, l, bbox, rho, parts=parts) for l in chosen}
     K = d.stiffness(C)
-    U = {**solve_system(K, F, fixed, spec.solver, d, info=info), **exact}
+    U = {**solve_system(K, F, fixed, spec.solver, d, records=records), **exact}
     kept = []
     shrink = min(1.0, COARSE_MAX_DOFS / (COARSE[-1] * d.ndof))
     for share in COARSE:
@@ -271,7 +271,7 @@ def _with_coarse(case, d: Discretisation, parts, status, info):
         cd = Discretisation(cm, spec.cell, spec.element)
         status(f"FEM coarse level for the estimate ({cd.ndof} dofs, {cd.nelems} elements)")
         try:
-            kept.append((cd.ndof, {**galerkin_solve(K, F, fixed, spec.solver, cd, d, info), **exact}))
+            kept.append((cd.ndof, {**galerkin_solve(K, F, fixed, spec.solver, cd, d, records), **exact}))
         except ModelError as exc:        # e.g. a grid too coarse for the clamp to leave it a field
             status(f"FEM: no coarse level ({exc.message}); no estimate")
             return U, []

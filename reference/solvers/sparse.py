@@ -21,13 +21,14 @@ setup); 'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at
 50-150k dofs, reused by the factorisation) and factorises when it predicts <= 300 Gflop
 and <= 2.5 GB, else starts with AMG (a 150k-dof 3-D cube: AMG, 0.9 GB). Without
 coordinates SuperLU is the direct method, up to 15k dofs in 3-D (150k in 2-D). P2/Q2
-systems handed their P1/Q1 subspace (reference/twolevel.py) take 'two-level' where 'auto'
+systems handed their P1/Q1 subspace (reference/solvers/twolevel.py) take 'two-level' where 'auto'
 would take AMG (the 50k-tet cylinder of ``bench calibrate``: 23 iterations, a third of
 AMG's CPU time).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
@@ -35,7 +36,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
-from reference import tensorpre
+from reference.solvers import tensorpre
+from reference.solvers.plan import METHODS, SYMBOLIC_MAX, System, choose_plan
+from reference.solvers.record import Fallback, SolveRecord
 
 # relative residual an accepted solve reaches, ||b - A x|| <= RTOL ||b||: the direct
 # solves (with one step of refinement) reach 1e-14..1e-12 on well-conditioned systems
@@ -51,18 +54,6 @@ RTOL = 1e-10
 FLOOR = 1.0
 # the weakest residual a direct solve is accepted with (a worse one means singular)
 DIRECT_RTOL = 1e-6
-# 'auto' factorises when the Cholesky's symbolic estimate is below both of these (else
-# AMG, falling back to the Cholesky): the measured break-even with AMG is ~300 Gflop
-# (see the table above); the estimate's memory (factor + 3 largest fronts) is within 10%
-# of the measured peak minus the assembled system, so a solve stays under ~3 GB
-CHOLESKY_GFLOP = 300.0
-CHOLESKY_GBYTES = 2.5
-# above these free dofs 'auto' goes to AMG without the symbolic estimate (3-D: a cube of
-# 300k dofs needs ~2e3 Gflop, a 10:1 bar 140k dofs 300 Gflop)
-SYMBOLIC_MAX = {2: 2_000_000, 3: 300_000}
-# the same choice for SuperLU (no coordinates for the Cholesky's nested dissection):
-# measured 3-D P2 SuperLU 9.4 s vs AMG 8.7 s at 14k dofs
-SUPERLU_MAX = {2: 150_000, 3: 15_000}
 AMG_MAXITER = 300
 STRONG_MAXITER = 1000
 CG_MAXITER = 20_000
@@ -73,32 +64,8 @@ CG_MAXITER = 20_000
 SECONDS_PER_GFLOP = 0.1
 CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
-METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level", "tensor")
-TENSOR_MAXITER = 2000    # fast-diagonalisation PCG (reference/tensorpre.py): 100-300 iterations measured
-# 'auto' takes it from these many dofs (bench reference, the 10:1 box's quarters at nu = 0.49, s,
-# tensor / Cholesky: 17k dofs 1.7 / 1.3, 55k 6.1 / 11.5, 129k 7.7 / -); in 2-D the Cholesky stays
-TENSOR_MIN = {2: 10 ** 12, 3: 20_000}
+TENSOR_MAXITER = 2000    # fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
 TWO_LEVEL_MAXITER = 300
-# with a P1/Q1 subspace (two-level), 'auto' factorises only while the Cholesky's estimate is
-# at most this many Gflop per nonzero of A: the two-level takes ~7e-8 s per nonzero and
-# iteration for three loads and 25-45 iterations, the Cholesky ~0.1 s per Gflop (measured,
-# three loads, CPU s, two-level / Cholesky: P2 cubes nu = 0.45 13.9k dofs 1.8 / 1.4, 45k
-# 6.8 / 11.8, 70.6k 9.6 / 25.7, 104.5k 14 / 47; 10:1 bars nu = 0.49 61k 13.2 / 7.9, 139k
-# 27 / 35: the rule picks the faster of each)
-TWO_LEVEL_GFLOP_PER_NONZERO = 2.8e-5
-# ... and from these many free dofs it takes the two-level without the symbolic estimate
-# (9 s at 203k dofs, where the Cholesky needs 1,730 Gflop; at 150k dofs only a thin bar's
-# Cholesky comes near the rule's limit, and there the two are close)
-TWO_LEVEL_FIRST = {2: 10 ** 12, 3: 150_000}
-
-
-def choose(method: str, n: int, dim: int) -> str:
-    """For callers that pass neither ``coords`` nor ``near_null`` to a direct solve: 'direct'
-    or 'amg' for 'auto' by the SuperLU crossover :data:`SUPERLU_MAX` (every method falls
-    back by itself). Callers that have the coordinates pass 'auto' straight to ``solve``."""
-    if method != "auto":
-        return method
-    return "direct" if n <= SUPERLU_MAX[dim] else "amg"
 
 
 def equilibrated(A: sp.spmatrix, s: np.ndarray) -> sp.csr_matrix:
@@ -119,32 +86,30 @@ def _singular() -> ModelError:
 
 
 def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.ndarray | None = None, *,
-          coords: np.ndarray | None = None, info: dict | None = None,
+          coords: np.ndarray | None = None, records: list | None = None,
           coarse: sp.spmatrix | None = None, tensor=None) -> np.ndarray:
     """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
     hierarchy) for symmetric positive definite A; returns x shaped like b.
 
-    ``method``: 'auto' (by the Cholesky's estimated cost, see :data:`CHOLESKY_GFLOP`), 'direct' = 'cholesky'
-    (multifrontal; needs ``coords`` (n, dim) of the free dofs' locations, or recovers
-    them from ``near_null``, else SuperLU), 'superlu', 'amg' (with ``near_null`` (n, 3|6)
-    rigid-body modes of the free dofs) or 'cg'. An iterative method that does not reach
-    :data:`RTOL` falls back to a stronger AMG and then to the Cholesky. ``info``, when
-    given, is filled with ``method`` (what solved it: 'cholesky', 'superlu', 'amg',
-    'amg-strong', 'cg' or 'two-level'), ``fallbacks`` (what was tried before, each
-    ``{'method', 'residual', 'reason', 'seconds'}``), ``residual`` (max over the columns of
-    ||b - A x|| / ||b||), ``rtol`` (the tolerance it was accepted at, see :data:`FLOOR`),
-    ``iterations`` (iterative methods) and ``seconds``.
+    ``method``: 'auto' (the plan of reference/solvers/plan.py: by the Cholesky's
+    estimated cost), 'direct' = 'cholesky' (multifrontal; needs ``coords`` (n, dim) of the
+    free dofs' locations, or recovers them from ``near_null``, else SuperLU), 'superlu',
+    'amg' (with ``near_null`` (n, 3|6) rigid-body modes of the free dofs) or 'cg'. An
+    iterative method that does not reach :data:`RTOL` falls back to a stronger AMG and
+    then to the Cholesky. ``records``, when given, gets the solve's
+    :class:`~reference.solvers.record.SolveRecord` (what solved it, the residual, the
+    tolerance it was accepted at (see :data:`FLOOR`), the attempts before it).
 
     ``coarse`` (n, nc): the P1/Q1 fields of a P2/Q2 system's mesh in its free dofs
-    (reference/twolevel.py ``prolongation``, rows of the free dofs); with it (and
+    (reference/solvers/twolevel.py ``prolongation``, rows of the free dofs); with it (and
     ``coords``) 'two-level' (CG, Gauss-Seidel and an exact P1 solve) replaces 'amg' as
     the iterative method of 'auto' and can be asked for by name.
 
     ``tensor``: z = P r, the fast-diagonalisation preconditioner of a Q2 system on a
-    tensor mesh (reference/tensorpre.py); with it 'tensor' (and 'auto' from
-    :data:`TENSOR_MIN` dofs) first tries CG with it, then falls back as 'auto' would
+    tensor mesh (reference/solvers/tensorpre.py); with it 'tensor' (and 'auto' from
+    ``plan.TENSOR_MIN`` dofs) first tries CG with it, then falls back as 'auto' would
     without it. (A material of one elastic tensor never gets here on a tensor mesh:
-    reference/tensorsolve.py solves it without assembling A.)"""
+    reference/solvers/tensorsolve.py solves it without assembling A.)"""
     t0 = time.perf_counter()
     if method not in METHODS:
         raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
@@ -152,17 +117,19 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     b = np.asarray(b, float)
     n = A.shape[0]
     b2 = b.reshape(n, -1)
-    rec = {"method": None, "fallbacks": [], "residual": 0.0, "rtol": RTOL, "iterations": 0, "seconds": 0.0}
-    if info is not None:
-        info.clear()
-        info.update(rec)
-        rec = info
+    fallbacks: list[Fallback] = []
+    estimate = None
+
+    def done(x, method, residual=0.0, rtol=RTOL, iterations=0):
+        if records is not None:
+            records.append(SolveRecord(method, residual, rtol, iterations, time.perf_counter() - t0,
+                                       tuple(fallbacks), estimate))
+        return x
     if not (np.all(np.isfinite(A.data)) and np.all(np.isfinite(b2))):
         raise _singular()
     d = A.diagonal()
     if n == 0:
-        rec.update(method="cholesky", seconds=time.perf_counter() - t0)
-        return np.zeros_like(b)
+        return done(np.zeros_like(b), "cholesky")
     if not np.all(d > 0):
         raise _singular()
     # equilibration: As = S A S, S = D^-1/2; A x = b  <=>  As y = S b, x = S y
@@ -185,43 +152,20 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
         return float(r.max()), float(np.max(r / tol)), float(tol[np.argmax(r / tol)])
 
     if not live.any():
-        rec.update(method="cholesky" if method in ("auto", "direct") else method, seconds=time.perf_counter() - t0)
-        return x.reshape(b.shape)
+        return done(x.reshape(b.shape), "cholesky" if method in ("auto", "direct") else method)
     dim = near_null.shape[1] // 3 + 1 if near_null is not None and near_null.shape[1] in (3, 6) else \
         (coords.shape[1] if coords is not None else 3)
     if coords is None and method in ("auto", "direct", "cholesky", "amg", "cg"):
         coords = _coords_from_modes(As, near_null)
     sym = None
-    two = coarse is not None and coords is not None
-    if method == "auto":
-        if tensor is not None and n >= TENSOR_MIN[dim]:
-            first = "tensor"
-        elif coords is None:
-            first = "superlu" if n <= SUPERLU_MAX[dim] else "amg"
-        elif n > SYMBOLIC_MAX[dim] or (two and n >= TWO_LEVEL_FIRST[dim]):
-            first = "amg"
-        else:   # the Cholesky's cost is known from its symbolic factorisation (reused)
-            sym = _symbolic(As, coords)
-            est = _estimate(sym)
-            rec["estimate"] = est
-            limit = min(CHOLESKY_GFLOP, TWO_LEVEL_GFLOP_PER_NONZERO * A.nnz) if two else CHOLESKY_GFLOP
-            first = "cholesky" if est["gflop"] <= limit and est["gbytes"] <= CHOLESKY_GBYTES else "amg"
-    else:
-        first = {"direct": "cholesky"}.get(method, method)
-    if first == "cholesky" and coords is None:
-        first = "superlu"
-    if method == "auto" and first == "amg" and two:
-        first = "two-level"
-    if first == "two-level" and not two:
-        first = "amg"
-    plan = []
-    if first == "tensor":    # then what 'auto' would do without it
-        first = "two-level" if two else "amg"
-        plan = ["tensor"] if tensor is not None else []
-    plan += {"cholesky": ["cholesky"], "superlu": ["superlu"], "cg": ["cg", "amg", "amg-strong", "cholesky"],
-             "amg": ["amg", "amg-strong", "cholesky"], "two-level": ["two-level", "amg-strong", "cholesky"]}[first]
-    if plan[-1] == "cholesky" and coords is None:
-        plan[-1] = "superlu"
+    system = System(n, dim, method, coords=coords is not None, coarse=coarse is not None, tensor=tensor is not None,
+                    nnz=A.nnz)
+    plan = choose_plan(system)
+    if plan.needs_estimate:     # the Cholesky's cost from its symbolic factorisation (reused)
+        sym = _symbolic(As, coords)
+        estimate = _estimate(sym)
+        plan = choose_plan(dataclasses.replace(system, estimate=estimate))
+    plan = list(plan.steps)
     Bs = None if near_null is None else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
     spent = 0.0   # CPU seconds of the failed attempts
     for m in plan:
@@ -231,9 +175,9 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
             # a stronger AMG only while it can beat the Cholesky it would fall back to
             if sym is None and n <= SYMBOLIC_MAX[dim]:
                 sym = _symbolic(As, coords)
-                rec["estimate"] = _estimate(sym)
-            if sym is not None and rec["estimate"]["gbytes"] <= FALLBACK_GBYTES:
-                chol = SECONDS_PER_GFLOP * rec["estimate"]["gflop"] + CHOLESKY_OVERHEAD
+                estimate = _estimate(sym)
+            if sym is not None and estimate["gbytes"] <= FALLBACK_GBYTES:
+                chol = SECONDS_PER_GFLOP * estimate["gflop"] + CHOLESKY_OVERHEAD
                 if chol < 2 * spent:
                     continue
                 budget = chol
@@ -263,16 +207,12 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
                 xs, (res, ratio, tol) = xs2, res2
         f = None
         if ratio <= 1 or (m in ("cholesky", "superlu") and res <= DIRECT_RTOL):
-            x = xs
-            rec.update(method=m, residual=res, rtol=tol, iterations=its)
-            break
+            return done(xs.reshape(b.shape), m, res, tol, its)
         if m in ("cholesky", "superlu"):
             raise _singular()
-        rec["fallbacks"].append({"method": m, "residual": res, "reason": why or f"residual above {tol:.1e}",
-                                 "seconds": time.perf_counter() - t1})
+        fallbacks.append(Fallback(m, res, why or f"residual above {tol:.1e}", time.perf_counter() - t1))
         spent += time.process_time() - c1
-    rec["seconds"] = time.perf_counter() - t0
-    return x.reshape(b.shape)
+    return done(x.reshape(b.shape), "none")     # not reached: the plan ends with a direct solve
 
 
 # -- direct ------------------------------------------------------------------------------
@@ -312,7 +252,7 @@ def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = Non
     """A solve function r -> A^-1 r: the shift-invert operator of the modal solves. The
     multifrontal Cholesky when its symbolic estimate fits in INVERSE_GBYTES; else, given
     the P1/Q1 subspace ``coarse`` of a P2/Q2 system, CG with the two-level preconditioner
-    (reference/twolevel.py, set up once) to INVERSE_RTOL; else None (eigsh's own SuperLU:
+    (reference/solvers/twolevel.py, set up once) to INVERSE_RTOL; else None (eigsh's own SuperLU:
     over 10 minutes on a 108k-dof Q2 box, past 12 GB on a 152k-dof one)."""
     As = sp.csr_matrix(A)
     sym = _symbolic(As, coords)
@@ -325,7 +265,7 @@ def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = Non
 
 
 def _two_level_inverse(As, coords, coarse):
-    from reference import twolevel
+    from reference.solvers import twolevel
     s = 1.0 / np.sqrt(As.diagonal())
     Ass = equilibrated(As, s)
     M = twolevel.TwoLevel(Ass, s, coarse, coords)
@@ -383,9 +323,9 @@ def _coords_from_modes(A, near_null):
 # -- iterative ---------------------------------------------------------------------------
 
 def _two_level(As, bs, s, coarse, coords, Bs, normA, bnorm):
-    """reference/twolevel.py's CG on every column at once, each to the residual
+    """reference/solvers/twolevel.py's CG on every column at once, each to the residual
     ``solve`` accepts (RTOL, or the floor of the column's solution, halved for margin)."""
-    from reference import twolevel
+    from reference.solvers import twolevel
     try:
         M = twolevel.TwoLevel(As, s, coarse, coords, Bs)
     except Exception as exc:   # noqa: BLE001 - a failed setup is a failed attempt

@@ -1,7 +1,7 @@
 """Richardson extrapolation over mesh levels, and the error estimate it implies.
 
 Level k has mesh parameter h_k = 1 / n_k (n_k cells per graded end zone, see
-reference/graded.py) and point values V_k. If V_k = u + C h_k^p + ..., two levels give
+reference/graded/meshes.py) and point values V_k. If V_k = u + C h_k^p + ..., two levels give
 the extrapolant E = V_f + (V_f - V_c) / ((h_c / h_f)^p - 1). The order p is observed:
 the median of the orders three consecutive levels show at the probe points with the largest
 differences. The
@@ -63,7 +63,7 @@ def extrapolate(values, h, p: float):
     the pointwise norm of its difference from the previous extrapolant times
     SAFETY / ((h_old / h_new)^p - 1) (needs three levels; with two, the plain difference
     of the levels). The levels' values are averaged over a window of cells
-    (reference/gridvalues.py), so the extrapolants converge smoothly and the GCI alone
+    (reference/graded/lattice.py), so the extrapolants converge smoothly and the GCI alone
     bounds the truth where a point's levels converge at order p. A floor at the correction
     made to the finest level (for points where the two extrapolants happen to agree) would
     hold the estimate at the finest level's own error (4.7e-4 where the truth is 7.6e-5,

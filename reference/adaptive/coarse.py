@@ -1,5 +1,5 @@
 """Coarser meshes of a mesh body and the user's system solved in their subspaces, for the
-error estimate of a user's mesh too large to refine (reference/adaptive.py, COARSE).
+error estimate of a user's mesh too large to refine (reference/adaptive/adapt.py, COARSE).
 
 The coarse mesh is a tensor grid of the body's bounding box (cubes of 6 tetrahedra,
 squares of 2 triangles), the cells whose centroid lies outside the user's mesh dropped;
@@ -14,13 +14,15 @@ user's; Delaunay meshes of a subset of the user's vertices, solved as meshes of 
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import scipy.sparse as sp
 import skfem
 
-from reference import solvers, twolevel
 from reference.fem import Discretisation
 from reference.locate import Locator
+from reference.solvers import sparse, twolevel
 
 KEEP = 0.25         # a coarse dof keeps its column when the fixed dofs take at most 1 - KEEP of its weight
 INSIDE = 1e-9       # a centroid's barycentric violation in the user's mesh up to this is inside
@@ -39,7 +41,7 @@ def transfer(coarse: Discretisation, fine: Discretisation) -> sp.csr_matrix:
 
 
 def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation, fine: Discretisation,
-                   info: list | None = None) -> dict:
+                   records: list | None = None) -> dict:
     """{load: fine dofs} of the Galerkin solutions of the fine system (K u = F, u = 0 on
     fixed[load]) in the subspace P W (``transfer``, its rows on fixed dofs zeroed, the
     coarse dofs that lose more than 1 - KEEP of their weight to them dropped): a
@@ -63,11 +65,11 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
         Pz = sp.csr_matrix((P0.data, P0.indices, _rows_at(P0.indptr, free, fine.ndof)), shape=(fine.ndof, len(kept)))
         A = sp.csr_matrix(Pz.T @ (K @ Pz))          # = P0^T K_ff P0 without slicing K (852k dofs: ~3 s a slice)
         b = np.column_stack([P0.T @ F[n][free] for n in names])
-        rec: dict = {}
-        y = solvers.solve(A, b, method, R[kept], info=rec, coords=coords[kept],
-                          coarse=None if low is None else low[kept])
-        if info is not None:
-            info.append(dict(rec, loads=list(names), n=len(kept), nnz=int(A.nnz), coarse=True))
+        done: list = []
+        y = sparse.solve(A, b, method, R[kept], records=done, coords=coords[kept],
+                         coarse=None if low is None else low[kept])
+        if records is not None:
+            records.append(dataclasses.replace(done[0], loads=tuple(names), n=len(kept), nnz=int(A.nnz), coarse=True))
         for i, n in enumerate(names):
             u = np.zeros(fine.ndof)
             u[free] = P0 @ y[:, i]

@@ -5,7 +5,7 @@ linear exact solution, which every P2/Q2 mesh represents exactly: the FEM return
 the solver's rounding (on the 10:1 box at nu = 0.49 the Cholesky's rounding is 1e-8 of
 the field). Here the Galerkin problem is solved over the linear fields that vanish on
 the fixed dofs (dim (dim + 1) of them, minus the constrained) and the result is accepted
-by the same residual test as any solve (reference/solvers.py): if K x = b holds on the
+by the same residual test as any solve (reference/solvers/sparse.py): if K x = b holds on the
 free dofs to that tolerance, x is the solution, found with a dozen products with K."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from reference import solvers
+from reference.solvers import sparse
 
 
 def linear_fields(doflocs: np.ndarray) -> np.ndarray:
@@ -55,7 +55,7 @@ def solve(apply_K, doflocs: np.ndarray, b: np.ndarray, fixed: np.ndarray, normA:
     if not live.any():
         return None
     r = np.linalg.norm((b - KV @ c)[free], axis=0)
-    tol = solvers.accepted_rtol(normA, np.linalg.norm(x[free], axis=0), np.where(live, bnorm, 1.0))
+    tol = sparse.accepted_rtol(normA, np.linalg.norm(x[free], axis=0), np.where(live, bnorm, 1.0))
     if np.all(r[live] <= tol[live] * bnorm[live]) and np.all(r[~live] == 0):
         return x, float(np.max(r[live] / bnorm[live]))
     return None

@@ -24,7 +24,7 @@ import numpy as np
 from harness.case.elasticity import element_stiffness
 from harness.case.parts import parse_face_name
 from reference.fem import VOIGT
-from reference.gridvalues import GridField
+from reference.graded.lattice import Lattice
 
 PLACES = 12                     # decimals to which a user part's corners are compared
 SAMPLES = 64                    # seeded points at which the material's mirror image is checked
@@ -145,7 +145,7 @@ def plane_dofs(doflocs: np.ndarray, centre, mirror: Mirror, tol: float) -> np.nd
     return np.unique(np.concatenate(out)) if out else np.zeros(0, np.int64)
 
 
-def unfold(full: GridField, half: GridField, u: np.ndarray, mirror: Mirror) -> np.ndarray:
+def unfold(full: Lattice, half: Lattice, u: np.ndarray, mirror: Mirror) -> np.ndarray:
     """The kept part's dof vector (ns_half * dim,) -> the whole box's (ns_full * dim,):
     u(M x) = p S u(x) for every cut, on grids whose lower halves coincide."""
     dim = len(full.shape)

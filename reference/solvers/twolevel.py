@@ -1,4 +1,4 @@
-"""Two-level preconditioned CG for P2/Q2 systems (reference/solvers.py's ``two-level``):
+"""Two-level preconditioned CG for P2/Q2 systems (reference/solvers/sparse.py's ``two-level``):
 symmetric Gauss-Seidel on the system itself and an exact solve on the subspace of the
 same mesh's P1/Q1 fields.
 

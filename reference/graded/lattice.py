@@ -1,4 +1,5 @@
-"""Point values of a Q2 field on a tensor mesh by cubic interpolation of its nodal values.
+"""The lattice of a tensor mesh's dofs, and point values of a Q2 field on it by cubic
+interpolation of its nodal values.
 
 The Q2 nodes of a tensor mesh (vertices, edge, face and cell midpoints) form a tensor
 grid. Where the solution is smooth, Q2 nodal values are superconvergent (error
@@ -14,7 +15,7 @@ mid-edge values carry different error constants), so the levels' values are not
 C + D h^p in h and Richardson stalls (measured: 7e-5..1e-4 at n = 8..10 on the Sec. 6
 cube whatever the interpolation order). ``evaluate_window`` therefore averages the field
 along each axis over a window in the continuous cell index t of the graded map
-(reference/graded.py AxisMap): (4/3) x the mean over one cell minus (1/3) x the mean
+(reference/graded/meshes.py AxisMap): (4/3) x the mean over one cell minus (1/3) x the mean
 over two cells. Both means span whole periods of any function of theta, so its swing
 averages out at every level alike; the combination has zero first and second moments,
 so a smooth field is changed only at O(window^4), far below the O(h^3) the levels
@@ -24,16 +25,26 @@ map is not linear), which keeps a linear field exact (measured there: 4.3e-5 at 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 
-class GridField:
-    """Nodal values of one level as a tensor grid: axes (per axis the sorted grid
-    coordinates) and ``index`` mapping scalar dofs to flat grid positions."""
+@dataclass(frozen=True)
+class Lattice:
+    """The scalar dofs of a tensor mesh as a grid: ``axes`` (per axis the sorted grid
+    coordinates) and ``index`` (each scalar dof's flat grid site, x slowest). The one
+    representation of the graded levels' fields (point values, :meth:`evaluate`), their
+    mirror images (reference/graded/symmetry.py) and the matrix-free solvers' lattice
+    fields (:meth:`to_lattice`, reference/solvers/tensorsolve.py)."""
+    axes: tuple
+    index: np.ndarray
 
-    def __init__(self, doflocs: np.ndarray):
+    @classmethod
+    def of(cls, doflocs: np.ndarray) -> Lattice:
+        """The grid of dof locations (dim, ns); ValueError if they are not a tensor grid."""
         dim = doflocs.shape[0]
-        self.axes = []
+        axes = []
         flat = np.zeros(doflocs.shape[1], np.int64)
         for a in range(dim):
             x = doflocs[a]
@@ -45,12 +56,53 @@ class GridField:
             line = np.empty(len(x), np.int64)
             line[order] = np.concatenate([[0], np.cumsum(gaps)])
             first = order[np.concatenate([[True], gaps])]
-            self.axes.append(x[first])
+            axes.append(x[first])
             flat = flat * len(first) + line
-        self.shape = tuple(len(g) for g in self.axes)
-        if np.prod(self.shape) != doflocs.shape[1]:
+        if np.prod([len(g) for g in axes]) != doflocs.shape[1]:
             raise ValueError("the dof locations are not a tensor grid")
-        self.index = flat
+        return cls(tuple(axes), flat)
+
+    @classmethod
+    def q2(cls, doflocs: np.ndarray) -> Lattice | None:
+        """The grid when the dof locations (dim, ns) are the Q2 nodes of a tensor mesh (an
+        odd number of nodes per axis, the odd ones midway), else None. The locations
+        alone: P2 on a tensor mesh's tetrahedra fills the same lattice, so the caller
+        checks the element."""
+        try:
+            lat = cls.of(doflocs)
+        except ValueError:
+            return None
+        for x in lat.axes:
+            tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
+            if len(x) % 2 == 0 or len(x) < 3 or np.abs(x[1:-1:2] - 0.5 * (x[:-2:2] + x[2::2])).max() > tol:
+                return None
+        return lat
+
+    @property
+    def shape(self) -> tuple:
+        """Grid points per axis."""
+        return tuple(len(g) for g in self.axes)
+
+    @property
+    def field_shape(self) -> tuple:
+        """The shape of a vector field on the lattice: (dim, *shape)."""
+        return (len(self.axes),) + self.shape
+
+    def to_lattice(self, v: np.ndarray) -> np.ndarray:
+        """Interleaved dof vectors (ndof,) or (ndof, m) -> lattice fields (dim, ..) or (m, dim, ..)."""
+        dim = len(self.axes)
+        v2 = np.asarray(v, float).reshape(len(self.index), dim, -1)
+        out = np.zeros((v2.shape[2], dim, int(np.prod(self.shape))))
+        out[:, :, self.index] = v2.transpose(2, 1, 0)
+        out = out.reshape((-1,) + self.field_shape)
+        return out[0] if np.ndim(v) == 1 else out
+
+    def from_lattice(self, U: np.ndarray) -> np.ndarray:
+        """The inverse of :meth:`to_lattice`."""
+        dim = len(self.axes)
+        U2 = np.asarray(U, float).reshape(-1, dim, int(np.prod(self.shape)))[:, :, self.index]
+        out = U2.transpose(2, 1, 0).reshape(-1, U2.shape[0])
+        return out[:, 0] if np.ndim(U) == len(self.field_shape) else out
 
     def grid(self, values: np.ndarray) -> np.ndarray:
         """Scalar-dof values (ns, c) -> grid array (n_x, n_y[, n_z], c)."""
