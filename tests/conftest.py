@@ -1,12 +1,19 @@
-"""The tests mirror the package's folders (tests/case/, tests/reference/, ...). Their shared
-helpers (meshes.py, independent_elasticity.py, fs_faults.py, the fake runner stage) stay
-here, and test modules share fixtures by module name (``from test_runner import fake``),
-so this folder and every sub-folder are importable from any test (names are unique)."""
+"""Fixtures shared across the test folders (the tests are packages: ``tests.run.test_runner``;
+shared helpers are modules here: meshes.py, plate_case.py, fakestage.py, fs_faults.py, ...)."""
 
-import sys
+import os
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-for folder in [HERE, *sorted(p for p in HERE.iterdir() if p.is_dir() and any(p.glob("test_*.py")))]:
-    if str(folder) not in sys.path:
-        sys.path.insert(0, str(folder))
+import pytest
+
+from harness import registry
+from tests.fakestage import FAKE
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture
+def fake(monkeypatch):
+    """The fake stage (tests/fakestage.py) in place of the real ones, also in worker processes."""
+    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": FAKE}))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))

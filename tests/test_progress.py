@@ -8,14 +8,11 @@ import io
 import re
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parent
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture)
-
-from harness import cli, progress  # noqa: E402
+from harness import cli, progress
+from tests.fakestage import write_case
 
 
 class Terminal(io.StringIO):
@@ -97,7 +94,7 @@ def test_calibrate_phases_drive_the_clock():
 @pytest.mark.slow
 @pytest.mark.parametrize("quiet", [False, True])
 def test_calibrate_on_a_terminal(monkeypatch, tmp_path, quiet):
-    import meshes
+    from tests import meshes
     pytest.importorskip("gmsh")
     mesh = meshes.cylinder(tmp_path)
     argv = ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3", "--prior-weight", "1", "--budget", "2",

@@ -11,18 +11,13 @@ import os
 import subprocess
 import sys
 from importlib import metadata
-from pathlib import Path
 
 import pandas as pd
 import pytest
 
-HERE = Path(__file__).resolve().parent
-if str(HERE / "run") not in sys.path:
-    sys.path.insert(0, str(HERE / "run"))
-from test_report_clean import fake_bench  # noqa: E402
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture)
-
-from harness import cli, provenance  # noqa: E402
+from harness import cli, provenance
+from tests.fakestage import write_case
+from tests.report.test_report_clean import fake_bench
 
 
 def git(root, *args):

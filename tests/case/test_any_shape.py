@@ -6,7 +6,6 @@ import signal
 import textwrap
 from pathlib import Path
 
-import meshes
 import meshio
 import numpy as np
 import pytest
@@ -19,6 +18,7 @@ from harness.case.loadsets import ANCHORS, stress_tensor
 from harness.case.reader import load_case
 from harness.errors import CaseError
 from harness.io.meshfile import boundary_facets, read_mesh
+from tests import meshes
 
 gmsh = pytest.importorskip("gmsh")
 

@@ -10,18 +10,11 @@ from __future__ import annotations
 
 import copy
 import re
-import sys
-from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_robustness import names_a_fix  # noqa: E402
-from test_runner import fake  # noqa: E402,F401  (fixture: the fake stage)
-
-from harness import cli  # noqa: E402
+from harness import cli
+from tests.run.test_robustness import names_a_fix
 
 BASE = {
     "": {"name": '"s"', "dim": "2"},
@@ -174,7 +167,7 @@ def run_lines(tmp_path_factory):
         (d / f"{name}.toml").write_text(render(f"name = \"{name}\"; {edits}"))
     err = io.StringIO()
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "test_runner_fakestages"}))
+        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "tests.fakestage"}))
         code = cli.main(["run", str(d), "--results", str(d.parent / "results"), "--jobs", "1", "--no-figures"])
     return code, err.getvalue().splitlines()
 

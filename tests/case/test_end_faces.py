@@ -5,7 +5,6 @@ traction on the same facets as the FEM's, and the clamp holds the same nodes in 
 
 import argparse
 
-import meshes
 import numpy as np
 import pytest
 
@@ -15,6 +14,7 @@ from harness.errors import CaseError
 from harness.io.end_faces import end_facets
 from harness.io.meshfile import boundary_facets, read_mesh
 from harness.mechanics import statics
+from tests import meshes
 
 gmsh = pytest.importorskip("gmsh")
 

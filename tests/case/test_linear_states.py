@@ -5,7 +5,6 @@ an independent P1 assembly, the reference's closed-form shortcut, the case file.
 
 import textwrap
 
-import meshes
 import numpy as np
 import pytest
 import skfem
@@ -17,6 +16,7 @@ from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
 from harness.registry import LOAD_SETS
 from reference.fem import Discretisation
+from tests import meshes
 
 gmsh = pytest.importorskip("gmsh")
 

@@ -6,7 +6,6 @@ one-line error naming the mesh and the groups it has."""
 
 import textwrap
 
-import meshes
 import meshio
 import numpy as np
 import pytest
@@ -16,6 +15,7 @@ from harness.case.parts import part_predicate
 from harness.case.reader import load_case
 from harness.io.mesh_groups import GroupPart, group_predicate
 from harness.io.meshfile import read_groups, read_mesh
+from tests import meshes
 
 pytest.importorskip("gmsh")
 R, L = 0.1, 0.5

@@ -10,11 +10,11 @@ import math
 
 import numpy as np
 import pytest
-from generator import generator
 
 from harness.case.reader import load_case
 from harness.case.sections import STIFFNESS_RULES
 from harness.paths import ROOT
+from tests.generator import generator
 
 FOLDER = ROOT / "cases" / "nu_sweep"
 

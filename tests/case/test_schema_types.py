@@ -6,18 +6,12 @@ file and that key, never a traceback. The keys are walked from the schema itself
 from __future__ import annotations
 
 import copy
-import sys
-from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_robustness import names_a_fix  # noqa: E402
-
-from harness import cli  # noqa: E402
-from harness.case import reader, sections  # noqa: E402
+from harness import cli
+from harness.case import reader, sections
+from tests.run.test_robustness import names_a_fix
 
 # TOML source of each wrong value. The list holds a boolean and a string, so it is wrong for
 # every list-valued key too (strings, numbers, tables, seeds, grid sizes).

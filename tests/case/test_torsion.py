@@ -7,13 +7,13 @@ import dataclasses
 import json
 import textwrap
 
-import meshes
 import numpy as np
 import pytest
 
 from harness import cli
 from harness.case.reader import load_case
 from harness.io.meshfile import read_mesh
+from tests import meshes
 
 pytest.importorskip("gmsh")
 R, L, E, NU = 0.1, 0.5, 1e5, 0.3

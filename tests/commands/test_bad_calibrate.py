@@ -4,20 +4,15 @@ nothing is written. Every mesh here fails before any FEM solve, so the table is 
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import meshio
 import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_bad_outputs import cube_tets  # noqa: E402
-from test_robustness import names_a_fix  # noqa: E402
-
-from harness import cli  # noqa: E402
+from harness import cli
+from tests.commands.inputs import cube_tets
+from tests.run.test_robustness import names_a_fix
 
 BASE = "MESH --E 1e5 --nu 0.3 --method rule --out OUT"
 FLAG_CASES = [  # (extra argv, text the line must hold)

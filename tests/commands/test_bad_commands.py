@@ -16,14 +16,14 @@ import meshio
 import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_bad_outputs import cache, cube_tets, made  # noqa: E402,F401  (fixtures)
-from test_robustness import names_a_fix  # noqa: E402
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture: the fake stage)
+from harness import cli
+from tests.commands.inputs import cube_tets
+from tests.fakestage import write_case
+from tests.run.test_robustness import names_a_fix
 
-from harness import cli  # noqa: E402
+HERE = Path(__file__).resolve().parents[1]   # tests/
+
+pytestmark = pytest.mark.usefixtures("cache")   # the reference cache of the ``made`` inputs
 
 
 def one_line(argv, capsys, *must) -> str:

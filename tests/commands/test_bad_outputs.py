@@ -11,76 +11,15 @@ fallback a CI machine without mount rights takes; never skipped."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
-import meshio
-import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from fs_faults import disk_full, read_only  # noqa: E402
-from plate_case import plate_case  # noqa: E402
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture: the fake stage)
+from harness import cli
+from tests.fakestage import write_case
+from tests.fs_faults import disk_full, read_only
 
-from harness import cli  # noqa: E402
-
-CASE = plate_case("tiny", """
-    [reference]
-    cell = "tri"
-    divisions = 2
-    max_refine = 1
-    tol = 0.1
-    modes = 0
-    [model]
-    kind = "sms"
-    placement = "grid"
-    grid = [3, 3]
-    structure = "edges+diagonal"
-    """)
-
-
-def cube_tets(n: int = 2):
-    """A unit cube split into 6 n^3 positively oriented tetrahedra (Kuhn)."""
-    import itertools
-    g = np.linspace(0.0, 1.0, n + 1)
-    pts = np.array([[x, y, z] for z in g for y in g for x in g])
-    idx = lambda i, j, k: i + (n + 1) * (j + (n + 1) * k)   # noqa: E731
-    tets = []
-    for i, j, k in itertools.product(range(n), repeat=3):
-        v = [idx(i + a, j + b, k + c) for c in (0, 1) for b in (0, 1) for a in (0, 1)]
-        for perm in itertools.permutations(range(3)):
-            cur, path = [0, 0, 0], [0]
-            for ax in perm:
-                cur[ax] = 1
-                path.append(cur[0] + 2 * cur[1] + 4 * cur[2])
-            tets.append([v[q] for q in path])
-    tets = np.array(tets)
-    p = pts[tets]
-    vol = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0])
-    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    return pts, tets
-
-
-@pytest.fixture(scope="module")
-def made(tmp_path_factory):
-    """A tiny case, the network it builds, points for the reference, a tiny tet mesh."""
-    d = tmp_path_factory.mktemp("inputs")
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("SPRINGBENCH_CACHE", str(d / "cache"))
-        (d / "tiny.toml").write_text(CASE)
-        (d / "points.csv").write_text("x,y\n0.5,0.5\n1.5,0.25\n")
-        meshio.write(d / "cube.vtu", meshio.Mesh(*cube_tets()[:1], [("tetra", cube_tets()[1])]))
-        assert cli.main(["build", str(d / "tiny.toml"), "--out", str(d / "net.vtu")]) == 0
-        yield d
-
-
-@pytest.fixture(autouse=True)
-def cache(made, monkeypatch):
-    monkeypatch.setenv("SPRINGBENCH_CACHE", str(made / "cache"))
-
+pytestmark = pytest.mark.usefixtures("cache")   # the reference cache of the ``made`` inputs
 
 FILE_OUT = {"build": "net.vtu", "score": "g.csv", "reference": "u.csv", "calibrate": "m.vtu"}
 

@@ -4,18 +4,14 @@ overwritten."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_bad_outputs import cache, made  # noqa: E402,F401  (fixtures)
-from test_robustness import names_a_fix  # noqa: E402
+from harness import cli
+from tests.run.test_robustness import names_a_fix
 
-from harness import cli  # noqa: E402
+pytestmark = pytest.mark.usefixtures("cache")   # the reference cache of the ``made`` inputs
 
 # (extra argv after NET CASE, text the line must hold); NET, CASE and DIR expand to the inputs and a folder
 SCORE_FLAGS = [

@@ -5,7 +5,6 @@ against a dense eigen-solve written here), and a finite held-out G."""
 
 import json
 
-import meshes
 import numpy as np
 import pandas as pd
 import pytest
@@ -13,6 +12,7 @@ import pytest
 from harness import cli
 from harness.case.linear_states import gradient_states
 from harness.case.loadsets import VOIGT
+from tests import meshes
 
 pytest.importorskip("gmsh")
 RHO = 1000.0

@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 import math
 
-import meshes
 import meshio
 import numpy as np
 import pandas as pd
 import pytest
 
 from harness import cli
+from tests import meshes
 
 pytest.importorskip("gmsh")
 

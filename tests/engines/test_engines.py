@@ -9,13 +9,13 @@ line for a missing engine."""
 
 import json
 
-import meshes
 import numpy as np
 import pytest
-from pack_solve import held_solve
 
 from harness import cli
 from harness.export.pack import read_pack
+from tests import meshes
+from tests.pack_solve import held_solve
 
 pytest.importorskip("gmsh")
 E, NU, RHO = 1e5, 0.3, 1000.0

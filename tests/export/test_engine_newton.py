@@ -8,7 +8,6 @@ same network and the FEM."""
 import argparse
 import json
 
-import meshes
 import numpy as np
 import pytest
 
@@ -19,6 +18,7 @@ from harness.commands import calibrate as cal
 from harness.export.vtu import read_vtu
 from harness.io.meshfile import read_mesh
 from harness.mechanics import statics
+from tests import meshes
 
 pytest.importorskip("gmsh")
 newton = pytest.importorskip("newton")

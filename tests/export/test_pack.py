@@ -7,14 +7,14 @@ pack's scores of springbench's own statics against calibrate's own held-out scor
 import json
 from xml.etree import ElementTree as ET
 
-import meshes
 import meshio
 import numpy as np
 import pytest
-from pack_solve import held_solve
 
 from harness import cli
 from harness.export.pack import read_pack, write_pack
+from tests import meshes
+from tests.pack_solve import held_solve
 
 pytest.importorskip("gmsh")
 E, NU, RHO = 1e5, 0.3, 1000.0

@@ -17,10 +17,9 @@ import pytest
 _WORK = """
 import sys, hashlib
 import numpy as np
-sys.path.insert(0, {tests!r})
-import conftest  # puts the tests' folders on the path
-from test_bc2000 import engines_models
-from test_determinism import _lattice
+sys.path.insert(0, {root!r})
+from tests.models.test_bc2000 import engines_models
+from tests.mechanics.test_determinism import _lattice
 from harness.mechanics.dynamics import simulate
 from harness.mechanics.modal import frequencies_arrays
 mesh, ld, dt, models = engines_models(sys.argv[1])
@@ -48,7 +47,7 @@ def test_same_bits_while_every_core_is_busy():
     for p in spinners:
         p.start()
     try:
-        out = subprocess.run([sys.executable, "-c", _WORK.format(tests=str(Path(__file__).resolve().parents[1])), kind],
+        out = subprocess.run([sys.executable, "-c", _WORK.format(root=str(Path(__file__).resolve().parents[2])), kind],
                              capture_output=True, text=True, timeout=1800)
     finally:
         stop.set()

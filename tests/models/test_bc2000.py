@@ -152,9 +152,8 @@ def test_kernels_leave_no_rounding_to_llvm():
 _CACHE_HISTORY = """
 import sys, hashlib
 import numpy as np
-sys.path.insert(0, {tests!r})
-import conftest  # puts the tests' folders on the path
-from test_bc2000 import engines_models
+sys.path.insert(0, {root!r})
+from tests.models.test_bc2000 import engines_models
 from harness.mechanics.dynamics import simulate
 mesh, ld, dt, models = engines_models("hexa")
 for m in models:
@@ -173,7 +172,7 @@ def test_two_threads_same_bits_whatever_the_cache_history(tmp_path):
     import subprocess
     import sys
     env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
-    script = _CACHE_HISTORY.format(tests=str(Path(__file__).resolve().parents[1]))
+    script = _CACHE_HISTORY.format(root=str(Path(__file__).resolve().parents[2]))
 
     def run(order):
         out = subprocess.run([sys.executable, "-c", script, order], env=env, capture_output=True, text=True,

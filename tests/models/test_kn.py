@@ -6,15 +6,15 @@ lambda = k/h + kn, mu = k/h, and recovery of known [k, kn] from a synthetic refe
 
 import numpy as np
 import pytest
-from numdiff import energy_forces, force_jacobian
 from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
-from test_volume import grid_simplices
 
 from harness.linalg.sparse import single_thread_blas
 from harness.models.kn import KNTerm, node_volumes
 from harness.optimize import FitProblem, optimize
 from harness.optimize.synthetic import basic_loads, grid_network
+from tests.models.test_volume import grid_simplices
+from tests.numdiff import energy_forces, force_jacobian
 
 
 @pytest.fixture(autouse=True)

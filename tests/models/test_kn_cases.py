@@ -6,10 +6,8 @@ documented formula)."""
 
 import json
 
-import meshes
 import numpy as np
 import pytest
-from test_sms import TINY, ClosedFormRef, _dense_K
 
 from harness import cli
 from harness.case.reader import load_case
@@ -19,6 +17,8 @@ from harness.models.kn import KNTerm
 from harness.models.sms import build_network, model_spec
 from harness.registry import MODEL_CLASSES
 from harness.stages.classes.springs import of_spec
+from tests import meshes
+from tests.models.test_sms import TINY, ClosedFormRef, _dense_K
 
 BOX = TINY.replace('dim = 2', 'dim = 3').replace('shape = "rectangle"\nsize = [2.0, 2.0]',
                                                  'shape = "box"\nsize = [2.0, 1.0, 1.0]').replace('basic2d', 'basic3d')

@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +18,7 @@ from harness.case.reader import Material
 from harness.commands import rules
 from harness.models import learned_rule as lr
 from harness.models.stiffness_rules import spring_constants, vangelder
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-import meshes  # noqa: E402
+from tests import meshes
 
 CORPUS = Path(__file__).resolve().parents[2] / "cases" / "rules_corpus"
 

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numdiff import energy_forces, force_jacobian
 from scipy.spatial.transform import Rotation
-from test_volume import grid_simplices, random_mesh
 
 from harness.models.springs import incidence, stiffness_matrix
 from harness.models.volume import NodeVolumeTerm, VolumeTerm, volume_gradients, volumes
+from tests.models.test_volume import grid_simplices, random_mesh
+from tests.numdiff import energy_forces, force_jacobian
 
 
 def term(dim, seed=0, n=14):

@@ -6,7 +6,6 @@ differences of G, and recovery of known constants from a synthetic reference."""
 
 import numpy as np
 import pytest
-from numdiff import energy_forces, force_jacobian
 from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
 
@@ -16,6 +15,7 @@ from harness.models.volume import VolumeTerm, volume_gradients, volumes
 from harness.optimize import FitProblem, optimize
 from harness.optimize.problem import value_and_grad
 from harness.optimize.synthetic import basic_loads, grid_network
+from tests.numdiff import energy_forces, force_jacobian
 
 
 @pytest.fixture(autouse=True)

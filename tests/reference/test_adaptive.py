@@ -230,7 +230,7 @@ def test_point_estimate_bounds_the_true_error_at_every_vertex(tmp_path):
     smaller: checked against a third refinement). It bounds the error at every vertex
     and is not a wild over-estimate."""
     pytest.importorskip("gmsh")
-    import meshes
+    from tests import meshes
     case = mesh_case(tmp_path, meshes.holed_plate(tmp_path, size=0.08), 2, CANTILEVER,
                      "max_refine = 3\ntol = 1e-8\n")
     ref = reference.solve(case, cache=False)
@@ -272,7 +272,7 @@ def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_p
     sum of triangle areas), and the clamp holds exactly the points of the user's
     clamped entities."""
     pytest.importorskip("gmsh")
-    import meshes
+    from tests import meshes
     f = meshes.cylinder(tmp_path, size=0.08)
     loads = """
         [[loads.case]]

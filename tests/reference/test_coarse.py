@@ -5,13 +5,13 @@ against independent fine solves (plain scikit-fem, the user's mesh refined)."""
 import numpy as np
 import pytest
 import skfem
-from test_adaptive import CANTILEVER, at_vertices, independent, mesh_case
 
 import reference
 import reference.adaptive.adapt as adaptive
 from reference.adaptive import coarse
 from reference.fem import Discretisation
 from reference.mesh import base_mesh
+from tests.reference.test_adaptive import CANTILEVER, at_vertices, independent, mesh_case
 
 
 def test_transfer_reproduces_the_coarse_polynomials_and_lies_in_the_fine_space():
@@ -35,7 +35,7 @@ def test_coarse_levels_estimate_bounds_the_independent_error(tmp_path, monkeypat
     without a wild factor, and the per-point estimate (that bound, uniform) bounds the
     error at every vertex."""
     pytest.importorskip("gmsh")
-    import meshes
+    from tests import meshes
     monkeypatch.setattr(adaptive, "MAX_DOFS", {2: 1, 3: 1})
     case = mesh_case(tmp_path, meshes.holed_plate(tmp_path, size=size), 2, CANTILEVER, "max_refine = 1\n")
     ref = reference.solve(case, cache=False)
@@ -55,7 +55,7 @@ def test_coarse_levels_estimate_bounds_the_independent_error(tmp_path, monkeypat
 def test_a_mesh_the_budget_refines_keeps_the_pointwise_estimate(tmp_path):
     """Below the budget the adaptive levels stay (no coarse levels, no uniform bound)."""
     m = skfem.MeshTri.init_sqsymmetric().refined(2)
-    from test_adaptive import write_mesh
+    from tests.reference.test_adaptive import write_mesh
     case = mesh_case(tmp_path, write_mesh(tmp_path / "sq.vtu", m), 2, CANTILEVER, "max_refine = 1\n")
     ref = reference.solve(case, cache=False)
     assert ref.level >= 1 and ref.changes is not None and ref.changes.uniform is None

@@ -12,10 +12,10 @@ import textwrap
 
 import numpy as np
 import pytest
-from independent_elasticity import extrapolated_shear
 
 import reference
 from harness.case.reader import load_case
+from tests.independent_elasticity import extrapolated_shear
 
 E, NU, S = 1000.0, 0.3, 1.0
 

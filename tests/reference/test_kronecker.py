@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import skfem
 from skfem.helpers import sym_grad
-from test_tensorpre import _orthotropic  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
 from reference.graded.lattice import Lattice
 from reference.graded.meshes import graded_axes, tensor_mesh
 from reference.solvers.kronecker import KroneckerStiffness, axis_matrices
+from tests.reference.test_tensorpre import _orthotropic
 
 
 def test_axis_matrices_are_the_q2_element_matrices():

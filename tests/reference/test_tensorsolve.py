@@ -8,14 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_graded import box_case  # noqa: E402
-from test_kronecker import _skfem_stiffness  # noqa: E402
 
 from harness.case.elasticity import isotropic_compliance
 from reference.graded import levels
 from reference.graded.lattice import Lattice
 from reference.graded.meshes import graded_axes, q2_doflocs, tensor_mesh
 from reference.solvers import plan, tensorsolve
+from tests.reference.test_graded import box_case
+from tests.reference.test_kronecker import _skfem_stiffness
 
 
 def _problem():

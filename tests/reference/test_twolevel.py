@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import skfem
-from test_solvers import elasticity
 
 from reference.fem import Discretisation
 from reference.solvers import plan, sparse, twolevel
+from tests.reference.test_solvers import elasticity
 
 CELLS = {"tet": skfem.MeshTet, "hex": skfem.MeshHex, "tri": skfem.MeshTri, "quad": skfem.MeshQuad}
 

@@ -3,21 +3,15 @@
 from __future__ import annotations
 
 import re
-import sys
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-
-from test_runner import calls, fake, write_case  # noqa: E402,F401  (fixture)
-
-from harness import cli  # noqa: E402
+from harness import cli
 from harness.report import build as report
-from harness.run.runner import run_suite  # noqa: E402
+from harness.run.runner import run_suite
+from tests.fakestage import calls, write_case
 
 
 def test_figures_from_stored_data_and_report_rebuild(tmp_path, fake, capsys):

@@ -8,7 +8,6 @@ from __future__ import annotations
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -16,9 +15,6 @@ import numpy as np
 import pytest
 
 HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_report_page import built, site  # noqa: E402,F401  (fixtures)
 
 ROOT = HERE.parent
 WIDTHS = (1280, 390)

@@ -8,19 +8,13 @@ no file."""
 from __future__ import annotations
 
 import shutil
-import sys
 from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-
-from test_runner import fake, write_case  # noqa: E402,F401  (fixture)
-
-from harness import cli  # noqa: E402
-from harness.report import figures  # noqa: E402
+from harness import cli
+from harness.report import figures
+from tests.fakestage import write_case
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -19,15 +19,11 @@ from pathlib import Path
 
 import pytest
 
+from harness import cli
+from harness.case.reader import Case, load_case
+from harness.errors import CaseError
+
 HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-from test_runner import fake  # noqa: E402,F401  (fixture: the fake stage)
-
-from harness import cli  # noqa: E402
-from harness.case.reader import Case, load_case  # noqa: E402
-from harness.errors import CaseError  # noqa: E402
-
 CATALOGUE = sorted((HERE / "bad_inputs").glob("*.toml"))
 ERROR = re.compile(r"^springbench( \w+)?: (error: )?")
 
@@ -56,12 +52,12 @@ def test_catalogue_is_large_and_annotated():
     files here, the CLI flag cases below, and the tables of tests/test_bad_*.py (calibrate
     flags and meshes, case-file edits per section, score/reference/build/report inputs,
     unwritable outputs and full disks)."""
-    from test_bad_calibrate import CALIBRATE_CASES
-    from test_bad_cases import BAD_CASES
-    from test_bad_commands import COMMAND_CASES
-    from test_bad_outputs import OUTPUT_CASES
-    from test_bad_score import SCORE_FLAG_CASES
-    from test_schema_types import PARAMS
+    from tests.case.test_bad_cases import BAD_CASES
+    from tests.case.test_schema_types import PARAMS
+    from tests.commands.test_bad_calibrate import CALIBRATE_CASES
+    from tests.commands.test_bad_commands import COMMAND_CASES
+    from tests.commands.test_bad_outputs import OUTPUT_CASES
+    from tests.commands.test_bad_score import SCORE_FLAG_CASES
     names = ([f"case file {p.name}" for p in CATALOGUE] + [f"cli {' '.join(a)}" for a, _ in CLI_CASES]
              + CALIBRATE_CASES + BAD_CASES + COMMAND_CASES + OUTPUT_CASES + SCORE_FLAG_CASES
              + [f"case key {key} = a {kind} ({base['']['name']})" for base, key, kind in PARAMS])
@@ -101,7 +97,7 @@ def catalogue_run(tmp_path_factory):
     res = work / "results"
     out = {}
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "test_runner_fakestages"}))
+        mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "tests.fakestage"}))
         for mode, paths in (("--quick", [cat]),
                             ("--full", [cat / p.name for p in CATALOGUE if header(p, "only") == ["full"]])):
             err = io.StringIO()
@@ -207,7 +203,7 @@ nu = 0.25
 
 hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
-from hypothesis import strategies as st
+from hypothesis import strategies as st  # noqa: E402
 
 KEYS = ["name", "dim", "description", "tags", "body", "shape", "size", "origin", "vertices", "file",
         "format", "parts", "box", "material", "E", "nu", "density", "plane", "fibre", "E_fibre",

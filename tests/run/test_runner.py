@@ -17,31 +17,15 @@ from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-FAKE = "test_runner_fakestages"
-
-from plate_case import plate_case  # noqa: E402
-
 from harness import (
-    cli,  # noqa: E402
+    cli,
     registry,
 )
-from harness.report.build import TIMING  # noqa: E402
-from harness.run.runner import run_suite  # noqa: E402
+from harness.report.build import TIMING
+from harness.run.runner import run_suite
+from tests.fakestage import FAKE, calls, write_case
 
-
-def write_case(folder: Path, name: str, desc: str = "", extra: str = "", tags=(), file=None) -> Path:
-    folder.mkdir(parents=True, exist_ok=True)
-    p = folder / (file or f"{name}.toml")
-    p.write_text(plate_case(name, top=f'description = "{desc}"\ntags = {json.dumps(list(tags))}', loads=extra))
-    return p
-
-
-def calls(folder: Path) -> list[str]:
-    f = folder / "calls.log"
-    return f.read_text().split("\n")[:-1] if f.exists() else []
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def strip_timing(csv_text: str) -> str:
@@ -49,12 +33,6 @@ def strip_timing(csv_text: str) -> str:
     rows = list(csv.reader(io.StringIO(csv_text)))
     keep = [i for i, c in enumerate(rows[0]) if not TIMING.search(c)]
     return "\n".join(",".join(r[i] for i in keep) for r in rows)
-
-
-@pytest.fixture
-def fake(monkeypatch):
-    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": FAKE}))
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")]))
 
 
 def run(*argv):
@@ -102,7 +80,7 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     mods.mkdir()
     name = f"fake_copy_{uuid.uuid4().hex[:8]}"
     src = mods / f"{name}.py"
-    shutil.copy(HERE / f"{FAKE}.py", src)
+    shutil.copy(ROOT / "tests" / "fakestage.py", src)
     monkeypatch.syspath_prepend(str(mods))
     monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": name}))
     suite = tmp_path / "cases" / "demo"
@@ -333,7 +311,7 @@ def test_sigkill_loses_no_finished_case(tmp_path):
     write_case(suite, "a_fast", "rows=1")
     write_case(suite, "b_slow", "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.registry as r; "
+    script = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
               f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main; "
               f"sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '1']))")
     proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.DEVNULL,
@@ -369,7 +347,7 @@ def test_ctrl_c_stops_workers_quietly(tmp_path):
     for n in ("b_slow", "c_slow"):
         write_case(suite, n, "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(HERE)!r}); import harness.registry as r; "
+    script = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
               f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main\n"
               f"if __name__ == '__main__':\n"
               f"    sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '2']))\n")

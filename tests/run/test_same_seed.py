@@ -4,10 +4,10 @@ every column that is not a timing (nor ``cached``, which says which run was cold
 
 import pandas as pd
 import pytest
-from plate_case import plate_case
 
 from harness import cli
 from harness.report.build import TIMING
+from tests.plate_case import plate_case
 
 TABLES = """
 [reference]

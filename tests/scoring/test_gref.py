@@ -6,21 +6,15 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
-
-from test_sms import TINY, ClosedFormRef  # noqa: E402
-
-from harness.case.reader import load_case  # noqa: E402
-from harness.report import build as report  # noqa: E402
-from harness.scoring import g_arrays, g_ref_arrays, ref_error_max, ref_status, reference_error  # noqa: E402
+from harness.case.reader import load_case
+from harness.report import build as report
+from harness.scoring import g_arrays, g_ref_arrays, ref_error_max, ref_status, reference_error
+from tests.models.test_sms import TINY, ClosedFormRef
 
 # -- the function ---------------------------------------------------------------------------
 

@@ -10,13 +10,13 @@ installed leaves rows that say which extra installs it."""
 import numpy as np
 import pandas as pd
 import pytest
-from generator import generator
-from pack_solve import held_solve
 
 from harness.case.reader import load_case
 from harness.paths import ROOT
 from harness.registry import STAGES
 from harness.stages import engines as S
+from tests.generator import generator
+from tests.pack_solve import held_solve
 
 FOLDER = ROOT / "cases" / "engines"
 

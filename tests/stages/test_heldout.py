@@ -5,13 +5,13 @@ held-out ones, both recomputed here from the stored displacements."""
 import numpy as np
 import pandas as pd
 import pytest
-from plate_case import plate_case
 
 from harness.case.reader import load_case
 from harness.export.vtu import read_vtu
 from harness.optimize import problem as fit_problem
 from harness.stages import StageContext
 from harness.stages import sms as stage
+from tests.plate_case import plate_case
 
 WEIGHTS = (1.0, 3.0, 15.0)
 

@@ -4,12 +4,12 @@ lowered, against the same calibration with every rule solved: the solved rules' 
 the same, every skipped rule's bound is below its true G_fit_score and above the best, so
 the rule 'best' picks and exports is the same."""
 
-import meshes
 import pandas as pd
 import pytest
 
 from harness import cli
 from harness.stages import sms_rules
+from tests import meshes
 
 pytest.importorskip("gmsh")
 

@@ -1,14 +1,32 @@
-"""A fake stage for the runner tests (no tests here): behaviour is driven by the case's
-``description``, tokens ``key=value``: rows=N, sleep=S, fail=case|bug, files=1.
-Every call appends a line to ``calls.log`` next to the case file."""
+"""A fake stage for the runner tests: behaviour is driven by the case's ``description``,
+tokens ``key=value``: rows=N, sleep=S, fail=case|bug, files=1. Every call appends a line
+to ``calls.log`` next to the case file. ``FAKE`` is its module name (what a registry
+entry or a worker imports), ``write_case`` writes a case file for it, ``calls`` reads
+the log; the ``fake`` fixture (tests/conftest.py) puts it in place of the real stages."""
 
 from __future__ import annotations
 
+import json
 import time
+from pathlib import Path
 
 from harness.errors import CaseError
+from tests.plate_case import plate_case
 
 NAME = "fake"
+FAKE = "tests.fakestage"
+
+
+def write_case(folder: Path, name: str, desc: str = "", extra: str = "", tags=(), file=None) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    p = folder / (file or f"{name}.toml")
+    p.write_text(plate_case(name, top=f'description = "{desc}"\ntags = {json.dumps(list(tags))}', loads=extra))
+    return p
+
+
+def calls(folder: Path) -> list[str]:
+    f = folder / "calls.log"
+    return f.read_text().split("\n")[:-1] if f.exists() else []
 
 
 def applies(case):
