@@ -15,7 +15,11 @@ from __future__ import annotations
 import os
 import platform
 import subprocess
+from importlib import metadata
 from pathlib import Path
+
+from harness import __version__
+from harness.paths import ROOT
 
 FORMAT_VERSION = 1     # of result files, summaries and bench CSVs; raise it when their meaning changes
 LIBRARIES = {"numpy_version": "numpy", "scipy_version": "scipy", "skfem_version": "scikit-fem",
@@ -29,10 +33,7 @@ OUTPUTS = ("results", "runs")
 
 def collect(root: Path | None = None) -> dict:
     """The provenance of work starting now (FIELDS; None where unknown)."""
-    from importlib import metadata
 
-    from harness import __version__
-    from harness.paths import ROOT
     commit, dirty = git_state(Path(root or ROOT))
     out = {"format_version": FORMAT_VERSION, "springbench_version": __version__, "git_commit": commit,
            "git_dirty": dirty, "python_version": platform.python_version()}

@@ -15,6 +15,8 @@ from typing import Mapping
 
 import numpy as np
 
+from harness.mechanics import statics as st
+
 
 @dataclass(frozen=True)
 class ScoreResult:
@@ -129,7 +131,6 @@ def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
     ScoreResult
         As :func:`g_arrays`.
     """
-    from harness.mechanics import statics as st
     res = statics or st.solve(network, case)
     u_ref = reference_displacements(ref, network.points, res.names)
     return g_arrays(u_ref, res.u, network.classes, case_weights(case, weights), res.names)

@@ -9,6 +9,7 @@ import numpy as np
 import skfem
 
 from harness.errors import ModelError
+from harness.io.meshfile import read_mesh
 
 # refined meshes are converted to C order silently (scikit-fem logs a warning each time)
 logging.getLogger("skfem.mesh.mesh").setLevel(logging.ERROR)
@@ -98,7 +99,6 @@ def file_mesh(body, cell: str) -> skfem.Mesh:
     import meshio
     from skfem.io.meshio import from_meshio
 
-    from harness.io.meshfile import read_mesh
     m = read_mesh(body.file, body.format)
     kind = MESHIO_TYPES[cell]
     if kind not in m.cells:

@@ -178,3 +178,50 @@ def test_no_hand_written_module_over_500_lines():
             if (n := len(path.read_text().splitlines())) > MAX_LINES
             and not path.read_text().lstrip('"').startswith("GENERATED")}
     assert long == {}
+
+
+# An import stays inside a function only in the command modules (``springbench --help``
+# imports every one), for an optional dependency (inside ``try``), or when its module is
+# slow to import and only some paths need it. These are the slow ones: each costs more than
+# 100 ms beyond numpy and scipy (``python -X importtime``; scikit-fem behind the reference
+# modules 0.3-0.5 s, numba behind the element kernels 0.2-0.25 s, pandas behind the stage
+# helpers 0.15-0.3 s); hoisting them made ``springbench validate cases/`` 15-25 % slower.
+LAZY = frozenset({
+    "harness.engines.newton_volume", "harness.geometry", "harness.geometry.bodies",
+    "harness.models.bc2000.kernels", "harness.models.bc2000.parallel", "harness.models.masses",
+    "harness.optimize.gradient", "harness.stages.bc2000_linear", "harness.stages.sms_fit",
+    "harness.stages.sms_measures", "harness.stages.sms_select", "reference", "reference.analytic",
+    "reference.graded.meshes", "reference.graded.symmetry", "reference.mesh", "reference.problem",
+    "reference.solvers.sparse", "reference.solvers.twolevel"})
+EAGER_EXEMPT = ("harness/commands/", "harness/cli.py", "harness/__main__.py")
+
+
+def lazy_project_imports(path: Path, known) -> list[tuple[int, str]]:
+    """(line, module) of the imports of project modules inside functions (not in ``try``)."""
+    out = []
+
+    def walk(node, in_func, in_try):
+        for c in ast.iter_child_nodes(node):
+            if in_func and not in_try and isinstance(c, (ast.Import, ast.ImportFrom)) and not getattr(c, "level", 0):
+                names = ([f"{c.module}.{a.name}" if f"{c.module}.{a.name}" in known else c.module for a in c.names]
+                         if isinstance(c, ast.ImportFrom) else [a.name for a in c.names])
+                out.extend((c.lineno, n) for n in names if n and n.split(".")[0] in PACKAGES)
+            walk(c, in_func or isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef)), in_try or isinstance(c, ast.Try))
+    walk(ast.parse(path.read_text(), str(path)), False, False)
+    return out
+
+
+def test_the_lazy_import_checker_reads_functions_and_skips_try(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("import harness.errors\ndef f():\n    from harness.stages import sms_fit\n    import reference\n"
+                   "    try:\n        from harness import scoring\n    except ImportError:\n        pass\n")
+    known = {"harness.stages.sms_fit", "harness.stages", "reference", "harness.scoring"}
+    assert lazy_project_imports(src, known) == [(3, "harness.stages.sms_fit"), (4, "reference")]
+
+
+def test_imports_are_at_module_top_unless_slow():
+    known = modules()
+    eager = [f"{path.relative_to(ROOT)}:{line} {mod}" for name, path in known.items()
+             if not path.relative_to(ROOT).as_posix().startswith(EAGER_EXEMPT)
+             for line, mod in lazy_project_imports(path, known) if mod not in LAZY]
+    assert eager == [], "import these at the module's top (or measure and add the module to LAZY)"

@@ -23,6 +23,7 @@ levels' subspaces), the solve on the mesh itself by the two-level method
 from __future__ import annotations
 
 import json
+import os
 import resource
 import signal
 import subprocess
@@ -79,7 +80,6 @@ def cylinder(path: Path, n_tets: int) -> int:
 def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess]:
     """(seconds, process) of one cold ``springbench calibrate``: its own process and an
     empty reference cache."""
-    import os
     cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45",
            "--budget", str(BUDGET), "--out", str(out), *extra]
     env = dict(os.environ, SPRINGBENCH_CACHE=str(out.parent / f"cache-{out.stem}"))

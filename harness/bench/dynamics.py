@@ -21,12 +21,17 @@ other processes' time slices), and load_average (1 min) at the end of the run.
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from harness.io.meshfile import read_mesh
+from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
+from harness.models.anisotropic import build_anisotropic
+from harness.models.massspring import MassSpring, build_massspring
 from harness.progress import steps as progress
 
 CXX_MS = {("tetra", "MS"): 1.5, ("tetra", "MT"): 7.3, ("hexa", "MS"): 1.6, ("hexa", "MT"): 6.1}
@@ -49,10 +54,6 @@ def _best_wall_cpu(fn, repeats):
 
 
 def table1(quick: bool) -> list[dict]:
-    from harness.io.meshfile import read_mesh
-    from harness.mechanics.dynamics import PROGRAM_DRAG, Loading, simulate
-    from harness.models.anisotropic import build_anisotropic
-    from harness.models.massspring import build_massspring
     rows = []
     repeats = 30 if quick else 100          # best of many: the machine is shared
     for kind in progress(("tetra", "hexa"), "bench dynamics", "mesh"):
@@ -104,7 +105,6 @@ def springs(quick: bool) -> list[dict]:
         spring_forces_parallel,
         spring_plan,
     )
-    from harness.models.massspring import MassSpring
     n = 48                                                # 961k springs
     pts, sp = lattice(n)
     rng = np.random.default_rng(0)
@@ -142,7 +142,6 @@ def springs(quick: bool) -> list[dict]:
 
 
 def run(quick: bool = True) -> pd.DataFrame:
-    import os
     df = pd.DataFrame(table1(quick) + springs(quick))
     df["load_average"] = os.getloadavg()[0]     # other processes on the machine inflate every time
     return df

@@ -7,11 +7,14 @@ against the independent truth of tests/independent_elasticity.py (loaded by path
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
+import resource
 import sys
 import tempfile
 import time
 import tomllib
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +22,7 @@ import pandas as pd
 import skfem
 
 from harness.case.elasticity import isotropic_compliance, plane
+from harness.case.reader import load_case
 from harness.progress import steps
 from reference.fem import Discretisation
 from reference.locate import Locator
@@ -108,7 +112,6 @@ def graded_solve_rows(quick: bool = False) -> list[dict]:
     quarter at levels n, solved by the multifrontal Cholesky (baseline, 'direct') and by
     CG with the fast-diagonalisation preconditioner ('tensor', K applied without assembly),
     solver seconds (and, apart, the rest of the call: assembly, loads, constraints)."""
-    import dataclasses
 
     from reference.graded.meshes import graded_axes, tensor_mesh
     from reference.graded.symmetry import lower_half, mirror_of
@@ -170,7 +173,6 @@ def _shear_case(folder: Path, name: str, reference: dict, size=None, nu=None, ni
     ``size`` / ``nu``) with the one load shear-xz (z0 clamped, traction s e_x on z1), or
     with ``nine`` the nine loads of basic3d (whose shear-xz is the same), and the given
     [reference] keys."""
-    from harness.case.reader import load_case
     raw = tomllib.loads(SEC6.read_text())
     body, mat = dict(raw["body"]), dict(raw["material"])
     body.update({} if size is None else {"size": list(size), "origin": [0.0, 0.0, 0.0]})
@@ -291,7 +293,6 @@ def _nine_loads(size, nu, points) -> dict:
     """In a fresh process: the default graded reference of basic3d's nine loads on a box
     of ``size`` and ``nu`` (sec6's E and s): wall seconds, the process's peak RSS, and
     shear-xz with its estimate at ``points``."""
-    import resource
 
     import reference
     with tempfile.TemporaryDirectory() as tmp:
@@ -309,7 +310,6 @@ def shape_rows() -> list[dict]:
     for the 10:1 box also the whole case (basic3d's nine loads) in a process of its own:
     seconds and peak memory, the issue's "<= 120 s, <= 4 GB per case"."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     import reference
     ie = _independent()

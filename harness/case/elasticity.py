@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.case.fibres import fibre_directions
+
 _VOIGT = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
 
 
@@ -105,7 +107,6 @@ def element_stiffness(material, centroids: np.ndarray) -> np.ndarray:
     A region overrides E (and nu) of the isotropic part; with a fibre, a region scales
     every modulus of the fibre material by E_region / E.
     """
-    from harness.case.fibres import fibre_directions
     centroids = np.asarray(centroids, float)
     n, dim = centroids.shape
     scale = np.ones(n)

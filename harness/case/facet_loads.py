@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from harness.errors import ModelError
+from harness.io.meshfile import mesh_surface
 
 
 def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
@@ -26,7 +27,6 @@ def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
     body = case.body
     if body.shape != "mesh":
         return [_planar_triangles(points, on_part)]
-    from harness.io.meshfile import mesh_surface
     mpoints, facets, _ = mesh_surface(body.file, body.format)
     tol = 1e-8 * float(np.ptp(mpoints, axis=0).max())
     dist, node = cKDTree(points).query(mpoints)

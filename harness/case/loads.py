@@ -21,8 +21,10 @@ from harness.case.loadsets import (
     Traction,
     anchor_points,
 )
+from harness.case.moments import box_moments, mesh_moments, polygon_moments
 from harness.case.parts import parse_face_name, part_exists
 from harness.errors import CaseError, SpringbenchError
+from harness.io.meshfile import boundary_facets, read_mesh
 
 if TYPE_CHECKING:
     from harness.case.reader import Body
@@ -126,14 +128,12 @@ def anchored(load_set: str | None, body: Body) -> bool:
 
 def body_frame(body: Body) -> Frame:
     """The body's volume (2-D: area) centroid and its largest bounding-box extent."""
-    from harness.case.moments import box_moments, mesh_moments, polygon_moments
     lo, hi = body.bbox()
     if body.shape in ("rectangle", "box"):
         m = box_moments(lo, hi)
     elif body.shape == "polygon":
         m = polygon_moments(np.asarray(body.vertices, float))
     else:
-        from harness.io.meshfile import read_mesh
         mesh = read_mesh(body.file, body.format)
         m = mesh_moments(mesh.points, mesh.cells)
     dim = len(lo)
@@ -152,7 +152,6 @@ def with_anchors(l: dict, body: Body, file: str) -> Body:
     elif body.shape == "polygon":
         boundary = np.asarray(body.vertices, float)
     else:
-        from harness.io.meshfile import boundary_facets, read_mesh
         try:
             m = read_mesh(body.file, body.format)
         except SpringbenchError as exc:

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.case.schema import LARGEST, SMALLEST
 from harness.errors import SpringbenchError
 
 #: faces of each volume cell type (local node indices); an edge list for surface cells
@@ -66,7 +67,6 @@ def signed_size(points: np.ndarray, kind: str, cells: np.ndarray) -> np.ndarray:
 def coordinate_problem(points) -> str | None:
     """Why a body's coordinates cannot be computed with (None if they can): too large,
     a body too small, or too small for its distance from the origin."""
-    from harness.case.schema import LARGEST, SMALLEST
     p = np.asarray(points, float)
     big, extent = float(np.abs(p).max()), float(np.max(p.max(0) - p.min(0)))
     if big > LARGEST:

@@ -19,6 +19,7 @@ import numpy as np
 
 from harness import registry
 from harness.case import sections as case_sections
+from harness.case.elasticity import transversely_isotropic_compliance
 from harness.case.fibres import NAMED_FIELDS
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.loadsets import LoadCase
@@ -27,6 +28,7 @@ from harness.case.schema import Field, check, describe, did_you_mean
 from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
+from harness.io.meshfile import mesh_points, read_mesh
 
 MODES = ("quick", "full")
 
@@ -155,7 +157,6 @@ class Body:
         if self.shape == "polygon":
             v = np.asarray(self.vertices, float)
             return v.min(0), v.max(0)
-        from harness.io.meshfile import mesh_points
         p = mesh_points(self.file, self.format)       # read once per version of the file
         return p.min(0), p.max(0)
 
@@ -360,7 +361,6 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         if not b["file"]:
             fail("file", "missing required field for shape = 'mesh'", "give the mesh path relative to the case file")
         mpath = (path.parent / b["file"]).resolve()
-        from harness.io.meshfile import read_mesh
         try:
             mesh = read_mesh(mpath, b["format"])
             from harness.case.mesh_checks import check_mesh
@@ -445,7 +445,6 @@ def _material(m: dict, dim: int, file: str) -> Material:
         G = f["G_fibre"] or f["E_fibre"] * f["E_cross"] / (f["E_fibre"] + f["E_cross"] * (1 + 2 * nu_f))
         fibre = Fibre(f["E_fibre"], f["E_cross"], nu_f, nu_c, G, f["direction"], f["azimuth_deg"],
                       f["elevation_deg"], f["field"], f["seed"])
-        from harness.case.elasticity import transversely_isotropic_compliance
         S = transversely_isotropic_compliance(fibre.E_fibre, fibre.E_cross, nu_f, nu_c, G)
         if np.linalg.eigvalsh(S).min() <= 0:
             fail("fibre", "the compliance is not positive definite",

@@ -7,6 +7,7 @@ dotted field and what is expected. Nothing here evaluates user text.
 
 from __future__ import annotations
 
+import difflib
 import math
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -80,7 +81,6 @@ def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
 
 def did_you_mean(key: str, allowed) -> str:
     """'did you mean ...? allowed here: ...' for an unknown key."""
-    import difflib
     allowed = sorted(allowed)
     close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
     k = str(key).lower()      # or one is the other's start: 'tolerance' for 'tol'

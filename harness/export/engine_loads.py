@@ -27,6 +27,8 @@ import math
 
 import numpy as np
 
+from harness.mechanics import statics
+
 DT_SAFE = 0.8
 
 
@@ -36,7 +38,6 @@ def _round(a) -> list:
 
 def load_records(net, case) -> dict:
     """The JSON keys of the module docstring for every load of ``case`` on ``net``."""
-    from harness.mechanics import statics
     names, frees, forces = statics.all_load_arrays(net, case)
     dim = net.dim
     clamped, loaded, fs, gravity = {}, {}, {}, {}
@@ -55,7 +56,6 @@ def load_records(net, case) -> dict:
 def settle_recipe(net, case) -> dict | None:
     """``settle_damping`` (module docstring) from the network's static answer to its
     first held-out body-force load (else its first clamped load); None without one."""
-    from harness.mechanics import statics
     held = [l for l in case.loads if l.name in case.heldout]
     pick = next((l for l in held if l.gravity is not None), held[0] if held else None)
     if pick is None:

@@ -8,6 +8,14 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
+
+from harness.export.engine import spring_damping, stable_step
+from harness.export.engine_loads import DT_SAFE
+from harness.export.vtu import write_vtu
+from harness.models.kn import KNTerm
+from harness.models.volume import NodeVolumeTerm
+
 
 def export(net, out: Path, meta: dict | None = None) -> dict:
     """Write a model for engines: MODEL.vtu and MODEL.json (SI units, the module docstring).
@@ -27,10 +35,7 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
     dict
         The JSON's data.
     """
-    import numpy as np
 
-    from harness.export.engine import spring_damping, stable_step
-    from harness.export.vtu import write_vtu
     meta = dict(meta or {})
     out.parent.mkdir(parents=True, exist_ok=True)
     write_vtu(out, net)
@@ -61,8 +66,6 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
         **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
     }
-    from harness.models.kn import KNTerm
-    from harness.models.volume import NodeVolumeTerm
     if isinstance(vol, KNTerm):      # springs + kn (harness/models/kn.py)
         data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
                              kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
@@ -88,7 +91,6 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
                                               "f = -kv (V - V0) / V0 dV/dx")
         data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
                     volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
-    from harness.export.engine_loads import DT_SAFE
     dt = step.get("dt_stable", math.nan)
     data["dt_safe"] = DT_SAFE * dt if math.isfinite(dt) else math.nan
     if isinstance(data.get("settle_damping"), dict) and math.isfinite(data["dt_safe"]):

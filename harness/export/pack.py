@@ -28,6 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.errors import SpringbenchError
+from harness.outputs import atomic_write
+
 FORMAT = "springbench-pack"
 FORMAT_VERSION = 1
 
@@ -75,7 +78,6 @@ UNITS = {"length": "m", "force": "N", "mass": "kg", "stress": "Pa", "density": "
 
 
 def _bad(message: str, file, fix: str, field: str | None = None):
-    from harness.errors import SpringbenchError
     raise SpringbenchError(message, file=str(file), field=field, fix=fix)
 
 
@@ -98,7 +100,6 @@ def write_pack(pack: Pack, out_dir) -> Path:
     """
     import meshio
 
-    from harness.outputs import atomic_write
     out = Path(out_dir)
     (out / "loads").mkdir(parents=True, exist_ok=True)
     mesh_path = out / "mesh.vtu"

@@ -18,6 +18,8 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.export.pack import Pack, PackLoad
+from harness.mechanics import statics
+from harness.scoring import reference_displacements, reference_error
 
 
 def _kind(load) -> str:
@@ -35,9 +37,7 @@ def make_pack(case, status=lambda msg: None, meta: dict | None = None) -> Pack:
     """The Pack of every load of ``case`` (a mesh body), its FEM solved here."""
     import reference
     from harness.geometry import body_geometry
-    from harness.mechanics import statics
     from harness.models.masses import compute_masses
-    from harness.scoring import reference_displacements, reference_error
     if case.body.shape != "mesh":
         raise SpringbenchError(f"the body is a {case.body.shape}, not a mesh: a pack needs the mesh an engine loads",
                                file=str(case.path) if case.path else None, field="body.shape",

@@ -24,6 +24,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from harness.errors import SpringbenchError
+from harness.scoring import g_arrays, g_ref_arrays, ref_status
 
 UNIT_FACTORS = {1e3: "mm", 1e2: "cm", 1e-3: "km"}   # u / u_fem near these: the engine's length unit is not m
 
@@ -102,7 +103,6 @@ def score_fields(pack, fields: dict, loads=None, limits: dict | None = None, max
     """Rows (dicts) per scored load and a total row; ``limits`` {load: gate}, ``max_g_norm``
     the gate of the others (None: none). G_norm and G_ref are harness.scoring's with every
     node weighing alike."""
-    from harness.scoring import g_arrays, g_ref_arrays, ref_status
     limits = dict(limits or {})
     names = list(loads) if loads is not None else [ld.name for ld in pack.loads]
     u_fem = np.stack([pack.load(n).u_fem for n in names])

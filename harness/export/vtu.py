@@ -9,11 +9,15 @@ bounding box, dim is 2 when every z is 0).
 
 from __future__ import annotations
 
+import contextlib
+import io
 from pathlib import Path
 
 import numpy as np
 
 from harness.errors import SpringbenchError
+from harness.models.sms import make_network
+from harness.outputs import staged
 
 
 def _pad3(a: np.ndarray) -> np.ndarray:
@@ -40,7 +44,6 @@ def write_vtu(path, network, displacements: dict | None = None) -> Path:
     """
     import meshio
 
-    from harness.outputs import staged
     path = Path(path)
     point_data = {"mass": np.asarray(network.masses, float), "class": np.asarray(network.classes, np.int32)}
     for name, u in (displacements or {}).items():
@@ -70,12 +73,9 @@ def read_vtu(path):
     displacements : dict of str to ndarray (n, dim)
         Its ``u_<load>`` point data by load name.
     """
-    import contextlib
-    import io
 
     import meshio
 
-    from harness.models.sms import make_network
     path = Path(path)
     if not path.exists():
         raise SpringbenchError("file not found", file=str(path), fix="check the path")

@@ -13,7 +13,9 @@ from typing import Mapping
 
 import numpy as np
 
+from harness.case.moments import mesh_moments
 from harness.errors import ModelError
+from harness.io.meshfile import read_mesh
 
 
 def polygon_area(v: np.ndarray) -> float:
@@ -136,7 +138,6 @@ class BodyGeom:
             return polygon_area(self.vertices)
         if self.kind == "box":
             return float(np.prod(self.hi - self.lo))
-        from harness.case.moments import mesh_moments
         return float(mesh_moments(self.mesh_points, self.mesh_cells)[0])
 
     def contains(self, x: np.ndarray) -> np.ndarray:
@@ -206,6 +207,5 @@ def body_geometry(case) -> BodyGeom:
         return box(lo, hi)
     if b.shape == "polygon":
         return polygon(b.vertices)
-    from harness.io.meshfile import read_mesh
     m = read_mesh(b.file, b.format)
     return mesh_body(m.points, m.cells)

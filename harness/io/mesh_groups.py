@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
+from harness.errors import SpringbenchError
 from harness.io.meshfile import boundary_facets, read_mesh
 
 HEX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
@@ -123,7 +124,6 @@ def require_group(mesh, name: str, *, file: str, field: str, error=None):
     group ``name``, naming the mesh file and the groups it has."""
     if name in mesh.groups:
         return
-    from harness.errors import SpringbenchError
     have = ", ".join(sorted(mesh.groups))
     fix = (f"groups of {Path(mesh.source).name}: {have}" if have else
            f"{Path(mesh.source).name} has no named groups (gmsh: addPhysicalGroup with a name; "

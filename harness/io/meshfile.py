@@ -7,6 +7,8 @@ function and its line there; any other name is a meshio format.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -62,8 +64,6 @@ def looks_like_bc2000(path: Path) -> bool:
 
 
 def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
-    import contextlib
-    import io
 
     import meshio
     # meshio prints and calls sys.exit on some unreadable files: keep both contained

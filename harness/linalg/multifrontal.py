@@ -24,7 +24,12 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 
 from harness.errors import ModelError
-from harness.linalg.sparse import dissection_tree
+from harness.linalg.sparse import (
+    blas_limited,
+    dissection_tree,
+    outer_blas_threads,
+    single_thread_blas,
+)
 
 LEAF = 128   # dofs per leaf front: best measured for factor + solve (2-D 2,500: 16 vs 18 ms at 256; 3-D 8,000: 1.16 vs 1.33 s)
 FLAT_MAX = 400   # largest update block added through precomputed flat indices
@@ -125,13 +130,11 @@ class MultifrontalCholesky:
     """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m)."""
 
     def __init__(self, K: sp.spmatrix, sym: Symbolic, name: str = ""):
-        from harness.linalg.sparse import blas_limited, single_thread_blas
         threaded = not blas_limited()        # a caller that asked for one thread keeps it
         with single_thread_blas():   # many small dense ops: threads only add overhead
             self._factor(K, sym, name, threaded)
 
     def _factor(self, K, sym, name, threaded=False):
-        from harness.linalg.sparse import outer_blas_threads
         K = sp.csr_matrix(K)
         K.sort_indices()
         data = K.data
@@ -165,7 +168,6 @@ class MultifrontalCholesky:
         front's own dofs are a contiguous slice there). Many right-hand sides at once
         (the SA engine's batches) go through a compiled loop over the fronts with the
         inverted diagonal blocks (:func:`_subst`); ``_solve`` is the LAPACK version."""
-        from harness.linalg.sparse import single_thread_blas
         rhs = np.asarray(rhs, float)
         with single_thread_blas():
             many = rhs.ndim == 2 and rhs.shape[1] >= SUBST_MIN
@@ -196,7 +198,6 @@ class MultifrontalCholesky:
         """Solve in place for a C-contiguous (n, q) right-hand side already in elimination
         order (``sym.order``): callers that keep their vectors in that order (the SA engine)
         skip the two row permutations of every solve. Needs numba."""
-        from harness.linalg.sparse import single_thread_blas
         with single_thread_blas():
             _subst_kernel()(b, *self._flat())
         return b

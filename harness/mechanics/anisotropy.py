@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.case.facet_loads import planar_forces
 from harness.case.loadsets import Constraint, LoadCase, Traction
 from harness.case.parts import part_predicate
 from harness.errors import ModelError
@@ -49,7 +50,6 @@ def pull_load(d, stress: float = 1.0, name: str = "pull") -> LoadCase:
 
 def pull_arrays(points, bbox, load: LoadCase) -> tuple[np.ndarray, np.ndarray]:
     """(free (3n,) bool, forces (3n,)) of a pull load on nodes ``points`` (n, 3)."""
-    from harness.case.facet_loads import planar_forces
     points = np.asarray(points, float)
     f = np.zeros(points.shape)
     for t in load.tractions:

@@ -19,6 +19,7 @@ A run that blows up raises SimulationError naming the step and the stable-step e
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import SimulationError
+from harness.models.bc2000.pack import kernel_arrays
 
 INTEGRATORS = ("verlet", "symplectic-euler", "backward-euler")
 PROGRAM_DRAG = 5e-3      # the program's drag per step: -5e-3 d (physical 5e-3 h N s/m)
@@ -97,7 +99,6 @@ def _kernel():
 def _kernel_arrays(model, dt, threads=1):
     """Model arrays for the compiled loop (harness/models/bc2000/pack.py): (springs, tets,
     hexes) argument tuples, empty where the model has none; None for other models."""
-    from harness.models.bc2000.pack import kernel_arrays
     return kernel_arrays(model, dt, threads)
 
 
@@ -302,7 +303,6 @@ def stable_step(model, loading: Loading, x=None) -> float:
 def _solve_regularised(K, r):
     """K dx = r; a stiffness with zero modes (a straight chain has no transverse
     stiffness) is shifted by 1e-10 of its diagonal scale. None if still singular."""
-    import warnings
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", spla.MatrixRankWarning)
         try:

@@ -22,13 +22,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
+from harness.case.elasticity import element_stiffness
 from harness.models.stiffness_rules import voigt_dyad
+from harness.models.topology import ALIASES
 
 
 def cell_springs(structure: str, spacing) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """Spring vectors (m, dim) of one periodic cell of a grid structure, their group ids
     and the group names (the same names as ``harness.models.topology.grid_structure``)."""
-    from harness.models.topology import ALIASES
     h = np.asarray(spacing, float)
     name = ALIASES.get(structure, structure)
     vecs, names, gids = [], [], []
@@ -142,7 +143,6 @@ def case_report(case, spec) -> dict | None:
     (None for non-grid placements)."""
     if spec.get("placement") != "grid":
         return None
-    from harness.case.elasticity import element_stiffness
     lo, hi = case.body.bbox()
     grid = np.asarray(spec["grid"])
     spacing = (np.asarray(hi) - np.asarray(lo)) / (grid - 1)

@@ -9,7 +9,9 @@ import scipy.linalg as sl
 import scipy.sparse as sp
 from scipy.sparse.linalg import eigs, eigsh
 
+from harness.case.loads import modal_load
 from harness.errors import ModelError
+from harness.mechanics.statics import fixed_mask
 from harness.models.springs import incidence, stiffness_matrix
 
 
@@ -70,8 +72,6 @@ def matrix_eigenvalues(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndar
 def frequencies(network, case, n_modes: int = 6, load: str | None = None) -> np.ndarray:
     """First ``n_modes`` natural frequencies (Hz) with the constraints of load ``load``
     (default: harness.case.loads.modal_load)."""
-    from harness.case.loads import modal_load
-    from harness.mechanics.statics import fixed_mask
     lc = modal_load(case) if load is None else next(l for l in case.loads if l.name == load)
     free = ~fixed_mask(network.points, case, lc).ravel()
     if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py

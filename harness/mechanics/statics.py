@@ -15,6 +15,8 @@ optimiser come from :func:`load_arrays`. A mechanism or a floating node raises
 
 from __future__ import annotations
 
+import hashlib
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,8 +26,11 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from harness.case.facet_loads import facet_forces, part_facets
+from harness.case.loadsets import LoadCase, stress_field, stress_tensor
 from harness.case.parts import part_predicate
 from harness.errors import ModelError, naming
+from harness.io.meshfile import mesh_surface
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.models.springs import incidence, stiffness_matrix
 
 
@@ -70,8 +75,6 @@ def stress_forces(points: np.ndarray, case, stress) -> np.ndarray:
     of the traction t, linear over it: f_i = |F| / k (t_c + (t_i - t_c) / m), t_i its
     value at vertex i, t_c their mean, m = k + 1 on a simplex of k vertices (exact), 3
     on a quadrilateral (bilinear, exact on a parallelogram); a constant t gives each |F| t / k."""
-    from harness.case.loadsets import LoadCase, stress_field, stress_tensor
-    from harness.io.meshfile import mesh_surface
     body = case.body
     if isinstance(stress, LoadCase):
         field = lambda x: stress_field(stress, x)           # noqa: E731
@@ -241,7 +244,6 @@ class _Factor:
             _mechanism(K, free_dofs, points, name)
         self.lu = None
         if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K):   # else LU (B&C's MT)
-            from harness.linalg.multifrontal import MultifrontalCholesky
             coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
             try:
                 self.chol = MultifrontalCholesky(K, _symbolic(K, coords), name)
@@ -318,7 +320,6 @@ def _stiffness(network):
 
 
 def _solve_all(networks, case, loads=None) -> list[StaticsResult]:
-    import time
     loads = [l for l in case.loads if loads is None or l.name in loads]
     if not loads:
         raise ModelError("no load cases to solve", field="loads", fix="add [loads] set = 'basic2d' or [[loads.case]]")
@@ -358,9 +359,7 @@ SYMBOLIC_KEEP = 2
 
 def _symbolic(K, coords):
     """The multifrontal Symbolic of K's pattern with these dof locations (cached, see _SYMBOLIC)."""
-    import hashlib
 
-    from harness.linalg.multifrontal import Symbolic
     A = sp.csr_matrix(K)
     A.sort_indices()
     h = hashlib.sha1()

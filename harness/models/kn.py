@@ -59,6 +59,7 @@ import scipy.sparse as sp
 
 from harness.errors import ModelError, naming
 from harness.models.sms import SpringNetwork
+from harness.models.springs import incidence
 from harness.models.volume import SpringVolumeNetwork, initial_kv, oriented, simplices, volumes
 
 MODES = ("none", "node", "shared")      # [model] kn: none, one constant per node, one per body
@@ -145,7 +146,6 @@ class KNTerm:
 
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
         """C (n*dim, m): column a = d sqrt(V_a) / N_a sum_{e at a} b_e / L_e at rest."""
-        from harness.models.springs import incidence
         points = np.asarray(points, float)
         dim = points.shape[1]
         W = self._weights(len(points)) @ sp.diags(dim * np.sqrt(self.V))

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.errors import ModelError
+from harness.models.topology import element_pairs, simplex_quality
 
 NU0 = 0.3          # the centre of the nu features (t = nu - NU0)
 SCALE = ("1", "nu", "nu^2")
@@ -89,7 +90,6 @@ def _cos_at(p: np.ndarray, i: int, j: int, others) -> np.ndarray:
 def geometry(points, springs, cells) -> np.ndarray:
     """The geometric features (e, len(FEATURES[dim]) - 3), in FEATURES order after the
     scale; zeros unless the cells are all simplices of the points' dimension."""
-    from harness.models.topology import element_pairs, simplex_quality
     points, springs = np.asarray(points, float), np.asarray(springs, int)
     n, dim = points.shape
     e = len(springs)

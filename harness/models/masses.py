@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import lsq_linear
 
+from harness.case.elasticity import densities
 from harness.case.moments import (  # noqa: F401
     _quadrature,
     _simplices,
@@ -30,15 +31,17 @@ from harness.case.moments import (  # noqa: F401
     monomials,
     polygon_moments,
 )
+from harness.case.reader import Region
 from harness.errors import ModelError
 from harness.geometry.bodies import BodyGeom, clip_box
 from harness.geometry.bodies import polygon as make_polygon
+from harness.geometry.placement import voronoi_cells_2d, voronoi_cells_sampled
+from harness.models.anisotropic import hex_to_tets
 
 RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
 
 def density_function(material, dim: int):
     """rho(points) for a ``harness.case.reader.Material`` (regions may override the density)."""
-    from harness.case.elasticity import densities
     return lambda x: densities(material, x)
 
 
@@ -83,7 +86,6 @@ def _scaled_body(body: BodyGeom, c, s) -> BodyGeom:
 
 class _ScaledMaterial:
     def __init__(self, material, c, s):
-        from harness.case.reader import Region
         self.density = material.density if material is not None else 1.0
         self.regions = tuple(Region(tuple((np.asarray(r.lo) - c) / s), tuple((np.asarray(r.hi) - c) / s), r.E,
                                     r.nu, r.density) for r in (material.regions if material is not None else ()))
@@ -132,7 +134,6 @@ def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None,
             rhs = np.concatenate([p, np.zeros(len(z))])
             m = lsq_linear(lhs, rhs, bounds=(0, np.inf), lsmr_tol="auto", tol=1e-14).x
     elif rule == "voronoi":
-        from harness.geometry.placement import voronoi_cells_2d, voronoi_cells_sampled
         if sb.kind == "polygon":
             sizes, cents = voronoi_cells_2d(z, sb)
         elif sb.kind == "box":
@@ -173,7 +174,6 @@ def lumped_masses(points, cells, density: float) -> np.ndarray:
 def sub_tet_volumes(points, cells) -> np.ndarray:
     """Signed volumes (m, k) of each element's tetrahedra (k = 1 for a tet, the hex split
     of harness.models.anisotropic.hex_to_tets for a hex)."""
-    from harness.models.anisotropic import hex_to_tets
     tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
     X = np.asarray(points, float)[tets]
     v = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError
+from harness.models.anisotropic import hex_to_tets
 
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
@@ -50,7 +51,6 @@ class MassSpring:
         return len(self.points)
 
     def tets(self):
-        from harness.models.anisotropic import hex_to_tets
         if self.cells is None:
             return None
         return self.cells if self.cells.shape[1] == 4 else hex_to_tets(self.cells)

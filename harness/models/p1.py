@@ -25,6 +25,7 @@ from types import MappingProxyType
 import numpy as np
 import scipy.sparse as sp
 
+from harness.case.elasticity import element_stiffness
 from harness.models.sms import SpringNetwork
 from harness.models.volume import SpringVolumeNetwork, oriented, simplices, volumes
 
@@ -95,7 +96,6 @@ class P1Term:
 def with_p1(net: SpringNetwork, material) -> SpringVolumeNetwork:
     """``net``'s nodes, masses and classes with P1 stiffness on its cells (simplices; quads
     and hexahedra split) and no spring stiffness (the springs stay as its connectivity)."""
-    from harness.case.elasticity import element_stiffness
     el = simplices(net.cells, net.dim)
     D = element_stiffness(material, net.points[el].mean(axis=1))
     term = P1Term.build(net.points, el, D)

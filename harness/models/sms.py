@@ -16,8 +16,14 @@ from typing import Mapping
 
 import numpy as np
 
+from harness.case.parts import classify_nodes
+from harness.case.schema import check
 from harness.case.sections import SMS as MODEL_SPEC  # the [model] keys of kind = "sms"
-from harness.errors import ModelError
+from harness.errors import ModelError, SpringbenchError
+from harness.io.meshfile import read_mesh
+from harness.models import topology
+from harness.models.springs import incidence, stiffness_matrix
+from harness.models.stiffness_rules import spring_constants
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,11 +66,9 @@ class SpringNetwork:
         return dataclasses.replace(self, k=k, info=MappingProxyType({**self.info, **info}))
 
     def incidence(self):
-        from harness.models.springs import incidence
         return incidence(self.points, self.springs)
 
     def stiffness_matrix(self):
-        from harness.models.springs import stiffness_matrix
         return stiffness_matrix(self.incidence(), self.k)
 
 
@@ -72,7 +76,6 @@ def make_network(points, springs, k=None, masses=None, classes=None, groups=None
                  cells=None, info=None, bbox=None) -> SpringNetwork:
     """A network from plain arrays; missing classes come from the bounding box
     (``harness.case.parts.classify_nodes``), missing masses are 1, groups one per network."""
-    from harness.case.parts import classify_nodes
     points = np.asarray(points, float)
     springs = np.asarray(springs, int).reshape(-1, 2)
     n, e = len(points), len(springs)
@@ -97,7 +100,6 @@ def make_network(points, springs, k=None, masses=None, classes=None, groups=None
 
 
 def _spec(spec) -> dict:
-    from harness.case.schema import check
     spec = {k: list(v) if isinstance(v, tuple) else v for k, v in dict(spec or {}).items()
             if k != "kind" and v is not None}
     return check(spec, MODEL_SPEC, "<model>", "model.")
@@ -105,7 +107,6 @@ def _spec(spec) -> dict:
 
 def node_classes(points: np.ndarray, body) -> np.ndarray:
     """0 inner, 1 border, 2 corner: corners are the body's vertices (rectangle/box/polygon)."""
-    from harness.case.parts import classify_nodes
     if body.kind == "mesh":
         return classify_nodes(points, body.bbox(), boundary=_mesh_boundary_nodes(body, len(points)))
     cls = np.where(body.on_boundary(points), 1, 0)
@@ -157,7 +158,6 @@ def place_points(case, spec: dict, seed: int, body=None):
             return res.points, res, body
         return pts, None, body
     if spec.get("mesh"):
-        from harness.io.meshfile import read_mesh
         path = (case.path.parent if case.path is not None else Path(".")) / spec["mesh"]
         m = read_mesh(path, spec.get("mesh_format"))
         if m.dim != case.dim:
@@ -176,7 +176,6 @@ class _MeshCells:
 
 
 def connect(case, spec: dict, points: np.ndarray, body, extra=None):
-    from harness.models import topology
     p = spec["placement"]
     if p == "grid":
         return topology.grid_structure(spec["grid"], spec["structure"] or ("structure1" if case.dim == 2 else "edges+face+body"))
@@ -192,7 +191,6 @@ def connect(case, spec: dict, points: np.ndarray, body, extra=None):
 def build_network(case, spec=None, seed: int = 0, stiffness: str | None = None) -> SpringNetwork:
     """The SMS a case's [model] table describes, with constants by ``stiffness`` (default:
     the first rule listed). ``seed`` is added to the table's seed. Errors name the case file."""
-    from harness.errors import SpringbenchError
     try:
         return _build(case, spec, seed, stiffness)
     except SpringbenchError as exc:
@@ -204,7 +202,6 @@ def build_network(case, spec=None, seed: int = 0, stiffness: str | None = None) 
 
 def _build(case, spec, seed, stiffness) -> SpringNetwork:
     from harness.models.masses import compute_masses
-    from harness.models.stiffness_rules import spring_constants
     spec = _spec(spec if spec is not None else case.section("model"))
     s = int(spec["seed"]) + int(seed)
     points, hist, body = place_points(case, spec, s)

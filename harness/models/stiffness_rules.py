@@ -54,7 +54,9 @@ import numpy as np
 from scipy.optimize import nnls
 
 from harness.case.elasticity import element_stiffness
+from harness.case.moments import _quadrature
 from harness.errors import ModelError
+from harness.models.learned_rule import learned as rule
 from harness.models.springs import spring_directions
 from harness.models.topology import element_pairs
 from harness.registry import STIFFNESS_RULES
@@ -92,7 +94,6 @@ def _cell_measure(points, c, ctype) -> np.ndarray:
     p = points[c]
     if ctype in ("triangle", "tetra"):
         return np.abs(np.linalg.det(p[:, 1:] - p[:, :1])) / (2 if ctype == "triangle" else 6)
-    from harness.case.moments import _quadrature
     q, w = _quadrature(points, {ctype: c})
     per = {"quad": 6, "hexahedron": 24}[ctype]  # quadrature points per cell
     return w.reshape(len(c), per).sum(1)
@@ -296,7 +297,6 @@ def cauchy(points, springs, cells, material) -> np.ndarray:
 
 def learned(points, springs, cells, material) -> np.ndarray:
     """The fitted rule of harness/models/learned_rule.py: van Gelder's k times its correction."""
-    from harness.models.learned_rule import learned as rule
     return rule(points, springs, cells, material, base=vangelder(points, springs, cells, material))
 
 

@@ -47,6 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError, naming
+from harness.models.anisotropic import hex_to_tets
 from harness.models.sms import SpringNetwork
 
 # [model] volume (harness/case/sections.py): none; on the elements one kv each ('element')
@@ -247,7 +248,6 @@ class SpringVolumeNetwork(SpringNetwork):
 def simplices(cells, dim: int) -> np.ndarray:
     """The tetrahedra (3-D) or triangles (2-D) of a cells mapping; quads and hexahedra are
     split (2 triangles, 6 tetrahedra: hex_to_tets). Other cells are a ModelError."""
-    from harness.models.anisotropic import hex_to_tets
     out = []
     for ctype, c in dict(cells or {}).items():
         c = np.asarray(c, int)

@@ -21,6 +21,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from harness.errors import SpringbenchError
+from harness.linalg.sparse import single_thread_blas
+from harness.optimize import annealing, equilibrium
+from harness.optimize.options import check_options
 from harness.optimize.problem import FitProblem, LoadBlock, ModalTerm  # noqa: F401
 from harness.registry import OPTIMIZERS
 
@@ -42,8 +45,7 @@ class FitResult:
 def check_method_options(method: str, options: dict) -> dict:
     """``options`` of ``method`` over its defaults, checked without running it (for
     ``springbench validate``: unknown keys and unusable values are one-line errors)."""
-    from harness.optimize import annealing, equilibrium, gradient
-    from harness.optimize.options import check_options
+    from harness.optimize import gradient  # slow to import (see tests/test_imports.py LAZY)
     if method in ("sa", "sa-refactor"):
         return annealing.check_options(options)
     defaults = {"lbfgs": gradient.LBFGS_DEFAULTS, "nelder-mead": gradient.NM_DEFAULTS,
@@ -77,7 +79,6 @@ def optimize(problem: FitProblem, method: str, options: dict | None = None, seed
     if method not in OPTIMIZERS:
         raise SpringbenchError(f"unknown optimizer method '{method}'", field="optimizer.method",
                                fix=f"use one of {sorted(OPTIMIZERS)}")
-    from harness.linalg.sparse import single_thread_blas
     with single_thread_blas():  # threads oversubscribe the 2 shared cores; chains use processes
         out = OPTIMIZERS.load(method)(problem, dict(options or {}), int(seed), status)
     info = {**out.pop("info"), "method": method, "seed": int(seed)}

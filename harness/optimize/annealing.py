@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from harness.errors import SpringbenchError
+from harness.linalg.sparse import single_thread_blas
 from harness.optimize.incremental import IncrementalG, RefactorG
 from harness.optimize.options import check_options as check_numbers
 from harness.optimize.options import static_only
@@ -185,7 +186,6 @@ def chain_seeds(seed: int, chains: int) -> list[int]:
 def run_chains(problem: FitProblem, options: dict, seed: int, status=None, refactor: bool = False) -> dict:
     """``chains`` independent chains; with more than one, each runs in its own process
     with single-threaded BLAS (env vars set before numpy loads there). Best G wins."""
-    from harness.linalg.sparse import single_thread_blas
     opts = check_options(options)
     chains = int(opts.get("chains") or 1)
     seeds = chain_seeds(seed, chains)

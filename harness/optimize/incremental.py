@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.blas import dsyrk as syrk
 
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic, _subst_kernel, warm_up
 from harness.optimize.incremental_kernels import _accept, _kernels, _propose  # noqa: F401  (tests call the plain ones)
 from harness.optimize.problem import FitProblem, per_matrix
 
@@ -78,7 +79,6 @@ def sparse_factor(ls, k):
     those with the general-purpose leaves of 256 (less fill: 0.35 M vs 0.69 M entries of
     L on the 2,500-node grid) for a slightly slower factorisation, paid once per renewal.
     Small blocks (no coordinates or <= SPARSE_MIN dofs) use the load set's own solver."""
-    from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic, warm_up
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
     K = ls.stiffness(k)
@@ -236,7 +236,6 @@ class IncrementalG:
         """Sparse mode: hold each set's dofs in its factor's elimination order (fixed: the
         symbolic factorisation is kept across renewals), so no solve permutes rows. G and
         all Grams are sums over dofs, hence independent of the order."""
-        from harness.linalg.multifrontal import MultifrontalCholesky, _subst_kernel
         for st in self.sets:
             fac = getattr(st, "fac", None)
             st.ordered = isinstance(fac, MultifrontalCholesky) and _subst_kernel() is not None

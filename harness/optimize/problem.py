@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import weakref
 from dataclasses import dataclass
 
@@ -21,6 +22,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import SpringbenchError
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+from harness.linalg.sparse import DenseFactor, Factor, nested_dissection
+from harness.models.springs import incidence
 
 
 @dataclass(frozen=True)
@@ -88,7 +92,6 @@ class FitProblem:
         masses and freq_target are given (modal_free: (ndof,) bool, default the first
         load's free dofs). ``extra_columns`` (ndof, m): more rank-one stiffness terms beside
         the springs' (e.g. harness/models/volume.py's), their constants after the springs' in k0."""
-        from harness.models.springs import incidence
         points = np.asarray(points, float)
         B = incidence(points, springs).tocsr()
         if extra_columns is not None:
@@ -221,7 +224,6 @@ class LoadSet:
         """Nested dissection by the coordinates (above 2,000 dofs), else None."""
         if self.coords is None or self.B.shape[0] <= 2000:
             return None
-        from harness.linalg.sparse import nested_dissection
         return per_matrix(self.B, "perm", lambda: nested_dissection(stiffness(self.B, self.k0), self.coords))
 
     def stiffness(self, k) -> sp.csc_matrix:
@@ -236,14 +238,12 @@ class LoadSet:
         (nested-dissection Cholesky, best in 3-D and for many right-hand sides) or
         "superlu" (SuperLU in nested-dissection order, best for single solves in 2-D).
         "auto" picks multifrontal in 3-D, SuperLU in 2-D."""
-        from harness.linalg.sparse import DenseFactor, Factor
         if self.B.shape[0] <= DENSE_FACTOR_MAX:
             return DenseFactor(self.stiffness(k).toarray(), self.name)
         if kind == "auto":
             kind = "multifrontal" if self.coords is not None and self.coords.shape[1] == 3 else "superlu"
         if kind == "multifrontal" and self.coords is not None:     # above DENSE_FACTOR_MAX: 1,680 dofs, 24
             # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
-            from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
             K = self.stiffness(k)
             return MultifrontalCholesky(K, per_matrix(self.B, "symbolic", lambda: Symbolic(K, self.coords)), self.name)
         return Factor(self.stiffness(k), self.perm, self.name)
@@ -293,7 +293,6 @@ def _stiffness_map(B: sp.csc_matrix):
 
 
 def _key(B: sp.csc_matrix):
-    import hashlib
     h = hashlib.sha1()
     for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
         h.update(np.ascontiguousarray(a).tobytes())

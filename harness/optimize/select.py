@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.case.sections import SELECT_CANDIDATES, SELECT_CRITERIA
-from harness.optimize.problem import FitProblem, per_matrix
+from harness.optimize.problem import FitProblem, per_matrix, value_and_grad
 
 
 @dataclass(frozen=True)
@@ -188,7 +188,6 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> 
     200) and max_seconds (the best point seen when it is reached)."""
     from scipy.optimize import minimize
 
-    from harness.optimize.problem import value_and_grad
     G0sq = value_and_grad(problem, problem.k0, grad=False)[0]
     budget = options.get("max_seconds")
     deadline = None if budget is None else time.perf_counter() + float(budget)

@@ -14,6 +14,7 @@ import itertools
 import numpy as np
 
 from harness.models.springs import incidence, stiffness_matrix
+from harness.optimize.problem import FitProblem
 
 AXES = "xyz"
 
@@ -120,7 +121,6 @@ def recoverable_problem(shape, sigma: float = 0.3, seed: int = 0, grouped: bool 
     constant (or each group's, when ``grouped``) by exp(sigma * N(0, 1)). Returns
     (problem, k_true).
     """
-    from harness.optimize.problem import FitProblem
     points, springs, groups = grid_network(shape, spacing, diagonals)
     rng = np.random.default_rng(seed)
     L = np.linalg.norm(points[springs[:, 1]] - points[springs[:, 0]], axis=1)

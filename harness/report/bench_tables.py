@@ -6,6 +6,9 @@ summary's geometric mean of the stored ratios."""
 
 from __future__ import annotations
 
+import numpy as np
+
+from harness.provenance import FIELDS, describe
 from harness.report.engines import ENGINES_NOTE, engines_finding, engines_summary
 from harness.report.numbers import fmt
 
@@ -31,7 +34,6 @@ def _display(df, cols):
 def heldout_summary(df):
     """Per body, mesh and nu: calibrate's choice and the geometric mean over the loads of
     its error / the best rule's (the rule chosen in hindsight per mesh), < 1: calibrate wins."""
-    import numpy as np
     import pandas as pd
     need = {"body", "nu", "model", "ratio_to_best_rule"}
     if not need <= set(df.columns):
@@ -68,7 +70,6 @@ def bench_table(name: str, df):
 
 def provenance_line(df) -> str:
     """The code and machine of a bench CSV (its first row's provenance columns)."""
-    from harness.provenance import FIELDS, describe
     first = df.iloc[0] if len(df) else {}
     return describe({k: (first[k] if k in df.columns else None) for k in FIELDS})
 

@@ -63,9 +63,17 @@ import re
 from pathlib import Path
 
 from harness.errors import SpringbenchError
+from harness.outputs import write_changed
+from harness.paths import DEFAULT_RUNS
+from harness.report import figures as figs
+from harness.report import origin
+from harness.report.figures import make_bench_figures
 from harness.report.frames import REF_COARSE, SCORED, optimizer_frame
 from harness.report.markdown import cell as _cell  # noqa: F401  (markdown_table: report's API)
 from harness.report.markdown import markdown_table
+from harness.report.nu_sweep import markdown_section, skipped_lines, sweep_frame, sweep_table
+from harness.report.page import index_html, page_suites
+from harness.report.readme import readme_md
 
 HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
         "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
@@ -237,10 +245,8 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
         raise SpringbenchError("no stored results here", file=str(suite_dir),
                                fix="give a folder results/<suite> written by 'springbench run'")
     df = summary_frame(manifests)
-    from harness.report import origin
     origin.write(suite_dir, manifests)
     csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
-    from harness.outputs import write_changed
     write_changed(csv_path, df.to_csv(index=False).encode())
     seeds = seeds_frame(df)
     seeds_path = suite_dir / "seeds.csv"
@@ -277,7 +283,6 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
                "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
                "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
                markdown_table(opts)]
-    from harness.report.nu_sweep import markdown_section, skipped_lines, sweep_frame, sweep_table
     sweep = sweep_table(sweep_frame(df))
     if not sweep.empty:
         md += ["\n## Model classes against Poisson's ratio\n",
@@ -295,7 +300,6 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     write_changed(md_path, "\n".join(md).encode())
     pngs = []
     if figures:
-        from harness.report import figures as figs
         for d in data_folders(suite_dir, manifests):
             pngs += figs.make_case_figures(d, redraw=redraw)
         pngs += figs.make_suite_figures(suite_dir, redraw=redraw)
@@ -313,9 +317,6 @@ def suites_under(results_root) -> list[Path]:
 def build_index(results_root) -> Path:
     """``<results_root>/index.html``, the page a person reads (:mod:`harness.report.page`),
     and ``README.md``, its tables as Markdown (:mod:`harness.report.readme`)."""
-    from harness.outputs import write_changed
-    from harness.report.page import index_html, page_suites
-    from harness.report.readme import readme_md
     root = Path(results_root)
     out = root / "index.html"
     write_changed(out, index_html(root).encode())
@@ -327,7 +328,6 @@ def build_index(results_root) -> Path:
 def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = False) -> list[dict]:
     """``springbench report``: rebuild the named suite folders (default: all under the
     results root, runs/ unless given) and the index."""
-    from harness.paths import DEFAULT_RUNS
     if paths:
         suites = []
         for p in map(Path, paths):
@@ -351,7 +351,6 @@ def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = Fa
     out = [build_suite(s, figures=figures, redraw=redraw) for s in suites]
     for r in roots:
         if figures and (r / "bench").is_dir():
-            from harness.report.figures import make_bench_figures
             make_bench_figures(r / "bench", redraw=redraw)
         build_index(r)
     return out

@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import math
 
+from harness.report.engines import engines_finding
 from harness.report.findings import MEMORISED, case_lines
 from harness.report.headlines import fmt
+from harness.report.nu_sweep import family_frame, findings
 
 
 def _num(df, col):
@@ -116,7 +118,6 @@ def verification(df) -> list[str]:
 def nu_sweep(df) -> list[str]:
     """Per body: at how many Poisson ratios a fitted class beats the best unfitted rule on
     held-out loads (outside the fit's spread over its starts), and by how much."""
-    from harness.report.nu_sweep import family_frame
     frame = family_frame(df)
     out = []
     for body, b in frame.groupby("body", sort=True) if not frame.empty else ():
@@ -141,7 +142,6 @@ def nu_sweep(df) -> list[str]:
 
 def engines(df) -> list[str]:
     """The engine table's sentence (harness/report/engines.py)."""
-    from harness.report.engines import engines_finding
     return [f"Engines: {engines_finding(df)}"] if "engine" in df else []
 
 
@@ -183,7 +183,6 @@ def suite_lists(name: str, df) -> list[tuple[str, list[str]]]:
     gaps inside the fit's spread over its starts are ties)."""
     if name != "nu_sweep":
         return []
-    from harness.report.nu_sweep import family_frame, findings
     out: dict[str, list[str]] = {}
     for body, _, sentence in findings(family_frame(df)):
         out.setdefault(body, []).append(sentence.removeprefix(f"{body}, "))

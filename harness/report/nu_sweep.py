@@ -17,6 +17,11 @@ from __future__ import annotations
 
 import math
 import re
+import warnings
+
+import numpy as np
+
+from harness.report.markdown import markdown_table
 
 COLUMNS = ("G_norm_final", "G_heldout", "freq_error_final", "k_spread", "dt_stable")
 CAUCHY_NU = {2: 1.0 / 3.0, 3: 0.25}     # central-force lattices: isotropic only here (2-D plane stress)
@@ -94,7 +99,6 @@ def fill_heldout(d, loads, rtol: float = 1e-6):
     case's rows that carry both agree on it to ``rtol`` and on ``n_nodes``. A row whose
     stage reports G per load but no normalised held-out G (mt's fitted row) is then in
     the table like the others; ``heldout_derived`` marks it."""
-    import numpy as np
     d = d.copy()
     d["heldout_derived"] = False
     for case, g in d.groupby("case", sort=False):
@@ -125,7 +129,6 @@ def family_frame(df):
     over the loads; computed from them where the rows predate it),
     ``G_heldout_mean_spread``, ``G_norm_final`` and ``status``. Empty without sweep rows
     or held-out loads."""
-    import numpy as np
     import pandas as pd
     d = _scored(df)
     loads = heldout_loads(d.columns) if not d.empty else []
@@ -165,9 +168,7 @@ def family_frame(df):
 
 def _nanmean(a):
     """Row means over the finite entries (NaN where none is)."""
-    import warnings
 
-    import numpy as np
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmean(a, axis=1)
@@ -245,7 +246,6 @@ def findings(frame) -> list[tuple[str, float, str]]:
 def markdown_section(df) -> list[str]:
     """The summary.md lines of the held-out families: per body and nu its finding and
     its table (held-out G per family, their mean, the spread, the fitted loads' G)."""
-    from harness.report.markdown import markdown_table
     frame = family_frame(df)
     if frame.empty:
         return []

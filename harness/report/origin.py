@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from harness.outputs import write_changed
 from harness.provenance import FIELDS, NOT_RECORDED, describe
 
 FILE = "provenance.json"
@@ -34,7 +35,6 @@ def gather(manifests) -> dict:
 
 def write(suite_dir: Path, manifests) -> Path:
     """The suite folder's provenance.json (rewritten only when it changes)."""
-    from harness.outputs import write_changed
     path = Path(suite_dir) / FILE
     write_changed(path, (json.dumps(gather(manifests), indent=1, sort_keys=True) + "\n").encode())
     return path

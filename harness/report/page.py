@@ -13,10 +13,14 @@ import html
 import struct
 import sys
 from pathlib import Path
+from urllib.parse import quote
 
-from harness.report.claims import suite_lists
+from harness.report.bench_tables import bench_table, provenance_line
+from harness.report.claims import headline_findings, suite_lists
+from harness.report.columns import glossary
 from harness.report.frames import REF_COARSE
 from harness.report.headlines import headline_tables
+from harness.report.origin import lines
 from harness.report.text import (
     BENCH,
     KEY_FIGURES,
@@ -54,7 +58,6 @@ def _e(text) -> str:
 
 def _href(root: Path, path: Path) -> str:
     """A relative, URL-safe link from the page to ``path``."""
-    from urllib.parse import quote
     return _e(quote(path.relative_to(root).as_posix()))
 
 
@@ -180,7 +183,6 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
         if (suite / name).is_file():
             data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
     parts.append("<p>Full tables: " + "; ".join(data) + ".</p>")
-    from harness.report.origin import lines
     parts.append("<details class='note'><summary>Code and machine</summary>"
                  + "".join(f"<p>{_e(line)}</p>" for line in lines(suite)) + "</details>")
     if key:
@@ -204,7 +206,6 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
 def _bench_section(root: Path, files: list[Path]) -> list[str]:
     import pandas as pd
 
-    from harness.report.bench_tables import bench_table, provenance_line
     parts = ["<section id='bench'><h2>Benchmarks</h2>",
              "<p>Each benchmark is measured by <code>springbench bench NAME</code> (speeds as ratios against a "
              "baseline measured in the same run); README.md gives the targets.</p>"]
@@ -223,7 +224,6 @@ def _bench_section(root: Path, files: list[Path]) -> list[str]:
 
 
 def _findings(suites: list[Path]) -> list[str]:
-    from harness.report.claims import headline_findings
     items = headline_findings(suites)
     if not items:
         return []
@@ -234,7 +234,6 @@ def _findings(suites: list[Path]) -> list[str]:
 
 
 def _glossary() -> list[str]:
-    from harness.report.columns import glossary
     items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in glossary())
     return ["<section id='glossary'><h2>Columns</h2>", "<p class='note'>The columns a reader meets first; "
             "every column of every summary.csv is explained in docs/columns.md.</p>", f"<dl>{items}</dl></section>"]

@@ -5,15 +5,17 @@ Markdown a code host renders beside the files, generated from the stored summari
 from __future__ import annotations
 
 from pathlib import Path
+from urllib.parse import quote
 
+from harness.report.bench_tables import bench_table, provenance_line
 from harness.report.claims import headline_findings, suite_lists
 from harness.report.headlines import headline_tables
 from harness.report.markdown import markdown_table
+from harness.report.origin import lines
 from harness.report.text import BENCH, KEY_FIGURES, SUITES, UNITS
 
 
 def _link(root: Path, path: Path) -> str:
-    from urllib.parse import quote
     return quote(path.relative_to(root).as_posix())
 
 
@@ -48,7 +50,6 @@ def _suite(root: Path, suite: Path, df, sections) -> list[str]:
         if (suite / name).is_file():
             links.append(f"[{name}]({_link(root, suite / name)}) ({what})")
     out.append("Full tables: " + "; ".join(links) + ".\n")
-    from harness.report.origin import lines
     out.append("Code and machine: " + " ".join(lines(suite)) + "\n")
     return out
 
@@ -83,7 +84,6 @@ def readme_md(root, suites, bench, extra=None) -> str:
 def _bench(root: Path, files) -> list[str]:
     import pandas as pd
 
-    from harness.report.bench_tables import bench_table, provenance_line
     out = ["## Benchmarks\n", "Measured by `springbench bench NAME`; speeds as ratios against a baseline measured "
                               "in the same run.\n"]
     for png in sorted((root / "bench").glob("fig-*.png")):

@@ -4,13 +4,17 @@ Dask worker), with live status sent back to the parent (harness/run/runner.py)."
 from __future__ import annotations
 
 import os
+import random
 import shutil
+import signal
 import time
 import traceback
 
+from harness.case.reader import load_case
 from harness.errors import CaseError, SpringbenchError
 from harness.run.jobs import Job, JobResult, _error_row, _jsonable, loaded_sources
 from harness.run.lock import scratch_dir
+from harness.stages import StageContext, load_stages
 
 # -- executing one job (in a worker) ----------------------------------------------------
 
@@ -53,7 +57,6 @@ class DaskSink:
 
 
 def _seed_everything(seed: int):
-    import random
     random.seed(seed)
     try:
         import numpy as np
@@ -64,8 +67,6 @@ def _seed_everything(seed: int):
 
 def execute(job: Job, sink=None) -> JobResult:
     """Run one job in a fresh temporary folder; never raises."""
-    from harness.case.reader import load_case
-    from harness.stages import StageContext, load_stages
 
     t_job = time.perf_counter()
     status = _Throttled(sink, job.label)
@@ -127,7 +128,6 @@ def execute(job: Job, sink=None) -> JobResult:
 
 def _ignore_sigint():
     """Ctrl-C is the parent's business: it stops the workers itself, without their tracebacks."""
-    import signal
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 

@@ -11,9 +11,11 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from harness.case.reader import find_cases, load_case
 from harness.errors import CaseError, SpringbenchError
 from harness.paths import DEFAULT_CASES, ROOT
 from harness.sources import file_sha, relative
+from harness.stages import stage_modules
 
 HASH_VERSION = "springbench-job-1"
 # loaded sources that cannot change a result (drawing, tables, command-line plumbing)
@@ -166,8 +168,6 @@ def _rel(path: Path) -> str:
 
 def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
     """Case files -> jobs (one per seed); case files that do not load become error results."""
-    from harness.case.reader import find_cases, load_case
-    from harness.stages import stage_modules
 
     stage_names = stage_modules() if stages is None else tuple(stages)
     files, seen = [], set()

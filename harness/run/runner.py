@@ -30,14 +30,20 @@ can pin BLAS to one thread before numpy loads.
 from __future__ import annotations
 
 import os
+import queue as queue_mod
+import shutil
 import sys
 import traceback
 import uuid
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
 from harness.errors import SpringbenchError
 from harness.paths import DEFAULT_RESULTS
+from harness.provenance import collect
+from harness.report import build as report
 from harness.run.execute import DaskSink, QueueSink, _ignore_sigint, _init_worker, execute
 from harness.run.jobs import Job, JobResult, _error_row, code_unchanged, plan
 from harness.run.lock import clean_stale_scratch, run_lock
@@ -74,7 +80,6 @@ class _Progress:
     stdout instead. ``enabled`` None: decide by the terminal."""
 
     def __init__(self, total: int, enabled):
-        import shutil
 
         from tqdm import tqdm
         tty = sys.stderr.isatty() if enabled is None else bool(enabled)
@@ -151,7 +156,6 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
                                field="--results", fix="give a writable folder")
     clean_stale_scratch()
     with run_lock(results):
-        from harness.provenance import collect
         return _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress,
                            collect())
 
@@ -196,7 +200,6 @@ def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figure
     finally:
         bar.close()
     suites = sorted({results / r.job.suite for r in all_results})
-    from harness.report import build as report
     for s in suites:
         report.build_suite(s, figures=figures)
     if suites:
@@ -217,9 +220,6 @@ def _run_pool(pending: list[Job], jobs_n: int, finish, bar):
 
 def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> list[Job]:
     import multiprocessing as mp
-    import queue as queue_mod
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    from concurrent.futures.process import BrokenProcessPool
     from multiprocessing.managers import SyncManager
 
     ctx = mp.get_context("spawn")

@@ -7,6 +7,7 @@ import json
 import re
 from pathlib import Path
 
+from harness.outputs import atomic_write as write
 from harness.run.jobs import Job, JobResult
 
 RESULT_PREFIX = "result-seed"
@@ -17,7 +18,6 @@ RESULT_PREFIX = "result-seed"
 def atomic_write(path: Path, data: bytes):
     """Write ``data`` to ``path`` so readers see the old file or the new one, never half; a
     full or read-only disk is one line naming the file (:mod:`harness.outputs`)."""
-    from harness.outputs import atomic_write as write
     write(path, data)
 
 

@@ -29,6 +29,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
+from harness import registry
+
 
 @dataclass
 class StageContext:
@@ -49,13 +53,11 @@ class StageContext:
 
     def rng(self, stream: int = 0):
         """A numpy Generator seeded by (seed, stream): independent streams per purpose."""
-        import numpy as np
         return np.random.default_rng([self.seed, stream])
 
 
 def stage_modules() -> tuple[str, ...]:
     """The registered stages' module names, in pipeline order."""
-    from harness import registry  # read at call time: a run may restrict the registry
     return tuple(registry.STAGES.module(name) for name in registry.STAGES)
 
 

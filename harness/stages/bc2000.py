@@ -25,9 +25,21 @@ import numpy as np
 import pandas as pd
 
 from harness import registry
+from harness.case.parts import classify_nodes
+from harness.case.schema import check
+from harness.case.sections import DYNAMICS
 from harness.errors import CaseError, SimulationError
-from harness.mechanics.dynamics import simulate
+from harness.mechanics.dynamics import simulate, stiffness
+from harness.mechanics.static_path import solve_static_path
+from harness.models.anisotropic import frame
 from harness.models.masses import sub_tet_volumes
+from harness.scoring import (
+    case_weights,
+    g_arrays,
+    ref_columns,
+    ref_status,
+    reference_displacements,
+)
 from harness.stages.bc2000_build import (  # noqa: F401
     _cells,
     _dt,
@@ -52,8 +64,6 @@ def run(case, ctx) -> list[dict]:
     model = dict(case.section("model"))
     dyn = dict(case.section("dynamics") or {})
     if not dyn:
-        from harness.case.schema import check
-        from harness.case.sections import DYNAMICS
         dyn = check({}, DYNAMICS, str(case.path), "dynamics.")
     exp = dyn["experiment"]
     return registry.EXPERIMENTS.load(exp)(case, ctx, model, dyn)
@@ -158,15 +168,6 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
     scale (the shape error alone), with ``G_ref`` / ``ref_error_max`` of that load and a
     "ref-coarse" status when G_ref exceeds 10 % of the scaled G or the reference missed
     its tol."""
-    from harness.case.parts import classify_nodes
-    from harness.mechanics.dynamics import stiffness
-    from harness.scoring import (
-        case_weights,
-        g_arrays,
-        ref_columns,
-        ref_status,
-        reference_displacements,
-    )
     from harness.stages import bc2000_linear as linear
     P = mesh.points
     masses = lumped_masses(P, _cells(mesh), case.material.density)
@@ -214,8 +215,6 @@ def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
     continuation past limit points) beside the linearised response to the same load."""
     import scipy.sparse.linalg as spla
 
-    from harness.mechanics.dynamics import stiffness
-    from harness.mechanics.static_path import solve_static_path
     free = np.repeat(~ld.fixed, 3)
     K = stiffness(m).tocsr()[free][:, free]
     u = np.zeros(3 * len(points))
@@ -302,7 +301,6 @@ def fibres(case, ctx, model, dyn):
                          "steps": len(tr.t) - 1, **_pulled_measures(mesh, tr), "twist_deg": twist,
                          "thinning": thin, "run_seconds": sec})
             cells = _cells(mesh)
-            from harness.models.anisotropic import frame
             a, e = fibre_angles(model, mesh.points, cells, field)
             data = dict(points=mesh.points[cells].mean(axis=1), directions=frame(a, e)[:, 0],
                         u=tr.x[cells].mean(axis=1) - mesh.points[cells].mean(axis=1))

@@ -4,10 +4,22 @@ of direction pulls (harness/stages/bc2000.py)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 
+from harness.case.parts import classify_nodes
 from harness.errors import CaseError, SpringbenchError
+from harness.mechanics import anisotropy as an
+from harness.models.anisotropic import build_anisotropic
+from harness.scoring import (
+    case_weights,
+    g_arrays,
+    ref_columns,
+    ref_status,
+    reference_displacements,
+)
 from harness.stages.bc2000_build import _cells, _label, _meshes, build, lumped_masses
 from harness.stages.bc2000_modes import heldout_modes
 
@@ -23,14 +35,6 @@ def fem(case, ctx, model, dyn):
     its tol), the fitted constants, the pull columns; anisotropy.csv per direction. Loads
     held out (``[loads] heldout``) are neither scaled to nor fitted: ``G_heldout``
     (``_initial``: with the scaled constants), ``G_ref_heldout``, ``ref_error_heldout``."""
-    from harness.case.parts import classify_nodes
-    from harness.scoring import (
-        case_weights,
-        g_arrays,
-        ref_columns,
-        ref_status,
-        reference_displacements,
-    )
     from harness.stages import bc2000_linear as linear
     from reference import solve as reference_solve
     path, mesh = _meshes(case, dyn)[0]
@@ -55,7 +59,6 @@ def fem(case, ctx, model, dyn):
     rows, aniso = [], []
     ctx.status("FEM direction pulls")
     bbox = (P.min(axis=0), P.max(axis=0))
-    from harness.mechanics import anisotropy as an
     try:                                 # before the FEM solves: the mesh must reach the corners
         an.pull_arrays(P, bbox, an.pull_load((1.0, 0.0, 0.0)))
     except SpringbenchError as exc:
@@ -132,7 +135,6 @@ ANGLES = tuple(range(0, 180, 15))   # pull directions in the x-y plane (degrees 
 def _turned(m, name, model, mesh, angle_deg):
     """The element model with every element frame (x, y, z) turned by ``angle_deg`` about z:
     its fibre along the pull direction at that angle, whatever the mesh."""
-    from harness.models.anisotropic import build_anisotropic
     c, s = np.cos(np.deg2rad(angle_deg)), np.sin(np.deg2rad(angle_deg))
     F = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
     return build_anisotropic(m.points, m.cells, frames=F, ks=m.ks, kvs=m.kvs, volume=(name == "MT"),
@@ -143,7 +145,6 @@ def _direction_columns(name, K, P, bbox, loads, fem_dir, aniso, suffix) -> dict:
     """Columns of the direction pulls of one model (K one matrix, or one per direction):
     spread (max/min), coefficient of variation, largest drift, and the largest deviation of
     the stiffness per direction from the FEM's; rows of anisotropy.csv."""
-    from harness.mechanics import anisotropy as an
     Ks = K if isinstance(K, list) else [K] * len(loads)
     res = []
     for ang, load, Kd in zip(ANGLES, loads, Ks):
@@ -164,9 +165,7 @@ def _direction_columns(name, K, P, bbox, loads, fem_dir, aniso, suffix) -> dict:
 def _fem_directions(case, ref_solve, P):
     """The FEM reference under the direction pulls (one reference solve of a copy of the
     case whose loads are the pulls), measured at the model's nodes."""
-    import dataclasses
 
-    from harness.mechanics import anisotropy as an
     loads = tuple(an.pull_load(d, name=f"pull-{a}") for a, d in zip(ANGLES, an.directions_xy(ANGLES)))
     sub = dataclasses.replace(case, loads=loads)
     ref = ref_solve(sub)

@@ -18,11 +18,12 @@ import scipy.sparse.linalg as spla
 from scipy.optimize import least_squares
 
 from harness.errors import ModelError
+from harness.mechanics import statics
 from harness.mechanics.dynamics import stiffness
+from harness.models.massspring import MassSpring
 
 
 def parameter_names(model) -> list[str]:
-    from harness.models.massspring import MassSpring
     if isinstance(model, MassSpring):
         return ["ks"]
     return ["ks1", "ks2", "ks3", "ks4", "ks5", "ks6"] + (["kvs"] if model.volume else [])
@@ -30,7 +31,6 @@ def parameter_names(model) -> list[str]:
 
 def unit_stiffnesses(model) -> list[sp.csr_matrix]:
     """K_j of each constant (the linearised stiffness with only that constant = 1)."""
-    from harness.models.massspring import MassSpring
     out = []
     if isinstance(model, MassSpring):
         m = replace(model, ks=np.ones_like(model.ks), kd=np.zeros_like(model.kd))
@@ -46,7 +46,6 @@ def unit_stiffnesses(model) -> list[sp.csr_matrix]:
 
 
 def current_parameters(model) -> np.ndarray:
-    from harness.models.massspring import MassSpring
     if isinstance(model, MassSpring):
         return np.array([float(np.mean(model.ks))])
     p = list(model.ks.mean(axis=0))
@@ -67,7 +66,6 @@ class _Net:            # what harness.mechanics.statics.load_arrays needs
 
 
 def case_loads(points, case, masses=None) -> Loads:
-    from harness.mechanics import statics
     net = _Net(points, np.ones(len(points)) if masses is None else masses)
     names, free, forces = statics.all_load_arrays(net, case)
     return Loads(names, free, forces)

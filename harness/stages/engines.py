@@ -30,7 +30,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from harness.engines import EXTRA
 from harness.errors import SpringbenchError
+from harness.export.pack import read_pack
+from harness.export.pack_score import read_displacements, score_fields
+from harness.io.meshfile import read_mesh
+from harness.registry import ENGINES
 
 NAME = "engines"
 OWN = "own (E, nu)"
@@ -66,14 +71,11 @@ def material_args(E: float, nu: float, density: float) -> tuple:
 
 
 def _installed(engine: str) -> bool:
-    from harness.registry import ENGINES
     return importlib.util.find_spec(ENGINES.about[engine][0]) is not None
 
 
 def engine_rows(pack, pack_dir: Path, engine: str, loads, folder: Path, model_json=None) -> list[dict]:
     """Per load: one engine run through ``springbench engines run`` and scored."""
-    from harness.engines import EXTRA
-    from harness.export.pack_score import read_displacements, score_fields
     if not _installed(engine):
         return [dict(load=n, engine_status="not-installed", note=f"{EXTRA} installs {engine}") for n in loads]
     folder.mkdir(parents=True, exist_ok=True)
@@ -113,7 +115,6 @@ def export(mesh: Path, material: tuple, groups: tuple, label: str, budget: float
 
 def study(mesh: Path, E: float, nu: float, density: float, spec, scratch: Path, status=lambda msg: None):
     """The per-load rows of one mesh and material (``spec``: the ``[model]`` section)."""
-    from harness.export.pack import read_pack
     material, loads = material_args(E, nu, density), list(spec["loads"])
     groups = ("--clamp", spec["clamp"], "--load-region", spec["load_region"])
     status("pack")
@@ -159,7 +160,6 @@ def with_means(df: pd.DataFrame, keys=("body", "resolution", "n_tets", "nu", "en
 
 
 def n_tets(mesh: Path) -> int:
-    from harness.io.meshfile import read_mesh
     return int(len(read_mesh(mesh).cells.get("tetra", ())))
 
 

@@ -12,6 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.case.elasticity import element_stiffness
+from harness.case.loadsets import stretch_closed_form
+
 NAME = "reference"
 
 
@@ -21,7 +24,6 @@ def applies(case) -> bool:
 
 def closed_form_error(case, sol, load) -> float:
     """max |u - u_exact| / max |u_exact| at the vertices, NaN without a closed form."""
-    from harness.case.loadsets import stretch_closed_form
     m = case.material
     standard = case.load_set in ("basic2d", "basic3d") and load.name.startswith("stretch-")
     homogeneous = m.fibre is None and not m.regions
@@ -29,7 +31,6 @@ def closed_form_error(case, sol, load) -> float:
     if standard and load.name == "stretch-x" and m.fibre is not None and not m.regions \
             and m.fibre.field is None and case.body.shape in ("rectangle", "box"):
         # homogeneous anisotropic: uniform stress, strain from the rotated compliance
-        from harness.case.elasticity import element_stiffness
         from reference.analytic import uniform_stress_displacement
         S = np.linalg.inv(element_stiffness(m, p[:1])[0])
         exact = uniform_stress_displacement(S, load.tractions[0].vector[0], 0, p, case.body.origin)

@@ -30,11 +30,19 @@ import time
 import numpy as np
 import pandas as pd
 
-from harness import registry
+from harness import registry, scoring
 from harness.case.loads import modal_load
 from harness.errors import CaseError, SpringbenchError
+from harness.export.vtu import write_vtu
+from harness.mechanics import statics
+from harness.models.sms import model_spec
+from harness.models.stiffness_rules import spring_constants
+from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
+from harness.optimize import check_method_options
 from harness.stages import sms_measures as measures
 from harness.stages.classes.base import Setting
+from harness.stages.classes.springs import of_spec
+from harness.stages.sms_rules import fit_score_of, solve_rules
 
 NAME = "sms"
 
@@ -76,8 +84,6 @@ def _expect(case) -> dict:
 def run(case, ctx) -> list[dict]:
     """The case's rows; with ``[model] classes``, each class's rows in turn (its files in
     the sub-folder named after it)."""
-    from harness.models.sms import model_spec
-    from harness.stages.classes.springs import of_spec
     spec = model_spec(case)
     names = list(spec.get("classes") or ())
     if not names:
@@ -91,9 +97,6 @@ def run(case, ctx) -> list[dict]:
 
 def _run(case, ctx, spec, cls) -> list[dict]:
     """The rows of model class ``cls`` (harness/stages/classes/) on the case."""
-    from harness import scoring
-    from harness.mechanics import statics
-    from harness.models.stiffness_rules import spring_constants
     opt = case.section("optimizer") or {}
     runs = cls.fit_runs(optimiser_runs(case, opt))      # case mistakes first, before any solve
     label = cls.label(spec, case)
@@ -140,7 +143,6 @@ def _run(case, ctx, spec, cls) -> list[dict]:
 
     def write(net, res, tag):
         """The row's files (``res`` None: the network alone)."""
-        from harness.export.vtu import write_vtu
         if res is None:
             write_vtu(ctx.file(f"model-{tag}.vtu"), net, {})
             return
@@ -158,7 +160,6 @@ def _run(case, ctx, spec, cls) -> list[dict]:
         nets[rule] = base if rule == base.info["stiffness"] else base.with_k(
             spring_constants(rule, base.points, base.springs, base.cells, case.material), stiffness=rule)
         made[rule] = time.perf_counter() - t1
-    from harness.stages.sms_rules import fit_score_of, solve_rules
     score = None if u_ref is None else lambda r: fit_score_of(r, case, u_ref, names, base.classes, weights)  # noqa: E731
     solved, bounds = solve_rules(case, nets, score, rules[0] if opt.get("start", "first") != "best" else None,
                                  ctx.status)
@@ -251,7 +252,6 @@ def _file(case) -> str | None:
 
 def check(case):
     """The [model] and [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
-    from harness.models.sms import model_spec
     spec = model_spec(case)
     grid = spec.get("grid")
     if spec["placement"] == "grid" and not (isinstance(grid, (list, tuple)) and len(grid) == case.dim
@@ -259,13 +259,11 @@ def check(case):
         raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=_file(case),
                         field="model.grid", fix=f"e.g. grid = {[5] * case.dim}")
     if spec["placement"] == "grid" and spec.get("structure") is not None:
-        from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
         known = STRUCTURES_2D if case.dim == 2 else STRUCTURES_3D
         if ALIASES.get(spec["structure"], spec["structure"]) not in known:
             raise CaseError(f"unknown {case.dim}-D grid structure '{spec['structure']}'", file=_file(case),
                             field="model.structure", fix=f"one of {', '.join(known)}")
     opt = case.section("optimizer") or {}
-    from harness.optimize import check_method_options
     for run_ in optimiser_runs(case, opt):
         try:
             check_method_options(run_["method"], run_["options"])

@@ -11,6 +11,10 @@ import pandas as pd
 
 from harness.case.loads import modal_load
 from harness.errors import ModelError, SpringbenchError
+from harness.mechanics import statics
+from harness.optimize.diagnostics import fit_diagnostics
+from harness.optimize.problem import FitProblem
+from harness.scoring import node_weights
 from harness.stages import sms_measures as measures
 from harness.stages.classes.base import Setting
 
@@ -30,10 +34,6 @@ def budget_label(options: dict) -> str:
 
 def optimise(setting: Setting, run_: dict, base, first: dict):
     """One optimiser run of a springs network on the fitted loads and its row."""
-    from harness.mechanics import statics
-    from harness.optimize.diagnostics import fit_diagnostics
-    from harness.optimize.problem import FitProblem
-    from harness.scoring import node_weights
     case, ctx, optimize, spec = setting.case, setting.ctx, setting.optimize, setting.spec
     u_ref, names, fit, weights, fem_f = setting.u_ref, setting.names, setting.fit, setting.weights, setting.fem_f
     method, objective = run_["method"], run_["objective"]

@@ -10,7 +10,11 @@ import math
 import numpy as np
 import pandas as pd
 
+from harness.case.loadsets import family
 from harness.errors import ModelError
+from harness.export.engine import stable_step
+from harness.mechanics.modal import frequencies
+from harness.optimize.select import CLAMPED, training_score
 
 
 def per_load_columns(sc, sh) -> dict:
@@ -23,8 +27,6 @@ def per_load_columns(sc, sh) -> dict:
 
 def families(case, names) -> list[str]:
     """Each fitted load's family: the linear sets' own, 'clamped' for every other load."""
-    from harness.case.loadsets import family
-    from harness.optimize.select import CLAMPED
     by_name = {l.name: l for l in case.loads}
     return [family(by_name[n]) or CLAMPED for n in names]
 
@@ -33,7 +35,6 @@ def fit_score(case, sc) -> dict:
     """``G_fit_score``: the validation's score of the row's model on the fitted loads as
     they are (harness/optimize/select.py ``training_score``: each load's own normalised G,
     families and clamped states weighted alike); 'best' starts the fits from its lowest."""
-    from harness.optimize.select import training_score
     names = list(case.fit_loads)
     return {"G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names))}
 
@@ -63,7 +64,6 @@ def engine_columns(net, p1: bool) -> dict:
     """``k_spread`` (max / median spring constant; NaN for P1, which has none) and
     ``dt_stable`` (s, the symplectic Euler limit of the free, undamped model,
     harness.export.engine.stable_step; NaN without positive masses)."""
-    from harness.export.engine import stable_step
     k = np.asarray(net.k, float)
     out = {"k_spread": float(k.max() / np.median(k)) if not p1 and len(k) and np.median(k) > 0 else math.nan}
     try:
@@ -103,7 +103,6 @@ def model_frequencies(case, ctx, fem_f, nets, n):
     returns {column: frequencies}: 'fem' and one per rule or optimised model."""
     if n <= 0:
         return {}
-    from harness.mechanics.modal import frequencies
     cols = {"mode": np.arange(1, n + 1)}
     if fem_f is not None:
         cols["fem"] = np.pad(fem_f, (0, max(n - len(fem_f), 0)), constant_values=np.nan)[:n]

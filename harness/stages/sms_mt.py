@@ -14,7 +14,9 @@ import time
 
 import numpy as np
 
+from harness.mechanics import statics
 from harness.models.mt import PARAMS, unsupported
+from harness.scoring import node_weights
 
 METHOD = "least-squares"
 BUDGET = "max_nfev=200"          # bc2000_linear.fit's budget
@@ -38,8 +40,6 @@ def runs(case_runs: list) -> list:
 
 def fit_theta(base, case, u_ref, names, fit, weights):
     """theta fitted on the loads ``fit`` (indices of ``names``) and the fit's G before/after."""
-    from harness.mechanics import statics
-    from harness.scoring import node_weights
     from harness.stages import bc2000_linear as linear
     _, free, forces = statics.all_load_arrays(base, case)
     loads = linear.Loads([names[i] for i in fit], free[fit], forces[fit])

@@ -18,6 +18,11 @@ import math
 
 import numpy as np
 
+from harness.mechanics import statics
+from harness.mechanics.statics import StaticsResult
+from harness.optimize.select import training_score
+from harness.scoring import g_arrays
+
 ALL_RULES_DOFS = 60_000      # networks up to this many dofs solve every rule under every load
 
 
@@ -28,7 +33,6 @@ def free_loads(case) -> list[str]:
 
 def _merge(a, b, names):
     """One StaticsResult over ``names`` from two that cover them."""
-    from harness.mechanics.statics import StaticsResult
     pick = [(a, a.names.index(n)) if n in a.names else (b, b.names.index(n)) for n in names]
     return StaticsResult(tuple(names), np.array([r.u[i] for r, i in pick]), np.array([r.forces[i] for r, i in pick]),
                          np.array([r.load_seconds[i] for r, i in pick]))
@@ -39,7 +43,6 @@ def solve_rules(case, nets: dict, score, first: str | None = None, status=lambda
     the rules left unsolved under the clamps). ``score(res)``: a complete result's
     G_fit_score, and of a free-traction-only result its free-traction part; ``first``: a
     rule always solved (the one the user named)."""
-    from harness.mechanics import statics
     rules = list(nets)
     if score is None:
         return dict(zip(rules, statics.solve_all(list(nets.values()), case))), {}
@@ -68,8 +71,6 @@ def solve_rules(case, nets: dict, score, first: str | None = None, status=lambda
 def fit_score_of(res, case, u_ref, names, classes, weights) -> float:
     """The G_fit_score of a statics result over the fitted loads it holds (of the
     free-traction states alone: their part of it)."""
-    from harness.optimize.select import training_score
-    from harness.scoring import g_arrays
     from harness.stages.sms_measures import families
     held = [n for n in case.fit_loads if n in res.names]
     sc = g_arrays(u_ref[[names.index(n) for n in held]], res.u[[res.names.index(n) for n in held]], classes, weights,

@@ -22,6 +22,13 @@ import pandas as pd
 import scipy.sparse as sp
 
 from harness.errors import CaseError
+from harness.mechanics import statics
+from harness.models.learned_rule import geometry
+from harness.models.springs import spring_directions
+from harness.models.volume import initial_kv, with_volume
+from harness.optimize import select as sel
+from harness.optimize.problem import FitProblem
+from harness.scoring import node_weights
 
 VALIDATION_BUDGET = 2.0     # the validation fits together: at most this many times the fit's budget
 
@@ -32,13 +39,6 @@ def optimise(setting, run_, base, first, first_res=None):
     :class:`harness.stages.classes.base.Setting`; ``first_res``: base's statics, when the
     stage has them (a validation they show unaffordable then costs no solve, and the
     rule's row reuses them)."""
-    from harness.mechanics import statics
-    from harness.models.learned_rule import geometry
-    from harness.models.springs import spring_directions
-    from harness.models.volume import initial_kv, with_volume
-    from harness.optimize import select as sel
-    from harness.optimize.problem import FitProblem
-    from harness.scoring import node_weights
     from harness.stages.sms_measures import families, fit_score, heldout_columns, per_load_columns
     case, ctx, u_ref, names, fit, weights = (setting.case, setting.ctx, setting.u_ref, setting.names, setting.fit,
                                              setting.weights)

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from reference.solvers import tensorpre
 from reference.solvers.plan import METHODS, SYMBOLIC_MAX, System, choose_plan
 from reference.solvers.record import Fallback, SolveRecord
@@ -218,7 +219,6 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
 # -- direct ------------------------------------------------------------------------------
 
 def _symbolic(As, coords):
-    from harness.linalg.multifrontal import Symbolic
     return Symbolic(As, coords)
 
 
@@ -231,7 +231,6 @@ def _factor(As, method, sym):
     """Factorise As (Cholesky on the Symbolic ``sym``); returns the solve function for
     (n, m) right-hand sides."""
     if method == "cholesky":
-        from harness.linalg.multifrontal import MultifrontalCholesky
         f = MultifrontalCholesky(As, sym)
         return lambda r: f.solve(np.ascontiguousarray(r)).reshape(r.shape)
     try:

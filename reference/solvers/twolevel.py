@@ -21,6 +21,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+from harness.linalg.sparse import single_thread_blas
+
 SWEEPS = 2              # Gauss-Seidel sweeps before and after the coarse correction (measured on
 # the 50k-tet cylinder: 1 sweep 40-43 CG iterations, 2 sweeps 23-25, 3 sweeps 19-20; 2 is cheapest)
 COARSE_GBYTES = 2.5     # the coarse system is factorised when its Cholesky fits in this, ...
@@ -62,7 +65,6 @@ class TwoLevel:
 
     def __init__(self, As: sp.csr_matrix, s: np.ndarray, P: sp.spmatrix, coords: np.ndarray,
                  near_null: np.ndarray | None = None):
-        from harness.linalg.multifrontal import Symbolic
         P = sp.csr_matrix(P)
         used = np.flatnonzero(np.asarray(abs(P).sum(axis=0)).ravel() > 0)    # coarse dofs on free dofs
         P = sp.csr_matrix(P[:, used])
@@ -82,8 +84,6 @@ class TwoLevel:
         est = sym.estimate()
         self.info = {"coarse_dofs": int(Acs.shape[0]), "coarse_gflop": est["gflop"]}
         if est["gbytes"] <= COARSE_GBYTES and est["gflop"] <= COARSE_GFLOP:
-            from harness.linalg.multifrontal import MultifrontalCholesky
-            from harness.linalg.sparse import single_thread_blas
             chol = MultifrontalCholesky(Acs, sym)
             with single_thread_blas():                     # small blocks: threads only add overhead
                 chol._flat()                               # every solve takes the compiled substitution

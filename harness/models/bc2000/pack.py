@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.models.anisotropic import AnisotropicBody
 from harness.models.bc2000.codegen import BLOCK, LAYOUT, NV, n_rows, rows
+from harness.models.massspring import MassSpring
 
 DAMPING = {"spring": ("kd",), "tet": ("kd",), "hex": ("kd", "kvd")}
 
@@ -125,8 +127,6 @@ def kernel_arrays(model, dt: float, threads: int = 1):
 
 
 def _kernel_arrays(model, dt, threads):
-    from harness.models.anisotropic import AnisotropicBody
-    from harness.models.massspring import MassSpring
     out = {"spring": empty("spring"), "tet": empty("tet"), "hex": empty("hex")}
     if isinstance(model, MassSpring):
         out["spring"] = block_arrays("spring", model, dt, threads)

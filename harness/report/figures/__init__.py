@@ -12,10 +12,16 @@ report carries on.
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import json
 import re
 import sys
 from pathlib import Path
+
+import numpy as np
+
+from harness.outputs import staged, write_changed
 
 FIGURES = [
     "harness.report.figures.trace",        # G against SA steps (trace.csv)
@@ -59,7 +65,6 @@ STAMP = ".figures.json"
 def _stamp(files, mods) -> str:
     """What figures depend on: the bytes of their data files (by name) and the figure code;
     never a time, so a fresh checkout or a copy of the results finds its figures current."""
-    import hashlib
     h = hashlib.sha256()
     for f in sorted(files, key=lambda f: f.name):
         h.update(f"{f.name}\0".encode())
@@ -83,9 +88,7 @@ def _stamped(folder: Path, mods, redraw: bool) -> list[Path]:
     """Each module's figures of ``folder``, redrawn only when its stamp (the data it reads
     and its code) differs from the one recorded in the folder's STAMP file with the PNGs it
     drew; the file is rewritten only when something changed (byte-identical otherwise)."""
-    import json
 
-    from harness.outputs import write_changed
     sfile = folder / STAMP
     try:
         old = json.loads(sfile.read_text()) if sfile.exists() else {}
@@ -159,7 +162,6 @@ def title(folder: Path) -> str:
 def log_if_decades(ax, values, axis: str = "y", decades: float = 1.5) -> bool:
     """Put ``axis`` on a log scale when the positive ``values`` span more than ``decades``
     decades (then small values stay readable beside large ones); True if it did."""
-    import numpy as np
     v = np.asarray(values, float).ravel()
     v = v[np.isfinite(v)]
     if not len(v) or (v <= 0).any() or v.max() / v.min() < 10 ** decades:
@@ -170,7 +172,6 @@ def log_if_decades(ax, values, axis: str = "y", decades: float = 1.5) -> bool:
 
 def save(fig, path: Path, tight: bool = True) -> Path:
     """Write ``fig`` as PNG (``tight``: tight_layout first, which draws the figure twice)."""
-    from harness.outputs import staged
     if tight:
         fig.tight_layout()
     with staged([path]) as (tmp,):     # never half a PNG (disk full): the old one stays

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "anisotropy", "case"
@@ -19,7 +21,6 @@ def make(folder: Path) -> list[Path]:
     df = read_csv(folder, "anisotropy.csv")
     if df is None or df.empty:
         return []
-    import numpy as np
     fig, ax = subplots(figsize=(9, 6), subplot_kw={"projection": "polar"})
     groups = df.groupby("model", sort=True) if "model" in df else [("model", df)]
     for model, g in groups:

@@ -26,7 +26,6 @@ def make(folder: Path) -> list[Path]:
 def visible_surface(p, springs, view=VIEW):
     """3-D: (nodes (n,) bool, springs (e,) bool) on the hull faces whose outward normal
     points towards the viewer; everything when the points span no volume."""
-    import numpy as np
     from scipy.spatial import ConvexHull, QhullError
     n = len(p)
     try:
@@ -43,7 +42,6 @@ def visible_surface(p, springs, view=VIEW):
 
 
 def _one(src: Path, folder: Path) -> Path | None:
-    import numpy as np
     suffix = src.stem[len("deformed"):]
     with np.load(src) as z:
         data = {k: z[k] for k in z.files}

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from harness.report.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "fibres", "case"
@@ -16,7 +18,6 @@ def make(folder: Path) -> list[Path]:
 
 
 def _one(src: Path, folder: Path) -> Path:
-    import numpy as np
     suffix = src.stem[len("fibres"):]
     with np.load(src) as z:
         p = np.asarray(z["points"], float)

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from harness.report.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots
 
 NAME, SCOPE = "lloyd_bars", "suite"
@@ -17,7 +19,6 @@ def make(folder: Path) -> list[Path]:
     df = read_csv(folder, "summary.csv")
     if df is None:
         return []
-    import numpy as np
     import pandas as pd
     if "lloyd_iterations" not in df or "G_final" not in df:
         return []

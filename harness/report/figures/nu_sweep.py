@@ -15,6 +15,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from harness.report.figures import read_csv, save, subplots
+from harness.report.nu_sweep import CAUCHY_NU, families_of, family_frame, sweep_frame
 
 NAME, SCOPE = "nu_sweep", "suite"
 DATA = ("summary.csv",)      # the files it reads (globs in the folder): its figures' stamp
@@ -24,7 +25,6 @@ RULE_COLOURS = ("tab:gray", "tab:brown", "tab:olive", "tab:cyan", "tab:pink", "b
 
 
 def make(folder: Path) -> list[Path]:
-    from harness.report.nu_sweep import family_frame, sweep_frame
     df = read_csv(folder, "summary.csv")
     if df is None:
         return []
@@ -39,7 +39,6 @@ def make(folder: Path) -> list[Path]:
 
 
 def _cauchy(ax, dim: int) -> None:
-    from harness.report.nu_sweep import CAUCHY_NU
     ax.axvline(CAUCHY_NU[dim], color="k", ls=":", lw=1)
     ax.text(CAUCHY_NU[dim], 0.98, f" Cauchy nu = {'1/4' if dim == 3 else '1/3'}", transform=ax.get_xaxis_transform(),
             fontsize=7, va="top")
@@ -75,7 +74,6 @@ def _classes(folder: Path, frame) -> Path:
 
 
 def _families(folder: Path, frame) -> Path:
-    from harness.report.nu_sweep import families_of
     bodies = list(dict.fromkeys(frame["body"]))
     fams = families_of(frame)
     models = list(dict.fromkeys(frame["model"]))

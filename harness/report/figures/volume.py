@@ -8,6 +8,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "volume", "case"
@@ -42,7 +44,6 @@ def original_curves(folder: Path) -> dict:
     """{model: (t, dV/V0 %)} of the original program's record (:func:`original_record`; its
     column rule is the bc2000 stage's: t, MS, MT0, MT, or t, V, dV/V0 % for one model); {}
     when there is none or it cannot be read."""
-    import numpy as np
     rec = original_record(folder)
     if rec is None:
         return {}
@@ -58,7 +59,6 @@ def original_curves(folder: Path) -> dict:
 def deviations(df, orig: dict) -> dict:
     """{model: (t, original, ours - original)} at the record's times, ours interpolated there (the
     record starts at t = dt, ours at 0); a one-model record ("*") goes to our one model."""
-    import numpy as np
     cols = [c for c in df.columns if c != "t"]
     if "*" in orig:
         orig = {cols[0]: orig["*"]} if len(cols) == 1 else {}

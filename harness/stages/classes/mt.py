@@ -6,6 +6,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from harness.errors import naming
+from harness.models.mt import with_mt
+from harness.models.sms import build_network
 from harness.stages import sms_mt
 from harness.stages.classes.base import ModelClass
 
@@ -18,9 +21,6 @@ class MTClass(ModelClass):
         return sms_mt.skip_row(case, label)
 
     def build(self, case, spec: dict, seed: int = 0):
-        from harness.errors import naming
-        from harness.models.mt import with_mt
-        from harness.models.sms import build_network
         net = build_network(case, spec, seed=seed)
         with naming(case):
             return with_mt(net, case.material)

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from harness.models.p1 import with_p1
+from harness.models.sms import build_network
 from harness.stages.classes.base import ModelClass
 
 
@@ -14,8 +16,6 @@ class P1Class(ModelClass):
     spring_constants: bool = False      # its springs are only the connectivity
 
     def build(self, case, spec: dict, seed: int = 0):
-        from harness.models.p1 import with_p1
-        from harness.models.sms import build_network
         return with_p1(build_network(case, spec, seed=seed), case.material)
 
 

@@ -6,6 +6,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from harness.export.vtu import write_vtu
+from harness.mechanics.homogenize import case_report
+from harness.models.kn import case_kn
+from harness.models.kn import save as save_kn
+from harness.models.sms import build_network
+from harness.models.volume import case_volume, save
 from harness.stages.classes.base import ModelClass, model_label
 
 
@@ -21,13 +27,10 @@ class Springs(ModelClass):
         return {**spec, "volume": self.volume, "kn": self.kn}
 
     def build(self, case, spec: dict, seed: int = 0):
-        from harness.models.sms import build_network
         net = build_network(case, spec, seed=seed)
         if self.volume != "none":
-            from harness.models.volume import case_volume
             net = case_volume(net, case, spec)
         if self.kn != "none":       # a ModelError if the volume term is there too
-            from harness.models.kn import case_kn
             net = case_kn(net, case, spec)
         return net
 
@@ -58,20 +61,16 @@ class Springs(ModelClass):
         return out
 
     def lattice(self, case, spec: dict) -> dict | None:
-        from harness.mechanics.homogenize import case_report
         return case_report(case, spec)
 
     def save(self, ctx, net, res, tag: str) -> None:
         """The network with its displacements as VTU, the extra term's constants as .npz."""
-        from harness.export.vtu import write_vtu
         write_vtu(ctx.file(f"model-{tag}.vtu"), net, dict(zip(res.names, res.u)))
         if getattr(net, "volume", None) is None:
             return
         if self.kn != "none":
-            from harness.models.kn import save as save_kn
             save_kn(ctx.file(f"kn-{tag}.npz"), net)
         else:
-            from harness.models.volume import save
             save(ctx.file(f"volume-{tag}.npz"), net)
 
 
