@@ -107,7 +107,7 @@ FITS = [   # spring/mass models and their fits (harness/stages/sms*.py)
     Column("negative_masses", "count", "nodes whose mass came out negative (moments rule)"),
     Column("model_seed", "", "the seed of the random placement (the run's seed plus [model] seed)"),
     Column("model_class", "", "springs, springs+volume, springs+node-volume, springs+kn, mt or p1 "
-                              "(harness/models/classes.py)"),
+                              "(harness/stages/classes/)"),
     Column("volume", "", "the volume term: element, shared, node or node-shared"),
     Column("n_volumes", "count", "volume terms (elements or nodes)"),
     Column("kn", "", "Kot & Nagahashi's term: node (one kn per node) or shared"),
