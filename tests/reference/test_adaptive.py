@@ -341,7 +341,7 @@ def test_cube_estimate_bounds_the_independent_error_without_a_wild_factor(tmp_pa
     The reference's per-point estimate bounds the true error at every vertex and its
     largest value is within a small factor of the largest true error (the estimate over
     consecutive adaptive levels was ~10x)."""
-    import independent_elasticity as ie
+    from tests import independent_elasticity as ie
     m = skfem.MeshTet.init_tensor(*[np.linspace(0.0, 3.0, 4)] * 3)
     case = mesh_case(tmp_path, write_mesh(tmp_path / "cube.vtu", m), 3, SHEAR, "max_refine = 3\ntol = 1e-8\n")
     ref = reference.solve(case, cache=False)
