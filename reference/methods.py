@@ -37,7 +37,20 @@ MODAL_DOFS = {2: 400_000, 3: 120_000}   # graded: the modes come from the finest
 # displacements that need the finer levels.
 
 
-class Refined:
+class _OnMesh:
+    """What every method has on its finest mesh ``mesh``: the discretisation and the point
+    locator, made when first asked for."""
+
+    @cached_property
+    def disc(self) -> Discretisation:
+        return Discretisation(self.mesh, self.case.reference.cell, self.case.reference.element)
+
+    @cached_property
+    def locator(self) -> Locator:
+        return Locator(self.mesh)
+
+
+class Refined(_OnMesh):
     """The finest of uniformly refined meshes; its estimate is the relative change from
     the previous level, the same at every point."""
     name = "refine"
@@ -51,14 +64,6 @@ class Refined:
     def solve(cls, case, status, records):
         mesh, U, est, history = solve_refined(case, status, records)
         return cls(case, mesh, U, est), est, history
-
-    @cached_property
-    def disc(self) -> Discretisation:
-        return Discretisation(self.mesh, self.case.reference.cell, self.case.reference.element)
-
-    @cached_property
-    def locator(self) -> Locator:
-        return Locator(self.mesh)
 
     @property
     def modal_disc(self) -> Discretisation:
@@ -119,7 +124,7 @@ class Adaptive(Refined):
                    Changes.from_arrays(names, arrays))
 
 
-class Graded:
+class Graded(_OnMesh):
     """Q2 levels of a box extrapolated: the field and its estimate per point are the
     extrapolant's (``levels``); ``fields`` are the finest level's."""
     name = "graded"
@@ -134,14 +139,6 @@ class Graded:
     def solve(cls, case, status, records):
         levels, est, history = solve_graded(case, status, records)
         return cls(case, levels), est, history
-
-    @cached_property
-    def disc(self) -> Discretisation:
-        return Discretisation(self.mesh, self.case.reference.cell, self.case.reference.element)
-
-    @cached_property
-    def locator(self) -> Locator:
-        return Locator(self.mesh)
 
     @cached_property
     def modal_disc(self) -> Discretisation:

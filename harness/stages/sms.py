@@ -42,6 +42,7 @@ from harness.optimize import check_method_options
 from harness.stages import sms_measures as measures
 from harness.stages.classes.base import Setting
 from harness.stages.classes.springs import of_spec
+from harness.stages.sms_fit import case_file
 from harness.stages.sms_rules import fit_score_of, solve_rules
 
 NAME = "sms"
@@ -245,23 +246,18 @@ def _run(case, ctx, spec, cls) -> list[dict]:
 
 # -- the case's optimiser runs ---------------------------------------------------------
 
-def _file(case) -> str | None:
-    """The case file, for error messages (None for an in-memory case)."""
-    return str(case.path) if case.path is not None else None
-
-
 def check(case):
     """The [model] and [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
     spec = model_spec(case)
     grid = spec.get("grid")
     if spec["placement"] == "grid" and not (isinstance(grid, (list, tuple)) and len(grid) == case.dim
                                             and all(isinstance(g, int) and g >= 2 for g in grid)):
-        raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=_file(case),
+        raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=case_file(case),
                         field="model.grid", fix=f"e.g. grid = {[5] * case.dim}")
     if spec["placement"] == "grid" and spec.get("structure") is not None:
         known = STRUCTURES_2D if case.dim == 2 else STRUCTURES_3D
         if ALIASES.get(spec["structure"], spec["structure"]) not in known:
-            raise CaseError(f"unknown {case.dim}-D grid structure '{spec['structure']}'", file=_file(case),
+            raise CaseError(f"unknown {case.dim}-D grid structure '{spec['structure']}'", file=case_file(case),
                             field="model.structure", fix=f"one of {', '.join(known)}")
     opt = case.section("optimizer") or {}
     for run_ in optimiser_runs(case, opt):
@@ -269,7 +265,7 @@ def check(case):
             check_method_options(run_["method"], run_["options"])
         except SpringbenchError as exc:   # named by the case field the options came from
             field = (exc.field or "optimizer.options").replace("optimizer.options", run_["where"], 1)
-            raise CaseError(exc.message, file=_file(case), field=field, fix=exc.fix) from None
+            raise CaseError(exc.message, file=case_file(case), field=field, fix=exc.fix) from None
     _check_modes(case, opt)
 
 
@@ -280,7 +276,7 @@ def optimiser_runs(case, opt) -> list[dict]:
     weight]}. Mistakes the schema cannot see (a repeated optimiser, options that are not
     a table, options with method = "none") are CaseErrors naming the file and field."""
     method = opt.get("method", "none")
-    file = _file(case)
+    file = case_file(case)
     compare = list(opt.get("compare") or ())
     extra = dict(opt.get("compare_options") or {})
     if method in compare or len(set(compare)) != len(compare):
@@ -319,7 +315,7 @@ def _check_modes(case, opt) -> int:
     fq = opt.get("frequency")
     if fq and fq["modes"] > n:
         raise CaseError(f"frequency modes = {fq['modes']} but the reference computes {n}",
-                        file=_file(case), field="optimizer.frequency.modes",
+                        file=case_file(case), field="optimizer.frequency.modes",
                         fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes")
     return n
 

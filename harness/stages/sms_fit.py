@@ -22,7 +22,8 @@ BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", 
                "xatol", "fatol", "cg_maxiter", "chains")
 
 
-def _file(case) -> str | None:
+def case_file(case) -> str | None:
+    """The case file, for error messages (None for an in-memory case)."""
     return str(case.path) if case.path is not None else None
 
 
@@ -42,7 +43,7 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
     _, free, forces = statics.all_load_arrays(base, case)
     free, forces, u_fit, names = free[fit], forces[fit], u_ref[fit], [names[i] for i in fit]
     wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    file = _file(case)
+    file = case_file(case)
     freq_kw = {}
     if objective != "G":
         if fem_f is None or len(fem_f) < run_["modes"]:
