@@ -112,9 +112,9 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
             assembled[0] = K()
         return assembled[0]
 
-    def record(rec, names, n, **more):
+    def record(rec, names, n):
         if records is not None:
-            records.append(dataclasses.replace(rec, loads=tuple(names), n=n, **more))
+            records.append(dataclasses.replace(rec, loads=tuple(names), n=n))
 
     tensor_mesh = C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex")
     lat = Lattice.q2(d.doflocs) if tensor_mesh and not prescribed else None
