@@ -43,6 +43,8 @@ def uniform_stress_displacement(S: np.ndarray, s: float, axis: int, points, orig
     return (points - np.asarray(origin, float)) @ L.T
 
 
-def cantilever_frequency(E: float, rho: float, length: float, I: float, A: float, mode: int = 0) -> float:
+def cantilever_frequency(
+    E: float, rho: float, length: float, I: float, A: float, mode: int = 0
+) -> float:
     """Euler-Bernoulli natural frequency (Hz) of a clamped-free beam."""
-    return EB_ROOTS[mode] ** 2 / (2 * np.pi * length ** 2) * np.sqrt(E * I / (rho * A))
+    return EB_ROOTS[mode] ** 2 / (2 * np.pi * length**2) * np.sqrt(E * I / (rho * A))

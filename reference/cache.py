@@ -51,8 +51,12 @@ def _canon(x):
 def case_key(case) -> str:
     """Hex digest identifying the reference solution of ``case``."""
     payload = {
-        "dim": case.dim, "body": _canon(case.body), "material": _canon(case.material),
-        "loads": _canon(case.loads), "reference": _canon(case.reference), "code": code_version(),
+        "dim": case.dim,
+        "body": _canon(case.body),
+        "material": _canon(case.material),
+        "loads": _canon(case.loads),
+        "reference": _canon(case.reference),
+        "code": code_version(),
     }
     text = json.dumps(payload, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()[:24]

@@ -34,6 +34,7 @@ def quadrature_orders(cell: str, order: str) -> tuple[int, int]:
 @dataclass
 class Discretisation:
     """One mesh with its scalar element; ``ns`` scalar dofs, ``ndof = dim * ns``."""
+
     mesh: skfem.Mesh
     cell: str
     order: str
@@ -43,8 +44,9 @@ class Discretisation:
         self.dim = self.mesh.p.shape[0]
         self.q_stiff, self.q_mass = quadrature_orders(self.cell, self.order)
         self.mapping = mapping(self.mesh)
-        self.basis = skfem.CellBasis(self.mesh, self.elem, mapping=self.mapping,
-                                     intorder=self.q_mass)
+        self.basis = skfem.CellBasis(
+            self.mesh, self.elem, mapping=self.mapping, intorder=self.q_mass
+        )
         self.dofs = self.basis.dofs
         self.ns = self.basis.N
         self.ndof = self.dim * self.ns
@@ -59,7 +61,9 @@ class Discretisation:
 
     def vector_dofs(self, element_dofs: np.ndarray) -> np.ndarray:
         """(nbf, ne) scalar dofs -> (ne, nbf * dim) interleaved vector dofs."""
-        return (self.dim * element_dofs.T[:, :, None] + np.arange(self.dim)).reshape(element_dofs.shape[1], -1)
+        return (self.dim * element_dofs.T[:, :, None] + np.arange(self.dim)).reshape(
+            element_dofs.shape[1], -1
+        )
 
     def _chunks(self, nloc: int):
         step = max(1, CHUNK_ENTRIES // (nloc * nloc))
@@ -67,8 +71,14 @@ class Discretisation:
             yield np.arange(start, min(start + step, self.nelems))
 
     def _cell_basis(self, elems, intorder):
-        return skfem.CellBasis(self.mesh, self.elem, mapping=self.mapping, intorder=intorder,
-                               elements=elems, dofs=self.dofs)
+        return skfem.CellBasis(
+            self.mesh,
+            self.elem,
+            mapping=self.mapping,
+            intorder=intorder,
+            elements=elems,
+            dofs=self.dofs,
+        )
 
     def stiffness(self, C: np.ndarray) -> sp.csr_matrix:
         """K for per-element Voigt stiffness C (ne, nv, nv)."""
@@ -94,14 +104,16 @@ class Discretisation:
         in the same order as cell 0's (a tensor mesh's quads or hexes), else None."""
         if SIMPLEX[self.cell]:
             return None
-        p = self.mesh.p[:, self.mesh.t]                       # dim, nv, ne
+        p = self.mesh.p[:, self.mesh.t]  # dim, nv, ne
         lo, hi = p.min(axis=1), p.max(axis=1)
         h = (hi - lo).T
         if not np.all(h > 0):
             return None
         tol = 1e-12 * h.T[:, None, :]
         upper = np.abs(p - hi[:, None, :]) <= tol
-        if not np.all(upper | (np.abs(p - lo[:, None, :]) <= tol)) or not np.all(upper == upper[:, :, :1]):
+        if not np.all(upper | (np.abs(p - lo[:, None, :]) <= tol)) or not np.all(
+            upper == upper[:, :, :1]
+        ):
             return None
         return h
 
@@ -114,7 +126,7 @@ class Discretisation:
         nbf, dim = len(self.basis.basis), self.dim
         nl = nbf * dim
         b = self._cell_basis(np.array([0]), self.q_stiff)
-        grad = np.stack([np.asarray(b.basis[a][0].grad)[:, 0] for a in range(nbf)])   # nbf, dim, nq
+        grad = np.stack([np.asarray(b.basis[a][0].grad)[:, 0] for a in range(nbf)])  # nbf, dim, nq
         G0 = np.einsum("ipk,jqk,k->pqij", grad, grad, b.dx[0])
         S = np.zeros((len(VOIGT[dim]), dim, dim))
         for v, (i, j) in enumerate(VOIGT[dim]):
@@ -122,11 +134,17 @@ class Discretisation:
             if i != j:
                 S[v, j, i] += 1.0
         vol = np.prod(h, axis=1)
-        scale = (vol / vol[0])[:, None, None] * (h[0][:, None] * h[0][None, :]) / (h[:, :, None] * h[:, None, :])
+        scale = (
+            (vol / vol[0])[:, None, None]
+            * (h[0][:, None] * h[0][None, :])
+            / (h[:, :, None] * h[:, None, :])
+        )
         K = sp.csr_matrix((self.ndof, self.ndof))
         for elems in self._chunks(nl):
             Ct = np.einsum("vap,evw,wbq->eabpq", S, C[elems], S) * scale[elems][:, None, None]
-            Ke = (Ct.reshape(-1, dim * dim) @ G0.reshape(dim * dim, nbf * nbf)).reshape(len(elems), dim, dim, nbf, nbf)
+            Ke = (Ct.reshape(-1, dim * dim) @ G0.reshape(dim * dim, nbf * nbf)).reshape(
+                len(elems), dim, dim, nbf, nbf
+            )
             Ke = Ke.transpose(0, 3, 1, 4, 2).reshape(len(elems), nl, nl)
             K = K + _scatter(Ke, self.vector_dofs(self.dofs.element_dofs[:, elems]), self.ndof)
         return K
@@ -150,8 +168,13 @@ class Discretisation:
     def body_load(self, f, intorder: int | None = None) -> np.ndarray:
         """Load vector of a force per volume: ``f`` (ne, dim) constant per element, or a
         callable x (dim, ne, nq) -> (dim, ne, nq)."""
-        b = self.basis if intorder is None else skfem.CellBasis(
-            self.mesh, self.elem, mapping=self.mapping, intorder=intorder, dofs=self.dofs)
+        b = (
+            self.basis
+            if intorder is None
+            else skfem.CellBasis(
+                self.mesh, self.elem, mapping=self.mapping, intorder=intorder, dofs=self.dofs
+            )
+        )
         if callable(f):
             fq = np.asarray(f(np.asarray(b.global_coordinates())))  # dim, ne, nq
         else:
@@ -174,24 +197,40 @@ class Discretisation:
 
     def traction_load(self, facets: np.ndarray, vector) -> np.ndarray:
         """Load vector of a constant traction ``vector`` on ``facets``."""
-        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=facets, intorder=self.q_mass,
-                              dofs=self.dofs)
+        fb = skfem.FacetBasis(
+            self.mesh,
+            self.elem,
+            mapping=self.mapping,
+            facets=facets,
+            intorder=self.q_mass,
+            dofs=self.dofs,
+        )
         w = skfem.asm(skfem.LinearForm(lambda v, _: v), fb)  # int phi_a ds, (ns,)
         return (w[:, None] * np.asarray(vector, float)[None, :]).ravel()
 
     def twist_load(self, facets: np.ndarray, w) -> np.ndarray:
         """Load vector of the traction w x (x - c) on ``facets`` (3-D), c their area
         centroid: a torque without resultant (harness.case.loadsets.Traction)."""
-        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=facets, intorder=self.q_mass,
-                              dofs=self.dofs)
+        fb = skfem.FacetBasis(
+            self.mesh,
+            self.elem,
+            mapping=self.mapping,
+            facets=facets,
+            intorder=self.q_mass,
+            dofs=self.dofs,
+        )
         xq, dx = np.asarray(fb.global_coordinates()), fb.dx
         c = np.einsum("dfq,fq->d", xq, dx) / dx.sum()
         w = np.asarray(w, float)
         out = np.zeros((self.ns, self.dim))
-        for comp in range(3):            # (w x r)_comp = w_a r_b - w_b r_a
+        for comp in range(3):  # (w x r)_comp = w_a r_b - w_b r_a
             a, b = (comp + 1) % 3, (comp + 2) % 3
-            out[:, comp] = skfem.asm(skfem.LinearForm(
-                lambda v, p: v * (w[a] * (p.x[b] - c[b]) - w[b] * (p.x[a] - c[a]))), fb)
+            out[:, comp] = skfem.asm(
+                skfem.LinearForm(
+                    lambda v, p: v * (w[a] * (p.x[b] - c[b]) - w[b] * (p.x[a] - c[a]))
+                ),
+                fb,
+            )
         return out.ravel()
 
     def stress_load(self, sigma) -> np.ndarray:
@@ -199,14 +238,20 @@ class Discretisation:
         normal of each facet): a constant stress (dim, dim), or a function of the points
         x (dim, nf, nq) -> (dim, dim, nf, nq); q_mass integrates a linear one against the
         basis exactly."""
-        fb = skfem.FacetBasis(self.mesh, self.elem, mapping=self.mapping, facets=self.mesh.boundary_facets(),
-                              intorder=self.q_mass, dofs=self.dofs)
+        fb = skfem.FacetBasis(
+            self.mesh,
+            self.elem,
+            mapping=self.mapping,
+            facets=self.mesh.boundary_facets(),
+            intorder=self.q_mass,
+            dofs=self.dofs,
+        )
         n = np.asarray(fb.normals)
         if callable(sigma):
             sq = np.asarray(sigma(np.asarray(fb.global_coordinates())))
         else:
             sq = np.asarray(sigma, float)[:, :, None, None]
-        t = np.einsum("ijfq,jfq->ifq", sq, n) * fb.dx            # traction times the facet weights
+        t = np.einsum("ijfq,jfq->ifq", sq, n) * fb.dx  # traction times the facet weights
         out = np.zeros((self.ns, self.dim))
         for a in range(len(fb.basis)):
             val = np.einsum("ifq,fq->fi", t, np.asarray(fb.basis[a][0]))
@@ -233,7 +278,7 @@ class Discretisation:
             m = np.zeros((ns, dim))
             m[:, c] = 1
             modes.append(m)
-        for i, j in ([(0, 1)] if dim == 2 else [(0, 1), (1, 2), (0, 2)]):
+        for i, j in [(0, 1)] if dim == 2 else [(0, 1), (1, 2), (0, 2)]:
             m = np.zeros((ns, dim))
             m[:, i], m[:, j] = -x[j], x[i]
             modes.append(m)
@@ -247,8 +292,10 @@ class Discretisation:
         s = np.linalg.svd(R, compute_uv=False) if len(R) else np.zeros(0)
         if len(s) < nr or s[-1] < 1e-8 * max(s[0], 1e-300):
             free = nr - int(np.sum(s > 1e-8 * (s[0] if len(s) else 1)))
-            raise ModelError(f"load case '{load_name}': the constraints leave {free} rigid motion(s) free",
-                             fix="constrain more parts or components")
+            raise ModelError(
+                f"load case '{load_name}': the constraints leave {free} rigid motion(s) free",
+                fix="constrain more parts or components",
+            )
 
 
 class _Isoparametric(skfem.MappingIsoparametric):
@@ -259,7 +306,9 @@ class _Isoparametric(skfem.MappingIsoparametric):
     rounding in the positions of the quadrature points."""
 
     def invF(self, x, tind=None, newton_max_iters=50, newton_tol=1e-12):
-        return super().invF(x, tind=tind, newton_max_iters=newton_max_iters, newton_tol=max(newton_tol, 1e-9))
+        return super().invF(
+            x, tind=tind, newton_max_iters=newton_max_iters, newton_tol=max(newton_tol, 1e-9)
+        )
 
 
 def mapping(mesh: skfem.Mesh):

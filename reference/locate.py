@@ -88,8 +88,10 @@ class Locator:
         bad = best > self.outside_tol
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise ModelError(f"{int(bad.sum())} point(s) lie outside the body, e.g. {pts[i].tolist()}",
-                             fix="give points inside or on the boundary of the body")
+            raise ModelError(
+                f"{int(bad.sum())} point(s) lie outside the body, e.g. {pts[i].tolist()}",
+                fix="give points inside or on the boundary of the body",
+            )
         return elem, ref
 
     def shape_values(self, elem_obj: skfem.Element, ref: np.ndarray) -> np.ndarray:

@@ -16,10 +16,14 @@ logging.getLogger("skfem.mesh.mesh").setLevel(logging.ERROR)
 
 MESHES = {"tri": skfem.MeshTri, "quad": skfem.MeshQuad, "tet": skfem.MeshTet, "hex": skfem.MeshHex}
 ELEMENTS = {
-    ("tri", "P1"): skfem.ElementTriP1, ("tri", "P2"): skfem.ElementTriP2,
-    ("quad", "P1"): skfem.ElementQuad1, ("quad", "P2"): skfem.ElementQuad2,
-    ("tet", "P1"): skfem.ElementTetP1, ("tet", "P2"): skfem.ElementTetP2,
-    ("hex", "P1"): skfem.ElementHex1, ("hex", "P2"): skfem.ElementHex2,
+    ("tri", "P1"): skfem.ElementTriP1,
+    ("tri", "P2"): skfem.ElementTriP2,
+    ("quad", "P1"): skfem.ElementQuad1,
+    ("quad", "P2"): skfem.ElementQuad2,
+    ("tet", "P1"): skfem.ElementTetP1,
+    ("tet", "P2"): skfem.ElementTetP2,
+    ("hex", "P1"): skfem.ElementHex1,
+    ("hex", "P2"): skfem.ElementHex2,
 }
 MESHIO_TYPES = {"tri": "triangle", "quad": "quad", "tet": "tetra", "hex": "hexahedron"}
 SIMPLEX = {"tri": True, "quad": False, "tet": True, "hex": False}
@@ -49,6 +53,7 @@ def polygon_mesh(vertices, divisions: int) -> skfem.MeshTri:
     centroid lies outside dropped. h = (shortest bbox side) / divisions."""
     from matplotlib.path import Path
     from scipy.spatial import Delaunay
+
     v = np.asarray(vertices, float)
     if np.sum(_cross2(v, np.roll(v, -1, 0))) < 0:
         v = v[::-1]
@@ -60,8 +65,15 @@ def polygon_mesh(vertices, divisions: int) -> skfem.MeshTri:
         edges.append(a + np.linspace(0, 1, k, endpoint=False)[:, None] * (b - a))
     boundary = np.vstack(edges)
     ys = np.arange(lo[1], hi[1] + h, h * np.sqrt(3) / 2)
-    lattice = [np.column_stack([np.arange(lo[0] + (i % 2) * h / 2, hi[0] + h, h), np.full(
-        len(np.arange(lo[0] + (i % 2) * h / 2, hi[0] + h, h)), y)]) for i, y in enumerate(ys)]
+    lattice = [
+        np.column_stack(
+            [
+                np.arange(lo[0] + (i % 2) * h / 2, hi[0] + h, h),
+                np.full(len(np.arange(lo[0] + (i % 2) * h / 2, hi[0] + h, h)), y),
+            ]
+        )
+        for i, y in enumerate(ys)
+    ]
     lattice = np.vstack(lattice)
     path = Path(np.vstack([v, v[:1]]), closed=True)
     inside = path.contains_points(lattice)
@@ -103,9 +115,13 @@ def file_mesh(body, cell: str) -> skfem.Mesh:
     kind = MESHIO_TYPES[cell]
     if kind not in m.cells:
         have = ", ".join(k for k, v in MESHIO_TYPES.items() if v in m.cells)
-        raise ModelError(f"the mesh has no {kind} cells", file=str(body.file), field="reference.cell",
-                         fix=f"set reference.cell to one of: {have}")
-    pts = m.points if m.points.shape[1] == m.dim else m.points[:, :m.dim]
+        raise ModelError(
+            f"the mesh has no {kind} cells",
+            file=str(body.file),
+            field="reference.cell",
+            fix=f"set reference.cell to one of: {have}",
+        )
+    pts = m.points if m.points.shape[1] == m.dim else m.points[:, : m.dim]
     mesh = from_meshio(meshio.Mesh(pts, [(kind, m.cells[kind])]))
     used = np.unique(mesh.t)
     if len(used) < mesh.p.shape[1]:  # drop nodes no cell uses (they would be floating dofs)

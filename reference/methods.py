@@ -31,7 +31,7 @@ from reference.graded.levels import Levels, n_dofs, solve_graded
 from reference.locate import Locator
 from reference.mesh import MESHES
 
-MODAL_DOFS = {2: 400_000, 3: 120_000}   # graded: the modes come from the finest level at most this
+MODAL_DOFS = {2: 400_000, 3: 120_000}  # graded: the modes come from the finest level at most this
 # large (the Sec. 6 cube's 108k-dof level factorises in ~3 GB; its 152k one would pass 6 GB, and its
 # shift-invert CG took > 15 min). Frequencies converge like h^(2p), far faster than the scored
 # displacements that need the finer levels.
@@ -53,6 +53,7 @@ class _OnMesh:
 class Refined(_OnMesh):
     """The finest of uniformly refined meshes; its estimate is the relative change from
     the previous level, the same at every point."""
+
     name = "refine"
 
     def __init__(self, case, mesh, fields: Mapping, estimates: dict):
@@ -74,7 +75,9 @@ class Refined(_OnMesh):
         return int(next(iter(self.fields.values())).size) if self.fields else 0
 
     def evaluate(self, points, load: str) -> np.ndarray:
-        return self.locator.evaluate(self.disc.basis, self.fields[load].reshape(-1, self.dim), points)
+        return self.locator.evaluate(
+            self.disc.basis, self.fields[load].reshape(-1, self.dim), points
+        )
 
     def u_max(self, load: str) -> float:
         nodal = self.fields[load].reshape(-1, self.dim)[: self.mesh.p.shape[1]]
@@ -98,6 +101,7 @@ class Adaptive(Refined):
     """The finest of adaptively refined meshes; the estimate per point comes from the
     last changes between levels and their observed order (``changes``; None after a
     single level: then as :class:`Refined`)."""
+
     name = "adaptive"
 
     def __init__(self, case, mesh, fields: Mapping, estimates: dict, changes: Changes | None):
@@ -115,18 +119,27 @@ class Adaptive(Refined):
         return self.changes.at(self.locator, self.disc.basis, points, load)
 
     def to_arrays(self, names) -> dict:
-        return {**super().to_arrays(names), **(self.changes.to_arrays(names) if self.changes is not None else {})}
+        return {
+            **super().to_arrays(names),
+            **(self.changes.to_arrays(names) if self.changes is not None else {}),
+        }
 
     @classmethod
     def from_arrays(cls, case, names, arrays: dict, estimates: dict):
         mesh = MESHES[case.reference.cell](arrays["p"], arrays["t"])
-        return cls(case, mesh, {n: arrays["u"][i] for i, n in enumerate(names)}, estimates,
-                   Changes.from_arrays(names, arrays))
+        return cls(
+            case,
+            mesh,
+            {n: arrays["u"][i] for i, n in enumerate(names)},
+            estimates,
+            Changes.from_arrays(names, arrays),
+        )
 
 
 class Graded(_OnMesh):
     """Q2 levels of a box extrapolated: the field and its estimate per point are the
     extrapolant's (``levels``); ``fields`` are the finest level's."""
+
     name = "graded"
 
     def __init__(self, case, levels: Levels):

@@ -33,17 +33,26 @@ def predicate(case, name: str, bbox, parts=None):
     return part_predicate(name, bbox, case.body.parts) if parts is None else parts(name, bbox)
 
 
-def fixed_dofs(d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), parts=None) -> np.ndarray:
+def fixed_dofs(
+    d: Discretisation, case, load, bbox, mirror: Mirror = Mirror(), parts=None
+) -> np.ndarray:
     """The load's constrained dofs (and, on a cut box, the cut planes' dofs). A part may
     miss a cut box when its mirror image is in it."""
-    out = [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, geometric_tol(bbox))] if mirror else []
+    out = (
+        [plane_dofs(d.doflocs, 0.5 * (bbox[0] + bbox[1]), mirror, geometric_tol(bbox))]
+        if mirror
+        else []
+    )
     for c in load.constraints:
         dofs = d.part_dofs(predicate(case, c.part, bbox, parts), c.components)
         if len(dofs) == 0 and mirror:
             continue
         if len(dofs) == 0:
-            raise ModelError(f"load case '{load.name}': constraint part '{c.part}' contains no mesh node",
-                             file=str(case.path), fix="enlarge the part or refine the mesh")
+            raise ModelError(
+                f"load case '{load.name}': constraint part '{c.part}' contains no mesh node",
+                file=str(case.path),
+                fix="enlarge the part or refine the mesh",
+            )
         out.append(dofs)
     fixed = np.unique(np.concatenate(out))
     try:
@@ -62,16 +71,20 @@ def load_stress(load):
     return lambda x: np.moveaxis(stress_field(load, np.moveaxis(x, 0, -1)), (-2, -1), (0, 1))
 
 
-def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror(),
-                parts=None) -> np.ndarray:
+def load_vector(
+    d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mirror = Mirror(), parts=None
+) -> np.ndarray:
     F = np.zeros(d.ndof)
     for t in load.tractions:
         facets = d.part_facets(predicate(case, t.part, bbox, parts))
         if len(facets) == 0 and mirror:
             continue
         if len(facets) == 0:
-            raise ModelError(f"load case '{load.name}': traction part '{t.part}' has no boundary facets",
-                             file=str(case.path), fix="put tractions on faces (2-D: edges) of the body")
+            raise ModelError(
+                f"load case '{load.name}': traction part '{t.part}' has no boundary facets",
+                file=str(case.path),
+                fix="put tractions on faces (2-D: edges) of the body",
+            )
         F += d.traction_load(facets, t.vector)
         if t.twist is not None:
             F += d.twist_load(facets, t.twist)
@@ -87,9 +100,17 @@ def load_vector(d: Discretisation, case, load, bbox, rho: np.ndarray, mirror: Mi
     return F
 
 
-def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
-                 prescribed: dict | None = None, records: list | None = None, C: np.ndarray | None = None,
-                 guess: dict | None = None) -> dict:
+def solve_system(
+    K,
+    loads: dict,
+    fixed: dict,
+    method: str,
+    d: Discretisation,
+    prescribed: dict | None = None,
+    records: list | None = None,
+    C: np.ndarray | None = None,
+    guess: dict | None = None,
+) -> dict:
     """Solve K u = F per load with u = 0 (or ``prescribed[name]``) on the fixed dofs.
     Loads sharing a constraint set share one factorisation; ``records`` (a list) gets a
     SolveRecord of each (reference/solvers/record.py) with the loads named. ``K``: the
@@ -116,7 +137,12 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
         if records is not None:
             records.append(dataclasses.replace(rec, loads=tuple(names), n=n))
 
-    tensor_mesh = C is not None and method in ("auto", "tensor") and d.order == "P2" and d.cell in ("quad", "hex")
+    tensor_mesh = (
+        C is not None
+        and method in ("auto", "tensor")
+        and d.order == "P2"
+        and d.cell in ("quad", "hex")
+    )
     lat = Lattice.q2(d.doflocs) if tensor_mesh and not prescribed else None
     C0 = None if lat is None else tensorsolve.homogeneous(C)
     op = None if C0 is None else tensorsolve.operator(lat, C0)
@@ -131,14 +157,23 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
                 apply, norm = op.apply_dofs, op.norm_bound()
             else:
                 apply, norm = stiffness().__matmul__, float(abs(stiffness()).sum(axis=1).max())
-            found = linearfield.solve(apply, d.doflocs, np.column_stack([loads[n] for n in names]), fx, norm)
+            found = linearfield.solve(
+                apply, d.doflocs, np.column_stack([loads[n] for n in names]), fx, norm
+            )
             if found is not None:
-                record(SolveRecord("linear", found[1], sparse.RTOL, 0, time.perf_counter() - t0), names, nfree)
+                record(
+                    SolveRecord("linear", found[1], sparse.RTOL, 0, time.perf_counter() - t0),
+                    names,
+                    nfree,
+                )
                 out.update({n: found[0][:, i] for i, n in enumerate(names)})
                 continue
         if plan.matrix_free:
-            x0 = None if not guess or any(n not in guess for n in names) else \
-                np.column_stack([guess[n] for n in names])
+            x0 = (
+                None
+                if not guess or any(n not in guess for n in names)
+                else np.column_stack([guess[n] for n in names])
+            )
             x, rec = tensorsolve.solve(op, np.column_stack([loads[n] for n in names]), fx, x0)
             if x is not None:
                 record(rec, names, nfree)
@@ -156,14 +191,22 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
             rhs.append(F[free])
         if R is None:
             R = d.rigid_modes()
-            coords = np.repeat(d.doflocs.T, d.dim, axis=0)   # location of each interleaved dof
+            coords = np.repeat(d.doflocs.T, d.dim, axis=0)  # location of each interleaved dof
             P = twolevel.prolongation(d) if plan.coarse else None
         tensor = None
         if tensor_mesh and tried is None:
             tensor = tensorpre.preconditioner(d.doflocs, free, C)
         done: list = []
-        x = sparse.solve(A, np.column_stack(rhs), "auto" if tried else method, R[free], records=done,
-                         coords=coords[free], coarse=None if P is None else P[free], tensor=tensor)
+        x = sparse.solve(
+            A,
+            np.column_stack(rhs),
+            "auto" if tried else method,
+            R[free],
+            records=done,
+            coords=coords[free],
+            coarse=None if P is None else P[free],
+            tensor=tensor,
+        )
         rec = done[0]
         if tried:
             rec = dataclasses.replace(rec, fallbacks=(tried,) + rec.fallbacks)
@@ -177,9 +220,17 @@ def solve_system(K, loads: dict, fixed: dict, method: str, d: Discretisation,
     return out
 
 
-def solve_mesh(case, mesh, loads=None, records: list | None = None, mirror: Mirror = Mirror(),
-               disc: Discretisation | None = None, parts=None, stiffness: dict | None = None,
-               guess: dict | None = None) -> dict:
+def solve_mesh(
+    case,
+    mesh,
+    loads=None,
+    records: list | None = None,
+    mirror: Mirror = Mirror(),
+    disc: Discretisation | None = None,
+    parts=None,
+    stiffness: dict | None = None,
+    guess: dict | None = None,
+) -> dict:
     """Displacements {load: (ndof,)} of the load cases of ``case`` on ``mesh`` (all, or
     those named in ``loads``). ``records``: a list that gets one SolveRecord per
     factorisation (reference/solvers/record.py). ``mirror``: ``mesh`` is the lower part of the
@@ -202,7 +253,7 @@ def solve_mesh(case, mesh, loads=None, records: list | None = None, mirror: Mirr
         return exact
     fixed = {l.name: fixed_dofs(d, case, l, bbox, mirror, parts) for l in chosen}
     F = {l.name: load_vector(d, case, l, bbox, rho, mirror, parts) for l in chosen}
-    held = {} if kept is None else kept[0]       # K, once something asks for it
+    held = {} if kept is None else kept[0]  # K, once something asks for it
 
     def K():
         if "K" not in held:
@@ -211,7 +262,10 @@ def solve_mesh(case, mesh, loads=None, records: list | None = None, mirror: Mirr
 
     if stiffness is not None:
         stiffness[id(d)] = (held, C)
-    return {**solve_system(K, F, fixed, case.reference.solver, d, records=records, C=C, guess=guess), **exact}
+    return {
+        **solve_system(K, F, fixed, case.reference.solver, d, records=records, C=C, guess=guess),
+        **exact,
+    }
 
 
 def homogeneous_field(d: Discretisation, case, load, C: np.ndarray) -> np.ndarray | None:

@@ -31,6 +31,7 @@ from reference.solvers.record import SolveRecord
 
 # -- the solution --------------------------------------------------------------------
 
+
 class ErrorEstimate(dict):
     """The reference's own error: ``est[load]`` is the relative estimate of a load case
     (largest estimated error over the probe points / largest displacement), and
@@ -56,8 +57,17 @@ class ReferenceSolution:
     finest), ``basis`` (scalar) and ``vector_basis`` for plots.
     """
 
-    def __init__(self, case, method, estimates: dict, history: list, key: str,
-                 from_cache: bool = False, seconds: float = 0.0, solver: list | None = None):
+    def __init__(
+        self,
+        case,
+        method,
+        estimates: dict,
+        history: list,
+        key: str,
+        from_cache: bool = False,
+        seconds: float = 0.0,
+        solver: list | None = None,
+    ):
         self.case = case
         self.method = method
         self.mesh = method.mesh
@@ -106,7 +116,9 @@ class ReferenceSolution:
 
     @cached_property
     def vector_basis(self) -> skfem.CellBasis:
-        return skfem.Basis(self.mesh, skfem.ElementVector(self.disc.elem), intorder=self.disc.q_mass)
+        return skfem.Basis(
+            self.mesh, skfem.ElementVector(self.disc.elem), intorder=self.disc.q_mass
+        )
 
     @property
     def locator(self) -> Locator:
@@ -136,7 +148,9 @@ class ReferenceSolution:
     def met_tol(self) -> bool:
         """Whether every load case's estimate is below the case's ``reference.tol``
         (False when there is no estimate: a single level is never trusted)."""
-        return all(np.isfinite(v) and v < self.case.reference.tol for v in self.error_estimate.values())
+        return all(
+            np.isfinite(v) and v < self.case.reference.tol for v in self.error_estimate.values()
+        )
 
     def _estimate(self, points, load: str) -> np.ndarray:
         return self.method.estimate(np.asarray(points, float), self._check_load(load))
@@ -161,6 +175,7 @@ class ReferenceSolution:
         k = min(k, len(free))
         if len(free) <= max(400, 3 * k):
             import scipy.linalg as sl
+
             lam, vec = sl.eigh(Kf.toarray(), Mf.toarray())
             lam, vec = lam[:k], vec[:, :k]
         else:
@@ -168,11 +183,21 @@ class ReferenceSolution:
 
             from reference.solvers.sparse import inverse
             from reference.solvers.twolevel import prolongation
+
             P = prolongation(d)
-            solve = inverse(Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free], None if P is None else P[free])
+            solve = inverse(
+                Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free], None if P is None else P[free]
+            )
             opinv = None if solve is None else LinearOperator(Kf.shape, matvec=solve, dtype=float)
-            lam, vec = eigsh(Kf.tocsc(), k=k, M=Mf.tocsc(), sigma=0.0, which="LM", OPinv=opinv,
-                             v0=np.random.default_rng(0).standard_normal(Kf.shape[0]))  # seeded: same bits
+            lam, vec = eigsh(
+                Kf.tocsc(),
+                k=k,
+                M=Mf.tocsc(),
+                sigma=0.0,
+                which="LM",
+                OPinv=opinv,
+                v0=np.random.default_rng(0).standard_normal(Kf.shape[0]),
+            )  # seeded: same bits
         order = np.argsort(lam)
         lam, vec = lam[order], vec[:, order]
         modes = np.zeros((k, d.ndof))
@@ -192,9 +217,13 @@ class ReferenceSolution:
     def modes(self, k: int | None = None, load: str | None = None) -> np.ndarray:
         """Mode shapes (k, n_vertices, dim) at the vertices of ``modal_mesh``, M-orthonormal."""
         k = k or self.case.reference.modes or 6
-        return self._modal_solve(k, self._check_load(load or self.loads[0]))[1][:, : self.modal_mesh.p.shape[1]]
+        return self._modal_solve(k, self._check_load(load or self.loads[0]))[1][
+            :, : self.modal_mesh.p.shape[1]
+        ]
 
-    def mode_displacement(self, points, i: int, k: int | None = None, load: str | None = None) -> np.ndarray:
+    def mode_displacement(
+        self, points, i: int, k: int | None = None, load: str | None = None
+    ) -> np.ndarray:
         """Mode i evaluated at points (n, dim)."""
         k = max(k or self.case.reference.modes or 6, i + 1)
         shapes = self._modal_solve(k, self._check_load(load or self.loads[0]))[1]
@@ -204,6 +233,7 @@ class ReferenceSolution:
 
 
 # -- solve ----------------------------------------------------------------------------
+
 
 def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolution:
     """The reference solution of every load case of a case.
@@ -225,8 +255,12 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
         error there (``estimate``), the solve history, the solvers used and the modes.
     """
     if not case.loads:
-        raise ModelError("the case has no load cases", file=str(case.path), field="loads",
-                         fix="add loads.set or [[loads.case]]")
+        raise ModelError(
+            "the case has no load cases",
+            file=str(case.path),
+            field="loads",
+            fix="add loads.set or [[loads.case]]",
+        )
     key = _cache.case_key(case) if cache else ""
     names = [l.name for l in case.loads]
     method = method_of(case)
@@ -236,16 +270,29 @@ def solve(case, *, cache: bool = True, status=lambda msg: None) -> ReferenceSolu
             est = {n: float(hit["estimate"][i]) for i, n in enumerate(names)}
             hist = [dict(zip(["n_dofs"] + names, row)) for row in hit["history"]]
             solver = [SolveRecord(str(m), float(r)) for m, r in zip(hit["solver"], hit["residual"])]
-            return ReferenceSolution(case, method.from_arrays(case, names, hit, est), est, hist, key,
-                                     from_cache=True, seconds=float(hit["seconds"]), solver=solver)
+            return ReferenceSolution(
+                case,
+                method.from_arrays(case, names, hit, est),
+                est,
+                hist,
+                key,
+                from_cache=True,
+                seconds=float(hit["seconds"]),
+                solver=solver,
+            )
     t0 = time.perf_counter()
     records: list = []
     solved, est, history = method.solve(case, status, records)
     seconds = time.perf_counter() - t0
     solver = [SolveRecord(r.method, r.residual) for r in records]
     if cache:
-        _cache.save(key, **solved.to_arrays(names), estimate=np.array([est[n] for n in names]),
-                    history=np.array([[h["n_dofs"]] + [h[n] for n in names] for h in history], float),
-                    seconds=seconds, solver=np.array([r.method for r in solver]),
-                    residual=np.array([r.residual for r in solver], float))
+        _cache.save(
+            key,
+            **solved.to_arrays(names),
+            estimate=np.array([est[n] for n in names]),
+            history=np.array([[h["n_dofs"]] + [h[n] for n in names] for h in history], float),
+            seconds=seconds,
+            solver=np.array([r.method for r in solver]),
+            residual=np.array([r.residual for r in solver], float),
+        )
     return ReferenceSolution(case, solved, est, history, key, seconds=seconds, solver=solver)

@@ -29,6 +29,15 @@ def test_ruff_check_is_clean():
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-1000:]
 
 
+FORMATTED = ("reference",)     # folders kept in `ruff format` style (line length 100, E501 enforced)
+
+
+def test_formatted_folders_are_in_ruff_format_style():
+    proc = subprocess.run([sys.executable, "-m", "ruff", "format", "--check", "--no-cache", *FORMATTED],
+                          cwd=ROOT, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-1000:]
+
+
 def test_no_history_or_issue_numbers_in_the_code():
     found = []
     for folder in CODE:

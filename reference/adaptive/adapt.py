@@ -67,31 +67,31 @@ from reference.problem import (
     solve_system,
 )
 
-THETA = 0.5          # Dörfler's bulk parameter: the marked elements carry this share of eta^2, ...
-LEAST = 0.1          # ... and are at least this share of the elements: a step then adds >= ~25 %
+THETA = 0.5  # Dörfler's bulk parameter: the marked elements carry this share of eta^2, ...
+LEAST = 0.1  # ... and are at least this share of the elements: a step then adds >= ~25 %
 # dofs (Dörfler's set alone added 2 % on a 10k-tet cylinder), and the estimate's
 # 1 / (r^p - 1) does not blow a step's noise up (there, three steps at a safety factor of
 # 1.25: 53k dofs and a 1.7 % estimate without LEAST, 103k and 0.3 % with)
-STEPS_PER_REFINE = {2: 2, 3: 3}   # bisection steps per [reference] max_refine: dim bisections
+STEPS_PER_REFINE = {2: 2, 3: 3}  # bisection steps per [reference] max_refine: dim bisections
 # of every element halve its size, so max_refine uniform refinements' worth of levels
-MAX_DOFS = {2: 400_000, 3: 200_000}   # the finest level's dofs at most, ...
-GROWTH = 1.0                          # ... or the user's mesh's own if larger: a 50k-tet mesh
+MAX_DOFS = {2: 400_000, 3: 200_000}  # the finest level's dofs at most, ...
+GROWTH = 1.0  # ... or the user's mesh's own if larger: a 50k-tet mesh
 # (214k dofs) is not refined (at 2x it took 18 min of AMG, against calibrate's 5-minute
 # target for such a mesh) but estimated from COARSE levels (below)
-WIDE = 4.0            # the estimate's levels are about this factor apart in dofs (when they span WIDE^2)
-SAFETY_THREE = 1.25   # Roache's factor of safety when three levels give the observed order
-EXACT = 1e-9          # a change below this share of the largest displacement is rounding
-FIT = 4               # changes the order is fitted to at most
-COARSE = (1 / (3 * WIDE ** 2), 1 / WIDE ** 2)   # a mesh no refinement of fits in the budget:
+WIDE = 4.0  # the estimate's levels are about this factor apart in dofs (when they span WIDE^2)
+SAFETY_THREE = 1.25  # Roache's factor of safety when three levels give the observed order
+EXACT = 1e-9  # a change below this share of the largest displacement is rounding
+FIT = 4  # changes the order is fitted to at most
+COARSE = (1 / (3 * WIDE**2), 1 / WIDE**2)  # a mesh no refinement of fits in the budget:
 # the estimate's levels i and j are coarser meshes of its body with about these shares of
 # its vertices (reference/adaptive/coarse.py; ~1/30 and ~1/10 of its dofs). Their Galerkin matrices
 # couple dofs a cell further than a native stiffness (~465 nonzeros a row, ~5x), so at
 # 1/4 of the vertices (72k dofs on the 50k-tet cylinder) the direct solve ran > 6 min
 # and 5.7 GB; at 1/16, 20k dofs, ~20 s. A refinement adds at least ~25 % dofs:
 GROWTH_MIN = 1.25
-COARSE_MAX_DOFS = 25_000   # the finer coarse level has at most about these dofs (the shares shrink
+COARSE_MAX_DOFS = 25_000  # the finer coarse level has at most about these dofs (the shares shrink
 # alike: a 200k-tet body's 1/10 level, 69k dofs and 32 M nonzeros, took ~190 s of its 5 clamp sets)
-HIGHEST = {"P1": 1.0, "P2": 2.0}   # the observed order at most the degree k: point values
+HIGHEST = {"P1": 1.0, "P2": 2.0}  # the observed order at most the degree k: point values
 # converge at k + 1 only where the solution is smooth, and a clamped or partly loaded face
 # has singular edges (B&C tetra cube_333, against the independent solve: 1.0-1.3 for the
 # shears, 2.3-2.7 for the sag between the wide levels, whose largest changes fitted 3 and
@@ -107,6 +107,7 @@ class Changes:
     represented exactly). ``uniform`` {load: bound}: the estimate is that bound at every
     point instead (coarse levels: their pointwise changes do not follow the finest
     mesh's error, only their largest does)."""
+
     d1: dict
     d2: dict
     coef: dict
@@ -117,14 +118,20 @@ class Changes:
             return np.full(len(points), self.uniform[load])
         a1, a2 = self.coef[load]
         dim = points.shape[1]
-        v = locator.evaluate(basis, np.column_stack([self.d1[load].reshape(-1, dim),
-                                                     self.d2[load].reshape(-1, dim)]), points)
+        v = locator.evaluate(
+            basis,
+            np.column_stack([self.d1[load].reshape(-1, dim), self.d2[load].reshape(-1, dim)]),
+            points,
+        )
         e1, e2 = np.linalg.norm(v[:, :dim], axis=1), np.linalg.norm(v[:, dim:], axis=1)
         return np.maximum(a1 * e1, a2 * e2)
 
     def to_arrays(self, names) -> dict:
-        out = {"d1": np.stack([self.d1[n] for n in names]), "d2": np.stack([self.d2[n] for n in names]),
-               "coef": np.array([self.coef[n] for n in names], float)}
+        out = {
+            "d1": np.stack([self.d1[n] for n in names]),
+            "d2": np.stack([self.d2[n] for n in names]),
+            "coef": np.array([self.coef[n] for n in names], float),
+        }
         if self.uniform is not None:
             out["uniform"] = np.array([self.uniform[n] for n in names], float)
         return out
@@ -133,16 +140,25 @@ class Changes:
     def from_arrays(cls, names, arrays) -> "Changes | None":
         if "coef" not in arrays:
             return None
-        uniform = {n: float(arrays["uniform"][i]) for i, n in enumerate(names)} if "uniform" in arrays else None
-        return cls({n: arrays["d1"][i] for i, n in enumerate(names)},
-                   {n: arrays["d2"][i] for i, n in enumerate(names)},
-                   {n: tuple(arrays["coef"][i]) for i, n in enumerate(names)}, uniform)
+        uniform = (
+            {n: float(arrays["uniform"][i]) for i, n in enumerate(names)}
+            if "uniform" in arrays
+            else None
+        )
+        return cls(
+            {n: arrays["d1"][i] for i, n in enumerate(names)},
+            {n: arrays["d2"][i] for i, n in enumerate(names)},
+            {n: tuple(arrays["coef"][i]) for i, n in enumerate(names)},
+            uniform,
+        )
 
 
 def n_dofs(mesh, order: str) -> int:
     """Vector dofs of a P1/P2 simplex mesh (P2: vertices and edge midpoints)."""
     dim = mesh.p.shape[0]
-    ns = mesh.p.shape[1] + (0 if order == "P1" else (mesh.facets.shape[1] if dim == 2 else mesh.edges.shape[1]))
+    ns = mesh.p.shape[1] + (
+        0 if order == "P1" else (mesh.facets.shape[1] if dim == 2 else mesh.edges.shape[1])
+    )
     return dim * ns
 
 
@@ -154,17 +170,17 @@ def fitted_order(changes, dofs, dim: int, highest: float = ORDER_RANGE[1]) -> fl
     c = np.asarray(changes[-FIT:], float)
     if len(c) < 2:
         return ORDER_RANGE[0]
-    h = np.asarray(dofs[-len(c) - 1:], float) ** (-1.0 / dim)
+    h = np.asarray(dofs[-len(c) - 1 :], float) ** (-1.0 / dim)
     p = np.linspace(ORDER_RANGE[0], highest, 401)
     res = np.log(c)[:, None] - np.log(h[:-1, None] ** p - h[1:, None] ** p)
     res -= res.mean(axis=0)
-    return float(p[np.argmin((res ** 2).sum(axis=0))])
+    return float(p[np.argmin((res**2).sum(axis=0))])
 
 
 def coefficients(p: float, dofs, dim: int) -> tuple:
     """(a1, a2): the last and the previous change scaled to the finest level's error,
     h_k^p / (h_(k-1)^p - h_k^p) and h_k^p / (h_(k-2)^p - h_(k-1)^p) (0 with two levels)."""
-    h = np.asarray(dofs[-3:], float) ** (-p / dim)       # h^p
+    h = np.asarray(dofs[-3:], float) ** (-p / dim)  # h^p
     a1 = h[-1] / (h[-2] - h[-1])
     return a1, (h[-1] / (h[-3] - h[-2]) if len(h) == 3 else 0.0)
 
@@ -180,8 +196,12 @@ def _marked(case, d: Discretisation, U: dict, loads, parts) -> np.ndarray:
     cent = d.centroids()
     C, rho = element_stiffness(case.material, cent), densities(case.material, cent)
     bbox = body_bbox(case, d.mesh)
-    fixed = {l.name: fixed_dofs(d, case, l, bbox, parts=parts) if l.constraints else np.zeros(0, np.int64)
-             for l in loads}
+    fixed = {
+        l.name: fixed_dofs(d, case, l, bbox, parts=parts)
+        if l.constraints
+        else np.zeros(0, np.int64)
+        for l in loads
+    }
     total = np.zeros(d.nelems)
     for eta2 in indicators(d, case, loads, U, C, rho, bbox, fixed, parts).values():
         if eta2.sum() > 0:
@@ -206,24 +226,33 @@ def solve_adaptive(case, status=lambda msg: None, records: list | None = None):
     d = Discretisation(mesh, spec.cell, spec.element)
     C0 = element_stiffness(case.material, d.centroids())
     solved = [l for l in case.loads if homogeneous_field(d, case, l, C0) is None]
-    est = {n: (float("nan") if any(l.name == n for l in solved) else 0.0) for n in names}   # closed forms: exact
+    est = {
+        n: (float("nan") if any(l.name == n for l in solved) else 0.0) for n in names
+    }  # closed forms: exact
     parts = UserMeshParts(case, mesh)
     budget = max(MAX_DOFS[dim], int(GROWTH * d.ndof))
     steps = STEPS_PER_REFINE[dim] * spec.max_refine if solved else 0
     history = []
-    kept = []                 # earlier levels: (dofs, {load: field on this level's mesh})
+    kept = []  # earlier levels: (dofs, {load: field on this level's mesh})
     changes = None
 
     def probe(v):
         return np.linalg.norm(v[: nv0 * dim].reshape(nv0, dim), axis=1)
-    if steps and GROWTH_MIN * d.ndof > budget:       # too large to refine: coarser meshes of its body
-        status(f"FEM on the mesh ({d.ndof} dofs, {d.nelems} elements; too large to refine within "
-               f"{budget} dofs: the estimate comes from coarser meshes of its body)")
+
+    if steps and GROWTH_MIN * d.ndof > budget:  # too large to refine: coarser meshes of its body
+        status(
+            f"FEM on the mesh ({d.ndof} dofs, {d.nelems} elements; too large to refine within "
+            f"{budget} dofs: the estimate comes from coarser meshes of its body)"
+        )
         U, kept = _with_coarse(case, d, parts, status, records)
         if kept:
             changes = _wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
-            changes = Changes(changes.d1, changes.d2, changes.coef,
-                              {n: est[n] * max(float(probe(U[n]).max()), 1e-300) for n in names})
+            changes = Changes(
+                changes.d1,
+                changes.d2,
+                changes.coef,
+                {n: est[n] * max(float(probe(U[n]).max()), 1e-300) for n in names},
+            )
         history.append(dict(n_dofs=int(d.ndof), **est))
         return d.mesh, U, est, history, changes
     for k in range(steps + 1):
@@ -271,8 +300,10 @@ def _with_coarse(case, d: Discretisation, parts, status, records):
         cd = Discretisation(cm, spec.cell, spec.element)
         status(f"FEM coarse level for the estimate ({cd.ndof} dofs, {cd.nelems} elements)")
         try:
-            kept.append((cd.ndof, {**galerkin_solve(K, F, fixed, spec.solver, cd, d, records), **exact}))
-        except ModelError as exc:        # e.g. a grid too coarse for the clamp to leave it a field
+            kept.append(
+                (cd.ndof, {**galerkin_solve(K, F, fixed, spec.solver, cd, d, records), **exact})
+            )
+        except ModelError as exc:  # e.g. a grid too coarse for the clamp to leave it a field
             status(f"FEM: no coarse level ({exc.message}); no estimate")
             return U, []
     return U, kept
@@ -282,7 +313,7 @@ def _levels(dofs, k: int):
     """(i, j) of the wide steps below level k: i the last level with dofs <= dofs[k] /
     WIDE^2 (else the first), j the level between them nearest their middle in log dofs;
     (None, i) when no level lies between."""
-    below = [l for l in range(k) if dofs[l] * WIDE ** 2 <= dofs[k]]
+    below = [l for l in range(k) if dofs[l] * WIDE**2 <= dofs[k]]
     i = below[-1] if below else 0
     if k - i < 2:
         return None, i
@@ -293,8 +324,8 @@ def _levels(dofs, k: int):
 def _prune(kept):
     """Drop the levels no later estimate can use (level i only moves up)."""
     dofs = [n for n, _ in kept]
-    below = [l for l in range(len(dofs) - 1) if dofs[l] * WIDE ** 2 <= dofs[-1]]
-    return kept[below[-1]:] if below else kept
+    below = [l for l in range(len(dofs) - 1) if dofs[l] * WIDE**2 <= dofs[-1]]
+    return kept[below[-1] :] if below else kept
 
 
 def _carry(kept, d: Discretisation, fine: Discretisation, names):
@@ -304,12 +335,22 @@ def _carry(kept, d: Discretisation, fine: Discretisation, names):
     vals = _interpolate(d, cols, fine)
     out, c = [], 0
     for ndof, _ in kept:
-        out.append((ndof, {n: vals[:, (c + a) * dim:(c + a + 1) * dim].ravel() for a, n in enumerate(names)}))
+        out.append(
+            (
+                ndof,
+                {
+                    n: vals[:, (c + a) * dim : (c + a + 1) * dim].ravel()
+                    for a, n in enumerate(names)
+                },
+            )
+        )
         c += len(names)
     return out
 
 
-def _wide_changes(kept, ndof: int, U: dict, names, dim: int, highest: float, probe, est: dict) -> Changes:
+def _wide_changes(
+    kept, ndof: int, U: dict, names, dim: int, highest: float, probe, est: dict
+) -> Changes:
     """The Changes of the finest level U over the wide steps (module docstring); fills
     ``est`` ({load: largest estimate at the user's vertices / max |u| there})."""
     dofs = [n for n, _ in kept] + [ndof]
@@ -325,7 +366,11 @@ def _wide_changes(kept, ndof: int, U: dict, names, dim: int, highest: float, pro
         if e1.max() <= EXACT * scale:
             coef[n] = (1.0, 0.0)
         else:
-            p = fitted_order([e2.max(), e1.max()], used, dim, highest) if i is not None else ORDER_RANGE[0]
+            p = (
+                fitted_order([e2.max(), e1.max()], used, dim, highest)
+                if i is not None
+                else ORDER_RANGE[0]
+            )
             safety = SAFETY_THREE if i is not None else SAFETY
             coef[n] = tuple(safety * a for a in coefficients(p, used, dim))
         est[n] = float(np.maximum(coef[n][0] * e1, coef[n][1] * e2).max() / scale)

@@ -24,8 +24,8 @@ from reference.fem import Discretisation
 from reference.locate import Locator
 from reference.solvers import sparse, twolevel
 
-KEEP = 0.25         # a coarse dof keeps its column when the fixed dofs take at most 1 - KEEP of its weight
-INSIDE = 1e-9       # a centroid's barycentric violation in the user's mesh up to this is inside
+KEEP = 0.25  # a coarse dof keeps its column when the fixed dofs take at most 1 - KEEP of its weight
+INSIDE = 1e-9  # a centroid's barycentric violation in the user's mesh up to this is inside
 
 
 def transfer(coarse: Discretisation, fine: Discretisation) -> sp.csr_matrix:
@@ -33,15 +33,24 @@ def transfer(coarse: Discretisation, fine: Discretisation) -> sp.csr_matrix:
     field (interleaved dofs), fine dofs outside the coarse mesh taking the polynomial of
     its nearest element: range(P) lies in the fine space."""
     elem, ref = Locator(coarse.mesh, outside_tol=np.inf).locate(fine.doflocs.T)
-    phi = np.stack([coarse.basis.elem.lbasis(ref, i)[0] for i in range(coarse.basis.elem.doflocs.shape[0])])
+    phi = np.stack(
+        [coarse.basis.elem.lbasis(ref, i)[0] for i in range(coarse.basis.elem.doflocs.shape[0])]
+    )
     cols = coarse.basis.element_dofs[:, elem]
     rows = np.broadcast_to(np.arange(fine.ns), cols.shape)
     Ps = sp.csr_matrix((phi.ravel(), (rows.ravel(), cols.ravel())), shape=(fine.ns, coarse.ns))
     return sp.csr_matrix(sp.kron(Ps, sp.eye(fine.dim), format="csr"))
 
 
-def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation, fine: Discretisation,
-                   records: list | None = None) -> dict:
+def galerkin_solve(
+    K,
+    F: dict,
+    fixed: dict,
+    method: str,
+    coarse: Discretisation,
+    fine: Discretisation,
+    records: list | None = None,
+) -> dict:
     """{load: fine dofs} of the Galerkin solutions of the fine system (K u = F, u = 0 on
     fixed[load]) in the subspace P W (``transfer``, its rows on fixed dofs zeroed, the
     coarse dofs that lose more than 1 - KEEP of their weight to them dropped): a
@@ -53,23 +62,43 @@ def galerkin_solve(K, F: dict, fixed: dict, method: str, coarse: Discretisation,
     full = np.asarray(P.multiply(P).sum(axis=0)).ravel()
     R = coarse.rigid_modes()
     coords = np.repeat(coarse.doflocs.T, coarse.dim, axis=0)
-    low = twolevel.prolongation(coarse)      # the coarse mesh's P1 fields: the two-level method's subspace
+    low = twolevel.prolongation(
+        coarse
+    )  # the coarse mesh's P1 fields: the two-level method's subspace
     out, groups = {}, {}
     for name in F:
         groups.setdefault(fixed[name].tobytes(), []).append(name)
     for names in groups.values():
         free = np.setdiff1d(np.arange(fine.ndof), fixed[names[0]])
         P0 = P[free]
-        kept = np.flatnonzero((np.asarray(P0.multiply(P0).sum(axis=0)).ravel() >= KEEP * full) & (full > 0))
+        kept = np.flatnonzero(
+            (np.asarray(P0.multiply(P0).sum(axis=0)).ravel() >= KEEP * full) & (full > 0)
+        )
         P0 = sp.csr_matrix(P0[:, kept])
-        Pz = sp.csr_matrix((P0.data, P0.indices, _rows_at(P0.indptr, free, fine.ndof)), shape=(fine.ndof, len(kept)))
-        A = sp.csr_matrix(Pz.T @ (K @ Pz))          # = P0^T K_ff P0 without slicing K (852k dofs: ~3 s a slice)
+        Pz = sp.csr_matrix(
+            (P0.data, P0.indices, _rows_at(P0.indptr, free, fine.ndof)),
+            shape=(fine.ndof, len(kept)),
+        )
+        A = sp.csr_matrix(
+            Pz.T @ (K @ Pz)
+        )  # = P0^T K_ff P0 without slicing K (852k dofs: ~3 s a slice)
         b = np.column_stack([P0.T @ F[n][free] for n in names])
         done: list = []
-        y = sparse.solve(A, b, method, R[kept], records=done, coords=coords[kept],
-                         coarse=None if low is None else low[kept])
+        y = sparse.solve(
+            A,
+            b,
+            method,
+            R[kept],
+            records=done,
+            coords=coords[kept],
+            coarse=None if low is None else low[kept],
+        )
         if records is not None:
-            records.append(dataclasses.replace(done[0], loads=tuple(names), n=len(kept), nnz=int(A.nnz), coarse=True))
+            records.append(
+                dataclasses.replace(
+                    done[0], loads=tuple(names), n=len(kept), nnz=int(A.nnz), coarse=True
+                )
+            )
         for i, n in enumerate(names):
             u = np.zeros(fine.ndof)
             u[free] = P0 @ y[:, i]
@@ -93,7 +122,9 @@ def grid_mesh(mesh, fraction: float):
     cell is left."""
     p, dim = mesh.p, mesh.p.shape[0]
     lo, hi = p.min(axis=1), p.max(axis=1)
-    vol = float(np.abs(mesh._mapping().detDF(np.zeros((dim, 1)))).sum()) / (2.0 if dim == 2 else 6.0)
+    vol = float(np.abs(mesh._mapping().detDF(np.zeros((dim, 1)))).sum()) / (
+        2.0 if dim == 2 else 6.0
+    )
     s = (vol / (fraction * p.shape[1])) ** (1.0 / dim)
     n = np.maximum(1, np.round((hi - lo) / s).astype(int))
     axes = [np.linspace(a, b, k + 1) for a, b, k in zip(lo, hi, n)]
@@ -107,4 +138,3 @@ def grid_mesh(mesh, fraction: float):
     remap = np.full(grid.p.shape[1], -1)
     remap[used] = np.arange(len(used))
     return cls(np.ascontiguousarray(grid.p[:, used]), np.ascontiguousarray(remap[t]))
-

@@ -9,8 +9,9 @@ For an element T (Verfürth, "A posteriori error estimation techniques", 2013, S
 with f the body force (rho g + body_force), g the prescribed traction (traction parts
 tested at each quadrature point, so a facet a part's box cuts shows its mismatch, and
 sigma_load(x) . n of a stress load, constant or linear, twists included), h the diameter
-(h / k for elements of degree k, Melenk & Wohlmuth 2001) and c_T the smallest eigenvalue of the element's
-elastic tensor (Mandel form; 2 mu when isotropic), which puts eta^2 in energy units:
+(h / k for elements of degree k, Melenk & Wohlmuth 2001) and c_T the smallest
+eigenvalue of the element's elastic tensor (Mandel form; 2 mu when isotropic), which
+puts eta^2 in energy units:
 sum eta_T^2 bounds the energy norm a(e, e) of the error up to a constant of the mesh
 shape (tests/reference/test_adaptive.py: eta / |e|_a stays in 1..20 and constant under
 refinement). A component fixed at every vertex of an element or facet carries no
@@ -28,7 +29,7 @@ import skfem
 from reference.fem import VOIGT, Discretisation
 from reference.problem import load_stress, predicate
 
-CHUNK = 50_000      # facets or elements per evaluation (memory: ~ CHUNK * basis * quadrature)
+CHUNK = 50_000  # facets or elements per evaluation (memory: ~ CHUNK * basis * quadrature)
 
 
 def body_force(case, load, rho: np.ndarray) -> np.ndarray:
@@ -52,7 +53,7 @@ def stress(basis, U: np.ndarray, C: np.ndarray) -> np.ndarray:
     """sigma_h (dim, dim, n, nq) at the basis' quadrature points; U (ns, dim) nodal
     values, C (n, nv, nv) the Voigt stiffness of the element each point lies in."""
     dim = U.shape[1]
-    G = np.stack([basis.interpolate(U[:, c]).grad for c in range(dim)])   # dG[c, j] = du_c/dx_j
+    G = np.stack([basis.interpolate(U[:, c]).grad for c in range(dim)])  # dG[c, j] = du_c/dx_j
     eps = np.stack([G[i, i] if i == j else G[i, j] + G[j, i] for i, j in VOIGT[dim]], axis=-1)
     sv = np.einsum("nab,nqb->nqa", C, eps)
     sig = np.empty((dim, dim) + sv.shape[:2])
@@ -66,8 +67,14 @@ def diameters(p: np.ndarray, nodes: np.ndarray) -> np.ndarray:
     k = nodes.shape[0]
     if k == 2:
         return np.linalg.norm(p[:, nodes[0]] - p[:, nodes[1]], axis=0)
-    return np.max([np.linalg.norm(p[:, nodes[i]] - p[:, nodes[j]], axis=0)
-                   for i in range(k) for j in range(i + 1, k)], axis=0)
+    return np.max(
+        [
+            np.linalg.norm(p[:, nodes[i]] - p[:, nodes[j]], axis=0)
+            for i in range(k)
+            for j in range(i + 1, k)
+        ],
+        axis=0,
+    )
 
 
 def _chunks(n: int):
@@ -84,6 +91,7 @@ def _free_mask(fixed_v: np.ndarray, nodes: np.ndarray) -> np.ndarray:
 class Field:
     """One load's discrete solution as the residuals need it: nodal values U (ns, dim),
     body force f (ne, dim), fixed components at the vertices (nv, dim)."""
+
     load: object
     U: np.ndarray
     f: np.ndarray
@@ -95,22 +103,29 @@ def element_residual(d: Discretisation, fields, C) -> np.ndarray:
     mesh, dim = d.mesh, d.dim
     R = np.stack([fd.f for fd in fields])
     if d.order == "P2":
-        X = np.vstack([np.zeros(dim), np.eye(dim)]).T            # reference vertices = mesh.t order
+        X = np.vstack([np.zeros(dim), np.eye(dim)]).T  # reference vertices = mesh.t order
         for e in _chunks(d.nelems):
-            b = skfem.CellBasis(mesh, d.elem, mapping=d.mapping, quadrature=(X, np.ones(dim + 1)),
-                                elements=e, dofs=d.dofs, disable_doflocs=True)
-            dX = d.mapping.invDF(X[:, :1], tind=e)[:, :, :, 0]     # dX_a/dx_j (a, j, ne)
+            b = skfem.CellBasis(
+                mesh,
+                d.elem,
+                mapping=d.mapping,
+                quadrature=(X, np.ones(dim + 1)),
+                elements=e,
+                dofs=d.dofs,
+                disable_doflocs=True,
+            )
+            dX = d.mapping.invDF(X[:, :1], tind=e)[:, :, :, 0]  # dX_a/dx_j (a, j, ne)
             for i, fd in enumerate(fields):
-                sig = stress(b, fd.U, C[e])                        # dim, dim, ne, vertex
+                sig = stress(b, fd.U, C[e])  # dim, dim, ne, vertex
                 R[i, e] += np.einsum("ijea,aje->ei", sig[..., 1:] - sig[..., :1], dX)
     R *= np.stack([_free_mask(fd.fixed_v, mesh.t) for fd in fields])
     vol = np.abs(d.mapping.detDF(np.zeros((dim, 1))))[:, 0] / (2.0 if dim == 2 else 6.0)
-    return diameters(mesh.p, mesh.t) ** 2 * vol * (R ** 2).sum(axis=2)
+    return diameters(mesh.p, mesh.t) ** 2 * vol * (R**2).sum(axis=2)
 
 
 def _facet_integral(fb, r: np.ndarray) -> np.ndarray:
     """int_F |r|^2 ds per facet, r (dim, nf, nq)."""
-    return ((r ** 2).sum(axis=0) * fb.dx).sum(axis=1)
+    return ((r**2).sum(axis=0) * fb.dx).sum(axis=1)
 
 
 def jump_residual(d: Discretisation, fields, C) -> np.ndarray:
@@ -120,9 +135,20 @@ def jump_residual(d: Discretisation, fields, C) -> np.ndarray:
     interior = np.flatnonzero(mesh.f2t[1] != -1)
     for part in _chunks(len(interior)):
         facets = interior[part]
-        sides = [skfem.InteriorFacetBasis(mesh, d.elem, mapping=d.mapping, intorder=2, facets=facets,
-                                          side=s, dofs=d.dofs, disable_doflocs=True) for s in (0, 1)]
-        n = np.asarray(sides[0].normals)                                  # outward from side 0
+        sides = [
+            skfem.InteriorFacetBasis(
+                mesh,
+                d.elem,
+                mapping=d.mapping,
+                intorder=2,
+                facets=facets,
+                side=s,
+                dofs=d.dofs,
+                disable_doflocs=True,
+            )
+            for s in (0, 1)
+        ]
+        n = np.asarray(sides[0].normals)  # outward from side 0
         h = diameters(mesh.p, mesh.facets[:, facets])
         for i, fd in enumerate(fields):
             sig = [stress(b, fd.U, C[b.tind]) for b in sides]
@@ -134,7 +160,9 @@ def jump_residual(d: Discretisation, fields, C) -> np.ndarray:
     return out
 
 
-def traction_at(case, load, bbox, x: np.ndarray, n: np.ndarray, parts=None, centres=None) -> np.ndarray:
+def traction_at(
+    case, load, bbox, x: np.ndarray, n: np.ndarray, parts=None, centres=None
+) -> np.ndarray:
     """The prescribed traction g (dim, nf, nq) at boundary points x with normals n;
     ``centres`` the area centroid of each twisted traction's facets (by index)."""
     dim = x.shape[0]
@@ -158,9 +186,18 @@ def twist_centres(d: Discretisation, case, load, bbox, parts=None) -> dict:
     out = {}
     for i, t in enumerate(load.tractions):
         if t.twist is not None:
-            fb = skfem.FacetBasis(d.mesh, d.elem, mapping=d.mapping, intorder=2, dofs=d.dofs,
-                                  facets=d.part_facets(predicate(case, t.part, bbox, parts)), disable_doflocs=True)
-            out[i] = np.einsum("dfq,fq->d", np.asarray(fb.global_coordinates()), fb.dx) / fb.dx.sum()
+            fb = skfem.FacetBasis(
+                d.mesh,
+                d.elem,
+                mapping=d.mapping,
+                intorder=2,
+                dofs=d.dofs,
+                facets=d.part_facets(predicate(case, t.part, bbox, parts)),
+                disable_doflocs=True,
+            )
+            out[i] = (
+                np.einsum("dfq,fq->d", np.asarray(fb.global_coordinates()), fb.dx) / fb.dx.sum()
+            )
     return out
 
 
@@ -172,8 +209,15 @@ def neumann_residual(d: Discretisation, case, fields, bbox, C, parts=None) -> np
     centres = [twist_centres(d, case, fd.load, bbox, parts) for fd in fields]
     for part in _chunks(len(boundary)):
         facets = boundary[part]
-        fb = skfem.FacetBasis(mesh, d.elem, mapping=d.mapping, intorder=2, facets=facets, dofs=d.dofs,
-                              disable_doflocs=True)
+        fb = skfem.FacetBasis(
+            mesh,
+            d.elem,
+            mapping=d.mapping,
+            intorder=2,
+            facets=facets,
+            dofs=d.dofs,
+            disable_doflocs=True,
+        )
         n = np.asarray(fb.normals)
         x = np.asarray(fb.global_coordinates())
         h = diameters(mesh.p, mesh.facets[:, facets])
@@ -185,8 +229,17 @@ def neumann_residual(d: Discretisation, case, fields, bbox, C, parts=None) -> np
     return out
 
 
-def indicators(d: Discretisation, case, loads, U: dict, C: np.ndarray, rho: np.ndarray,
-               bbox, fixed: dict, parts=None) -> dict:
+def indicators(
+    d: Discretisation,
+    case,
+    loads,
+    U: dict,
+    C: np.ndarray,
+    rho: np.ndarray,
+    bbox,
+    fixed: dict,
+    parts=None,
+) -> dict:
     """{load name: eta_T^2 (ne,)} of the loads' displacement dofs U[name] (ndof,) with
     fixed vector dofs fixed[name]; C (ne, nv, nv) and rho (ne,) per element; ``parts``
     as reference/problem.py takes it."""
@@ -197,11 +250,19 @@ def indicators(d: Discretisation, case, loads, U: dict, C: np.ndarray, rho: np.n
     for load in loads:
         fx = np.zeros(d.ndof, bool)
         fx[fixed[load.name]] = True
-        fields.append(Field(load, U[load.name].reshape(d.ns, d.dim), body_force(case, load, rho),
-                            fx.reshape(d.ns, d.dim)[:nv]))
+        fields.append(
+            Field(
+                load,
+                U[load.name].reshape(d.ns, d.dim),
+                body_force(case, load, rho),
+                fx.reshape(d.ns, d.dim)[:nv],
+            )
+        )
     k = 1.0 if d.order == "P1" else 2.0
-    eta2 = (element_residual(d, fields, C) / k ** 2
-            + (jump_residual(d, fields, C) + neumann_residual(d, case, fields, bbox, C, parts)) / k)
+    eta2 = (
+        element_residual(d, fields, C) / k**2
+        + (jump_residual(d, fields, C) + neumann_residual(d, case, fields, bbox, C, parts)) / k
+    )
     eta2 /= mandel_min(C)
     return {load.name: eta2[i] for i, load in enumerate(loads)}
 

@@ -21,7 +21,7 @@ import numpy as np
 from harness.case.parts import part_predicate
 from reference.locate import Locator
 
-BARY = 1e-9          # a barycentric coordinate below this is zero (the point lies on a face)
+BARY = 1e-9  # a barycentric coordinate below this is zero (the point lies on a face)
 
 
 class UserMeshParts:
@@ -41,11 +41,12 @@ class UserMeshParts:
 
         def on_user_entities(x):
             x = np.asarray(x, float)
-            inside = base(x)                 # the entities of a box lie in the box
+            inside = base(x)  # the entities of a box lie in the box
             idx = np.flatnonzero(inside)
             if len(idx):
                 inside[idx] = self._closure(flag, x[:, idx])
             return inside
+
         return on_user_entities
 
     def _closure(self, flag: np.ndarray, x: np.ndarray) -> np.ndarray:

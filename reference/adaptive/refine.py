@@ -11,7 +11,10 @@ import skfem
 from reference.mesh import base_mesh
 from reference.problem import solve_mesh
 
-GRADE_PASSES = {2: 4, 3: 0}  # per level: extra halvings of the smallest element near a singular corner
+GRADE_PASSES = {
+    2: 4,
+    3: 0,
+}  # per level: extra halvings of the smallest element near a singular corner
 # (2-D). In 3-D, grading towards the 12 box edges cost 9x the dofs for a 1.5x smaller
 # estimate (unit cube, shear, P2), so 3-D refines uniformly (boxes use reference/graded/levels.py).
 MAX_DOFS = {2: 400_000, 3: 200_000}  # refinement stops before a level would exceed this
@@ -36,7 +39,9 @@ def singular_distance(case, x: np.ndarray) -> np.ndarray | None:
         for r in case.material.regions:  # where a material interface meets the boundary
             corners = np.array([[a, b] for a in (r.lo[0], r.hi[0]) for b in (r.lo[1], r.hi[1])])
             corners = np.clip(corners, lo, hi)
-            dist = np.minimum(dist, np.linalg.norm(x[:, None, :] - corners[None], axis=2).min(axis=1))
+            dist = np.minimum(
+                dist, np.linalg.norm(x[:, None, :] - corners[None], axis=2).min(axis=1)
+            )
         return dist
     return np.min([np.hypot(d[:, a], d[:, b]) for a, b in ((0, 1), (0, 2), (1, 2))], axis=0)
 
@@ -45,7 +50,10 @@ def element_size(mesh) -> np.ndarray:
     """Longest edge of each element."""
     x = mesh.p[:, mesh.t]  # dim, nverts, ne
     k = x.shape[1]
-    return np.max([np.linalg.norm(x[:, i] - x[:, j], axis=0) for i in range(k) for j in range(i + 1, k)], axis=0)
+    return np.max(
+        [np.linalg.norm(x[:, i] - x[:, j], axis=0) for i in range(k) for j in range(i + 1, k)],
+        axis=0,
+    )
 
 
 def refine(case, mesh, h: float, passes: int):
@@ -56,7 +64,7 @@ def refine(case, mesh, h: float, passes: int):
     mesh = mesh.refined()
     if passes == 0 or not isinstance(mesh, (skfem.MeshTri, skfem.MeshTet)):
         return mesh
-    h_min = h * 0.5 ** passes
+    h_min = h * 0.5**passes
     for _ in range(passes + 2):
         dist = singular_distance(case, mesh.p[:, mesh.t].mean(axis=1).T)
         if dist is None:
@@ -89,8 +97,8 @@ def solve_refined(case, status=lambda msg: None, records: list | None = None):
     est = {n: float("nan") for n in names}
     history = [dict(n_dofs=next(iter(U.values())).size, **est)]
     for level in range(1, case.reference.max_refine + 1):
-        h = float(element_size(base).max()) / 2 ** level
-        if next(iter(U.values())).size * 2 ** case.dim > MAX_DOFS[case.dim]:
+        h = float(element_size(base).max()) / 2**level
+        if next(iter(U.values())).size * 2**case.dim > MAX_DOFS[case.dim]:
             status(f"FEM: next level would exceed {MAX_DOFS[case.dim]} dofs; stopping")
             break
         finer = refine(case, mesh, h, GRADE_PASSES[case.dim] * level)

@@ -15,15 +15,17 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import brentq
 
-ORDER_RANGE = (1.0, 5.0)   # observed orders outside this are clipped (noise, pre-asymptotic)
-MAJOR = 0.1                # points whose order is observed: last difference >= MAJOR x the largest
-FORMAL_ORDER = 3.0         # of Q2 point values (h^3); an observed order above it is pre-asymptotic
-ASYMPTOTIC = 2.0           # a point converges at order p when its difference ratio is within this factor
-SAFETY = 3.0               # Roache's factor of safety for an error estimated from two solutions (the
+ORDER_RANGE = (1.0, 5.0)  # observed orders outside this are clipped (noise, pre-asymptotic)
+MAJOR = 0.1  # points whose order is observed: last difference >= MAJOR x the largest
+FORMAL_ORDER = 3.0  # of Q2 point values (h^3); an observed order above it is pre-asymptotic
+ASYMPTOTIC = 2.0  # a point converges at order p when its difference ratio is within this factor
+SAFETY = 3.0  # Roache's factor of safety for an error estimated from two solutions (the
 # two extrapolants); the grid convergence index GCI = SAFETY |E_new - E_old| / (r^p - 1)
 
 
-def richardson(coarse: np.ndarray, fine: np.ndarray, h_coarse: float, h_fine: float, p: float) -> np.ndarray:
+def richardson(
+    coarse: np.ndarray, fine: np.ndarray, h_coarse: float, h_fine: float, p: float
+) -> np.ndarray:
     """The extrapolant of two levels' values for order p."""
     return fine + (fine - coarse) / ((h_coarse / h_fine) ** p - 1.0)
 
@@ -47,7 +49,7 @@ def observed_order(values, h) -> float:
 
 
 def _order(target: float, h0: float, h1: float, h2: float) -> float:
-    f = lambda p: (h0 ** p - h1 ** p) / (h1 ** p - h2 ** p) - target   # noqa: E731 - increasing in p
+    f = lambda p: (h0**p - h1**p) / (h1**p - h2**p) - target  # noqa: E731 - increasing in p
     lo, hi = ORDER_RANGE
     if not np.isfinite(target) or f(lo) >= 0:
         return lo

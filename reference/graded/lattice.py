@@ -20,7 +20,8 @@ over two cells. Both means span whole periods of any function of theta, so its s
 averages out at every level alike; the combination has zero first and second moments,
 so a smooth field is changed only at O(window^4), far below the O(h^3) the levels
 extrapolate, and the window is placed so that its samples' mean is the point (the graded
-map is not linear), which keeps a linear field exact (measured there: 4.3e-5 at n = 8, 1.6e-5 at n = 10, observed order 3.0).
+map is not linear), which keeps a linear field exact (measured there: 4.3e-5 at n = 8,
+1.6e-5 at n = 10, observed order 3.0).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class Lattice:
     representation of the graded levels' fields (point values, :meth:`evaluate`), their
     mirror images (reference/graded/symmetry.py) and the matrix-free solvers' lattice
     fields (:meth:`to_lattice`, reference/solvers/tensorsolve.py)."""
+
     axes: tuple
     index: np.ndarray
 
@@ -74,7 +76,11 @@ class Lattice:
             return None
         for x in lat.axes:
             tol = 1e-9 * max(float(np.ptp(x)), 1e-300)
-            if len(x) % 2 == 0 or len(x) < 3 or np.abs(x[1:-1:2] - 0.5 * (x[:-2:2] + x[2::2])).max() > tol:
+            if (
+                len(x) % 2 == 0
+                or len(x) < 3
+                or np.abs(x[1:-1:2] - 0.5 * (x[:-2:2] + x[2::2])).max() > tol
+            ):
                 return None
         return lat
 
@@ -89,7 +95,8 @@ class Lattice:
         return (len(self.axes),) + self.shape
 
     def to_lattice(self, v: np.ndarray) -> np.ndarray:
-        """Interleaved dof vectors (ndof,) or (ndof, m) -> lattice fields (dim, ..) or (m, dim, ..)."""
+        """Interleaved dof vectors (ndof,) or (ndof, m) -> lattice fields (dim, ..) or
+        (m, dim, ..)."""
         dim = len(self.axes)
         v2 = np.asarray(v, float).reshape(len(self.index), dim, -1)
         out = np.zeros((v2.shape[2], dim, int(np.prod(self.shape))))
@@ -122,9 +129,15 @@ class Lattice:
             out += wt[:, None] * G[i]
         return out
 
-
-    def evaluate_window(self, values: np.ndarray, points: np.ndarray, maps, origin, average: np.ndarray,
-                        chunk: int = 2000) -> np.ndarray:
+    def evaluate_window(
+        self,
+        values: np.ndarray,
+        points: np.ndarray,
+        maps,
+        origin,
+        average: np.ndarray,
+        chunk: int = 2000,
+    ) -> np.ndarray:
         """Field (ns, c) at points (m, dim) -> (m, c), averaged along axis d over the
         window (module docstring) of ``maps[d]`` (AxisMap, coordinates from ``origin``)
         where ``average[:, d]`` is True, else interpolated there as ``evaluate`` does."""
@@ -134,20 +147,30 @@ class Lattice:
         out = np.zeros((len(pts), G.shape[-1]))
         for lo in range(0, len(pts), chunk):
             sel = slice(lo, lo + chunk)
-            starts, weights = zip(*(_axis_weights(self.axes[d], pts[sel, d], maps[d], origin[d], average[sel, d])
-                                    for d in range(dim)))
-            idx = [np.minimum(st[:, None] + np.arange(w.shape[1]), len(self.axes[d]) - 1)
-                   for d, (st, w) in enumerate(zip(starts, weights))]
+            starts, weights = zip(
+                *(
+                    _axis_weights(self.axes[d], pts[sel, d], maps[d], origin[d], average[sel, d])
+                    for d in range(dim)
+                )
+            )
+            idx = [
+                np.minimum(st[:, None] + np.arange(w.shape[1]), len(self.axes[d]) - 1)
+                for d, (st, w) in enumerate(zip(starts, weights))
+            ]
             if dim == 2:
                 block = G[idx[0][:, :, None], idx[1][:, None, :]]
                 out[sel] = np.einsum("pi,pj,pijc->pc", weights[0], weights[1], block)
             else:
-                block = G[idx[0][:, :, None, None], idx[1][:, None, :, None], idx[2][:, None, None, :]]
-                out[sel] = np.einsum("pi,pj,pk,pijkc->pc", weights[0], weights[1], weights[2], block)
+                block = G[
+                    idx[0][:, :, None, None], idx[1][:, None, :, None], idx[2][:, None, None, :]
+                ]
+                out[sel] = np.einsum(
+                    "pi,pj,pk,pijkc->pc", weights[0], weights[1], weights[2], block
+                )
         return out
 
 
-WINDOW_SAMPLES = 8      # midpoint samples per cell: exact for the swing's harmonics up to the 7th
+WINDOW_SAMPLES = 8  # midpoint samples per cell: exact for the swing's harmonics up to the 7th
 
 
 def window(samples: int = WINDOW_SAMPLES):
@@ -156,10 +179,14 @@ def window(samples: int = WINDOW_SAMPLES):
     one = (np.arange(samples) + 0.5) / samples - 0.5
     two = (np.arange(2 * samples) + 0.5) / samples - 1.0
     # the samples' own second moments, so that the combination's is zero to rounding
-    v1, v2 = np.mean(one ** 2), np.mean(two ** 2)
-    a = v2 / (v2 - v1)           # 4/3 for the exact means
-    return (np.concatenate([one, two]),
-            np.concatenate([np.full(samples, a / samples), np.full(2 * samples, (1 - a) / (2 * samples))]))
+    v1, v2 = np.mean(one**2), np.mean(two**2)
+    a = v2 / (v2 - v1)  # 4/3 for the exact means
+    return (
+        np.concatenate([one, two]),
+        np.concatenate(
+            [np.full(samples, a / samples), np.full(2 * samples, (1 - a) / (2 * samples))]
+        ),
+    )
 
 
 def _axis_weights(g: np.ndarray, x: np.ndarray, amap, origin: float, average: np.ndarray):
@@ -167,8 +194,10 @@ def _axis_weights(g: np.ndarray, x: np.ndarray, amap, origin: float, average: np
     g[start .. start + R - 1] that give the windowed (or plain cubic) value at x."""
     tau, wt = window()
     t = amap.t(x - origin)
-    mean = lambda t: (origin + amap.x(t[:, None] + tau[None, :])) @ wt   # noqa: E731
-    for _ in range(20):     # centre the window so that its samples' mean is x: a linear field stays exact
+    mean = lambda t: (origin + amap.x(t[:, None] + tau[None, :])) @ wt  # noqa: E731
+    for _ in range(
+        20
+    ):  # centre the window so that its samples' mean is x: a linear field stays exact
         slope = np.maximum((mean(t + 1e-4) - mean(t - 1e-4)) / 2e-4, 1e-300)
         step = np.where(average, (mean(t) - x) / slope, 0.0)
         t = t - step

@@ -2,8 +2,9 @@
 towards every face (reference/graded/meshes.py), solved on levels of n = divisions / 2,
 + 1, + 2, ... cells per end zone (every second n skipped between the first three and
 the last three, see :func:`next_divisions`), and Richardson-extrapolated over the last
-three levels (reference/graded/extrapolate.py). The extrapolant is the reference field; the difference of
-the last two extrapolants is its per-point error estimate. A load whose last two levels
+three levels (reference/graded/extrapolate.py). The extrapolant is the reference field;
+the difference of the last two extrapolants is its per-point error estimate. A load
+whose last two levels
 agree to rounding (a field the mesh represents exactly, like the stretches' linear
 closed form) stops refining; the others go on until every estimate at the probe points
 is below ``reference.tol``, ``reference.max_refine`` levels are done, or the next level
@@ -34,15 +35,19 @@ from reference.graded.meshes import (
 from reference.graded.symmetry import Mirror, lower_half, mirror_of, unfold
 from reference.problem import solve_mesh
 
-FIRST = 2                       # cells per end zone at level 0 when [reference] divisions is not set
+FIRST = 2  # cells per end zone at level 0 when [reference] divisions is not set
 # (divisions counts cells along the shortest side: two end zones)
-MAX_DOFS = {2: 400_000, 3: 64_000}     # the largest system one level may solve (3-D: ~15 s a factorisation)
-# ... with the fast-diagonalisation CG (solver 'auto' or 'tensor', reference/solvers/tensorpre.py): no
-# factorisation, K applied without assembly (reference/solvers/tensorsolve.py), ~80-110 iterations at
-# nu = 0.49; the limit is time (the 10:1 box's nine loads: 103 s to n = 10, 252k-dof quarters)
+MAX_DOFS = {
+    2: 400_000,
+    3: 64_000,
+}  # the largest system one level may solve (3-D: ~15 s a factorisation)
+# ... with the fast-diagonalisation CG (solver 'auto' or 'tensor',
+# reference/solvers/tensorpre.py): no factorisation, K applied without assembly
+# (reference/solvers/tensorsolve.py), ~80-110 iterations at nu = 0.49; the limit is time
+# (the 10:1 box's nine loads: 103 s to n = 10, 252k-dof quarters)
 TENSOR_MAX_DOFS = {2: 2_000_000, 3: 400_000}
-WORKERS = min(2, len(os.sched_getaffinity(0)))   # threads solving a cut's load groups side by side
-EXACT = 1e-6                    # relative change between two levels below which a field is exact
+WORKERS = min(2, len(os.sched_getaffinity(0)))  # threads solving a cut's load groups side by side
+EXACT = 1e-6  # relative change between two levels below which a field is exact
 # (its levels differ by the solves' rounding only): the 10:1 box's stretch-x at nu = 0.49, a
 # linear field, changes by 1.2e-9 and then 1.7e-7 from level to level (Cholesky residuals ~1e-8 on
 # that ill-conditioned system); at 1e-9 it stayed active and its full-box solves took most of the
@@ -63,6 +68,7 @@ class Levels:
     """The solved levels: ``ns`` cells per end zone, ``meshes``, per load the
     (level, dof vector) pairs kept (the last three; for a load found exact, the two
     that agree, the coarser last: it is the field used) and the observed order."""
+
     dim: int
     origin: np.ndarray = None
     size: np.ndarray = None
@@ -110,8 +116,16 @@ class Levels:
             def one(member):
                 mirror, names = member
                 rec: list = []
-                U = solve_mesh(case, d.mesh, loads=set(names), records=rec, mirror=mirror, disc=d,
-                               stiffness=stiffness, guess=self.guess(d.doflocs, names))
+                U = solve_mesh(
+                    case,
+                    d.mesh,
+                    loads=set(names),
+                    records=rec,
+                    mirror=mirror,
+                    disc=d,
+                    stiffness=stiffness,
+                    guess=self.guess(d.doflocs, names),
+                )
                 return {n: unfold(self._evaluator(k), half, U[n], mirror) for n in names}, rec
 
             self._evaluator(k)
@@ -129,7 +143,11 @@ class Levels:
     def guess(self, doflocs: np.ndarray, names) -> dict:
         """{load: its last level's field interpolated at ``doflocs`` (dim, ns)} of the loads
         solved before: initial guesses of the next level's iterative solves."""
-        return {n: self.at(doflocs.T, k, u).ravel() for n in names for k, u in self.fields.get(n, [])[-1:]}
+        return {
+            n: self.at(doflocs.T, k, u).ravel()
+            for n in names
+            for k, u in self.fields.get(n, [])[-1:]
+        }
 
     def at(self, points, k: int, u: np.ndarray, average: np.ndarray | None = None) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
@@ -140,14 +158,18 @@ class Levels:
         points = np.asarray(points, float)
         if average is None or not average.any():
             return ev.evaluate(u.reshape(-1, self.dim), points)
-        return ev.evaluate_window(u.reshape(-1, self.dim), points, axis_maps(self.size, self.ns[k]),
-                                  self.origin, average)
+        return ev.evaluate_window(
+            u.reshape(-1, self.dim), points, axis_maps(self.size, self.ns[k]), self.origin, average
+        )
 
     def window_axes(self, points, n: int) -> np.ndarray:
         """(m, dim): the axes along which the window (one cell each way) fits inside the
         box at level n, and so at every finer level; never along an axis on whose end
         faces a point lies (there the cell coordinate is fixed and nothing swings)."""
-        t = np.stack([a.t(points[:, d] - self.origin[d]) for d, a in enumerate(axis_maps(self.size, n))], axis=1)
+        t = np.stack(
+            [a.t(points[:, d] - self.origin[d]) for d, a in enumerate(axis_maps(self.size, n))],
+            axis=1,
+        )
         cells = np.array([a.cells for a in axis_maps(self.size, n)])
         return (t >= 1.0 - 1e-9) & (t <= cells - 1.0 + 1e-9)
 
@@ -156,8 +178,15 @@ class Levels:
         level averaged along the same axes (those that fit at the coarsest of them)."""
         pairs = self.fields[load]
         points = np.asarray(points, float)
-        average = None if self.origin is None else self.window_axes(points, min(self.ns[k] for k, _ in pairs))
-        return ([self.at(points, k, u, average) for k, u in pairs], [1.0 / self.ns[k] for k, _ in pairs])
+        average = (
+            None
+            if self.origin is None
+            else self.window_axes(points, min(self.ns[k] for k, _ in pairs))
+        )
+        return (
+            [self.at(points, k, u, average) for k, u in pairs],
+            [1.0 / self.ns[k] for k, _ in pairs],
+        )
 
     def evaluate(self, points, load: str):
         """(extrapolated displacement (n, dim), estimate of its error (n,)) at points."""
@@ -173,8 +202,10 @@ class Levels:
         return self.at(q2_doflocs(self.meshes[-1]).T, k, u).ravel()
 
     def to_arrays(self, names) -> dict:
-        out = {"ns": np.asarray(self.ns, np.int64),
-               "orders": np.array([self.orders.get(n, np.nan) for n in names])}
+        out = {
+            "ns": np.asarray(self.ns, np.int64),
+            "orders": np.array([self.orders.get(n, np.nan) for n in names]),
+        }
         for i, n in enumerate(names):
             out[f"lv{i}"] = np.array([k for k, _ in self.fields[n]], np.int64)
             for k, u in self.fields[n]:
@@ -201,12 +232,16 @@ def solve_graded(case, status=lambda msg: None, records: list | None = None):
     size = hi - lo
     names = [l.name for l in case.loads]
     probes = probe_points(lo, size)
-    lev = Levels(case.dim, np.asarray(lo, float), np.asarray(size, float), fields={n: [] for n in names})
+    lev = Levels(
+        case.dim, np.asarray(lo, float), np.asarray(size, float), fields={n: [] for n in names}
+    )
     active = list(names)
     est = {n: float("nan") for n in names}
     mirrors = {l.name: mirror_of(case, l) for l in case.loads}
     history = []
-    first = -(-spec.divisions // 2) if spec.divisions else FIRST    # divisions: cells along the shortest side
+    first = (
+        -(-spec.divisions // 2) if spec.divisions else FIRST
+    )  # divisions: cells along the shortest side
     cap = (TENSOR_MAX_DOFS if spec.solver in ("auto", "tensor") else MAX_DOFS)[case.dim]
 
     def largest(n: int) -> int:
@@ -216,13 +251,19 @@ def solve_graded(case, status=lambda msg: None, records: list | None = None):
     k, n = 0, first
     while n <= first + spec.max_refine:
         if k > 0 and largest(n) > cap:
-            status(f"FEM: the next graded level (a system of {largest(n)} dofs) would exceed {cap}; stopping")
+            status(
+                f"FEM: the next graded level (a system of {largest(n)} dofs) would exceed "
+                f"{cap}; stopping"
+            )
             break
         axes = graded_axes(lo, size, n)
         mesh = tensor_mesh(axes)
         dofs = n_dofs(mesh, case.dim)
-        status(f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, largest system {largest(n)}, "
-               f"{len(active)} loads)")
+        status(
+            f"FEM graded level {k} ({n} cells per end zone, {dofs} dofs, "
+            f"largest system {largest(n)}, "
+            f"{len(active)} loads)"
+        )
         lev.add_mesh(n, mesh)
         U = lev.solve(case, k, axes, {name: mirrors[name] for name in active}, records=records)
         for name in active:
@@ -233,10 +274,12 @@ def solve_graded(case, status=lambda msg: None, records: list | None = None):
                 continue
             scale = max(float(np.linalg.norm(vals[-1], axis=1).max()), 1e-300)
             if np.abs(vals[-1] - vals[-2]).max() <= EXACT * scale:
-                active.remove(name)           # represented exactly: no further level helps;
-                lev.orders.pop(name, None)    # the coarser of the two (less rounding) goes last
+                active.remove(name)  # represented exactly: no further level helps;
+                lev.orders.pop(name, None)  # the coarser of the two (less rounding) goes last
                 lev.fields[name] = lev.fields[name][-1:] + lev.fields[name][-2:-1]
-            elif len(vals) >= 3:   # a higher observed order is the next terms at work, not the leading one
+            elif (
+                len(vals) >= 3
+            ):  # a higher observed order is the next terms at work, not the leading one
                 lev.orders[name] = min(FORMAL_ORDER, observed_order(vals[-3:], h[-3:]))
             _, e = extrapolate(vals, h, lev.orders.get(name, float("nan")))
             est[name] = float(e.max()) / scale

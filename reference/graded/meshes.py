@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import skfem
 
-GRADE_EXPONENT = 3.0   # beta, and ZONE: the end zones' width / the shortest side. Measured on the
-ZONE = 0.5             # sec6 cube's shear against an independent solve (tests/independent_elasticity.py)
+GRADE_EXPONENT = 3.0  # beta, and ZONE: the end zones' width / the shortest side. Measured on the
+ZONE = 0.5  # sec6 cube's shear against an independent solve (tests/independent_elasticity.py)
 MESHES = {2: skfem.MeshQuad, 3: skfem.MeshHex}
 
 
@@ -30,6 +30,7 @@ class AxisMap:
     ``m`` uniform cells in between (an even number, as many as keep them no larger than
     the largest graded cell at n, proportional to n), so the axis is symmetric and its
     midpoint is a node."""
+
     length: float
     w: float
     n: int
@@ -37,15 +38,26 @@ class AxisMap:
     beta: float
 
     @classmethod
-    def of(cls, length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT,
-           zone: float = ZONE) -> "AxisMap":
+    def of(
+        cls,
+        length: float,
+        shortest: float,
+        n: int,
+        beta: float = GRADE_EXPONENT,
+        zone: float = ZONE,
+    ) -> "AxisMap":
         if n < 1:
             raise ValueError("need at least one cell per end zone")
         w = min(zone * shortest, 0.5 * length)
         middle = length - 2 * w
-        # largest graded cell ~ zone_slope w / n (the zone's end slope; the count is proportional to n);
-        # an even count puts a vertex on the mid-plane, where reference/graded/symmetry.py cuts the box
-        m = 0 if middle <= 1e-12 * length else 2 * max(1, int(np.ceil(middle * n / (2 * zone_slope(beta) * w) - 1e-9)))
+        # largest graded cell ~ zone_slope w / n (the zone's end slope; the count is
+        # proportional to n); an even count puts a vertex on the mid-plane, where
+        # reference/graded/symmetry.py cuts the box
+        m = (
+            0
+            if middle <= 1e-12 * length
+            else 2 * max(1, int(np.ceil(middle * n / (2 * zone_slope(beta) * w) - 1e-9)))
+        )
         return cls(float(length), float(w) if m else 0.5 * float(length), int(n), m, float(beta))
 
     @property
@@ -54,15 +66,23 @@ class AxisMap:
 
     def x(self, t) -> np.ndarray:
         t = np.clip(np.asarray(t, float), 0.0, self.cells)
-        end = lambda s: self.w * zone_map(np.clip(s, 0.0, self.n) / self.n, self.beta)   # noqa: E731
+        end = lambda s: self.w * zone_map(np.clip(s, 0.0, self.n) / self.n, self.beta)  # noqa: E731
         mid = self.w + (t - self.n) * (self.length - 2 * self.w) / max(self.m, 1)
-        return np.where(t <= self.n, end(t), np.where(t >= self.n + self.m, self.length - end(self.cells - t), mid))
+        return np.where(
+            t <= self.n,
+            end(t),
+            np.where(t >= self.n + self.m, self.length - end(self.cells - t), mid),
+        )
 
     def t(self, x) -> np.ndarray:
         x = np.clip(np.asarray(x, float), 0.0, self.length)
-        end = lambda d: self.n * zone_inverse(np.clip(d, 0.0, self.w) / self.w, self.beta)   # noqa: E731
+        end = lambda d: self.n * zone_inverse(np.clip(d, 0.0, self.w) / self.w, self.beta)  # noqa: E731
         mid = self.n + (x - self.w) * max(self.m, 1) / max(self.length - 2 * self.w, 1e-300)
-        return np.where(x <= self.w, end(x), np.where(x >= self.length - self.w, self.cells - end(self.length - x), mid))
+        return np.where(
+            x <= self.w,
+            end(x),
+            np.where(x >= self.length - self.w, self.cells - end(self.length - x), mid),
+        )
 
 
 def zone_map(s, beta: float = GRADE_EXPONENT) -> np.ndarray:
@@ -74,7 +94,7 @@ def zone_map(s, beta: float = GRADE_EXPONENT) -> np.ndarray:
     then swing again. Near the face it is s^beta, the grading the edges need."""
     s = np.asarray(s, float)
     c = beta * (beta - 1) / (2 * beta + 2)
-    return s ** beta + c * (s ** (beta + 1) - s ** (beta + 2))
+    return s**beta + c * (s ** (beta + 1) - s ** (beta + 2))
 
 
 def zone_slope(beta: float = GRADE_EXPONENT) -> float:
@@ -90,7 +110,7 @@ def zone_inverse(y, beta: float = GRADE_EXPONENT) -> np.ndarray:
     c = beta * (beta - 1) / (2 * beta + 2)
     s = y ** (1.0 / beta) * 0.0 + np.clip(y, 0.0, 1.0) ** (1.0 / beta)
     for _ in range(100):
-        d = beta * s ** (beta - 1) + c * ((beta + 1) * s ** beta - (beta + 2) * s ** (beta + 1))
+        d = beta * s ** (beta - 1) + c * ((beta + 1) * s**beta - (beta + 2) * s ** (beta + 1))
         step = np.divide(zone_map(s, beta) - y, d, out=np.zeros_like(s), where=d > 0)
         s = np.clip(s - step, 0.0, 1.0)
         if np.all(np.abs(step) <= 1e-15):
@@ -98,8 +118,9 @@ def zone_inverse(y, beta: float = GRADE_EXPONENT) -> np.ndarray:
     return s
 
 
-def axis_nodes(length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT,
-               zone: float = ZONE) -> np.ndarray:
+def axis_nodes(
+    length: float, shortest: float, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE
+) -> np.ndarray:
     """Node coordinates in [0, length] of the graded axis (AxisMap) at level n."""
     a = AxisMap.of(length, shortest, n, beta, zone)
     x = a.x(np.arange(a.cells + 1))
@@ -130,10 +151,14 @@ def q2_doflocs(mesh: skfem.Mesh) -> np.ndarray:
     building a basis: a CellBasis of a million-dof level holds ~1 GB of quadrature data."""
     p = mesh.p
     parts = [p] + ([p[:, mesh.edges].mean(axis=1)] if p.shape[0] == 3 else [])
-    return np.concatenate(parts + [p[:, mesh.facets].mean(axis=1), p[:, mesh.t].mean(axis=1)], axis=1)
+    return np.concatenate(
+        parts + [p[:, mesh.facets].mean(axis=1), p[:, mesh.t].mean(axis=1)], axis=1
+    )
 
 
-def graded_mesh(origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE) -> skfem.Mesh:
+def graded_mesh(
+    origin, size, n: int, beta: float = GRADE_EXPONENT, zone: float = ZONE
+) -> skfem.Mesh:
     """Quadrilateral (2-D) or hexahedral (3-D) tensor mesh of [origin, origin + size]
     graded towards every face, ``n`` cells per end zone."""
     return tensor_mesh(graded_axes(origin, size, n, beta, zone))

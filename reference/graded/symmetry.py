@@ -26,13 +26,14 @@ from harness.case.parts import parse_face_name
 from reference.fem import VOIGT
 from reference.graded.lattice import Lattice
 
-PLACES = 12                     # decimals to which a user part's corners are compared
-SAMPLES = 64                    # seeded points at which the material's mirror image is checked
+PLACES = 12  # decimals to which a user part's corners are compared
+SAMPLES = 64  # seeded points at which the material's mirror image is checked
 
 
 @dataclass(frozen=True)
 class Mirror:
     """Mid-planes the solve is cut at: ``axes`` and per axis the parity (+1, -1)."""
+
     axes: tuple[int, ...] = ()
     parities: tuple[int, ...] = ()
 
@@ -74,7 +75,9 @@ def material_is_symmetric(case, m: int) -> bool:
     xm[:, m] = lo[m] + hi[m] - x[:, m]
     T = np.array([-1.0 if (i == m) != (j == m) else 1.0 for i, j in VOIGT[case.dim]])
     C, Cm = element_stiffness(case.material, x), element_stiffness(case.material, xm)
-    return bool(np.allclose(Cm, T[:, None] * C * T[None, :], rtol=1e-12, atol=1e-12 * np.abs(C).max()))
+    return bool(
+        np.allclose(Cm, T[:, None] * C * T[None, :], rtol=1e-12, atol=1e-12 * np.abs(C).max())
+    )
 
 
 def _parity(case, load, m: int, lo, hi) -> int:
@@ -92,12 +95,14 @@ def _parity(case, load, m: int, lo, hi) -> int:
     forces = {}
     for t in load.tractions:
         key = _part_key(t.part, case, lo, hi)
-        if key is None or t.twist is not None:      # a twist: solved whole
+        if key is None or t.twist is not None:  # a twist: solved whole
             return 0
         forces[key] = forces.get(key, 0.0) + np.asarray(t.vector, float)
     for p in (1, -1):
-        ok = all(np.array_equal(p * _flip(v, m), forces.get(_mirror_key(k, m, lo, hi), 0.0 * v))
-                 for k, v in forces.items())
+        ok = all(
+            np.array_equal(p * _flip(v, m), forces.get(_mirror_key(k, m, lo, hi), 0.0 * v))
+            for k, v in forces.items()
+        )
         for g in (load.gravity, load.body_force):
             ok = ok and (g is None or np.array_equal(p * _flip(g, m), np.asarray(g, float)))
         if ok:
@@ -126,7 +131,9 @@ def lower_half(axes: list, mirror: Mirror) -> list:
     out = []
     for a, x in enumerate(axes):
         if a in mirror.axes:
-            if len(x) % 2 == 0 or not np.allclose(x, x[0] + x[-1] - x[::-1], rtol=0, atol=1e-12 * np.ptp(x)):
+            if len(x) % 2 == 0 or not np.allclose(
+                x, x[0] + x[-1] - x[::-1], rtol=0, atol=1e-12 * np.ptp(x)
+            ):
                 raise ValueError("a cut axis needs symmetric nodes with a node at its midpoint")
             x = x[: len(x) // 2 + 1]
         out.append(x)

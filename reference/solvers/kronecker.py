@@ -24,7 +24,7 @@ import numpy as np
 
 from reference.fem import VOIGT
 
-GAUSS = np.polynomial.legendre.leggauss(3)    # exact for the 1-D Q2 mass (degree 4)
+GAUSS = np.polynomial.legendre.leggauss(3)  # exact for the 1-D Q2 mass (degree 4)
 
 
 def axis_matrices(nodes: np.ndarray) -> dict[str, np.ndarray]:
@@ -35,11 +35,11 @@ def axis_matrices(nodes: np.ndarray) -> dict[str, np.ndarray]:
     n = len(nodes)
     xg, wg = GAUSS
     t = 0.5 * (xg + 1.0)
-    N = np.stack([2 * (1 - t) * (0.5 - t), 4 * t * (1 - t), 2 * t * (t - 0.5)])        # basis at t
-    dN = np.stack([4 * t - 3, 4 - 8 * t, 4 * t - 1])                                  # d/dt
+    N = np.stack([2 * (1 - t) * (0.5 - t), 4 * t * (1 - t), 2 * t * (t - 0.5)])  # basis at t
+    dN = np.stack([4 * t - 3, 4 - 8 * t, 4 * t - 1])  # d/dt
     Me = 0.5 * np.einsum("iq,jq,q->ij", N, N, wg)
     Ae = 0.5 * np.einsum("iq,jq,q->ij", dN, dN, wg)
-    De = 0.5 * np.einsum("iq,jq,q->ij", dN, N, wg)       # the cell length cancels
+    De = 0.5 * np.einsum("iq,jq,q->ij", dN, N, wg)  # the cell length cancels
     M, A, D = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
     for c in range(n // 2):
         s = slice(2 * c, 2 * c + 3)
@@ -62,7 +62,7 @@ def bands(L: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _band(B, v, out, coef):      # pragma: no cover - compiled
+def _band(B, v, out, coef):  # pragma: no cover - compiled
     """out[p, i, q] += coef sum_j B[j - i + 2, i] v[p, j, q] (|j - i| <= 2)."""
     pre, n, post = v.shape
     for p in range(pre):
@@ -75,7 +75,7 @@ def _band(B, v, out, coef):      # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
-def _band_last(B, v, out, coef):      # pragma: no cover - compiled
+def _band_last(B, v, out, coef):  # pragma: no cover - compiled
     """:func:`_band` along the last (contiguous) axis: v, out (pre, n)."""
     pre, n = v.shape
     for p in range(pre):
@@ -86,16 +86,19 @@ def _band_last(B, v, out, coef):      # pragma: no cover - compiled
             out[p, i] += coef * acc
 
 
-def band_apply(B: np.ndarray, u: np.ndarray, axis: int, out: np.ndarray | None = None,
-               coef: float = 1.0) -> np.ndarray:
+def band_apply(
+    B: np.ndarray, u: np.ndarray, axis: int, out: np.ndarray | None = None, coef: float = 1.0
+) -> np.ndarray:
     """out + coef L u along ``axis`` of a C-contiguous u (out zero when not given), L given
     by its bands (see :func:`bands`); a compiled loop (numpy's nine passes over the array
     per product took 3/4 of the thin box's CG time)."""
     n = u.shape[axis]
-    shape3 = (int(np.prod(u.shape[:axis])), n, int(np.prod(u.shape[axis + 1:])))
+    shape3 = (int(np.prod(u.shape[:axis])), n, int(np.prod(u.shape[axis + 1 :])))
     out = np.zeros(u.shape) if out is None else out
     if not out.flags.c_contiguous or out.shape != u.shape:
-        raise ValueError("band_apply: out must be C-contiguous and shaped like u (it is written in place)")
+        raise ValueError(
+            "band_apply: out must be C-contiguous and shaped like u (it is written in place)"
+        )
     v = np.ascontiguousarray(u).reshape(shape3)
     if shape3[2] == 1:
         _band_last(B, v.reshape(shape3[:2]), out.reshape(shape3[:2]), float(coef))
@@ -118,16 +121,19 @@ def voigt_tensor(C: np.ndarray) -> np.ndarray:
 
 def _pattern(p: int, q: int, dim: int) -> tuple[str, ...]:
     """The 1-D matrix of G_pq along each axis."""
-    return tuple("A" if r == p == q else "D" if r == p else "Dt" if r == q else "M" for r in range(dim))
+    return tuple(
+        "A" if r == p == q else "D" if r == p else "Dt" if r == q else "M" for r in range(dim)
+    )
 
 
 @dataclass(frozen=True)
 class KroneckerStiffness:
     """K of the Voigt stiffness C (one for the whole mesh) on the Q2 lattice of ``axes``
     (per axis the Q2 node coordinates)."""
+
     axes: tuple
-    bands: tuple          # per axis {name: (5, n) bands}
-    terms: tuple          # (a, b, pattern, coefficient) with Ct[a, p, b, q] != 0
+    bands: tuple  # per axis {name: (5, n) bands}
+    terms: tuple  # (a, b, pattern, coefficient) with Ct[a, p, b, q] != 0
 
     @classmethod
     def of(cls, axes, C: np.ndarray) -> "KroneckerStiffness":
@@ -135,11 +141,19 @@ class KroneckerStiffness:
         mats = [axis_matrices(x) for x in axes]
         Ct = voigt_tensor(np.asarray(C, float))
         small = 1e-14 * np.abs(Ct).max()
-        terms = tuple((a, b, _pattern(p, q, dim), float(Ct[a, p, b, q]))
-                      for a in range(dim) for b in range(dim) for p in range(dim) for q in range(dim)
-                      if abs(Ct[a, p, b, q]) > small)
-        return cls(tuple(np.asarray(x, float) for x in axes),
-                   tuple({k: bands(L) for k, L in m.items()} for m in mats), terms)
+        terms = tuple(
+            (a, b, _pattern(p, q, dim), float(Ct[a, p, b, q]))
+            for a in range(dim)
+            for b in range(dim)
+            for p in range(dim)
+            for q in range(dim)
+            if abs(Ct[a, p, b, q]) > small
+        )
+        return cls(
+            tuple(np.asarray(x, float) for x in axes),
+            tuple({k: bands(L) for k, L in m.items()} for m in mats),
+            terms,
+        )
 
     @property
     def shape(self) -> tuple:
@@ -174,7 +188,11 @@ class KroneckerStiffness:
                 continue
             d = coef
             for r, name in enumerate(pattern):
-                d = np.multiply.outer(d, self.bands[r][name][2]) if r else d * self.bands[r][name][2]
+                d = (
+                    np.multiply.outer(d, self.bands[r][name][2])
+                    if r
+                    else d * self.bands[r][name][2]
+                )
             out[a] += d
         return out
 
@@ -183,6 +201,7 @@ class KroneckerStiffness:
         product of the 1-D matrices' infinity norms."""
         total = np.zeros(len(self.axes))
         for a, b, pattern, coef in self.terms:
-            total[a] += abs(coef) * np.prod([np.abs(self.bands[r][n]).sum(axis=0).max()
-                                             for r, n in enumerate(pattern)])
+            total[a] += abs(coef) * np.prod(
+                [np.abs(self.bands[r][n]).sum(axis=0).max() for r, n in enumerate(pattern)]
+            )
         return float(total.max())

@@ -27,10 +27,10 @@ SUPERLU_MAX = {2: 150_000, 3: 15_000}
 # the fast-diagonalisation PCG on the assembled system (reference/solvers/tensorpre.py) from
 # these many dofs (the 10:1 box's quarters at nu = 0.49, s, tensor / Cholesky: 17k dofs
 # 1.7 / 1.3, 55k 6.1 / 11.5, 129k 7.7 / -); in 2-D the Cholesky stays
-TENSOR_MIN = {2: 10 ** 12, 3: 20_000}
+TENSOR_MIN = {2: 10**12, 3: 20_000}
 # ... and without assembling it (one elastic tensor, reference/solvers/tensorsolve.py) from
 # these many free dofs (s, matrix-free CG / Cholesky: 7k dofs 1.0 / 0.8, 17k 1.3 / 2.5)
-MATRIX_FREE_MIN = {2: 10 ** 12, 3: 10_000}
+MATRIX_FREE_MIN = {2: 10**12, 3: 10_000}
 # a P2/Q2 system of at least these many dofs gets its P1/Q1 subspace (two-level); below,
 # 'auto' always factorises
 TWO_LEVEL_MIN = 20_000
@@ -42,11 +42,16 @@ TWO_LEVEL_MIN = 20_000
 TWO_LEVEL_GFLOP_PER_NONZERO = 2.8e-5
 # ... and from these many free dofs it takes the two-level without the symbolic estimate
 # (9 s at 203k dofs, where the Cholesky needs 1,730 Gflop)
-TWO_LEVEL_FIRST = {2: 10 ** 12, 3: 150_000}
+TWO_LEVEL_FIRST = {2: 10**12, 3: 150_000}
 
 # what each first method falls back to when it is not accepted
-_CHAINS = {"cholesky": ("cholesky",), "superlu": ("superlu",), "cg": ("cg", "amg", "amg-strong", "cholesky"),
-           "amg": ("amg", "amg-strong", "cholesky"), "two-level": ("two-level", "amg-strong", "cholesky")}
+_CHAINS = {
+    "cholesky": ("cholesky",),
+    "superlu": ("superlu",),
+    "cg": ("cg", "amg", "amg-strong", "cholesky"),
+    "amg": ("amg", "amg-strong", "cholesky"),
+    "two-level": ("two-level", "amg-strong", "cholesky"),
+}
 
 
 @dataclass(frozen=True)
@@ -58,6 +63,7 @@ class System:
     fast-diagonalisation preconditioner is at hand; ``matrix_free``: the stiffness is one
     elastic tensor on that lattice (K need not be assembled); ``nnz``: A's nonzeros;
     ``estimate``: the Cholesky's symbolic estimate {gflop, gbytes} once made."""
+
     n: int
     dim: int
     method: str = "auto"
@@ -76,6 +82,7 @@ class Plan:
     accepted; ``matrix_free``: try the matrix-free CG first; ``coarse``: build the P1/Q1
     subspace; ``needs_estimate``: 'auto' decides by the Cholesky's symbolic estimate:
     make it and ask again."""
+
     steps: tuple[str, ...] = ()
     matrix_free: bool = False
     coarse: bool = False
@@ -99,7 +106,9 @@ def choose_plan(s: System) -> Plan:
         elif s.estimate is None:
             return Plan(matrix_free=matrix_free, coarse=coarse, needs_estimate=True)
         else:
-            limit = min(CHOLESKY_GFLOP, TWO_LEVEL_GFLOP_PER_NONZERO * s.nnz) if two else CHOLESKY_GFLOP
+            limit = (
+                min(CHOLESKY_GFLOP, TWO_LEVEL_GFLOP_PER_NONZERO * s.nnz) if two else CHOLESKY_GFLOP
+            )
             ok = s.estimate["gflop"] <= limit and s.estimate["gbytes"] <= CHOLESKY_GBYTES
             first = "cholesky" if ok else "amg"
     else:
@@ -111,7 +120,7 @@ def choose_plan(s: System) -> Plan:
     if first == "two-level" and not two:
         first = "amg"
     steps: tuple[str, ...] = ()
-    if first == "tensor":    # then what 'auto' would do without it
+    if first == "tensor":  # then what 'auto' would do without it
         first = "two-level" if two else "amg"
         steps = ("tensor",) if s.tensor else ()
     steps += _CHAINS[first]

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 @dataclass(frozen=True)
 class Fallback:
     """An attempt that was not accepted: its method, residual, why, and its wall seconds."""
+
     method: str
     residual: float
     reason: str
@@ -27,6 +28,7 @@ class SolveRecord:
     estimate {gflop, gbytes} when one was made; ``loads``: the loads it solved; ``n``: free
     dofs; ``nnz``: nonzeros of A (when recorded); ``matrix_free``: K was never assembled;
     ``coarse``: solved in a coarser subspace (reference/adaptive/coarse.py)."""
+
     method: str
     residual: float = 0.0
     rtol: float = 0.0

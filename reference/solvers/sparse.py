@@ -65,7 +65,9 @@ CG_MAXITER = 20_000
 SECONDS_PER_GFLOP = 0.1
 CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
-TENSOR_MAXITER = 2000    # fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
+TENSOR_MAXITER = (
+    2000  # fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
+)
 TWO_LEVEL_MAXITER = 300
 
 
@@ -86,9 +88,17 @@ def _singular() -> ModelError:
     return ModelError("the stiffness matrix is singular", fix="check the constraints")
 
 
-def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.ndarray | None = None, *,
-          coords: np.ndarray | None = None, records: list | None = None,
-          coarse: sp.spmatrix | None = None, tensor=None) -> np.ndarray:
+def solve(
+    A: sp.spmatrix,
+    b: np.ndarray,
+    method: str = "auto",
+    near_null: np.ndarray | None = None,
+    *,
+    coords: np.ndarray | None = None,
+    records: list | None = None,
+    coarse: sp.spmatrix | None = None,
+    tensor=None,
+) -> np.ndarray:
     """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
     hierarchy) for symmetric positive definite A; returns x shaped like b.
 
@@ -123,9 +133,19 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
 
     def done(x, method, residual=0.0, rtol=RTOL, iterations=0):
         if records is not None:
-            records.append(SolveRecord(method, residual, rtol, iterations, time.perf_counter() - t0,
-                                       tuple(fallbacks), estimate))
+            records.append(
+                SolveRecord(
+                    method,
+                    residual,
+                    rtol,
+                    iterations,
+                    time.perf_counter() - t0,
+                    tuple(fallbacks),
+                    estimate,
+                )
+            )
         return x
+
     if not (np.all(np.isfinite(A.data)) and np.all(np.isfinite(b2))):
         raise _singular()
     d = A.diagonal()
@@ -141,7 +161,7 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
     live = bnorm > 0
     x = np.zeros_like(b2)
 
-    normA = float(np.max(abs(A) @ np.ones(n)))    # ||A||_inf >= ||A||_2 (symmetric)
+    normA = float(np.max(abs(A) @ np.ones(n)))  # ||A||_inf >= ||A||_2 (symmetric)
 
     def residual(xs):
         """(max ||b - A x|| / ||b||, the largest ratio of a column's residual to its
@@ -154,21 +174,35 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
 
     if not live.any():
         return done(x.reshape(b.shape), "cholesky" if method in ("auto", "direct") else method)
-    dim = near_null.shape[1] // 3 + 1 if near_null is not None and near_null.shape[1] in (3, 6) else \
-        (coords.shape[1] if coords is not None else 3)
+    dim = (
+        near_null.shape[1] // 3 + 1
+        if near_null is not None and near_null.shape[1] in (3, 6)
+        else (coords.shape[1] if coords is not None else 3)
+    )
     if coords is None and method in ("auto", "direct", "cholesky", "amg", "cg"):
         coords = _coords_from_modes(As, near_null)
     sym = None
-    system = System(n, dim, method, coords=coords is not None, coarse=coarse is not None, tensor=tensor is not None,
-                    nnz=A.nnz)
+    system = System(
+        n,
+        dim,
+        method,
+        coords=coords is not None,
+        coarse=coarse is not None,
+        tensor=tensor is not None,
+        nnz=A.nnz,
+    )
     plan = choose_plan(system)
-    if plan.needs_estimate:     # the Cholesky's cost from its symbolic factorisation (reused)
+    if plan.needs_estimate:  # the Cholesky's cost from its symbolic factorisation (reused)
         sym = _symbolic(As, coords)
         estimate = _estimate(sym)
         plan = choose_plan(dataclasses.replace(system, estimate=estimate))
     plan = list(plan.steps)
-    Bs = None if near_null is None else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
-    spent = 0.0   # CPU seconds of the failed attempts
+    Bs = (
+        None
+        if near_null is None
+        else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
+    )
+    spent = 0.0  # CPU seconds of the failed attempts
     for m in plan:
         t1, c1 = time.perf_counter(), time.process_time()
         budget = None
@@ -211,12 +245,15 @@ def solve(A: sp.spmatrix, b: np.ndarray, method: str = "auto", near_null: np.nda
             return done(xs.reshape(b.shape), m, res, tol, its)
         if m in ("cholesky", "superlu"):
             raise _singular()
-        fallbacks.append(Fallback(m, res, why or f"residual above {tol:.1e}", time.perf_counter() - t1))
+        fallbacks.append(
+            Fallback(m, res, why or f"residual above {tol:.1e}", time.perf_counter() - t1)
+        )
         spent += time.process_time() - c1
-    return done(x.reshape(b.shape), "none")     # not reached: the plan ends with a direct solve
+    return done(x.reshape(b.shape), "none")  # not reached: the plan ends with a direct solve
 
 
 # -- direct ------------------------------------------------------------------------------
+
 
 def _symbolic(As, coords):
     return Symbolic(As, coords)
@@ -235,7 +272,7 @@ def _factor(As, method, sym):
         return lambda r: f.solve(np.ascontiguousarray(r)).reshape(r.shape)
     try:
         lu = spla.splu(As.tocsc(), permc_spec="COLAMD")
-    except RuntimeError:       # exactly singular
+    except RuntimeError:  # exactly singular
         raise _singular() from None
     u = np.abs(lu.U.diagonal())
     if not np.all(np.isfinite(u)) or u.min() < 1e-14 * u.max():
@@ -243,8 +280,10 @@ def _factor(As, method, sym):
     return lambda r: lu.solve(np.ascontiguousarray(r)).reshape(r.shape)
 
 
-INVERSE_GBYTES = 6.0     # memory the shift-invert Cholesky may take (beyond it: the two-level CG below)
-INVERSE_RTOL = 1e-11     # relative residual of each shift-invert solve by the two-level CG
+INVERSE_GBYTES = (
+    6.0  # memory the shift-invert Cholesky may take (beyond it: the two-level CG below)
+)
+INVERSE_RTOL = 1e-11  # relative residual of each shift-invert solve by the two-level CG
 
 
 def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = None):
@@ -258,13 +297,14 @@ def inverse(A: sp.spmatrix, coords: np.ndarray, coarse: sp.spmatrix | None = Non
     if _estimate(sym)["gbytes"] <= INVERSE_GBYTES:
         try:
             return _factor(As, "cholesky", sym)
-        except ModelError:     # not positive definite: leave it to eigsh's own factorisation
+        except ModelError:  # not positive definite: leave it to eigsh's own factorisation
             return None
     return None if coarse is None else _two_level_inverse(As, coords, coarse)
 
 
 def _two_level_inverse(As, coords, coarse):
     from reference.solvers import twolevel
+
     s = 1.0 / np.sqrt(As.diagonal())
     Ass = equilibrated(As, s)
     M = twolevel.TwoLevel(Ass, s, coarse, coords)
@@ -273,11 +313,17 @@ def _two_level_inverse(As, coords, coarse):
         r = np.asarray(r, float)
         r2 = r.reshape(len(s), -1)
         bn = np.linalg.norm(r2, axis=0)
-        y, _, why = twolevel.pcg(Ass, s[:, None] * r2, M, 1.0 / s, lambda Y: INVERSE_RTOL * bn, TWO_LEVEL_MAXITER)
+        y, _, why = twolevel.pcg(
+            Ass, s[:, None] * r2, M, 1.0 / s, lambda Y: INVERSE_RTOL * bn, TWO_LEVEL_MAXITER
+        )
         if why:
-            raise ModelError(f"the modal solve's shift-invert CG failed: {why}", field="reference.modes",
-                             fix="fewer reference levels (max_refine) or modes = 0")
+            raise ModelError(
+                f"the modal solve's shift-invert CG failed: {why}",
+                field="reference.modes",
+                fix="fewer reference levels (max_refine) or modes = 0",
+            )
         return (s[:, None] * y).reshape(r.shape)
+
     return solve
 
 
@@ -302,8 +348,11 @@ def _coords_from_modes(A, near_null):
     X = np.zeros((n, dim))
     known = np.zeros((n, dim), bool)
     # (mode column, component, coordinate, sign): mode value = sign * coordinate
-    table = [(2, 0, 1, -1), (2, 1, 0, 1)] if dim == 2 else \
-        [(3, 0, 1, -1), (3, 1, 0, 1), (4, 1, 2, -1), (4, 2, 1, 1), (5, 0, 2, -1), (5, 2, 0, 1)]
+    table = (
+        [(2, 0, 1, -1), (2, 1, 0, 1)]
+        if dim == 2
+        else [(3, 0, 1, -1), (3, 1, 0, 1), (4, 1, 2, -1), (4, 2, 1, 1), (5, 0, 2, -1), (5, 2, 0, 1)]
+    )
     for col, c, j, sign in table:
         on = comp == c
         X[on, j] = sign * R[on, col]
@@ -321,31 +370,45 @@ def _coords_from_modes(A, near_null):
 
 # -- iterative ---------------------------------------------------------------------------
 
+
 def _two_level(As, bs, s, coarse, coords, Bs, normA, bnorm):
     """reference/solvers/twolevel.py's CG on every column at once, each to the residual
     ``solve`` accepts (RTOL, or the floor of the column's solution, halved for margin)."""
     from reference.solvers import twolevel
+
     try:
         M = twolevel.TwoLevel(As, s, coarse, coords, Bs)
-    except Exception as exc:   # noqa: BLE001 - a failed setup is a failed attempt
+    except Exception as exc:  # noqa: BLE001 - a failed setup is a failed attempt
         return np.full_like(bs, np.nan), 0, f"two-level setup failed: {exc}"
 
     def target(Y):
         xn = np.linalg.norm(Y * s[:, None], axis=0)
-        return 0.5 * np.clip(FLOOR * np.finfo(float).eps * normA * xn / bnorm, RTOL, DIRECT_RTOL) * bnorm
+        return (
+            0.5
+            * np.clip(FLOOR * np.finfo(float).eps * normA * xn / bnorm, RTOL, DIRECT_RTOL)
+            * bnorm
+        )
+
     return twolevel.pcg(As, bs, M, 1.0 / s, target, TWO_LEVEL_MAXITER)
 
 
 def _hierarchy(As, Bs, strong: bool):
     import pyamg
+
     if not strong:
         return pyamg.smoothed_aggregation_solver(As, B=Bs, symmetry="hermitian")
     smoother = ("gauss_seidel", {"sweep": "symmetric", "iterations": 2})
     return pyamg.smoothed_aggregation_solver(
-        As, B=Bs, symmetry="hermitian", strength=("symmetric", {"theta": 0.0}),
+        As,
+        B=Bs,
+        symmetry="hermitian",
+        strength=("symmetric", {"theta": 0.0}),
         smooth=("energy", {"krylov": "cg", "maxiter": 4, "degree": 2, "weighting": "local"}),
         improve_candidates=[("gauss_seidel", {"sweep": "symmetric", "iterations": 4})] * 2 + [None],
-        presmoother=smoother, postsmoother=smoother, max_coarse=500)
+        presmoother=smoother,
+        postsmoother=smoother,
+        max_coarse=500,
+    )
 
 
 def _iterative(As, bs, method, Bs, budget=None):
@@ -358,7 +421,7 @@ def _iterative(As, bs, method, Bs, budget=None):
     else:
         try:
             ml = _hierarchy(As, Bs, method == "amg-strong")
-        except Exception as exc:   # noqa: BLE001 - a failed setup is a failed attempt
+        except Exception as exc:  # noqa: BLE001 - a failed setup is a failed attempt
             return np.full_like(bs, np.nan), 0, f"AMG setup failed: {exc}"
         M = ml.aspreconditioner(cycle="V")
         maxiter = AMG_MAXITER if method == "amg" else STRONG_MAXITER
@@ -373,7 +436,8 @@ def _iterative(As, bs, method, Bs, budget=None):
 def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
     """Preconditioned CG to ||b - A x|| <= rtol ||b|| (recursive residual; the caller
     checks the true one). Gives up when the iteration budget runs out or the rate of the
-    last ``window`` iterations cannot reach rtol within it (or within ``seconds`` CPU). Returns (x, iterations, reason)."""
+    last ``window`` iterations cannot reach rtol within it (or within ``seconds`` CPU).
+    Returns (x, iterations, reason)."""
     c0 = time.process_time()
     x = np.zeros_like(b)
     r = b.copy()
@@ -396,13 +460,20 @@ def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
         hist.append(rel)
         if rel <= rtol:
             return x, k, ""
-        if k >= 2 * window and k % 10 == 0:   # rate of the best residual over the window
+        if k >= 2 * window and k % 10 == 0:  # rate of the best residual over the window
             rate = (min(hist[-window:]) / min(hist[:-window])) ** (1 / window)
             more = np.log(rtol / rel) / np.log(rate) if rate < 1 else np.inf
             if more > maxiter - k:
                 return x, k, f"too slow (rate {rate:.3f} per iteration at {k} iterations)"
-            if seconds is not None and more * (time.process_time() - c0) / k > seconds - (time.process_time() - c0):
-                return x, k, f"too slow ({k} iterations, ~{more:.0f} more would take longer than the Cholesky)"
+            if seconds is not None and more * (time.process_time() - c0) / k > seconds - (
+                time.process_time() - c0
+            ):
+                return (
+                    x,
+                    k,
+                    f"too slow ({k} iterations, ~{more:.0f} more would take longer than the "
+                    "Cholesky)",
+                )
         z = r if M is None else M @ r
         rz_new = r @ z
         if not rz_new > 0:

@@ -34,7 +34,7 @@ import scipy.sparse.linalg as spla
 from reference.graded.lattice import Lattice
 from reference.solvers.kronecker import axis_matrices
 
-_PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}   # Voigt index of a shear pair
+_PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}  # Voigt index of a shear pair
 
 
 def moduli(C: np.ndarray, dim: int) -> np.ndarray:
@@ -51,16 +51,17 @@ def moduli(C: np.ndarray, dim: int) -> np.ndarray:
 @dataclass(frozen=True)
 class _Block:
     """B_c^-1 of one component on its Dirichlet-reduced lattice."""
-    keep: tuple       # per axis: the lattice indices that are not Dirichlet ends
-    V: tuple          # per axis: M-orthonormal eigenvectors on ``keep``
-    inv: np.ndarray   # 1 / eigenvalue sums, shaped like the reduced lattice
+
+    keep: tuple  # per axis: the lattice indices that are not Dirichlet ends
+    V: tuple  # per axis: M-orthonormal eigenvectors on ``keep``
+    inv: np.ndarray  # 1 / eigenvalue sums, shaped like the reduced lattice
 
     def apply(self, r: np.ndarray) -> np.ndarray:
         t = r[np.ix_(*self.keep)]
-        for a, V in enumerate(self.V):            # W^T r
+        for a, V in enumerate(self.V):  # W^T r
             t = np.moveaxis(np.tensordot(V, t, axes=([0], [a])), 0, a)
         t *= self.inv
-        for a, V in enumerate(self.V):            # W t
+        for a, V in enumerate(self.V):  # W t
             t = np.moveaxis(np.tensordot(V, t, axes=([1], [a])), 0, a)
         out = np.zeros_like(r)
         out[np.ix_(*self.keep)] = t
@@ -74,8 +75,10 @@ def _block(axes, mats, free: np.ndarray, k: np.ndarray) -> _Block | None:
     keep = []
     for a in range(dim):
         ends = [0, len(axes[a]) - 1]
-        plane = lambda i: np.take(free, i, axis=a)   # noqa: E731
-        keep.append(np.array([i for i in range(len(axes[a])) if not (i in ends and not plane(i).any())]))
+        plane = lambda i: np.take(free, i, axis=a)  # noqa: E731
+        keep.append(
+            np.array([i for i in range(len(axes[a])) if not (i in ends and not plane(i).any())])
+        )
     if all(len(kept) == len(x) for kept, x in zip(keep, axes)):
         return None
     V, lam = [], []
@@ -83,7 +86,9 @@ def _block(axes, mats, free: np.ndarray, k: np.ndarray) -> _Block | None:
         l, v = sla.eigh(m["A"][np.ix_(kept, kept)], m["M"][np.ix_(kept, kept)])
         V.append(v)
         lam.append(np.maximum(l, 0.0))
-    total = sum(k[a] * lam[a].reshape([-1 if b == a else 1 for b in range(dim)]) for a in range(dim))
+    total = sum(
+        k[a] * lam[a].reshape([-1 if b == a else 1 for b in range(dim)]) for a in range(dim)
+    )
     return _Block(tuple(keep), tuple(V), 1.0 / total)
 
 
@@ -103,8 +108,10 @@ def blocks(axes, free: np.ndarray, C: np.ndarray) -> list | None:
 
 def lattice_preconditioner(found: list, free: np.ndarray):
     """z = P r on lattice fields (dim, lattice shape), zero on the fixed nodes."""
+
     def apply(r: np.ndarray) -> np.ndarray:
         return np.stack([B.apply(np.where(f, rc, 0.0)) for B, f, rc in zip(found, free, r)]) * free
+
     return apply
 
 
@@ -119,7 +126,7 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
         return None
     axes, index, shape = lat.axes, lat.index, lat.shape
     node, comp = np.divmod(np.asarray(free), dim)
-    at = comp * int(np.prod(shape)) + index[node]      # each free dof's place in a lattice field
+    at = comp * int(np.prod(shape)) + index[node]  # each free dof's place in a lattice field
     mask = np.zeros(dim * int(np.prod(shape)), bool)
     mask[at] = True
     mask = mask.reshape((dim,) + shape)
@@ -136,7 +143,7 @@ def preconditioner(doflocs: np.ndarray, free: np.ndarray, C: np.ndarray):
     return apply
 
 
-RESTARTS = 3   # CG restarts from the true residual (its recursive one drifts below it)
+RESTARTS = 3  # CG restarts from the true residual (its recursive one drifts below it)
 
 
 def cg(As, bs, s, apply, pcg, rtol: float, maxiter: int, y0=None):

@@ -20,11 +20,12 @@ from reference.solvers import sparse, tensorpre
 from reference.solvers.kronecker import KroneckerStiffness
 from reference.solvers.record import Fallback, SolveRecord
 
-ATTEMPTS = 3    # CG passes, each with a tighter target if the last fell short of the acceptance
+ATTEMPTS = 3  # CG passes, each with a tighter target if the last fell short of the acceptance
 
 
 def homogeneous(C: np.ndarray) -> np.ndarray | None:
-    """The one Voigt matrix of per-element stiffnesses C (ne, nv, nv) that are all equal, else None."""
+    """The one Voigt matrix of per-element stiffnesses C (ne, nv, nv) that are all equal,
+    else None."""
     C = np.asarray(C, float)
     return C[0] if np.allclose(C, C[0], rtol=1e-12, atol=1e-12 * np.abs(C[0]).max()) else None
 
@@ -32,6 +33,7 @@ def homogeneous(C: np.ndarray) -> np.ndarray | None:
 @dataclass(frozen=True)
 class Operator:
     """K of one Voigt matrix ``C`` on a lattice, applied to interleaved dof vectors."""
+
     lat: Lattice
     C: np.ndarray
     K: KroneckerStiffness
@@ -87,19 +89,32 @@ def solve(A: Operator, b: np.ndarray, fixed: np.ndarray, x0: np.ndarray | None =
         target = float(np.min(sparse.accepted_rtol(normA, np.linalg.norm(X0, axis=0), bnorm[live])))
     its = 0
     for _ in range(ATTEMPTS):
-        y0, k, why = tensorpre.cg(As, B[:, live] * s[:, None], safe, lambda r: P(r.reshape(lat.field_shape)).ravel(),
-                                  sparse._pcg, target, sparse.TENSOR_MAXITER - its, y0)
+        y0, k, why = tensorpre.cg(
+            As,
+            B[:, live] * s[:, None],
+            safe,
+            lambda r: P(r.reshape(lat.field_shape)).ravel(),
+            sparse._pcg,
+            target,
+            sparse.TENSOR_MAXITER - its,
+            y0,
+        )
         its += k
         X = np.zeros_like(B)
         X[:, live] = y0 * s[:, None]
-        r = np.linalg.norm(B[:, live] - np.column_stack([Af(x) for x in X[:, live].T]), axis=0) / bnorm[live]
+        r = (
+            np.linalg.norm(B[:, live] - np.column_stack([Af(x) for x in X[:, live].T]), axis=0)
+            / bnorm[live]
+        )
         tol = sparse.accepted_rtol(normA, np.linalg.norm(X[:, live], axis=0), bnorm[live])
         if why or not np.all(np.isfinite(r)) or np.all(r <= tol):
             break
-        target *= float(np.min(tol / r)) / 2      # the equilibrated residual fell short of the true one
+        target *= float(np.min(tol / r)) / 2  # the equilibrated residual fell short of the true one
     seconds = time.perf_counter() - t0
     res = float(r.max()) if r.size else 0.0
     if not np.all(np.isfinite(r)) or np.any(r > tol):
         return None, Fallback("tensor", res, why or "residual above the tolerance", seconds)
-    rec = SolveRecord("tensor", res, float(tol.max()) if tol.size else sparse.RTOL, its, seconds, matrix_free=True)
+    rec = SolveRecord(
+        "tensor", res, float(tol.max()) if tol.size else sparse.RTOL, its, seconds, matrix_free=True
+    )
     return lat.from_lattice(X.T.reshape((-1,) + lat.field_shape)), rec
