@@ -19,12 +19,21 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     from harness import __version__
-    parser = _Parser(prog="springbench", description="Score and calibrate spring/mass models against linear elasticity.")
+
+    parser = _Parser(
+        prog="springbench",
+        description="Score and calibrate spring/mass models against linear elasticity.",
+    )
     parser.add_argument("--version", action="version", version=f"springbench {__version__}")
     sub = parser.add_subparsers(dest="command", parser_class=_Parser, metavar="COMMAND")
     for name, mod in COMMANDS.items():
-        p = sub.add_parser(name, help=mod.HELP, description=mod.HELP, epilog=getattr(mod, "EPILOG", None),
-                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        p = sub.add_parser(
+            name,
+            help=mod.HELP,
+            description=mod.HELP,
+            epilog=getattr(mod, "EPILOG", None),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
         mod.add_arguments(p)
         p.set_defaults(_main=mod.main)
     return parser

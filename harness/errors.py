@@ -12,8 +12,14 @@ class SpringbenchError(Exception):
     should turn user mistakes into tracebacks.
     """
 
-    def __init__(self, message: str, *, file: str | None = None, field: str | None = None,
-                 fix: str | None = None):
+    def __init__(
+        self,
+        message: str,
+        *,
+        file: str | None = None,
+        field: str | None = None,
+        fix: str | None = None,
+    ):
         self.message, self.file, self.field, self.fix = message, file, field, fix
         super().__init__(str(self))
 
@@ -46,13 +52,14 @@ class CaseErrors(CaseError):
         first = self.errors[0]
         super().__init__(first.message, file=first.file, field=first.field, fix=first.fix)
 
-    def __reduce__(self):   # picklable (worker processes)
+    def __reduce__(self):  # picklable (worker processes)
         return CaseErrors, (self.errors,)
 
     def __str__(self) -> str:
         more = len(self.errors) - 1
-        return super().__str__() + (f" [and {more} more mistake{'s' if more > 1 else ''}: "
-                                    "springbench validate lists each]")
+        return super().__str__() + (
+            f" [and {more} more mistake{'s' if more > 1 else ''}: springbench validate lists each]"
+        )
 
 
 def raise_all(errors) -> None:

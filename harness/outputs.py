@@ -19,7 +19,10 @@ from pathlib import Path
 from harness.errors import SpringbenchError
 
 _WHY = {
-    errno.ENOSPC: ("disk full (no space left on the device)", "free space on that disk or write somewhere else"),
+    errno.ENOSPC: (
+        "disk full (no space left on the device)",
+        "free space on that disk or write somewhere else",
+    ),
     errno.EDQUOT: ("disk quota exceeded", "free space on that disk or write somewhere else"),
     errno.EROFS: ("read-only file system", "give a writable folder"),
     errno.EACCES: ("permission denied", "give a folder you can write to"),
@@ -32,7 +35,9 @@ _WHY = {
 
 def os_error(exc: OSError, path, field: str | None = None) -> SpringbenchError:
     """One line for a failed write of ``path`` (the user's name for it)."""
-    msg, fix = _WHY.get(exc.errno, (f"cannot write it ({exc.strerror or exc})", "check the path and the disk"))
+    msg, fix = _WHY.get(
+        exc.errno, (f"cannot write it ({exc.strerror or exc})", "check the path and the disk")
+    )
     return SpringbenchError(msg, file=str(path), field=field, fix=fix)
 
 
@@ -45,8 +50,12 @@ def _existing_ancestor(p: Path) -> Path:
 
 def _check_writable_folder(folder: Path, path, field):
     if not folder.is_dir():
-        raise SpringbenchError(f"{folder} is a file, not a folder", file=str(path), field=field,
-                               fix="give a path inside a folder")
+        raise SpringbenchError(
+            f"{folder} is a file, not a folder",
+            file=str(path),
+            field=field,
+            fix="give a path inside a folder",
+        )
     if not os.access(folder, os.W_OK | os.X_OK):
         readonly = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
         raise os_error(OSError(errno.EROFS if readonly else errno.EACCES, ""), path, field)
@@ -67,8 +76,12 @@ def check_out_dir(path, field: str | None = "--out") -> Path:
     """The same for an output folder (it may exist; it must be a folder)."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise SpringbenchError("exists and is not a folder", file=str(path), field=field,
-                               fix="give a folder (or a new name)")
+        raise SpringbenchError(
+            "exists and is not a folder",
+            file=str(path),
+            field=field,
+            fix="give a folder (or a new name)",
+        )
     _check_writable_folder(_existing_ancestor(path), path, field)
     return path
 
@@ -122,13 +135,17 @@ def staged(paths, field: str | None = None):
         for t, p in zip(temps, paths):
             os.replace(t, p)
     except OSError as exc:
-        failed = next((p for t, p in zip(temps, paths) if exc.filename in (str(t), str(p))), paths[0])
+        failed = next(
+            (p for t, p in zip(temps, paths) if exc.filename in (str(t), str(p))), paths[0]
+        )
         raise os_error(exc, failed, field) from None
-    except SpringbenchError as exc:    # a nested atomic writer named our temp file: name the user's
+    except SpringbenchError as exc:  # a nested atomic writer named our temp file: name the user's
         user = next((p for t, p in zip(temps, paths) if exc.file == str(t)), None)
         if user is None:
             raise
-        raise type(exc)(exc.message, file=str(user), field=field or exc.field, fix=exc.fix) from None
+        raise type(exc)(
+            exc.message, file=str(user), field=field or exc.field, fix=exc.fix
+        ) from None
     finally:
         for t in temps:
             try:

@@ -8,5 +8,5 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 HOME = ROOT if (ROOT / "cases").is_dir() else Path.cwd()
 DEFAULT_CASES = HOME / "cases"
-DEFAULT_RESULTS = HOME / "results"   # the published tables: the --full run, committed
-DEFAULT_RUNS = HOME / "runs"         # where a user's runs go by default (git-ignored)
+DEFAULT_RESULTS = HOME / "results"  # the published tables: the --full run, committed
+DEFAULT_RUNS = HOME / "runs"  # where a user's runs go by default (git-ignored)

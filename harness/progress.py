@@ -27,8 +27,17 @@ def shown() -> bool:
 def steps(items, desc: str, unit: str = "step"):
     """``items`` with a tqdm bar (count, elapsed, ETA) when :func:`shown`."""
     from tqdm import tqdm
+
     items = list(items)
-    return tqdm(items, desc=desc, unit=unit, file=sys.stderr, disable=not shown(), leave=False, dynamic_ncols=True)
+    return tqdm(
+        items,
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        disable=not shown(),
+        leave=False,
+        dynamic_ncols=True,
+    )
 
 
 class Clock:
@@ -42,8 +51,14 @@ class Clock:
         self.bar, self._lock = None, threading.Lock()
         if shown():
             from tqdm import tqdm
-            self.bar = tqdm(total=None, file=sys.stderr, leave=False, dynamic_ncols=True,
-                            bar_format="{desc} [{elapsed}]{postfix}")
+
+            self.bar = tqdm(
+                total=None,
+                file=sys.stderr,
+                leave=False,
+                dynamic_ncols=True,
+                bar_format="{desc} [{elapsed}]{postfix}",
+            )
             self._stop = threading.Event()
             self._thread = threading.Thread(target=self._tick, daemon=True)
             self._thread.start()
@@ -78,11 +93,16 @@ class Clock:
             self.bar.bar_format = "{desc} [{elapsed}]{postfix}"
         else:
             from tqdm import tqdm
+
             total = max(self.end, now) - self.t0
             self.bar.total = total
             self.bar.n = min(now - self.t0, total)
-            left = tqdm.format_interval(max(self.end - now, 0.0))      # the bound, not tqdm's rate estimate
-            self.bar.bar_format = "{desc} {percentage:3.0f}%|{bar}| {elapsed}, at most " + left + " left{postfix}"
+            left = tqdm.format_interval(
+                max(self.end - now, 0.0)
+            )  # the bound, not tqdm's rate estimate
+            self.bar.bar_format = (
+                "{desc} {percentage:3.0f}%|{bar}| {elapsed}, at most " + left + " left{postfix}"
+            )
         self.bar.refresh()
 
     def close(self) -> None:

@@ -21,11 +21,24 @@ from pathlib import Path
 from harness import __version__
 from harness.paths import ROOT
 
-FORMAT_VERSION = 1     # of result files, summaries and bench CSVs; raise it when their meaning changes
-LIBRARIES = {"numpy_version": "numpy", "scipy_version": "scipy", "skfem_version": "scikit-fem",
-             "pandas_version": "pandas"}
-FIELDS = ("format_version", "springbench_version", "git_commit", "git_dirty", "python_version",
-          *LIBRARIES, "cpu_model", "cpu_cores", "load_average")
+FORMAT_VERSION = 1  # of result files, summaries and bench CSVs; raise it when their meaning changes
+LIBRARIES = {
+    "numpy_version": "numpy",
+    "scipy_version": "scipy",
+    "skfem_version": "scikit-fem",
+    "pandas_version": "pandas",
+}
+FIELDS = (
+    "format_version",
+    "springbench_version",
+    "git_commit",
+    "git_dirty",
+    "python_version",
+    *LIBRARIES,
+    "cpu_model",
+    "cpu_cores",
+    "load_average",
+)
 NOT_RECORDED = "not recorded"
 # what a dirty tree means: changed code or cases, not the outputs of runs (results/, runs/)
 OUTPUTS = ("results", "runs")
@@ -35,8 +48,13 @@ def collect(root: Path | None = None) -> dict:
     """The provenance of work starting now (FIELDS; None where unknown)."""
 
     commit, dirty = git_state(Path(root or ROOT))
-    out = {"format_version": FORMAT_VERSION, "springbench_version": __version__, "git_commit": commit,
-           "git_dirty": dirty, "python_version": platform.python_version()}
+    out = {
+        "format_version": FORMAT_VERSION,
+        "springbench_version": __version__,
+        "git_commit": commit,
+        "git_dirty": dirty,
+        "python_version": platform.python_version(),
+    }
     for key, dist in LIBRARIES.items():
         try:
             out[key] = metadata.version(dist)
@@ -44,7 +62,7 @@ def collect(root: Path | None = None) -> dict:
             out[key] = None
     try:
         load = round(os.getloadavg()[0], 2)
-    except OSError:                          # pragma: no cover - no load average on this system
+    except OSError:  # pragma: no cover - no load average on this system
         load = None
     out.update(cpu_model=cpu_model(), cpu_cores=os.cpu_count(), load_average=load)
     return out
@@ -53,8 +71,12 @@ def collect(root: Path | None = None) -> dict:
 def git_state(root: Path) -> tuple[str | None, bool | None]:
     """(HEAD's commit, whether tracked or untracked files outside OUTPUTS differ from it);
     (None, None) outside a git checkout or without git."""
+
     def git(*args):
-        return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30)
+        return subprocess.run(
+            ["git", "-C", str(root), *args], capture_output=True, text=True, timeout=30
+        )
+
     try:
         head = git("rev-parse", "HEAD")
         if head.returncode != 0:
@@ -84,20 +106,34 @@ def describe(p: dict | None) -> str:
 
     def get(key):
         v = p.get(key)
-        return NOT_RECORDED if v is None or v != v or v == "" else v     # NaN: a CSV's empty cell
-    if get("format_version") == NOT_RECORDED:      # every record has it: without it, nothing was recorded
+        return NOT_RECORDED if v is None or v != v or v == "" else v  # NaN: a CSV's empty cell
+
+    if (
+        get("format_version") == NOT_RECORDED
+    ):  # every record has it: without it, nothing was recorded
         return NOT_RECORDED
     commit = get("git_commit")
     dirty = p.get("git_dirty")
-    state = "" if commit == NOT_RECORDED else (" (dirty tree)" if str(dirty).lower() in ("true", "1") else
-                                                " (clean tree)" if str(dirty).lower() in ("false", "0") else "")
+    state = (
+        ""
+        if commit == NOT_RECORDED
+        else (
+            " (dirty tree)"
+            if str(dirty).lower() in ("true", "1")
+            else " (clean tree)"
+            if str(dirty).lower() in ("false", "0")
+            else ""
+        )
+    )
     libs = ", ".join(f"{dist} {get(key)}" for key, dist in LIBRARIES.items())
-    return (f"format {get('format_version')}, springbench {get('springbench_version')}, commit "
-            f"{str(commit)[:12]}{state}; Python {get('python_version')}, {libs}; CPU {get('cpu_model')}, "
-            f"{get('cpu_cores')} cores, load average {get('load_average')} at start")
+    return (
+        f"format {get('format_version')}, springbench {get('springbench_version')}, commit "
+        f"{str(commit)[:12]}{state}; Python {get('python_version')}, {libs}; CPU "
+        f"{get('cpu_model')}, "
+        f"{get('cpu_cores')} cores, load average {get('load_average')} at start"
+    )
 
 
 def columns(p: dict) -> dict:
     """The FIELDS of ``p`` as CSV columns (the bench CSVs)."""
     return {k: p.get(k) for k in FIELDS}
-

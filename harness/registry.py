@@ -20,6 +20,7 @@ from typing import Any, Iterator, Mapping
 class Registry:
     """``kind`` (for messages), ``entries`` name -> "module[:attribute]", and per name
     whatever else its users read without importing it (``about``)."""
+
     kind: str
     entries: Mapping[str, str]
     about: Mapping[str, Any] = field(default_factory=dict)
@@ -57,7 +58,9 @@ class Registry:
 
     def with_entries(self, entries: Mapping[str, str]) -> Registry:
         """A registry of the same kind holding ``entries`` (tests, restricted runs)."""
-        return Registry(self.kind, dict(entries), {k: v for k, v in self.about.items() if k in entries})
+        return Registry(
+            self.kind, dict(entries), {k: v for k, v in self.about.items() if k in entries}
+        )
 
 
 def _modules(kind: str, package: str, names: str) -> Registry:
@@ -65,103 +68,164 @@ def _modules(kind: str, package: str, names: str) -> Registry:
 
 
 # ``springbench COMMAND``: modules with HELP, add_arguments(parser), main(args) -> int
-COMMANDS = _modules("command", "harness.commands",
-                    "run validate reference build score calibrate pack engines bench report rules")
+COMMANDS = _modules(
+    "command",
+    "harness.commands",
+    "run validate reference build score calibrate pack engines bench report rules",
+)
 
 # ``springbench run``: stage modules in pipeline order (NAME, applies, run[, check]);
 # keyed by NAME, the case files' ``[run] stages``
-STAGES = Registry("stage", {
-    "reference": "harness.stages.reference_check",     # FEM reference + its verification
-    "sms": "harness.stages.sms",                       # spring/mass build + score + optimise
-    "bc2000": "harness.stages.bc2000",                 # Bourguignon & Cani experiments
-    "engines": "harness.stages.engines",               # engines' deformable bodies against the FEM
-})
+STAGES = Registry(
+    "stage",
+    {
+        "reference": "harness.stages.reference_check",  # FEM reference + its verification
+        "sms": "harness.stages.sms",  # spring/mass build + score + optimise
+        "bc2000": "harness.stages.bc2000",  # Bourguignon & Cani experiments
+        "engines": "harness.stages.engines",  # engines' deformable bodies against the FEM
+    },
+)
 
 # ``springbench bench NAME``: modules with run(quick) -> DataFrame
-BENCHES = _modules("benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines")
+BENCHES = _modules(
+    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines"
+)
 
 # ``[optimizer] method``: function(problem, options, seed, status) -> FitResult fields
-OPTIMIZERS = Registry("optimiser", {
-    "sa": "harness.optimize.annealing:sa",                      # Deussen 1995 Fig. 6, incremental G
-    "sa-refactor": "harness.optimize.annealing:sa_refactor",    # the same chain, re-factorised (baseline)
-    "lbfgs": "harness.optimize.gradient:lbfgs",                 # adjoint gradient, L-BFGS-B over log k
-    "nelder-mead": "harness.optimize.gradient:nelder_mead",     # derivative-free (few groups)
-    "gauss-newton": "harness.optimize.gradient:gauss_newton",   # Levenberg-Marquardt, CG on adjoint products
-    "equilibrium-gap": "harness.optimize.equilibrium:equilibrium_gap",  # equation error, one sparse lstsq
-    "none": "harness.optimize.keep:keep",                       # k0 as it is (the unoptimised row)
-})
+OPTIMIZERS = Registry(
+    "optimiser",
+    {
+        "sa": "harness.optimize.annealing:sa",  # Deussen 1995 Fig. 6, incremental G
+        # the same chain, every proposal re-factorised (the paper's cost; baseline)
+        "sa-refactor": "harness.optimize.annealing:sa_refactor",
+        "lbfgs": "harness.optimize.gradient:lbfgs",  # adjoint gradient, L-BFGS-B over log k
+        "nelder-mead": "harness.optimize.gradient:nelder_mead",  # derivative-free (few groups)
+        # Levenberg-Marquardt, CG on adjoint products
+        "gauss-newton": "harness.optimize.gradient:gauss_newton",
+        # the equation error: one sparse linear least squares
+        "equilibrium-gap": "harness.optimize.equilibrium:equilibrium_gap",
+        "none": "harness.optimize.keep:keep",  # k0 as it is (the unoptimised row)
+    },
+)
 
 # ``[model] classes``: model classes an sms case scores on the same nodes (ModelClass objects,
 # harness/stages/classes/)
-MODEL_CLASSES = Registry("model class", {
-    "springs": "harness.stages.classes.springs:SPRINGS",
-    "springs+volume": "harness.stages.classes.springs:VOLUME_SHARED",
-    "springs+volume-element": "harness.stages.classes.springs:VOLUME_ELEMENT",
-    "p1": "harness.stages.classes.p1:P1",
-    "mt": "harness.stages.classes.mt:MT",
-    "springs+kn": "harness.stages.classes.springs:KN_SHARED",
-    "springs+node-volume": "harness.stages.classes.springs:NODE_VOLUME_SHARED",
-})
+MODEL_CLASSES = Registry(
+    "model class",
+    {
+        "springs": "harness.stages.classes.springs:SPRINGS",
+        "springs+volume": "harness.stages.classes.springs:VOLUME_SHARED",
+        "springs+volume-element": "harness.stages.classes.springs:VOLUME_ELEMENT",
+        "p1": "harness.stages.classes.p1:P1",
+        "mt": "harness.stages.classes.mt:MT",
+        "springs+kn": "harness.stages.classes.springs:KN_SHARED",
+        "springs+node-volume": "harness.stages.classes.springs:NODE_VOLUME_SHARED",
+    },
+)
 
 # ``[model] stiffness``: rule(points, springs, cells, material) -> k
-STIFFNESS_RULES = Registry("stiffness rule", {
-    "deussen": "harness.models.stiffness_rules:deussen",
-    "vangelder": "harness.models.stiffness_rules:vangelder",
-    "lloyd": "harness.models.stiffness_rules:lloyd",
-    "uniform": "harness.models.stiffness_rules:uniform",
-    "cauchy": "harness.models.stiffness_rules:cauchy",
-    "learned": "harness.models.stiffness_rules:learned",
-})
+STIFFNESS_RULES = Registry(
+    "stiffness rule",
+    {
+        "deussen": "harness.models.stiffness_rules:deussen",
+        "vangelder": "harness.models.stiffness_rules:vangelder",
+        "lloyd": "harness.models.stiffness_rules:lloyd",
+        "uniform": "harness.models.stiffness_rules:uniform",
+        "cauchy": "harness.models.stiffness_rules:cauchy",
+        "learned": "harness.models.stiffness_rules:learned",
+    },
+)
 
 # ``[loads] set``: make(s, anchors, frame) -> loads; ``about``: the set's dimension
-LOAD_SETS = Registry("load set", {
-    "basic2d": "harness.case.loadsets:basic2d",                 # Deussen 1995 Fig. 4
-    "basic3d": "harness.case.loadsets:basic3d",                 # Deussen 1995 Fig. 7
-    "homogeneous2d": "harness.case.loadsets:homogeneous2d",     # constant stress states
-    "homogeneous3d": "harness.case.loadsets:homogeneous3d",
-    "linear2d": "harness.case.linear_states:linear2d",          # + equilibrated linear stress states
-    "linear3d": "harness.case.linear_states:linear3d",
-}, about={"basic2d": 2, "basic3d": 3, "homogeneous2d": 2, "homogeneous3d": 3, "linear2d": 2, "linear3d": 3})
+LOAD_SETS = Registry(
+    "load set",
+    {
+        "basic2d": "harness.case.loadsets:basic2d",  # Deussen 1995 Fig. 4
+        "basic3d": "harness.case.loadsets:basic3d",  # Deussen 1995 Fig. 7
+        "homogeneous2d": "harness.case.loadsets:homogeneous2d",  # constant stress states
+        "homogeneous3d": "harness.case.loadsets:homogeneous3d",
+        "linear2d": "harness.case.linear_states:linear2d",  # + equilibrated linear stress states
+        "linear3d": "harness.case.linear_states:linear3d",
+    },
+    about={
+        "basic2d": 2,
+        "basic3d": 3,
+        "homogeneous2d": 2,
+        "homogeneous3d": 3,
+        "linear2d": 2,
+        "linear3d": 3,
+    },
+)
 
 # mesh formats of our own (any other name is a meshio format): reader(path) -> Mesh
-MESH_READERS = Registry("mesh format", {
-    "bc2000": "harness.io.meshfile:read_bc2000",
-    "meshio": "harness.io.meshfile:read_meshio",
-})
+MESH_READERS = Registry(
+    "mesh format",
+    {
+        "bc2000": "harness.io.meshfile:read_bc2000",
+        "meshio": "harness.io.meshfile:read_meshio",
+    },
+)
 
 # ``ENGINE`` / ``[model] engines``: adapter(pack, options) -> {load: Answer};
 # ``about``: (the package it needs, what it runs)
-ENGINES = Registry("engine", {
-    "newton-springs": "harness.engines.newton_engine:run_springs",
-    "newton-tets": "harness.engines.newton_engine:run_tets",
-    "mujoco-flex": "harness.engines.mujoco_flex:run",
-}, about={
-    "newton-springs": ("newton", "a springbench export (--model MODEL.json) as NVIDIA Newton particles, springs "
-                                 "and (springs+volume) tetrahedra"),
-    "newton-tets": ("newton", "NVIDIA Newton's own tetrahedral FEM (stable Neo-Hookean, k_mu / k_lambda from E "
-                              "and nu)"),
-    "mujoco-flex": ("mujoco", "MuJoCo's 3-D flex with its own elasticity (young, poisson)"),
-})
+ENGINES = Registry(
+    "engine",
+    {
+        "newton-springs": "harness.engines.newton_engine:run_springs",
+        "newton-tets": "harness.engines.newton_engine:run_tets",
+        "mujoco-flex": "harness.engines.mujoco_flex:run",
+    },
+    about={
+        "newton-springs": (
+            "newton",
+            "a springbench export (--model MODEL.json) as NVIDIA Newton particles, springs "
+            "and (springs+volume) tetrahedra",
+        ),
+        "newton-tets": (
+            "newton",
+            "NVIDIA Newton's own tetrahedral FEM (stable Neo-Hookean, k_mu / k_lambda from E "
+            "and nu)",
+        ),
+        "mujoco-flex": ("mujoco", "MuJoCo's 3-D flex with its own elasticity (young, poisson)"),
+    },
+)
 
 # ``[dynamics] experiment`` of the bc2000 stage: function(case, ctx, model, dyn) -> rows
-EXPERIMENTS = Registry("bc2000 experiment", {
-    "run": "harness.stages.bc2000:plain",
-    "volume": "harness.stages.bc2000:volume",
-    "pull": "harness.stages.bc2000:pull",
-    "cantilever": "harness.stages.bc2000:cantilever",
-    "fibres": "harness.stages.bc2000:fibres",
-    "timing": "harness.stages.bc2000:timing",
-    "fem": "harness.stages.bc2000_fem:fem",
-})
+EXPERIMENTS = Registry(
+    "bc2000 experiment",
+    {
+        "run": "harness.stages.bc2000:plain",
+        "volume": "harness.stages.bc2000:volume",
+        "pull": "harness.stages.bc2000:pull",
+        "cantilever": "harness.stages.bc2000:cantilever",
+        "fibres": "harness.stages.bc2000:fibres",
+        "timing": "harness.stages.bc2000:timing",
+        "fem": "harness.stages.bc2000_fem:fem",
+    },
+)
 
 # the results page's tables of a suite folder: function(summary DataFrame) -> tables
 # (suites not named here get harness.report.headlines:generic_tables)
-REPORT_TABLES = Registry("report table", {
-    "deussen1995": "harness.report.headlines:deussen_tables",
-    "bourguignon2000": "harness.report.headlines:bc2000_tables",
-    "verification": "harness.report.headlines:verification_tables",
-    "engines": "harness.report.engines:engines_tables",
-})
+REPORT_TABLES = Registry(
+    "report table",
+    {
+        "deussen1995": "harness.report.headlines:deussen_tables",
+        "bourguignon2000": "harness.report.headlines:bc2000_tables",
+        "verification": "harness.report.headlines:verification_tables",
+        "engines": "harness.report.engines:engines_tables",
+    },
+)
 
-ALL = (COMMANDS, STAGES, BENCHES, OPTIMIZERS, MODEL_CLASSES, STIFFNESS_RULES, LOAD_SETS, MESH_READERS, ENGINES,
-       EXPERIMENTS, REPORT_TABLES)
+ALL = (
+    COMMANDS,
+    STAGES,
+    BENCHES,
+    OPTIMIZERS,
+    MODEL_CLASSES,
+    STIFFNESS_RULES,
+    LOAD_SETS,
+    MESH_READERS,
+    ENGINES,
+    EXPERIMENTS,
+    REPORT_TABLES,
+)

@@ -1,4 +1,5 @@
-"""The G criteria of Deussen, Kobbelt & Tuecke 1995 (eq. 12, Section 5.4; docs/design.md, "The G criteria"):
+"""The G criteria of Deussen, Kobbelt & Tuecke 1995 (eq. 12, Section 5.4; docs/design.md, "The G
+criteria"):
 
     G_{a:b:c} = sqrt( sum_i sum_p w_p |u_ref,i(p) - u_i(p)|^2 ),  w_p = a inner, b border, c corner
 
@@ -21,6 +22,7 @@ from harness.mechanics import statics as st
 @dataclass(frozen=True)
 class ScoreResult:
     """G with ``weights`` (a, b, c), G_s, the normalised G, and per-load breakdowns."""
+
     G: float
     G_s: float
     G_norm: float
@@ -31,7 +33,9 @@ class ScoreResult:
 
     def rows(self) -> list[dict]:
         """One row per load case plus a 'total' row (for CSV output)."""
-        out = [{"load": k, "G": v, "G_norm": self.per_load_norm[k]} for k, v in self.per_load.items()]
+        out = [
+            {"load": k, "G": v, "G_norm": self.per_load_norm[k]} for k, v in self.per_load.items()
+        ]
         out.append({"load": "total", "G": self.G, "G_norm": self.G_norm})
         return out
 
@@ -41,7 +45,9 @@ def node_weights(classes: np.ndarray, weights) -> np.ndarray:
     return np.asarray(weights, float)[np.asarray(classes, int)]
 
 
-def g_arrays(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names=None) -> ScoreResult:
+def g_arrays(
+    u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names=None
+) -> ScoreResult:
     """The G criteria of a model's displacements against the reference's.
 
     Parameters
@@ -70,8 +76,9 @@ def g_arrays(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, nam
 
     def per(w):
         err = np.einsum("p,lpd->l", w, (u_ref - u) ** 2)
-        ref = np.einsum("p,lpd->l", w, u_ref ** 2)
+        ref = np.einsum("p,lpd->l", w, u_ref**2)
         return err, ref
+
     w = node_weights(classes, weights)
     err, ref = per(w)
     err_s, ref_s = per(np.ones(len(w)))
@@ -79,13 +86,20 @@ def g_arrays(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, nam
     with np.errstate(divide="ignore", invalid="ignore"):
         per_norm = np.sqrt(err / ref)
         G_norm = float(np.sqrt(err.sum() / ref.sum())) if ref.sum() > 0 else float("nan")
-    return ScoreResult(G, float(np.sqrt(err_s.sum())), G_norm, weights,
-                       MappingProxyType(dict(zip(names, np.sqrt(err).tolist()))),
-                       MappingProxyType(dict(zip(names, per_norm.tolist()))), u.shape[1])
+    return ScoreResult(
+        G,
+        float(np.sqrt(err_s.sum())),
+        G_norm,
+        weights,
+        MappingProxyType(dict(zip(names, np.sqrt(err).tolist()))),
+        MappingProxyType(dict(zip(names, per_norm.tolist()))),
+        u.shape[1],
+    )
 
 
-def fit_and_heldout(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names, fit, heldout
-                    ) -> tuple[ScoreResult, ScoreResult | None]:
+def fit_and_heldout(
+    u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names, fit, heldout
+) -> tuple[ScoreResult, ScoreResult | None]:
     """Scores of u against u_ref (L, n, dim) over loads ``names`` kept apart: on the
     fitted loads ``fit`` and on the held-out ones ``heldout`` (None when there are none),
     the same weights (docs/design.md, "Fitted and held-out loads")."""
@@ -95,6 +109,7 @@ def fit_and_heldout(u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weigh
     def part(which):
         idx = [names.index(n) for n in which]
         return g_arrays(u_ref[idx], u[idx], classes, weights, list(which))
+
     return part(fit), (part(heldout) if len(heldout) else None)
 
 
@@ -138,10 +153,12 @@ def score(network, case, ref, weights=None, statics=None) -> ScoreResult:
 
 # -- the reference's own error beside every score (docs/design.md) -------------------
 
-REF_COARSE_FRACTION = 0.1   # G_ref above this fraction of a row's normalised G: "ref-coarse"
+REF_COARSE_FRACTION = 0.1  # G_ref above this fraction of a row's normalised G: "ref-coarse"
 
 
-def g_ref_arrays(u_ref: np.ndarray, e: np.ndarray, classes: np.ndarray, weights) -> tuple[float, np.ndarray]:
+def g_ref_arrays(
+    u_ref: np.ndarray, e: np.ndarray, classes: np.ndarray, weights
+) -> tuple[float, np.ndarray]:
     """G_ref: the normalised G of :func:`g_arrays` with the reference's estimated error
     e_p = |u_h - u|(p) in place of |u_ref - u|, same weights and nodes:
 
@@ -152,10 +169,12 @@ def g_ref_arrays(u_ref: np.ndarray, e: np.ndarray, classes: np.ndarray, weights)
     u_ref = np.asarray(u_ref, float)
     e = np.asarray(e, float)
     if u_ref.ndim != 3 or e.shape != u_ref.shape[:2]:
-        raise ValueError(f"u_ref {u_ref.shape} must be (loads, nodes, dim) and e {e.shape} (loads, nodes)")
+        raise ValueError(
+            f"u_ref {u_ref.shape} must be (loads, nodes, dim) and e {e.shape} (loads, nodes)"
+        )
     w = node_weights(classes, weights)
-    err = np.einsum("p,lp->l", w, e ** 2)
-    ref = np.einsum("p,lpd->l", w, u_ref ** 2)
+    err = np.einsum("p,lp->l", w, e**2)
+    ref = np.einsum("p,lpd->l", w, u_ref**2)
     with np.errstate(divide="ignore", invalid="ignore"):
         per = np.sqrt(err / ref)
         total = float(np.sqrt(err.sum() / ref.sum())) if ref.sum() > 0 else float("nan")
@@ -209,7 +228,7 @@ def met_tol_at(u_ref: np.ndarray, e: np.ndarray, tol: float) -> bool:
 
 
 def ref_status(g_ref: float, g_norm: float, met_tol: bool | None) -> str:
-    """"ref-coarse" if the reference missed its tol or its own error G_ref exceeds
+    """ "ref-coarse" if the reference missed its tol or its own error G_ref exceeds
     REF_COARSE_FRACTION of the row's normalised G (a NaN G_ref alone is not enough:
     it means no estimate, which ``met_tol`` then reports as missed); else "ok"."""
     if met_tol is False:
@@ -219,7 +238,9 @@ def ref_status(g_ref: float, g_norm: float, met_tol: bool | None) -> str:
     return "ok"
 
 
-def ref_columns(ref, points: np.ndarray, names, u_ref: np.ndarray, classes: np.ndarray, weights) -> dict:
+def ref_columns(
+    ref, points: np.ndarray, names, u_ref: np.ndarray, classes: np.ndarray, weights
+) -> dict:
     """The row columns of the reference's own error at a model's nodes for loads
     ``names``: ``G_ref``, ``ref_error_max``, ``ref_met_tol`` and ``ref_met_tol_body`` (the
     last two only when the reference says whether it met its tol). ``ref_met_tol`` is

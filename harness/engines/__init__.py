@@ -29,9 +29,14 @@ def adapter(name: str):
     """The run function of engine ``name`` (its package imported): one-line errors for an
     unknown engine or a missing package."""
     if name not in ENGINES:
-        raise SpringbenchError(f"unknown engine '{name}'", field="ENGINE", fix=f"one of {', '.join(ENGINES)}")
+        raise SpringbenchError(
+            f"unknown engine '{name}'", field="ENGINE", fix=f"one of {', '.join(ENGINES)}"
+        )
     package = ENGINES.about[name][0]
-    if importlib.util.find_spec(package) is None:       # found, not imported: an engine sets itself up
-        raise SpringbenchError(f"engine '{name}' needs the package '{package}', which is not installed",
-                               field="ENGINE", fix=f"{EXTRA} (or pip install {package})") from None
+    if importlib.util.find_spec(package) is None:  # found, not imported: an engine sets itself up
+        raise SpringbenchError(
+            f"engine '{name}' needs the package '{package}', which is not installed",
+            field="ENGINE",
+            fix=f"{EXTRA} (or pip install {package})",
+        ) from None
     return ENGINES.load(name)

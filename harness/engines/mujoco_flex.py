@@ -29,11 +29,15 @@ def _xml(points, tets, held_full, E, nu) -> str:
     pts = " ".join(f"{x:.17g}" for x in points.ravel())
     el = " ".join(str(int(i)) for i in tets.ravel())
     pin = f'<pin id="{" ".join(str(int(i)) for i in held_full)}"/>' if len(held_full) else ""
-    return (f'<mujoco><option timestep="1e-4" gravity="0 0 0" integrator="Euler"/><worldbody>'
-            f'<flexcomp name="body" type="direct" dim="3" dof="full" point="{pts}" element="{el}" mass="1" '
-            f'radius="0.0001"><contact contype="0" conaffinity="0" selfcollide="none"/><edge equality="false"/>'
-            f'<elasticity young="{E:.17g}" poisson="{nu:.17g}" damping="0"/>{pin}</flexcomp>'
-            f"</worldbody></mujoco>")
+    return (
+        f'<mujoco><option timestep="1e-4" gravity="0 0 0" integrator="Euler"/><worldbody>'
+        f'<flexcomp name="body" type="direct" dim="3" dof="full" point="{pts}" '
+        f'element="{el}" mass="1" '
+        'radius="0.0001"><contact contype="0" conaffinity="0" selfcollide="none"/><edge '
+        'equality="false"/>'
+        f'<elasticity young="{E:.17g}" poisson="{nu:.17g}" damping="0"/>{pin}</flexcomp>'
+        f"</worldbody></mujoco>"
+    )
 
 
 class MujocoSim:
@@ -41,15 +45,20 @@ class MujocoSim:
 
     def __init__(self, pack, tets, masses, dt):
         import mujoco
+
         self.mj, self.pack, self.tets, self.masses, self.dt = mujoco, pack, tets, masses, dt
 
     def load(self, ld):
         mj = self.mj
         full = ld.held_nodes[ld.held_components.all(axis=1)]
         previous, self.warnings = mj.get_mju_user_warning(), []
-        mj.set_mju_user_warning(self.warnings.append)     # else MuJoCo writes MUJOCO_LOG.TXT into the cwd
+        mj.set_mju_user_warning(
+            self.warnings.append
+        )  # else MuJoCo writes MUJOCO_LOG.TXT into the cwd
         try:
-            self.m = mj.MjModel.from_xml_string(_xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu))
+            self.m = mj.MjModel.from_xml_string(
+                _xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu)
+            )
         finally:
             mj.set_mju_user_warning(previous)
         self.d = mj.MjData(self.m)
@@ -57,7 +66,9 @@ class MujocoSim:
         self.vb = self.m.flex_vertbodyid.copy()
         self.free_nodes = np.flatnonzero(self.vb > 0)
         bodies = self.vb[self.free_nodes]
-        self.dof = self.m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]       # (k, 3) each vertex's joints
+        self.dof = (
+            self.m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]
+        )  # (k, 3) each vertex's joints
         self.m.body_mass[bodies] = self.masses[self.free_nodes]
         self.d.xfrc_applied[bodies, :3] = ld.force[self.free_nodes]
         part = ~ld.held_components.all(axis=1)
@@ -93,7 +104,9 @@ class MujocoSim:
         self.mj.mj_forward(self.m, self.d)
         u[self.free_nodes] = self.d.qpos[self.qpos_of]
         v[self.free_nodes] = self.d.qvel[self.dof]
-        f[self.free_nodes] = self.d.qfrc_passive[self.dof] + self.d.xfrc_applied[self.vb[self.free_nodes], :3]
+        f[self.free_nodes] = (
+            self.d.qfrc_passive[self.dof] + self.d.xfrc_applied[self.vb[self.free_nodes], :3]
+        )
         return u, v, f
 
 
@@ -101,7 +114,10 @@ def run(pack, options=None) -> dict:
     """{load: Answer} of MuJoCo's flex on the pack's tetrahedra."""
     tets = pack.cells.get("tetra")
     if pack.dim != 3 or tets is None or not len(tets):
-        return {ld.name: unsupported(pack, "mujoco-flex needs a 3-D tetrahedral mesh") for ld in pack.loads}
+        return {
+            ld.name: unsupported(pack, "mujoco-flex needs a 3-D tetrahedral mesh")
+            for ld in pack.loads
+        }
     tets = np.asarray(tets, int)
     masses = lumped_masses(pack.points, tets, pack.density)
     limit = 2.0 / p1_omega_max(pack.points, tets, pack.E, pack.nu, masses)
@@ -115,6 +131,16 @@ def run(pack, options=None) -> dict:
             if ans.status != "diverged":
                 break
             dt *= 0.5
-        out[ld.name] = ans if ans.status != "diverged" else Answer(ans.u, "diverged", ans.steps, ans.sim_time, ans.wall,
-                                                                    note=f"unstable down to dt {dt:.3g} s")
+        out[ld.name] = (
+            ans
+            if ans.status != "diverged"
+            else Answer(
+                ans.u,
+                "diverged",
+                ans.steps,
+                ans.sim_time,
+                ans.wall,
+                note=f"unstable down to dt {dt:.3g} s",
+            )
+        )
     return out

@@ -40,7 +40,9 @@ from harness.engines.settle import (
 from harness.errors import SpringbenchError
 from harness.models.masses import lumped_masses
 
-DT_MARGIN = 0.8      # of the free model's explicit limit 2 / omega_max (float32 forces; no damping margin)
+DT_MARGIN = (
+    0.8  # of the free model's explicit limit 2 / omega_max (float32 forces; no damping margin)
+)
 
 
 class NewtonSim:
@@ -48,14 +50,21 @@ class NewtonSim:
 
     def __init__(self, q, masses, springs=(), tets=(), dt=1e-4, extra=None):
         import warp as wp
-        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)   # before Newton initialises Warp: no
-        #                                                                   banner or module log on stdout
+
+        wp.config.log_level = max(
+            wp.config.log_level, wp.LOG_WARNING
+        )  # before Newton initialises Warp: no
+        #                                                                   banner or module log
+        # on stdout
         import newton
+
         self.wp, self.newton = wp, newton
         self.q0 = np.asarray(q, float)
         self.masses = np.asarray(masses, float)
         self.springs, self.tets, self.dt = springs, tets, dt
-        self.extra = None if extra is None else extra()     # forces Newton has no term for: apply(q, f)
+        self.extra = (
+            None if extra is None else extra()
+        )  # forces Newton has no term for: apply(q, f)
 
     def load(self, held_nodes, held_components, force):
         """A fresh model and state at rest for this load's holds and forces."""
@@ -64,15 +73,32 @@ class NewtonSim:
         full[held_nodes[held_components.all(axis=1)]] = True
         b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
         for i, x in enumerate(self.q0):
-            b.add_particle(wp.vec3(*x), wp.vec3(0.0, 0.0, 0.0), 0.0 if full[i] else float(self.masses[i]), radius=0.0)
+            b.add_particle(
+                wp.vec3(*x),
+                wp.vec3(0.0, 0.0, 0.0),
+                0.0 if full[i] else float(self.masses[i]),
+                radius=0.0,
+            )
         for i, j, ke, kd in self.springs:
             b.add_spring(int(i), int(j), float(ke), float(kd), 0.0)
         for i, j, k, l, mu, lam, damp in self.tets:
-            b.add_tetrahedron(int(i), int(j), int(k), int(l), k_mu=float(mu), k_lambda=float(lam), k_damp=float(damp))
+            b.add_tetrahedron(
+                int(i),
+                int(j),
+                int(k),
+                int(l),
+                k_mu=float(mu),
+                k_lambda=float(lam),
+                k_damp=float(damp),
+            )
         self.model = b.finalize(device="cpu")
-        self.model.particle_grid = None                      # no particle contacts
+        self.model.particle_grid = None  # no particle contacts
         self.solver = newton.solvers.SolverSemiImplicit(self.model)
-        self.s0, self.s1, self.control = self.model.state(), self.model.state(), self.model.control()
+        self.s0, self.s1, self.control = (
+            self.model.state(),
+            self.model.state(),
+            self.model.control(),
+        )
         self.fext = wp.array(np.asarray(force, np.float32), dtype=wp.vec3, device="cpu")
         part = ~held_components.all(axis=1)
         self.part_nodes, self.part_mask = held_nodes[part], held_components[part]
@@ -97,7 +123,9 @@ class NewtonSim:
             v *= self.factor
             if len(self.part_nodes):
                 x = self.s0.particle_q.numpy()
-                x[self.part_nodes] = np.where(self.part_mask, self.q0[self.part_nodes], x[self.part_nodes])
+                x[self.part_nodes] = np.where(
+                    self.part_mask, self.q0[self.part_nodes], x[self.part_nodes]
+                )
                 v[self.part_nodes] = np.where(self.part_mask, 0.0, v[self.part_nodes])
             self.s0.particle_qd.assign(v)
             if len(self.part_nodes):
@@ -118,8 +146,9 @@ def _solve(pack, sim, masses, dt, omega1=None) -> dict:
     out, omega1 = {}, omega1 or pack_omega(pack, masses)
     for ld in pack.loads:
         sim.load(ld.held_nodes, ld.held_components, ld.force)
-        out[ld.name] = settle(sim, ld, masses, dt, omega1,
-                              resolution=float32_resolution(pack.points))
+        out[ld.name] = settle(
+            sim, ld, masses, dt, omega1, resolution=float32_resolution(pack.points)
+        )
     return out
 
 
@@ -134,7 +163,10 @@ def run_tets(pack, options=None) -> dict:
     """{load: Answer} of Newton's tetrahedral FEM on the pack's tetrahedra."""
     tets = _tets(pack)
     if tets is None:
-        return {ld.name: unsupported(pack, "newton-tets needs a 3-D tetrahedral mesh") for ld in pack.loads}
+        return {
+            ld.name: unsupported(pack, "newton-tets needs a 3-D tetrahedral mesh")
+            for ld in pack.loads
+        }
     mu = pack.E / (2 * (1 + pack.nu))
     lam = pack.E * pack.nu / ((1 + pack.nu) * (1 - 2 * pack.nu))
     k_mu, k_lambda = 4.0 / 3.0 * mu, lam + 5.0 / 6.0 * mu
@@ -161,8 +193,12 @@ def read_model(path) -> dict:
         for key in ("particle_q", "particle_mass", "spring_indices", "spring_stiffness"):
             data[key]
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise SpringbenchError(f"not a springbench model export ({type(exc).__name__}: {exc})", file=str(path),
-                               field="--model", fix="give the MODEL.json `springbench calibrate` wrote") from None
+        raise SpringbenchError(
+            f"not a springbench model export ({type(exc).__name__}: {exc})",
+            file=str(path),
+            field="--model",
+            fix="give the MODEL.json `springbench calibrate` wrote",
+        ) from None
     return data
 
 
@@ -170,29 +206,54 @@ def run_springs(pack, options=None) -> dict:
     """{load: Answer} of a springbench export (``options['model']``: its JSON path) in Newton."""
     options = dict(options or {})
     if options.get("model") is None:
-        raise SpringbenchError("newton-springs runs a springbench export", field="--model",
-                               fix="--model MODEL.json (from springbench calibrate on the pack's mesh)")
+        raise SpringbenchError(
+            "newton-springs runs a springbench export",
+            field="--model",
+            fix="--model MODEL.json (from springbench calibrate on the pack's mesh)",
+        )
     data = read_model(options["model"])
-    q = np.asarray(data["particle_q"], float)[:, :pack.dim]
-    if q.shape != pack.points.shape or not np.allclose(q, pack.points, atol=1e-9 * np.ptp(pack.points)):
-        raise SpringbenchError(f"the model's {len(q)} particles are not the pack's {pack.n_nodes} nodes",
-                               file=str(options["model"]), field="--model",
-                               fix="calibrate the pack's own mesh (mesh.vtu in the pack), in metres")
+    q = np.asarray(data["particle_q"], float)[:, : pack.dim]
+    if q.shape != pack.points.shape or not np.allclose(
+        q, pack.points, atol=1e-9 * np.ptp(pack.points)
+    ):
+        raise SpringbenchError(
+            f"the model's {len(q)} particles are not the pack's {pack.n_nodes} nodes",
+            file=str(options["model"]),
+            field="--model",
+            fix="calibrate the pack's own mesh (mesh.vtu in the pack), in metres",
+        )
     if pack.dim != 3:
         return {ld.name: unsupported(pack, "newton-springs runs 3-D models") for ld in pack.loads}
     masses = np.asarray(data["particle_mass"], float)
     kd = data.get("spring_damping") or [0.0] * len(data["spring_stiffness"])
-    springs = [(i, j, k, d) for (i, j), k, d in zip(data["spring_indices"], data["spring_stiffness"], kd)]
-    tets = [(*t, 0.0, kv, 0.0) for t, kv in zip(data.get("volume_indices", []), data.get("volume_stiffness", []))]
+    springs = [
+        (i, j, k, d) for (i, j), k, d in zip(data["spring_indices"], data["spring_stiffness"], kd)
+    ]
+    tets = [
+        (*t, 0.0, kv, 0.0)
+        for t, kv in zip(data.get("volume_indices", []), data.get("volume_stiffness", []))
+    ]
     dt = float(data.get("dt_safe") or (0.9 * data["dt_stable_float32"]))
     if not (math.isfinite(dt) and dt > 0):
-        raise SpringbenchError("the model has no stable time step (masses not positive?)", file=str(options["model"]),
-                               field="--model", fix="calibrate with --masses lumped")
+        raise SpringbenchError(
+            "the model has no stable time step (masses not positive?)",
+            file=str(options["model"]),
+            field="--model",
+            fix="calibrate with --masses lumped",
+        )
     sd = data.get("settle_damping") or {}
     extra = None
     if data.get("node_volume_elements"):
+
         def extra():
             from harness.engines.newton_volume import NodeVolumeForces
+
             return NodeVolumeForces(len(q), data)
-    return _solve(pack, NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt, extra=extra), masses,
-                  dt, sd.get("omega_1"))
+
+    return _solve(
+        pack,
+        NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt, extra=extra),
+        masses,
+        dt,
+        sd.get("omega_1"),
+    )

@@ -16,8 +16,12 @@ import warp as wp
 
 
 @wp.kernel
-def node_changes(q: wp.array(dtype=wp.vec3), tets: wp.array(dtype=wp.int32, ndim=2),
-                 V0: wp.array(dtype=wp.float32), dV: wp.array(dtype=wp.float32)):
+def node_changes(
+    q: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.int32, ndim=2),
+    V0: wp.array(dtype=wp.float32),
+    dV: wp.array(dtype=wp.float32),
+):
     e = wp.tid()
     i, j, k, m = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
     x0 = q[i]
@@ -29,9 +33,13 @@ def node_changes(q: wp.array(dtype=wp.vec3), tets: wp.array(dtype=wp.int32, ndim
 
 
 @wp.kernel
-def element_forces(q: wp.array(dtype=wp.vec3), tets: wp.array(dtype=wp.int32, ndim=2),
-                   stiff: wp.array(dtype=wp.float32), dV: wp.array(dtype=wp.float32),
-                   f: wp.array(dtype=wp.vec3)):
+def element_forces(
+    q: wp.array(dtype=wp.vec3),
+    tets: wp.array(dtype=wp.int32, ndim=2),
+    stiff: wp.array(dtype=wp.float32),
+    dV: wp.array(dtype=wp.float32),
+    f: wp.array(dtype=wp.vec3),
+):
     e = wp.tid()
     i, j, k, m = tets[e, 0], tets[e, 1], tets[e, 2], tets[e, 3]
     s = -0.25 * (stiff[i] * dV[i] + stiff[j] * dV[j] + stiff[k] * dV[k] + stiff[m] * dV[m])
@@ -52,13 +60,27 @@ class NodeVolumeForces:
         tets = np.asarray(data["node_volume_elements"], np.int32)
         stiff = np.zeros(n)
         nodes = np.asarray(data["node_volume_nodes"], int)
-        stiff[nodes] = np.asarray(data["node_volume_stiffness"], float) / np.asarray(data["node_volume_rest"], float)
+        stiff[nodes] = np.asarray(data["node_volume_stiffness"], float) / np.asarray(
+            data["node_volume_rest"], float
+        )
         self.tets = wp.array(tets, dtype=wp.int32, device="cpu")
-        self.V0 = wp.array(np.asarray(data["node_volume_element_rest"], np.float32), dtype=wp.float32, device="cpu")
+        self.V0 = wp.array(
+            np.asarray(data["node_volume_element_rest"], np.float32), dtype=wp.float32, device="cpu"
+        )
         self.stiff = wp.array(stiff.astype(np.float32), dtype=wp.float32, device="cpu")
         self.dV = wp.zeros(n, dtype=wp.float32, device="cpu")
 
     def apply(self, q, f):
         self.dV.zero_()
-        wp.launch(node_changes, dim=self.tets.shape[0], inputs=[q, self.tets, self.V0, self.dV], device="cpu")
-        wp.launch(element_forces, dim=self.tets.shape[0], inputs=[q, self.tets, self.stiff, self.dV, f], device="cpu")
+        wp.launch(
+            node_changes,
+            dim=self.tets.shape[0],
+            inputs=[q, self.tets, self.V0, self.dV],
+            device="cpu",
+        )
+        wp.launch(
+            element_forces,
+            dim=self.tets.shape[0],
+            inputs=[q, self.tets, self.stiff, self.dV, f],
+            device="cpu",
+        )

@@ -38,11 +38,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-RTOL = 1e-4          # the displacement's change between checks, relative to its largest value
-RES_TOL = 1e-2       # the residual force, relative to the external force
-KE_TOL = 1e-3        # kinetic energy, relative to the load's work, with a stalled residual
-STALL = 10           # checks over which a residual that fell by under 5 % has stalled
-CHECK = 200          # steps between checks
+RTOL = 1e-4  # the displacement's change between checks, relative to its largest value
+RES_TOL = 1e-2  # the residual force, relative to the external force
+KE_TOL = 1e-3  # kinetic energy, relative to the load's work, with a stalled residual
+STALL = 10  # checks over which a residual that fell by under 5 % has stalled
+CHECK = 200  # steps between checks
 MAX_STEPS = 400_000
 
 
@@ -51,6 +51,7 @@ class Answer:
     """One load's equilibrium: ``u`` (n, dim) (NaN when it has none), ``status``
     ("settled", "not-settled", "diverged", "unsupported"), the steps and simulated time
     it took, its wall time, the final kinetic energy (J) and relative residual force."""
+
     u: np.ndarray
     status: str
     steps: int = 0
@@ -90,25 +91,40 @@ def pack_omega(pack, masses: np.ndarray) -> float:
     return min(finite) if finite else math.nan
 
 
-def p1_omega_max(points: np.ndarray, tets: np.ndarray, E: float, nu: float, masses: np.ndarray) -> float:
+def p1_omega_max(
+    points: np.ndarray, tets: np.ndarray, E: float, nu: float, masses: np.ndarray
+) -> float:
     """The largest omega (rad/s) of the free P1 (linear tetrahedra) model with lumped
     masses: a continuum engine's explicit step limit is about 2 / omega_max."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
+
     mesh = skfem.MeshTet(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
     basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP1()))
     K = skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis).tocsr()
-    s = sp.diags(1.0 / np.sqrt(np.repeat(masses, 3)))      # skfem's interleaved dofs: node-major
+    s = sp.diags(1.0 / np.sqrt(np.repeat(masses, 3)))  # skfem's interleaved dofs: node-major
     A = (s @ K @ s).tocsr()
-    lam = spla.eigsh(A, k=1, which="LA", tol=1e-6, v0=np.random.default_rng(0).standard_normal(A.shape[0]))[0]
+    lam = spla.eigsh(
+        A, k=1, which="LA", tol=1e-6, v0=np.random.default_rng(0).standard_normal(A.shape[0])
+    )[0]
     return float(np.sqrt(max(lam[0], 0.0)))
 
 
-def settle(sim, load, masses: np.ndarray, dt: float, omega1: float, max_steps: int = MAX_STEPS,
-           rtol: float = RTOL, check: int = CHECK, res_tol: float = RES_TOL,
-           ke_tol: float = KE_TOL, resolution: float = 0.0) -> Answer:
+def settle(
+    sim,
+    load,
+    masses: np.ndarray,
+    dt: float,
+    omega1: float,
+    max_steps: int = MAX_STEPS,
+    rtol: float = RTOL,
+    check: int = CHECK,
+    res_tol: float = RES_TOL,
+    ke_tol: float = KE_TOL,
+    resolution: float = 0.0,
+) -> Answer:
     """Run ``sim`` to equilibrium under ``load`` (module docstring)."""
     t0 = time.perf_counter()
     free = np.ones(load.force.shape, bool)
@@ -127,9 +143,19 @@ def settle(sim, load, masses: np.ndarray, dt: float, omega1: float, max_steps: i
         u, v, f = sim.measure()
         ke = 0.5 * float(np.sum(masses[:, None] * v * v))
         res = float(np.linalg.norm(f[free])) / fext if fext > 0 else float(np.linalg.norm(f[free]))
-        if not (np.all(np.isfinite(u)) and math.isfinite(res)) or np.abs(u).max() > 1e3 * max(umax, 1e-300):
-            return Answer(np.full_like(u, np.nan), "diverged", steps, steps * dt, time.perf_counter() - t0, ke, res,
-                          f"at step {steps} (dt {dt:.3g} s)")
+        if not (np.all(np.isfinite(u)) and math.isfinite(res)) or np.abs(u).max() > 1e3 * max(
+            umax, 1e-300
+        ):
+            return Answer(
+                np.full_like(u, np.nan),
+                "diverged",
+                steps,
+                steps * dt,
+                time.perf_counter() - t0,
+                ke,
+                res,
+                f"at step {steps} (dt {dt:.3g} s)",
+            )
         past.append(u)
         before = past.pop(0) if len(past) > span else None
         scale = max(float(np.abs(u).max()), 4.0 * resolution / rtol, 1e-300)
@@ -137,7 +163,19 @@ def settle(sim, load, masses: np.ndarray, dt: float, omega1: float, max_steps: i
         history.append(res)
         stalled = len(history) > STALL and res >= 0.95 * history[-1 - STALL]
         if change <= rtol and (res <= res_tol or (stalled and ke <= ke_tol * work)):
-            note = "" if res <= res_tol else f"residual {res:.2g} stalled, kinetic {ke / work:.1g} of the work"
+            note = (
+                ""
+                if res <= res_tol
+                else f"residual {res:.2g} stalled, kinetic {ke / work:.1g} of the work"
+            )
             return Answer(u, "settled", steps, steps * dt, time.perf_counter() - t0, ke, res, note)
-    return Answer(u, "not-settled", steps, steps * dt, time.perf_counter() - t0, ke, res,
-                  f"residual {res:.2g} after {steps} steps")
+    return Answer(
+        u,
+        "not-settled",
+        steps,
+        steps * dt,
+        time.perf_counter() - t0,
+        ke,
+        res,
+        f"residual {res:.2g} after {steps} steps",
+    )

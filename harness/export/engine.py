@@ -25,13 +25,17 @@ from harness.models.springs import incidence, stiffness_matrix
 FLOAT32_MARGIN = 0.9
 
 
-def spring_damping(springs: np.ndarray, k: np.ndarray, masses: np.ndarray, zeta: float) -> np.ndarray:
+def spring_damping(
+    springs: np.ndarray, k: np.ndarray, masses: np.ndarray, zeta: float
+) -> np.ndarray:
     """Per-spring damping coefficients kd (N s/m) at damping ratio zeta."""
     springs = np.asarray(springs, int)
     m = np.asarray(masses, float)
     mi, mj = m[springs[:, 0]], m[springs[:, 1]]
     if np.any(mi <= 0) or np.any(mj <= 0):
-        raise ModelError("spring damping needs positive masses", field="masses", fix="use --masses lumped")
+        raise ModelError(
+            "spring damping needs positive masses", field="masses", fix="use --masses lumped"
+        )
     mu = mi * mj / (mi + mj)
     return 2.0 * zeta * np.sqrt(np.asarray(k, float) * mu)
 
@@ -45,26 +49,34 @@ def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
     points = np.asarray(points, float)
     m = np.repeat(np.asarray(masses, float), points.shape[1])
     if np.any(m <= 0):
-        raise ModelError("the stable step needs positive masses", field="masses", fix="use --masses lumped")
+        raise ModelError(
+            "the stable step needs positive masses", field="masses", fix="use --masses lumped"
+        )
     B = incidence(points, springs)
     s = sp.diags(1.0 / np.sqrt(m))
     K = stiffness_matrix(B, k)
     if volume is not None:
         K = K + volume.stiffness_matrix(points)
-        if not getattr(volume, "symmetric", True):    # B&C's elements (harness/models/mt.py): the
-            K = 0.5 * (K + K.T)                       # symmetric part, as mechanics.dynamics.stable_step
+        if not getattr(volume, "symmetric", True):  # B&C's elements (harness/models/mt.py): the
+            K = 0.5 * (K + K.T)  # symmetric part, as mechanics.dynamics.stable_step
     A = (s @ K @ s).tocsr()
     if A.shape[0] <= 300:
         lam, vec = np.linalg.eigh(A.toarray())
         lam, v = lam[-1], vec[:, -1]
     else:
-        lam, vec = spla.eigsh(A, k=1, which="LA", tol=1e-8,
-                              v0=np.random.default_rng(0).standard_normal(A.shape[0]))   # seeded start
+        lam, vec = spla.eigsh(
+            A, k=1, which="LA", tol=1e-8, v0=np.random.default_rng(0).standard_normal(A.shape[0])
+        )  # seeded start
         lam, v = lam[0], vec[:, 0]
     omega = float(np.sqrt(max(lam, 0.0)))
     zeta = 0.0
     if kd is not None and omega > 0:
         C = s @ stiffness_matrix(B, kd) @ s
         zeta = float(v @ (C @ v)) / (2.0 * omega * float(v @ v))
-    dt = 2.0 / omega * (np.sqrt(1.0 + zeta ** 2) - zeta) if omega > 0 else float("inf")
-    return {"omega_max": omega, "zeta_top": zeta, "dt_stable": float(dt), "dt_stable_float32": FLOAT32_MARGIN * float(dt)}
+    dt = 2.0 / omega * (np.sqrt(1.0 + zeta**2) - zeta) if omega > 0 else float("inf")
+    return {
+        "omega_max": omega,
+        "zeta_top": zeta,
+        "dt_stable": float(dt),
+        "dt_stable_float32": FLOAT32_MARGIN * float(dt),
+    }

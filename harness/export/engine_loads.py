@@ -44,7 +44,10 @@ def load_records(net, case) -> dict:
     for name, free, f, load in zip(names, frees, forces, case.loads):
         held = ~free.reshape(-1, dim)
         rows = np.flatnonzero(held.any(axis=1))
-        clamped[name] = {"nodes": rows.tolist(), "components": [np.flatnonzero(h).tolist() for h in held[rows]]}
+        clamped[name] = {
+            "nodes": rows.tolist(),
+            "components": [np.flatnonzero(h).tolist() for h in held[rows]],
+        }
         f = f.reshape(-1, dim)
         on = np.flatnonzero(np.any(f != 0, axis=1))
         loaded[name] = on.tolist()
@@ -70,6 +73,11 @@ def settle_recipe(net, case) -> dict | None:
         return None
     omega = math.sqrt(num / den)
     c = 2.0 * omega
-    return {"c": c, "omega_1": omega, "load": pick.name,
-            "recipe": "after every step v *= velocity_factor = exp(-c dt) (mass-proportional damping c, about "
-                      "critical for the lowest mode); steps of dt_safe"}
+    return {
+        "c": c,
+        "omega_1": omega,
+        "load": pick.name,
+        "recipe": "after every step v *= velocity_factor = exp(-c dt) (mass-proportional "
+        "damping c, about "
+        "critical for the lowest mode); steps of dt_safe",
+    }

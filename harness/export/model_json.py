@@ -48,12 +48,20 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
     vol = getattr(net, "volume", None)
     step = stable_step(net.points, net.springs, k, net.masses, kd, volume=vol) if positive else {}
     data = {
-        "units": {"length": "m", "mass": "kg", "time": "s", "spring_stiffness": "N/m (f = k (l - l0))",
-                  "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
-                  "spring_stiffness_times_length": "N (k l0; per-length convention, f = k l0 (l - l0) / l0)",
-                  "E": "Pa", "density": "kg/m^3", "omega_max": "rad/s",
-                  "G_norm": "RMS displacement error / RMS FEM displacement (weighted, fitted loads)",
-                  "note": "2-D models: unit thickness" if net.dim == 2 else ""},
+        "units": {
+            "length": "m",
+            "mass": "kg",
+            "time": "s",
+            "spring_stiffness": "N/m (f = k (l - l0))",
+            "spring_damping": "N s/m (f = kd (v_j - v_i) . d along the spring)",
+            "spring_stiffness_times_length": "N (k l0; per-length convention, f = k l0 (l - "
+            "l0) / l0)",
+            "E": "Pa",
+            "density": "kg/m^3",
+            "omega_max": "rad/s",
+            "G_norm": "RMS displacement error / RMS FEM displacement (weighted, fitted loads)",
+            "note": "2-D models: unit thickness" if net.dim == 2 else "",
+        },
         "dim": net.dim,
         "particle_q": q.tolist(),
         "particle_mass": np.asarray(net.masses, float).tolist(),
@@ -64,40 +72,72 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
         "damping_ratio": zeta,
         "spring_stiffness_times_length": (k * L).tolist(),
         **{key: step.get(key, math.nan) for key in ("dt_stable", "dt_stable_float32", "omega_max")},
-        **{key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in meta.items()},
+        **{
+            key: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for key, v in meta.items()
+        },
     }
-    if isinstance(vol, KNTerm):      # springs + kn (harness/models/kn.py)
-        data["units"].update(kn_node_volume="m^3 (2-D: m^2, unit thickness)",
-                             kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
-                                          "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
-                                          "d = dim; each spring's tension T = sum over its two ends a of "
-                                          "kn_a V_a d^2 s_a / (N_a l0), f_i = T (x_j - x_i)/l, f_j = -f_i")
-        data.update(kn_nodes=vol.nodes.tolist(), kn_node_volume=vol.V.tolist(),
-                    kn_spring_count=vol.N.astype(int).tolist(), kn_stiffness=vol.kv.tolist(),
-                    kn_shared=bool(vol.shared))
-    elif isinstance(vol, NodeVolumeTerm):      # springs + one volume term per node (harness/models/volume.py)
-        data["units"].update(node_volume_rest="m^3 (2-D: m^2, unit thickness)",
-                             node_volume_element_rest="m^3 (2-D: m^2, unit thickness)",
-                             node_volume_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kv_a/2 dV_a^2 / V0_a, "
-                                                   "dV_a = sum over the node_volume_elements e that hold node a of "
-                                                   "(V_e - V0_e) / (dim + 1); f = -dE/dx: each element's nodes "
-                                                   "get -mean over its nodes a of (kv_a dV_a / V0_a) times dV_e/dx")
-        data.update(node_volume_nodes=vol.nodes.tolist(), node_volume_rest=vol.Vn.tolist(),
-                    node_volume_stiffness=vol.kv.tolist(), node_volume_shared=bool(vol.shared),
-                    node_volume_elements=vol.elements.tolist(), node_volume_element_rest=vol.V0.tolist())
-    elif vol is not None:     # springs + volume (harness/models/volume.py)
-        data["units"].update(volume_rest="m^3 (2-D: m^2, unit thickness)",
-                             volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
-                                              "f = -kv (V - V0) / V0 dV/dx")
-        data.update(volume_indices=vol.elements.tolist(), volume_rest=vol.V0.tolist(),
-                    volume_stiffness=vol.kv.tolist(), volume_shared=bool(vol.shared))
+    if isinstance(vol, KNTerm):  # springs + kn (harness/models/kn.py)
+        data["units"].update(
+            kn_node_volume="m^3 (2-D: m^2, unit thickness)",
+            kn_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kn_a/2 V_a d^2 s_a^2, s_a = mean over "
+            "the springs at node a of (l - l0)/l0 (spring_indices, spring_rest_length), "
+            "d = dim; each spring's tension T = sum over its two ends a of "
+            "kn_a V_a d^2 s_a / (N_a l0), f_i = T (x_j - x_i)/l, f_j = -f_i",
+        )
+        data.update(
+            kn_nodes=vol.nodes.tolist(),
+            kn_node_volume=vol.V.tolist(),
+            kn_spring_count=vol.N.astype(int).tolist(),
+            kn_stiffness=vol.kv.tolist(),
+            kn_shared=bool(vol.shared),
+        )
+    elif isinstance(
+        vol, NodeVolumeTerm
+    ):  # springs + one volume term per node (harness/models/volume.py)
+        data["units"].update(
+            node_volume_rest="m^3 (2-D: m^2, unit thickness)",
+            node_volume_element_rest="m^3 (2-D: m^2, unit thickness)",
+            node_volume_stiffness="Pa = N/m^2 (2-D: N/m): E = sum_a kv_a/2 dV_a^2 / V0_a, "
+            "dV_a = sum over the node_volume_elements e that hold node a of "
+            "(V_e - V0_e) / (dim + 1); f = -dE/dx: each element's nodes "
+            "get -mean over its nodes a of (kv_a dV_a / V0_a) times dV_e/dx",
+        )
+        data.update(
+            node_volume_nodes=vol.nodes.tolist(),
+            node_volume_rest=vol.Vn.tolist(),
+            node_volume_stiffness=vol.kv.tolist(),
+            node_volume_shared=bool(vol.shared),
+            node_volume_elements=vol.elements.tolist(),
+            node_volume_element_rest=vol.V0.tolist(),
+        )
+    elif vol is not None:  # springs + volume (harness/models/volume.py)
+        data["units"].update(
+            volume_rest="m^3 (2-D: m^2, unit thickness)",
+            volume_stiffness="Pa = N/m^2 (2-D: N/m): E = kv/2 (V - V0)^2 / V0, "
+            "f = -kv (V - V0) / V0 dV/dx",
+        )
+        data.update(
+            volume_indices=vol.elements.tolist(),
+            volume_rest=vol.V0.tolist(),
+            volume_stiffness=vol.kv.tolist(),
+            volume_shared=bool(vol.shared),
+        )
     dt = step.get("dt_stable", math.nan)
     data["dt_safe"] = DT_SAFE * dt if math.isfinite(dt) else math.nan
     if isinstance(data.get("settle_damping"), dict) and math.isfinite(data["dt_safe"]):
-        data["settle_damping"] = dict(data["settle_damping"],
-                                      velocity_factor=math.exp(-data["settle_damping"]["c"] * data["dt_safe"]))
-    data = {key: (None if isinstance(v, float) and not math.isfinite(v) else v) for key, v in data.items()}
+        data["settle_damping"] = dict(
+            data["settle_damping"],
+            velocity_factor=math.exp(-data["settle_damping"]["c"] * data["dt_safe"]),
+        )
+    data = {
+        key: (None if isinstance(v, float) and not math.isfinite(v) else v)
+        for key, v in data.items()
+    }
     if not positive:
-        data["warning"] = f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable explicitly"
+        data["warning"] = (
+            f"{int(np.sum(np.asarray(net.masses) <= 0))} particle masses <= 0: not runnable "
+            "explicitly"
+        )
     out.with_suffix(".json").write_text(json.dumps(data))
     return data

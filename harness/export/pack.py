@@ -38,27 +38,29 @@ FORMAT_VERSION = 1
 @dataclass(frozen=True)
 class PackLoad:
     """One load of a pack: what is held, what pushes, and the FEM's answer."""
+
     name: str
-    role: str                        # "fitted" or "heldout"
-    held_nodes: np.ndarray           # (h,) int node ids
-    held_components: np.ndarray      # (h, dim) bool: component held at zero displacement
-    force: np.ndarray                # (n, dim) N, every node's external force
-    u_fem: np.ndarray                # (n, dim) m
-    u_fem_error: np.ndarray          # (n,) m, NaN where not estimated
-    gravity: np.ndarray | None = None    # (dim,) m/s^2 when the load includes a body force
-    kind: str = ""                   # e.g. "traction", "gravity", "traction+gravity"
+    role: str  # "fitted" or "heldout"
+    held_nodes: np.ndarray  # (h,) int node ids
+    held_components: np.ndarray  # (h, dim) bool: component held at zero displacement
+    force: np.ndarray  # (n, dim) N, every node's external force
+    u_fem: np.ndarray  # (n, dim) m
+    u_fem_error: np.ndarray  # (n,) m, NaN where not estimated
+    gravity: np.ndarray | None = None  # (dim,) m/s^2 when the load includes a body force
+    kind: str = ""  # e.g. "traction", "gravity", "traction+gravity"
 
 
 @dataclass(frozen=True)
 class Pack:
     """A body (mesh points and volume cells), its material and its loads."""
-    points: np.ndarray               # (n, dim) m
-    cells: dict                      # meshio cell type -> (m, k) int
-    E: float                         # Pa
+
+    points: np.ndarray  # (n, dim) m
+    cells: dict  # meshio cell type -> (m, k) int
+    E: float  # Pa
     nu: float
-    density: float                   # kg/m^3
+    density: float  # kg/m^3
     loads: tuple[PackLoad, ...]
-    plane: str | None = None         # 2-D: "stress" or "strain"
+    plane: str | None = None  # 2-D: "stress" or "strain"
     meta: dict = field(default_factory=dict)
 
     @property
@@ -73,8 +75,15 @@ class Pack:
         return next(ld for ld in self.loads if ld.name == name)
 
 
-UNITS = {"length": "m", "force": "N", "mass": "kg", "stress": "Pa", "density": "kg/m^3",
-         "acceleration": "m/s^2", "displacement": "m"}
+UNITS = {
+    "length": "m",
+    "force": "N",
+    "mass": "kg",
+    "stress": "Pa",
+    "density": "kg/m^3",
+    "acceleration": "m/s^2",
+    "displacement": "m",
+}
 
 
 def _bad(message: str, file, fix: str, field: str | None = None):
@@ -104,29 +113,57 @@ def write_pack(pack: Pack, out_dir) -> Path:
     (out / "loads").mkdir(parents=True, exist_ok=True)
     mesh_path = out / "mesh.vtu"
     tmp = out / ".mesh.tmp.vtu"
-    meshio.write(tmp, meshio.Mesh(np.asarray(pack.points, float), [(k, np.asarray(v, int)) for k, v in pack.cells.items()]))
+    meshio.write(
+        tmp,
+        meshio.Mesh(
+            np.asarray(pack.points, float), [(k, np.asarray(v, int)) for k, v in pack.cells.items()]
+        ),
+    )
     tmp.replace(mesh_path)
     entries = []
     for ld in pack.loads:
         buf = io.BytesIO()
-        np.savez_compressed(buf, held_nodes=np.asarray(ld.held_nodes, np.int64),
-                            held_components=np.asarray(ld.held_components, bool), force=np.asarray(ld.force, float),
-                            u_fem=np.asarray(ld.u_fem, float), u_fem_error=np.asarray(ld.u_fem_error, float))
+        np.savez_compressed(
+            buf,
+            held_nodes=np.asarray(ld.held_nodes, np.int64),
+            held_components=np.asarray(ld.held_components, bool),
+            force=np.asarray(ld.force, float),
+            u_fem=np.asarray(ld.u_fem, float),
+            u_fem_error=np.asarray(ld.u_fem_error, float),
+        )
         rel = f"loads/{ld.name}.npz"
         atomic_write(out / rel, buf.getvalue(), "--out")
         err = np.asarray(ld.u_fem_error, float)
-        entries.append({"name": ld.name, "role": ld.role, "kind": ld.kind,
-                        "gravity": None if ld.gravity is None else [float(g) for g in ld.gravity],
-                        "file": rel, "n_held": int(len(ld.held_nodes)),
-                        "force_total": [float(x) for x in np.asarray(ld.force).sum(axis=0)],
-                        "u_fem_max": float(np.linalg.norm(ld.u_fem, axis=1).max()),
-                        "u_fem_error_max": float(np.nanmax(err)) if np.isfinite(err).any() else None})
-    manifest = {"format": FORMAT, "format_version": FORMAT_VERSION, "units": UNITS, "dim": pack.dim,
-                "mesh": "mesh.vtu", "n_nodes": pack.n_nodes,
-                "cells": {k: int(len(v)) for k, v in pack.cells.items()},
-                "material": {"E": float(pack.E), "nu": float(pack.nu), "density": float(pack.density),
-                             "plane": pack.plane},
-                "loads": entries, **{k: v for k, v in pack.meta.items() if k not in ("loads", "format")}}
+        entries.append(
+            {
+                "name": ld.name,
+                "role": ld.role,
+                "kind": ld.kind,
+                "gravity": None if ld.gravity is None else [float(g) for g in ld.gravity],
+                "file": rel,
+                "n_held": int(len(ld.held_nodes)),
+                "force_total": [float(x) for x in np.asarray(ld.force).sum(axis=0)],
+                "u_fem_max": float(np.linalg.norm(ld.u_fem, axis=1).max()),
+                "u_fem_error_max": float(np.nanmax(err)) if np.isfinite(err).any() else None,
+            }
+        )
+    manifest = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "units": UNITS,
+        "dim": pack.dim,
+        "mesh": "mesh.vtu",
+        "n_nodes": pack.n_nodes,
+        "cells": {k: int(len(v)) for k, v in pack.cells.items()},
+        "material": {
+            "E": float(pack.E),
+            "nu": float(pack.nu),
+            "density": float(pack.density),
+            "plane": pack.plane,
+        },
+        "loads": entries,
+        **{k: v for k, v in pack.meta.items() if k not in ("loads", "format")},
+    }
     path = out / "problem.json"
     atomic_write(path, (json.dumps(manifest, indent=1) + "\n").encode(), "--out")
     return path
@@ -150,22 +187,36 @@ def read_pack(folder) -> Pack:
         One line naming the file and the fix (missing file, wrong shape, bad manifest).
     """
     import meshio
+
     folder = Path(folder)
     if folder.name == "problem.json":
         folder = folder.parent
     man_path = folder / "problem.json"
     if not man_path.is_file():
-        _bad("no problem.json here: not a benchmark pack", folder, "give the folder `springbench pack` wrote")
+        _bad(
+            "no problem.json here: not a benchmark pack",
+            folder,
+            "give the folder `springbench pack` wrote",
+        )
     try:
         man = json.loads(man_path.read_text())
     except (ValueError, UnicodeDecodeError) as exc:
         _bad(f"not JSON ({exc})", man_path, "write the pack again with `springbench pack`")
     if not isinstance(man, dict) or man.get("format") != FORMAT:
-        _bad(f"format is {man.get('format') if isinstance(man, dict) else man!r}, not {FORMAT!r}", man_path,
-             "give a pack written by `springbench pack`", "format")
+        _bad(
+            f"format is {man.get('format') if isinstance(man, dict) else man!r}, not {FORMAT!r}",
+            man_path,
+            "give a pack written by `springbench pack`",
+            "format",
+        )
     if man.get("format_version") != FORMAT_VERSION:
-        _bad(f"format_version {man.get('format_version')!r}; this springbench reads {FORMAT_VERSION}", man_path,
-             "write the pack again with this version of `springbench pack`", "format_version")
+        _bad(
+            f"format_version {man.get('format_version')!r}; this springbench reads "
+            f"{FORMAT_VERSION}",
+            man_path,
+            "write the pack again with this version of `springbench pack`",
+            "format_version",
+        )
     try:
         mesh = meshio.read(folder / man["mesh"])
         dim, n = int(man["dim"]), int(man["n_nodes"])
@@ -173,36 +224,67 @@ def read_pack(folder) -> Pack:
         E, nu, rho = float(mat["E"]), float(mat["nu"]), float(mat["density"])
         entries = list(man["loads"])
     except (KeyError, TypeError, ValueError, OSError) as exc:
-        _bad(f"incomplete or unreadable pack ({type(exc).__name__}: {exc})", man_path,
-             "write the pack again with `springbench pack`")
+        _bad(
+            f"incomplete or unreadable pack ({type(exc).__name__}: {exc})",
+            man_path,
+            "write the pack again with `springbench pack`",
+        )
     points = np.asarray(mesh.points, float)[:, :dim]
     if points.shape != (n, dim):
-        _bad(f"the mesh has {len(points)} nodes, the manifest says {n}", folder / man["mesh"],
-             "write the pack again with `springbench pack`", "n_nodes")
+        _bad(
+            f"the mesh has {len(points)} nodes, the manifest says {n}",
+            folder / man["mesh"],
+            "write the pack again with `springbench pack`",
+            "n_nodes",
+        )
     loads = []
     for e in entries:
         f = folder / str(e.get("file", ""))
         try:
             z = np.load(f)
-            arrays = {k: z[k] for k in ("held_nodes", "held_components", "force", "u_fem", "u_fem_error")}
+            arrays = {
+                k: z[k] for k in ("held_nodes", "held_components", "force", "u_fem", "u_fem_error")
+            }
         except (OSError, KeyError, ValueError) as exc:
-            _bad(f"load {e.get('name')!r}: unreadable ({type(exc).__name__}: {exc})", f,
-                 "write the pack again with `springbench pack`")
+            _bad(
+                f"load {e.get('name')!r}: unreadable ({type(exc).__name__}: {exc})",
+                f,
+                "write the pack again with `springbench pack`",
+            )
         h = len(arrays["held_nodes"])
-        shapes = {"force": (n, dim), "u_fem": (n, dim), "u_fem_error": (n,), "held_components": (h, dim)}
+        shapes = {
+            "force": (n, dim),
+            "u_fem": (n, dim),
+            "u_fem_error": (n,),
+            "held_components": (h, dim),
+        }
         for key, shape in shapes.items():
             if arrays[key].shape != shape:
-                _bad(f"{key} has shape {arrays[key].shape}, expected {shape}", f, "write the pack again", key)
+                _bad(
+                    f"{key} has shape {arrays[key].shape}, expected {shape}",
+                    f,
+                    "write the pack again",
+                    key,
+                )
         for key in ("force", "u_fem"):
             if not np.all(np.isfinite(arrays[key])):
                 _bad(f"{key} holds NaN or infinite values", f, "write the pack again", key)
         if h and (arrays["held_nodes"].min() < 0 or arrays["held_nodes"].max() >= n):
             _bad("held_nodes outside the mesh's nodes", f, "write the pack again", "held_nodes")
         g = e.get("gravity")
-        loads.append(PackLoad(str(e["name"]), str(e.get("role", "")), arrays["held_nodes"].astype(int),
-                              arrays["held_components"].astype(bool), arrays["force"].astype(float),
-                              arrays["u_fem"].astype(float), arrays["u_fem_error"].astype(float),
-                              None if g is None else np.asarray(g, float), str(e.get("kind", ""))))
+        loads.append(
+            PackLoad(
+                str(e["name"]),
+                str(e.get("role", "")),
+                arrays["held_nodes"].astype(int),
+                arrays["held_components"].astype(bool),
+                arrays["force"].astype(float),
+                arrays["u_fem"].astype(float),
+                arrays["u_fem_error"].astype(float),
+                None if g is None else np.asarray(g, float),
+                str(e.get("kind", "")),
+            )
+        )
     cells = {c.type: np.asarray(c.data, int) for c in mesh.cells}
     meta = {k: v for k, v in man.items() if k in ("source", "springbench", "peak_strain")}
     return Pack(points, cells, E, nu, rho, tuple(loads), mat.get("plane"), meta)

@@ -38,11 +38,15 @@ def make_pack(case, status=lambda msg: None, meta: dict | None = None) -> Pack:
     import reference
     from harness.geometry import body_geometry
     from harness.models.masses import compute_masses
+
     if case.body.shape != "mesh":
-        raise SpringbenchError(f"the body is a {case.body.shape}, not a mesh: a pack needs the mesh an engine loads",
-                               file=str(case.path) if case.path else None, field="body.shape",
-                               fix="give a mesh file (springbench pack MESH --E .. --nu ..) or a case with "
-                                   "[body] shape = 'mesh'")
+        raise SpringbenchError(
+            f"the body is a {case.body.shape}, not a mesh: a pack needs the mesh an engine loads",
+            file=str(case.path) if case.path else None,
+            field="body.shape",
+            fix="give a mesh file (springbench pack MESH --E .. --nu ..) or a case with "
+            "[body] shape = 'mesh'",
+        )
     body = body_geometry(case)
     points = np.asarray(body.mesh_points, float)
     masses = compute_masses("lumped", points, body, case.material).masses
@@ -57,10 +61,29 @@ def make_pack(case, status=lambda msg: None, meta: dict | None = None) -> Pack:
         held = statics.fixed_mask(points, case, ld)
         rows = np.flatnonzero(held.any(axis=1))
         g = None if ld.gravity is None else np.asarray(ld.gravity, float)
-        loads.append(PackLoad(ld.name, "heldout" if ld.name in case.heldout else "fitted", rows, held[rows],
-                              statics.force_vector(nodes, case, ld), np.asarray(u[i], float), np.asarray(err[i], float),
-                              g, _kind(ld)))
+        loads.append(
+            PackLoad(
+                ld.name,
+                "heldout" if ld.name in case.heldout else "fitted",
+                rows,
+                held[rows],
+                statics.force_vector(nodes, case, ld),
+                np.asarray(u[i], float),
+                np.asarray(err[i], float),
+                g,
+                _kind(ld),
+            )
+        )
     cells = {k: np.asarray(v, int) for k, v in body.mesh_cells.items()}
     m = case.material
     plane = getattr(m, "plane", None) if case.dim == 2 else None
-    return Pack(points, cells, float(m.E), float(m.nu), float(m.density), tuple(loads), plane, dict(meta or {}))
+    return Pack(
+        points,
+        cells,
+        float(m.E),
+        float(m.nu),
+        float(m.density),
+        tuple(loads),
+        plane,
+        dict(meta or {}),
+    )

@@ -45,15 +45,23 @@ def write_vtu(path, network, displacements: dict | None = None) -> Path:
     import meshio
 
     path = Path(path)
-    point_data = {"mass": np.asarray(network.masses, float), "class": np.asarray(network.classes, np.int32)}
+    point_data = {
+        "mass": np.asarray(network.masses, float),
+        "class": np.asarray(network.classes, np.int32),
+    }
     for name, u in (displacements or {}).items():
         point_data[f"u_{name}"] = _pad3(u)
-    mesh = meshio.Mesh(_pad3(network.points), [("line", np.asarray(network.springs, np.int64))],
-                       point_data=point_data,
-                       cell_data={"stiffness": [np.asarray(network.k, float)],
-                                  "group": [np.asarray(network.groups, np.int32)]},
-                       field_data={"dim": np.array([network.dim], np.int32)})
-    with staged([path]) as (tmp,):     # atomic: never half a file (e.g. disk full)
+    mesh = meshio.Mesh(
+        _pad3(network.points),
+        [("line", np.asarray(network.springs, np.int64))],
+        point_data=point_data,
+        cell_data={
+            "stiffness": [np.asarray(network.k, float)],
+            "group": [np.asarray(network.groups, np.int32)],
+        },
+        field_data={"dim": np.array([network.dim], np.int32)},
+    )
+    with staged([path]) as (tmp,):  # atomic: never half a file (e.g. disk full)
         meshio.write(tmp, mesh, file_format="vtu")
     return path
 
@@ -82,35 +90,71 @@ def read_vtu(path):
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
             m = meshio.read(path)
-    except (Exception, SystemExit) as exc:   # meshio exits on some broken files
-        why = "the file is empty" if path.stat().st_size == 0 else (
-            "not a mesh file meshio reads (truncated, or another format?)" if isinstance(exc, SystemExit)
-            else f"cannot read it as a mesh ({type(exc).__name__}: {exc})")
-        raise SpringbenchError(why, file=str(path), fix="give a VTU file written by 'springbench build' or meshio")
+    except (Exception, SystemExit) as exc:  # meshio exits on some broken files
+        why = (
+            "the file is empty"
+            if path.stat().st_size == 0
+            else (
+                "not a mesh file meshio reads (truncated, or another format?)"
+                if isinstance(exc, SystemExit)
+                else f"cannot read it as a mesh ({type(exc).__name__}: {exc})"
+            )
+        )
+        raise SpringbenchError(
+            why, file=str(path), fix="give a VTU file written by 'springbench build' or meshio"
+        )
     blocks = [i for i, c in enumerate(m.cells) if c.type == "line"]
     if not blocks:
-        raise SpringbenchError("no 'line' cells (springs)", file=str(path), fix="springs are a line cell block")
+        raise SpringbenchError(
+            "no 'line' cells (springs)", file=str(path), fix="springs are a line cell block"
+        )
     springs = np.vstack([m.cells[i].data for i in blocks])
     if "stiffness" not in m.cell_data:
-        raise SpringbenchError("no cell data 'stiffness'", file=str(path), fix="store the spring constants as cell data 'stiffness'")
+        raise SpringbenchError(
+            "no cell data 'stiffness'",
+            file=str(path),
+            fix="store the spring constants as cell data 'stiffness'",
+        )
     k = np.concatenate([np.asarray(m.cell_data["stiffness"][i], float).ravel() for i in blocks])
-    groups = (np.concatenate([np.asarray(m.cell_data["group"][i]).ravel() for i in blocks]).astype(int)
-              if "group" in m.cell_data else None)
+    groups = (
+        np.concatenate([np.asarray(m.cell_data["group"][i]).ravel() for i in blocks]).astype(int)
+        if "group" in m.cell_data
+        else None
+    )
     pts = np.asarray(m.points, float)
-    dim = int(np.ravel(m.field_data["dim"])[0]) if "dim" in m.field_data else (2 if np.allclose(pts[:, 2:], 0) else 3)
+    dim = (
+        int(np.ravel(m.field_data["dim"])[0])
+        if "dim" in m.field_data
+        else (2 if np.allclose(pts[:, 2:], 0) else 3)
+    )
     pts = pts[:, :dim]
     bad = np.flatnonzero(~np.isfinite(pts).all(1))
     if len(bad):
-        raise SpringbenchError(f"non-finite coordinates at points {bad[:5].tolist()}", file=str(path),
-                               fix="fix the point coordinates")
+        raise SpringbenchError(
+            f"non-finite coordinates at points {bad[:5].tolist()}",
+            file=str(path),
+            fix="fix the point coordinates",
+        )
     masses = np.asarray(m.point_data["mass"], float).ravel() if "mass" in m.point_data else None
-    classes = np.asarray(m.point_data["class"]).astype(int).ravel() if "class" in m.point_data else None
+    classes = (
+        np.asarray(m.point_data["class"]).astype(int).ravel() if "class" in m.point_data else None
+    )
     if np.any(~np.isfinite(k)) or np.any(k <= 0):
-        raise SpringbenchError("stiffness must be positive and finite", file=str(path), field="stiffness")
+        raise SpringbenchError(
+            "stiffness must be positive and finite", file=str(path), field="stiffness"
+        )
     try:
         net = make_network(pts, springs, k, masses, classes, groups)
-    except SpringbenchError as exc:         # about this file's springs: name it
-        raise SpringbenchError(exc.message, file=str(path), field=exc.field,
-                               fix=exc.fix or "springs are pairs of distinct point indices 0 .. n-1") from None
-    disp = {name[2:]: np.asarray(v, float)[:, :dim] for name, v in m.point_data.items() if name.startswith("u_")}
+    except SpringbenchError as exc:  # about this file's springs: name it
+        raise SpringbenchError(
+            exc.message,
+            file=str(path),
+            field=exc.field,
+            fix=exc.fix or "springs are pairs of distinct point indices 0 .. n-1",
+        ) from None
+    disp = {
+        name[2:]: np.asarray(v, float)[:, :dim]
+        for name, v in m.point_data.items()
+        if name.startswith("u_")
+    }
     return net, disp

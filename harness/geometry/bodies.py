@@ -57,7 +57,7 @@ def clip_halfplane(poly: np.ndarray, normal: np.ndarray, offset: float) -> np.nd
     cross = inside != np.roll(inside, -1)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cross, d / (d - dn), 0.0)
-    cand = np.stack([poly, poly + t[:, None] * (nxt - poly)], axis=1)      # (n, 2 slots, 2)
+    cand = np.stack([poly, poly + t[:, None] * (nxt - poly)], axis=1)  # (n, 2 slots, 2)
     keep = np.stack([inside, cross], axis=1)
     return cand[keep]
 
@@ -97,6 +97,7 @@ def segment_distance(x: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.nd
 class BodyGeom:
     """Geometry of a body. kind: "polygon" (2-D, ``vertices`` counter-clockwise),
     "box" (3-D, [lo, hi]) or "mesh" (``mesh_points``, ``mesh_cells``)."""
+
     dim: int
     kind: str
     lo: np.ndarray
@@ -118,8 +119,18 @@ class BodyGeom:
         if self.kind == "box":
             return True
         if self.kind == "polygon" and len(self.vertices) == 4:
-            return bool(np.all(np.any(np.isclose(self.vertices[:, None, :], np.stack([self.lo, self.hi])[None],
-                                                 atol=self.tol), axis=1)))
+            return bool(
+                np.all(
+                    np.any(
+                        np.isclose(
+                            self.vertices[:, None, :],
+                            np.stack([self.lo, self.hi])[None],
+                            atol=self.tol,
+                        ),
+                        axis=1,
+                    )
+                )
+            )
         return False
 
     @property
@@ -148,8 +159,11 @@ class BodyGeom:
             return inbox & (points_in_polygon(x, self.vertices) | self.on_boundary(x))
         if self.kind == "box":
             return inbox
-        raise ModelError("inside tests are not implemented for mesh bodies", field="body.shape",
-                         fix="use placement = 'mesh' (the mesh's own nodes) for mesh bodies")
+        raise ModelError(
+            "inside tests are not implemented for mesh bodies",
+            field="body.shape",
+            fix="use placement = 'mesh' (the mesh's own nodes) for mesh bodies",
+        )
 
     def on_boundary(self, x: np.ndarray) -> np.ndarray:
         x = np.atleast_2d(np.asarray(x, float))
@@ -158,7 +172,9 @@ class BodyGeom:
             d, _ = segment_distance(x, v, np.roll(v, -1, axis=0))
             return d.min(axis=1) <= self.tol
         if self.kind == "box":
-            return np.any((np.abs(x - self.lo) <= self.tol) | (np.abs(x - self.hi) <= self.tol), axis=1)
+            return np.any(
+                (np.abs(x - self.lo) <= self.tol) | (np.abs(x - self.hi) <= self.tol), axis=1
+            )
         return np.zeros(len(x), bool)
 
     def boundary_edge(self, x: np.ndarray) -> np.ndarray:
@@ -193,8 +209,14 @@ def polygon(vertices) -> BodyGeom:
 
 def mesh_body(points, cells) -> BodyGeom:
     p = np.asarray(points, float)
-    return BodyGeom(p.shape[1], "mesh", p.min(0), p.max(0), mesh_points=p,
-                    mesh_cells=MappingProxyType({k: np.asarray(c, int) for k, c in cells.items()}))
+    return BodyGeom(
+        p.shape[1],
+        "mesh",
+        p.min(0),
+        p.max(0),
+        mesh_points=p,
+        mesh_cells=MappingProxyType({k: np.asarray(c, int) for k, c in cells.items()}),
+    )
 
 
 def body_geometry(case) -> BodyGeom:

@@ -29,8 +29,11 @@ def grid_points(lo, hi, shape) -> np.ndarray:
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     shape = tuple(int(s) for s in shape)
     if len(shape) != len(lo) or min(shape) < 2:
-        raise ModelError(f"grid {list(shape)} needs {len(lo)} entries >= 2", field="model.grid",
-                         fix="e.g. grid = [5, 5] for a 25-node plate")
+        raise ModelError(
+            f"grid {list(shape)} needs {len(lo)} entries >= 2",
+            field="model.grid",
+            fix="e.g. grid = [5, 5] for a 25-node plate",
+        )
     axes = [np.linspace(lo[a], hi[a], shape[a]) for a in range(len(lo))]
     mesh = np.meshgrid(*axes, indexing="ij")
     return np.stack([m.ravel(order="F") for m in mesh], axis=1)
@@ -61,8 +64,12 @@ def random_points(body: BodyGeom, n: int, seed: int, n_boundary: int | None = No
             n_boundary = max(int(round(P / h)) - len(v), 0)
         n_in = n - len(v) - n_boundary
         if n_in < 0:
-            raise ModelError(f"n_points = {n} is less than the {len(v)} vertices plus {n_boundary} boundary points",
-                             field="model.n_points", fix="give more points or a smaller n_boundary")
+            raise ModelError(
+                f"n_points = {n} is less than the {len(v)} vertices plus {n_boundary} "
+                "boundary points",
+                field="model.n_points",
+                fix="give more points or a smaller n_boundary",
+            )
         s = np.sort(rng.uniform(0, P, n_boundary))
         cum = np.concatenate([[0], np.cumsum(L)])
         e = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(v) - 1)
@@ -70,8 +77,11 @@ def random_points(body: BodyGeom, n: int, seed: int, n_boundary: int | None = No
         inner = _sample_inside(body, n_in, rng)
         return np.vstack([corners, bpts, inner])
     if body.kind != "box":
-        raise ModelError("random placement needs a rectangle, polygon or box", field="model.placement",
-                         fix="use placement = 'mesh' for mesh bodies")
+        raise ModelError(
+            "random placement needs a rectangle, polygon or box",
+            field="model.placement",
+            fix="use placement = 'mesh' for mesh bodies",
+        )
     lo, hi = body.lo, body.hi
     ext = hi - lo
     V = float(np.prod(ext))
@@ -102,9 +112,12 @@ def random_points(body: BodyGeom, n: int, seed: int, n_boundary: int | None = No
             pts.append(q)
     nb = sum(len(p) for p in pts)
     if n_boundary is not None or n - nb < 0:
-        raise ModelError(f"n_points = {n} is too few for a box (needs more than {nb} boundary points)"
-                         if n - nb < 0 else "n_boundary is only used in 2-D",
-                         field="model.n_points" if n - nb < 0 else "model.n_boundary")
+        raise ModelError(
+            f"n_points = {n} is too few for a box (needs more than {nb} boundary points)"
+            if n - nb < 0
+            else "n_boundary is only used in 2-D",
+            field="model.n_points" if n - nb < 0 else "model.n_boundary",
+        )
     pts.append(lo + rng.uniform(size=(n - nb, 3)) * ext)
     return np.vstack(pts)
 
@@ -120,11 +133,13 @@ def _sample_inside(body: BodyGeom, m: int, rng) -> np.ndarray:
 
 # -- Lloyd / iterated Voronoi -----------------------------------------------------------
 
+
 @dataclass(frozen=True, eq=False)
 class LloydResult:
     """points after the iterations; std_distance / std_size (iterations + 1,) from the
     initial state on: std of Delaunay neighbour distances and of Voronoi region sizes;
     sizes (n,): region areas/volumes of the final points."""
+
     points: np.ndarray
     std_distance: np.ndarray
     std_size: np.ndarray
@@ -150,7 +165,7 @@ def voronoi_cells_2d(points: np.ndarray, body: BodyGeom) -> tuple[np.ndarray, np
     cents = points.copy()
     for i, p in enumerate(points):
         poly = body.vertices
-        for j in nbrs[indptr[i]:indptr[i + 1]]:
+        for j in nbrs[indptr[i] : indptr[i + 1]]:
             q = points[j]
             nrm = q - p
             poly = clip_halfplane(poly, nrm, nrm @ (0.5 * (p + q)))
@@ -163,20 +178,26 @@ def voronoi_cells_2d(points: np.ndarray, body: BodyGeom) -> tuple[np.ndarray, np
     return areas, cents
 
 
-def voronoi_cells_sampled(points: np.ndarray, body: BodyGeom, n_samples: int, rng) -> tuple[np.ndarray, np.ndarray]:
+def voronoi_cells_sampled(
+    points: np.ndarray, body: BodyGeom, n_samples: int, rng
+) -> tuple[np.ndarray, np.ndarray]:
     """Monte-Carlo volumes (n,) and centroids (n, dim) of the Voronoi cells inside the body."""
     q = body.lo + rng.uniform(size=(n_samples, body.dim)) * (body.hi - body.lo)
     if body.kind != "box":
         q = q[body.contains(q)]
     owner = cKDTree(points).query(q)[1]
     cnt = np.bincount(owner, minlength=len(points)).astype(float)
-    sums = np.stack([np.bincount(owner, q[:, a], minlength=len(points)) for a in range(body.dim)], axis=1)
+    sums = np.stack(
+        [np.bincount(owner, q[:, a], minlength=len(points)) for a in range(body.dim)], axis=1
+    )
     cents = np.where(cnt[:, None] > 0, sums / np.maximum(cnt, 1)[:, None], points)
     vol = cnt * (np.prod(body.hi - body.lo) * len(q) / n_samples) / max(len(q), 1)
     return vol, cents
 
 
-def _constrain(body: BodyGeom, old: np.ndarray, new: np.ndarray, fixed: np.ndarray, edge: np.ndarray) -> np.ndarray:
+def _constrain(
+    body: BodyGeom, old: np.ndarray, new: np.ndarray, fixed: np.ndarray, edge: np.ndarray
+) -> np.ndarray:
     """Keep boundary points on the boundary (see the module docstring)."""
     out = new.copy()
     out[fixed] = old[fixed]
@@ -193,8 +214,13 @@ def _constrain(body: BodyGeom, old: np.ndarray, new: np.ndarray, fixed: np.ndarr
     return out
 
 
-def lloyd(body: BodyGeom, points: np.ndarray, iterations: int, seed: int = 0,
-          samples_per_point: int = 2000) -> LloydResult:
+def lloyd(
+    body: BodyGeom,
+    points: np.ndarray,
+    iterations: int,
+    seed: int = 0,
+    samples_per_point: int = 2000,
+) -> LloydResult:
     """``iterations`` Lloyd steps: every point moves to the centroid of its Voronoi
     region clipped to the body (boundary points along the boundary)."""
     rng = np.random.default_rng(seed)

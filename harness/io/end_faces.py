@@ -22,16 +22,17 @@ import numpy as np
 from harness.io.mesh_groups import cell_simplices, on_simplices
 from harness.io.meshfile import mesh_surface
 
-BAND = 0.05       # default band: 5 % of the body's extent along the axis
-COS = 0.5         # default: normals within 60 degrees of the axis
+BAND = 0.05  # default band: 5 % of the body's extent along the axis
+COS = 0.5  # default: normals within 60 degrees of the axis
 FACET_TYPE = {2: "line", 3: "triangle", 4: "quad"}
 
 
 @dataclass(frozen=True)
 class EndPart:
     """A ``[body.parts]`` entry ``{ end = "x0" | "x1" | "y0" ..., band, cos }`` of a mesh body."""
+
     axis: int
-    side: int                  # 0: the low end, 1: the high end
+    side: int  # 0: the low end, 1: the high end
     file: Path
     format: str | None = None
     band: float = BAND
@@ -42,7 +43,9 @@ class EndPart:
         return f"{'xyz'[self.axis]}{self.side}"
 
 
-def outward_normals(points: np.ndarray, facets: np.ndarray, inside: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def outward_normals(
+    points: np.ndarray, facets: np.ndarray, inside: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(centroids (m, dim), outward unit normals (m, dim)) of boundary facets (m, k) whose
     cells have the centroids ``inside`` (m, dim): segments in 2-D, polygons in 3-D."""
     x = points[facets]
@@ -58,8 +61,9 @@ def outward_normals(points: np.ndarray, facets: np.ndarray, inside: np.ndarray) 
     return c, n * np.where(np.einsum("ij,ij->i", n, c - inside) < 0, -1.0, 1.0)[:, None]
 
 
-def end_facets(points: np.ndarray, facets, inside, axis: int, side: int, band: float = BAND,
-               cos: float = COS) -> list[np.ndarray]:
+def end_facets(
+    points: np.ndarray, facets, inside, axis: int, side: int, band: float = BAND, cos: float = COS
+) -> list[np.ndarray]:
     """The end face's facets: one (m, k) vertex-index array per facet size of ``facets``
     (harness.io.meshfile.boundary_facets with the cells' centroids ``inside``)."""
     x = points[:, axis]
@@ -81,7 +85,9 @@ def part_facets(part: EndPart) -> list[np.ndarray]:
 
 
 @functools.lru_cache(maxsize=8)
-def _geometry(file: str, fmt: str | None, stamp: tuple, axis: int, side: int, band: float, cos: float):
+def _geometry(
+    file: str, fmt: str | None, stamp: tuple, axis: int, side: int, band: float, cos: float
+):
     part = EndPart(axis, side, Path(file), fmt, band, cos)
     points = mesh_surface(file, fmt)[0]
     by_k: dict[int, list] = {}
@@ -94,8 +100,15 @@ def _geometry(file: str, fmt: str | None, stamp: tuple, axis: int, side: int, ba
 def end_predicate(part: EndPart, tol: float):
     """Predicate (coordinates (dim, n) -> mask) of the points on the end part's facets."""
     st = Path(part.file).stat()
-    geometry = _geometry(str(part.file), part.format, (st.st_mtime_ns, st.st_size), part.axis, part.side,
-                         float(part.band), float(part.cos))
+    geometry = _geometry(
+        str(part.file),
+        part.format,
+        (st.st_mtime_ns, st.st_size),
+        part.axis,
+        part.side,
+        float(part.band),
+        float(part.cos),
+    )
 
     def on_end(x):
         x = np.asarray(x, float).T
@@ -103,4 +116,5 @@ def end_predicate(part: EndPart, tol: float):
         for simplices in geometry.values():
             mask |= on_simplices(x, simplices, tol)
         return mask
+
     return on_end

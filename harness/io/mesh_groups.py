@@ -23,12 +23,13 @@ from harness.errors import SpringbenchError
 from harness.io.meshfile import boundary_facets, read_mesh
 
 HEX_FACES = ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
-BARY_TOL = 1e-9          # barycentric coordinates may be this far below 0 (rounding)
+BARY_TOL = 1e-9  # barycentric coordinates may be this far below 0 (rounding)
 
 
 @dataclass(frozen=True)
 class GroupPart:
     """A ``[body.parts]`` entry that names a group of the body's mesh file."""
+
     group: str
     file: Path
     format: str | None = None
@@ -65,7 +66,9 @@ def group_simplices(mesh, name: str) -> dict[int, np.ndarray]:
         held = np.zeros(len(x), bool)
         held[g.nodes] = True
         for fac in boundary_facets(mesh.cells):
-            cells.append(({2: "line", 3: "triangle", 4: "quad"}[fac.shape[1]], fac[held[fac].all(axis=1)]))
+            cells.append(
+                ({2: "line", 3: "triangle", 4: "quad"}[fac.shape[1]], fac[held[fac].all(axis=1)])
+            )
     for ctype, c in cells:
         for s in cell_simplices(ctype, np.asarray(c, int), x):
             by_k.setdefault(s.shape[1], []).append(s)
@@ -92,7 +95,7 @@ def on_simplices(x: np.ndarray, simplices: np.ndarray, tol: float) -> np.ndarray
     if simplices.shape[1] == 1:
         ok = np.linalg.norm(r, axis=1) <= tol
     else:
-        E = (simplices[:, 1:] - v0[:, None]).transpose(0, 2, 1)       # (m, dim, k-1) edge vectors
+        E = (simplices[:, 1:] - v0[:, None]).transpose(0, 2, 1)  # (m, dim, k-1) edge vectors
         lam = np.einsum("pij,pj->pi", np.linalg.pinv(E)[s], r)
         dist = np.linalg.norm(np.einsum("pij,pj->pi", E[s], lam) - r, axis=1)
         ok = (dist <= tol) & np.all(lam >= -BARY_TOL, axis=1) & (lam.sum(axis=1) <= 1 + BARY_TOL)
@@ -116,6 +119,7 @@ def group_predicate(part: GroupPart, tol: float):
         for simplices in geometry.values():
             mask |= on_simplices(x, simplices, tol)
         return mask
+
     return on_group
 
 
@@ -125,17 +129,22 @@ def require_group(mesh, name: str, *, file: str, field: str, error=None):
     if name in mesh.groups:
         return
     have = ", ".join(sorted(mesh.groups))
-    fix = (f"groups of {Path(mesh.source).name}: {have}" if have else
-           f"{Path(mesh.source).name} has no named groups (gmsh: addPhysicalGroup with a name; "
-           "meshio: cell_sets or point_sets)")
-    raise (error or SpringbenchError)(f"mesh '{Path(mesh.source).name}' has no group '{name}'",
-                                      file=file, field=field, fix=fix)
+    fix = (
+        f"groups of {Path(mesh.source).name}: {have}"
+        if have
+        else f"{Path(mesh.source).name} has no named groups (gmsh: addPhysicalGroup with a name; "
+        "meshio: cell_sets or point_sets)"
+    )
+    raise (error or SpringbenchError)(
+        f"mesh '{Path(mesh.source).name}' has no group '{name}'", file=file, field=field, fix=fix
+    )
 
 
 def scaled_copy(path, fmt: str | None, scale: float, folder) -> Path:
     """The mesh file with its coordinates times ``scale``, written in its own format into
     ``folder`` so that its groups stay with it."""
     import meshio
+
     m = meshio.read(path, file_format=fmt)
     m.points = m.points * scale
     out = Path(folder) / f"mesh{Path(path).suffix}"

@@ -26,6 +26,7 @@ class Mesh:
     """points (n, dim); cells: cell type ("triangle", "quad", "tetra", "hexahedron")
     -> (m, k) int array; flags (n,) node flags of the original format (0 if none);
     groups: name -> harness.io.mesh_groups.Group (physical groups, cell and node sets)."""
+
     points: np.ndarray
     cells: dict
     flags: np.ndarray
@@ -42,8 +43,8 @@ def read_bc2000(path: Path) -> Mesh:
     elements of 4 (tetra) or 8 (hexa) 0-based indices."""
     lines = [ln.split() for ln in Path(path).read_text().splitlines() if ln.strip()]
     n_nodes, n_elems = int(lines[0][0]), int(lines[0][1])
-    nodes = np.array([[float(t) for t in ln[:4]] for ln in lines[1:1 + n_nodes]])
-    elems = np.array([[int(t) for t in ln] for ln in lines[1 + n_nodes:1 + n_nodes + n_elems]])
+    nodes = np.array([[float(t) for t in ln[:4]] for ln in lines[1 : 1 + n_nodes]])
+    elems = np.array([[int(t) for t in ln] for ln in lines[1 + n_nodes : 1 + n_nodes + n_elems]])
     if nodes.shape != (n_nodes, 4) or len(elems) != n_elems:
         raise ValueError(f"expected {n_nodes} nodes and {n_elems} elements")
     if elems.min() < 0 or elems.max() >= n_nodes:
@@ -66,6 +67,7 @@ def looks_like_bc2000(path: Path) -> bool:
 def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
 
     import meshio
+
     # meshio prints and calls sys.exit on some unreadable files: keep both contained
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
         try:
@@ -76,7 +78,9 @@ def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
     cells = {}
     for block in m.cells:
         if block.type in ("triangle", "quad", "tetra", "hexahedron"):
-            cells[block.type] = np.vstack([cells[block.type], block.data]) if block.type in cells else block.data
+            cells[block.type] = (
+                np.vstack([cells[block.type], block.data]) if block.type in cells else block.data
+            )
     if not cells:
         raise ValueError("no triangle, quad, tetra or hexahedron cells")
     kinds = set(cells)
@@ -88,14 +92,28 @@ def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
 
 
 # corner nodes of the cell types a group may hold (higher-order types by their corners)
-CORNERS = {"vertex": 1, "line": 2, "line3": 2, "triangle": 3, "triangle6": 3, "quad": 4, "quad8": 4, "quad9": 4,
-           "tetra": 4, "tetra10": 4, "hexahedron": 8, "hexahedron20": 8, "hexahedron27": 8}
+CORNERS = {
+    "vertex": 1,
+    "line": 2,
+    "line3": 2,
+    "triangle": 3,
+    "triangle6": 3,
+    "quad": 4,
+    "quad8": 4,
+    "quad9": 4,
+    "tetra": 4,
+    "tetra10": 4,
+    "hexahedron": 8,
+    "hexahedron20": 8,
+    "hexahedron27": 8,
+}
 DIMS = {"vertex": 0, "line": 1, "triangle": 2, "quad": 2, "tetra": 3, "hexahedron": 3}
 
 
 @dataclass(frozen=True)
 class Group:
     """One named region: cells (meshio type -> (m, k) node indices) and loose nodes (p,)."""
+
     cells: dict = field(default_factory=dict)
     nodes: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
 
@@ -109,9 +127,10 @@ def read_groups(m) -> dict[str, Group]:
     def add(name, ctype, data):
         if ctype in CORNERS and len(data):
             cells = out.setdefault(name, {})
-            data = np.asarray(data, int)[:, :CORNERS[ctype]]
-            base = ctype.rstrip("0123456789")          # tetra10 -> tetra, triangle6 -> triangle
+            data = np.asarray(data, int)[:, : CORNERS[ctype]]
+            base = ctype.rstrip("0123456789")  # tetra10 -> tetra, triangle6 -> triangle
             cells[base] = np.vstack([cells[base], data]) if base in cells else data
+
     for name, per_block in (m.cell_sets or {}).items():
         if name.startswith("gmsh:"):
             continue
@@ -121,7 +140,7 @@ def read_groups(m) -> dict[str, Group]:
             else:
                 out.setdefault(name, {})
     tags = (m.cell_data or {}).get("gmsh:physical")
-    if tags is not None:            # gmsh tags are per dimension: field_data holds (tag, dim)
+    if tags is not None:  # gmsh tags are per dimension: field_data holds (tag, dim)
         for name, (tag, dim) in ((n, v) for n, v in (m.field_data or {}).items() if n not in out):
             for block, t in zip(m.cells, tags):
                 if DIMS.get(block.type.rstrip("0123456789")) == dim:
@@ -137,24 +156,44 @@ def read_mesh(path, fmt: str | None = None) -> Mesh:
     """Read a mesh; ``fmt`` None guesses (bc2000 if the first line is two integers)."""
     path = Path(path)
     if not path.is_file():  # meshio's own error for this is a long ReadError
-        raise SpringbenchError(f"no such mesh file '{path.name}'", file=str(path),
-                               fix="check the path (relative to the case file)")
+        raise SpringbenchError(
+            f"no such mesh file '{path.name}'",
+            file=str(path),
+            fix="check the path (relative to the case file)",
+        )
     if path.stat().st_size == 0:
-        raise SpringbenchError("the mesh file is empty", file=str(path), fix="give a mesh with nodes and cells")
+        raise SpringbenchError(
+            "the mesh file is empty", file=str(path), fix="give a mesh with nodes and cells"
+        )
     if fmt is None:
         fmt = "bc2000" if looks_like_bc2000(path) else "meshio"
     try:
-        return MESH_READERS.load(fmt)(path) if fmt in MESH_READERS else read_meshio(path, fmt)   # meshio's names
+        return (
+            MESH_READERS.load(fmt)(path) if fmt in MESH_READERS else read_meshio(path, fmt)
+        )  # meshio's names
     except FileNotFoundError:
         raise SpringbenchError("file not found", file=str(path), fix="check the path")
     except Exception as exc:  # any parser failure becomes one line
-        raise SpringbenchError(f"cannot read mesh ({type(exc).__name__}: {exc})".replace("\n", " "),
-                               file=str(path), fix="give a bc2000 mesh or any format meshio reads")
+        raise SpringbenchError(
+            f"cannot read mesh ({type(exc).__name__}: {exc})".replace("\n", " "),
+            file=str(path),
+            fix="give a bc2000 mesh or any format meshio reads",
+        )
 
 
-FACETS = {"triangle": [(0, 1), (1, 2), (2, 0)], "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
-          "tetra": [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)],
-          "hexahedron": [(0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]}
+FACETS = {
+    "triangle": [(0, 1), (1, 2), (2, 0)],
+    "quad": [(0, 1), (1, 2), (2, 3), (3, 0)],
+    "tetra": [(0, 2, 1), (0, 1, 3), (0, 3, 2), (1, 2, 3)],
+    "hexahedron": [
+        (0, 3, 2, 1),
+        (4, 5, 6, 7),
+        (0, 1, 5, 4),
+        (1, 2, 6, 5),
+        (2, 3, 7, 6),
+        (3, 0, 4, 7),
+    ],
+}
 
 
 def boundary_facets(cells, points=None):
@@ -183,7 +222,7 @@ def _once(rows: np.ndarray) -> np.ndarray:
     than np.unique over rows), else by rows."""
     m, k = rows.shape
     base = int(rows.max(initial=0)) + 1
-    if m and rows.min() >= 0 and base ** k < 2 ** 62:
+    if m and rows.min() >= 0 and base**k < 2**62:
         key = np.zeros(m, np.int64)
         for j in range(k):
             key = key * base + rows[:, j]
@@ -193,19 +232,19 @@ def _once(rows: np.ndarray) -> np.ndarray:
     return np.sort(first[count == 1])
 
 
-_CACHE: dict = {}     # (what, path, format, size, mtime) -> read-only arrays, the last few
+_CACHE: dict = {}  # (what, path, format, size, mtime) -> read-only arrays, the last few
 
 
 def _cached(what: str, path, fmt, make):
     p = Path(path)
     if not p.is_file():
-        read_mesh(p, fmt)            # its one-line error naming the file
+        read_mesh(p, fmt)  # its one-line error naming the file
     st = p.stat()
     key = (what, str(p.resolve()), fmt, st.st_size, st.st_mtime_ns)
     if key not in _CACHE:
         value = make(read_mesh(p, fmt))
-        for a in (value if isinstance(value, tuple) else (value,)):
-            for arr in (a if isinstance(a, list) else [a]):
+        for a in value if isinstance(value, tuple) else (value,):
+            for arr in a if isinstance(a, list) else [a]:
                 arr.flags.writeable = False
         if len(_CACHE) >= 8:
             _CACHE.pop(next(iter(_CACHE)))
@@ -225,7 +264,9 @@ def mesh_surface(path, fmt: str | None = None):
     points)``, read and computed once per version of the file (path, size, mtime) and
     returned read-only: the homogeneous and facet loads of every network of a calibration
     ask for them load by load (44 times, ~1 s each, on a 50k-tet mesh)."""
+
     def make(m):
         facets, inside = boundary_facets(m.cells, m.points)
         return np.array(m.points), [np.array(a) for a in facets], [np.array(a) for a in inside]
+
     return _cached("surface", path, fmt, make)

@@ -31,9 +31,11 @@ from harness.linalg.sparse import (
     single_thread_blas,
 )
 
-LEAF = 128   # dofs per leaf front: best measured for factor + solve (2-D 2,500: 16 vs 18 ms at 256; 3-D 8,000: 1.16 vs 1.33 s)
-FLAT_MAX = 400   # largest update block added through precomputed flat indices
-BIG_FRONT = 1000   # fronts of at least this many dofs factorise with every BLAS thread the caller
+# dofs per leaf front: best measured for factor + solve (2-D 2,500: 16 vs 18 ms at 256;
+# 3-D 8,000: 1.16 vs 1.33 s)
+LEAF = 128
+FLAT_MAX = 400  # largest update block added through precomputed flat indices
+BIG_FRONT = 1000  # fronts of at least this many dofs factorise with every BLAS thread the caller
 # allows (a 104k-dof spring network of a 200k-tet mesh: 107 fronts, 95 % of the flops)
 
 
@@ -59,7 +61,11 @@ class Symbolic:
                 parent[c] = t
         for t, (V, kids) in enumerate(nodes):
             top = rank[V].max(initial=-1)
-            cols = A.indices[np.concatenate([np.arange(A.indptr[v], A.indptr[v + 1]) for v in V])] if len(V) else np.empty(0, int)
+            cols = (
+                A.indices[np.concatenate([np.arange(A.indptr[v], A.indptr[v + 1]) for v in V])]
+                if len(V)
+                else np.empty(0, int)
+            )
             cand = [cols[rank[cols] > top]] + [U_of[c][rank[U_of[c]] > top] for c in kids]
             U = np.unique(np.concatenate(cand)) if cand else np.empty(0, int)
             U = U[np.argsort(rank[U])]
@@ -82,12 +88,28 @@ class Symbolic:
             mirror = cl[upper] * nf + rows[upper]
             child_maps = [pos[U_of[c]] for c in kids]
             # extend-add by flat indices into the front (small updates; big ones use ix_)
-            child_flat = [(loc[:, None] * nf + loc[None, :]).ravel() if len(loc) <= FLAT_MAX else None
-                          for loc in child_maps]
+            child_flat = [
+                (loc[:, None] * nf + loc[None, :]).ravel() if len(loc) <= FLAT_MAX else None
+                for loc in child_maps
+            ]
             start = int(rank[V[0]]) if nv else 0
-            self.nodes.append(dict(V=V, U=U, nv=nv, nf=nf, kids=kids, kidx=kidx, direct=direct,
-                                   mirror=mirror, kidx_m=kidx[upper], child_maps=child_maps, child_flat=child_flat,
-                                   sl=slice(start, start + nv), Ur=rank[U]))
+            self.nodes.append(
+                dict(
+                    V=V,
+                    U=U,
+                    nv=nv,
+                    nf=nf,
+                    kids=kids,
+                    kidx=kidx,
+                    direct=direct,
+                    mirror=mirror,
+                    kidx_m=kidx[upper],
+                    child_maps=child_maps,
+                    child_flat=child_flat,
+                    sl=slice(start, start + nv),
+                    Ur=rank[U],
+                )
+            )
             pos[front] = -1
         self.parent = parent
         self.order = order
@@ -97,7 +119,7 @@ class Symbolic:
         Schur complement and product, measured ~3 of them) of the factorisation."""
         nv = np.array([nd["nv"] for nd in self.nodes], float)
         nu = np.array([len(nd["U"]) for nd in self.nodes], float)
-        flop = np.sum(nv ** 3 / 3 + nv ** 2 * nu + nv * nu ** 2)
+        flop = np.sum(nv**3 / 3 + nv**2 * nu + nv * nu**2)
         mem = 8 * (np.sum(nv * (nv + nu)) + 3 * np.max((nv + nu) ** 2, initial=0.0))
         return {"gflop": float(flop / 1e9), "gbytes": float(mem / 1e9)}
 
@@ -113,16 +135,22 @@ def _partial(F: np.ndarray, nv: int, potrf, trtrs, name: str):
     nf = F.shape[0]
     L11, info = potrf(F[:nv, :nv], lower=1, clean=1, overwrite_a=0)
     if info != 0:
-        raise ModelError(f"load '{name}': stiffness matrix is not positive definite", field="springs",
-                         fix="the network has a mechanism or floating node, or a spring constant <= 0")
+        raise ModelError(
+            f"load '{name}': stiffness matrix is not positive definite",
+            field="springs",
+            fix="the network has a mechanism or floating node, or a spring constant <= 0",
+        )
     d = np.diag(L11)
     if d.min() < 1e-7 * d.max():
-        raise ModelError(f"load '{name}': stiffness matrix is singular (pivot ratio {d.min() / d.max():.1e})",
-                         field="springs", fix="the network has a mechanism or floating node")
+        raise ModelError(
+            f"load '{name}': stiffness matrix is singular (pivot ratio {d.min() / d.max():.1e})",
+            field="springs",
+            fix="the network has a mechanism or floating node",
+        )
     if nf == nv:
         return L11, np.empty((0, nv)), np.empty((0, 0))
-    X = trtrs(L11, F[nv:, :nv].T, lower=1)[0]                 # L11^-1 F21^T = L21^T
-    S = sla.blas.dsyrk(-1.0, X, beta=1.0, c=F[nv:, nv:], trans=1, lower=1)   # F22 - X^T X (lower)
+    X = trtrs(L11, F[nv:, :nv].T, lower=1)[0]  # L11^-1 F21^T = L21^T
+    S = sla.blas.dsyrk(-1.0, X, beta=1.0, c=F[nv:, nv:], trans=1, lower=1)  # F22 - X^T X (lower)
     return L11, X.T, S
 
 
@@ -130,8 +158,8 @@ class MultifrontalCholesky:
     """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m)."""
 
     def __init__(self, K: sp.spmatrix, sym: Symbolic, name: str = ""):
-        threaded = not blas_limited()        # a caller that asked for one thread keeps it
-        with single_thread_blas():   # many small dense ops: threads only add overhead
+        threaded = not blas_limited()  # a caller that asked for one thread keeps it
+        with single_thread_blas():  # many small dense ops: threads only add overhead
             self._factor(K, sym, name, threaded)
 
     def _factor(self, K, sym, name, threaded=False):
@@ -171,7 +199,9 @@ class MultifrontalCholesky:
         rhs = np.asarray(rhs, float)
         with single_thread_blas():
             many = rhs.ndim == 2 and rhs.shape[1] >= SUBST_MIN
-            if (many or getattr(self, "_flat_cache", None) is not None) and _subst_kernel() is not None:
+            if (
+                many or getattr(self, "_flat_cache", None) is not None
+            ) and _subst_kernel() is not None:
                 return self._solve_compiled(rhs.reshape(len(rhs), -1)).reshape(rhs.shape)
             return self._solve(rhs)
 
@@ -188,9 +218,11 @@ class MultifrontalCholesky:
             off = lambda sizes: np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
             Li = np.concatenate([x.ravel() for x in inv])
             L21 = np.concatenate([self.L21[t].ravel() for t in keep] + [np.empty(0)])
-            Ur = np.concatenate([self.sym.nodes[t]["Ur"] for t in keep] + [np.empty(0, np.int64)]).astype(np.int64)
+            Ur = np.concatenate(
+                [self.sym.nodes[t]["Ur"] for t in keep] + [np.empty(0, np.int64)]
+            ).astype(np.int64)
             self._flat_cache = (start, nv, nu, off(nv * nv), off(nv * nu), off(nu), Li, L21, Ur)
-            if drop:   # every later solve takes the compiled path: the blocks are not needed
+            if drop:  # every later solve takes the compiled path: the blocks are not needed
                 self.L11 = self.L21 = None
         return self._flat_cache
 
@@ -238,8 +270,8 @@ class MultifrontalCholesky:
         return out[:, 0] if vec else out
 
 
-SUBST_MIN = 8   # right-hand sides from which inverting the diagonal blocks pays (later
-                # solves with the same factor then take the compiled path too)
+SUBST_MIN = 8  # right-hand sides from which inverting the diagonal blocks pays (later
+# solves with the same factor then take the compiled path too)
 _KERNEL = []
 
 
@@ -250,8 +282,8 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, L21, Ur):
     cols = np.empty(q, np.int64)
     for t in range(nn):
         s0, k, u = start[t], nv[t], nu[t]
-        nz = 0                   # right-hand sides not yet reaching this front stay 0:
-        for c in range(q):       # sparse b (the SA batches) skips most leaf work
+        nz = 0  # right-hand sides not yet reaching this front stay 0:
+        for c in range(q):  # sparse b (the SA batches) skips most leaf work
             for r in range(s0, s0 + k):
                 if b[r, c] != 0.0:
                     cols[nz] = c
@@ -260,19 +292,19 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, L21, Ur):
         if nz == 0:
             continue
         if nz == q:
-            y = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k), b[s0:s0 + k])
-            b[s0:s0 + k] = y
+            y = np.dot(Li[oL[t] : oL[t + 1]].reshape(k, k), b[s0 : s0 + k])
+            b[s0 : s0 + k] = y
         else:
             bb = np.empty((k, nz))
             for r in range(k):
                 for c in range(nz):
                     bb[r, c] = b[s0 + r, cols[c]]
-            y = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k), bb)
+            y = np.dot(Li[oL[t] : oL[t + 1]].reshape(k, k), bb)
             for r in range(k):
                 for c in range(nz):
                     b[s0 + r, cols[c]] = y[r, c]
         if u:
-            w = np.dot(L21[o21[t]:o21[t + 1]].reshape(u, k), y)
+            w = np.dot(L21[o21[t] : o21[t + 1]].reshape(u, k), y)
             for i in range(u):
                 r = Ur[oU[t] + i]
                 if nz == q:
@@ -283,15 +315,15 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, L21, Ur):
                         b[r, cols[c]] -= w[i, c]
     for t in range(nn - 1, -1, -1):
         s0, k, u = start[t], nv[t], nu[t]
-        y = b[s0:s0 + k].copy()
+        y = b[s0 : s0 + k].copy()
         if u:
             g = np.empty((u, q))
             for i in range(u):
                 r = Ur[oU[t] + i]
                 for c in range(q):
                     g[i, c] = b[r, c]
-            y -= np.dot(L21[o21[t]:o21[t + 1]].reshape(u, k).T, g)
-        b[s0:s0 + k] = np.dot(Li[oL[t]:oL[t + 1]].reshape(k, k).T, y)
+            y -= np.dot(L21[o21[t] : o21[t + 1]].reshape(u, k).T, g)
+        b[s0 : s0 + k] = np.dot(Li[oL[t] : oL[t + 1]].reshape(k, k).T, y)
 
 
 def _subst_kernel():
@@ -302,8 +334,9 @@ def _subst_kernel():
     if not _KERNEL:
         try:
             import numba
+
             _KERNEL.append(numba.njit(cache=True, nogil=True)(_subst))
-        except ImportError:       # pragma: no cover - numba is a declared dependency
+        except ImportError:  # pragma: no cover - numba is a declared dependency
             _KERNEL.append(None)
     return _KERNEL[0]
 

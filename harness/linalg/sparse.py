@@ -65,20 +65,35 @@ class Factor:
         self.perm = perm
         try:
             if perm is None:  # no coordinates: SuperLU's minimum degree on A^T + A
-                self.lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                                    options=dict(SymmetricMode=True))
+                self.lu = spla.splu(
+                    K,
+                    permc_spec="MMD_AT_PLUS_A",
+                    diag_pivot_thresh=0.0,
+                    options=dict(SymmetricMode=True),
+                )
             else:
                 self.iperm = np.empty_like(perm)
                 self.iperm[perm] = np.arange(len(perm))
-                self.lu = spla.splu(K[perm][:, perm].tocsc(), permc_spec="NATURAL", diag_pivot_thresh=0.0,
-                                    options=dict(SymmetricMode=True))
+                self.lu = spla.splu(
+                    K[perm][:, perm].tocsc(),
+                    permc_spec="NATURAL",
+                    diag_pivot_thresh=0.0,
+                    options=dict(SymmetricMode=True),
+                )
         except RuntimeError as exc:
-            raise ModelError(f"load '{name}': stiffness matrix is singular ({exc})", field="springs",
-                             fix="the network has a mechanism or floating node; add springs or constraints") from None
+            raise ModelError(
+                f"load '{name}': stiffness matrix is singular ({exc})",
+                field="springs",
+                fix="the network has a mechanism or floating node; add springs or constraints",
+            ) from None
         d = self.lu.U.diagonal()
         if np.any(d <= 0) or np.min(d) < 1e-13 * np.max(d):
-            raise ModelError(f"load '{name}': stiffness matrix is singular or indefinite (pivot ratio {np.min(d) / np.max(d):.1e})",
-                             field="springs", fix="the network has a mechanism or floating node, or a spring constant <= 0")
+            raise ModelError(
+                f"load '{name}': stiffness matrix is singular or indefinite (pivot ratio "
+                f"{np.min(d) / np.max(d):.1e})",
+                field="springs",
+                fix="the network has a mechanism or floating node, or a spring constant <= 0",
+            )
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         if self.perm is None:
@@ -92,24 +107,33 @@ class DenseFactor:
 
     def __init__(self, K: np.ndarray, name: str = ""):
         import scipy.linalg as sla
+
         try:
             self.c = sla.cho_factor(K, lower=True, check_finite=False)
         except np.linalg.LinAlgError:
-            raise ModelError(f"load '{name}': stiffness matrix is singular or indefinite", field="springs",
-                             fix="the network has a mechanism or floating node, or a spring constant <= 0") from None
+            raise ModelError(
+                f"load '{name}': stiffness matrix is singular or indefinite",
+                field="springs",
+                fix="the network has a mechanism or floating node, or a spring constant <= 0",
+            ) from None
         d = np.diag(self.c[0])
         if np.min(d) < 1e-7 * np.max(d):
-            raise ModelError(f"load '{name}': stiffness matrix is singular (pivot ratio {np.min(d) / np.max(d):.1e})",
-                             field="springs", fix="the network has a mechanism or floating node")
+            raise ModelError(
+                f"load '{name}': stiffness matrix is singular (pivot ratio "
+                f"{np.min(d) / np.max(d):.1e})",
+                field="springs",
+                fix="the network has a mechanism or floating node",
+            )
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         import scipy.linalg as sla
+
         return sla.cho_solve(self.c, rhs, check_finite=False)
 
 
 # --- BLAS threads ------------------------------------------------------------------------
-_ONE_THREAD = 0   # depth of nested single_thread_blas blocks
-_OUTER = 1        # BLAS threads in effect when the outermost block began
+_ONE_THREAD = 0  # depth of nested single_thread_blas blocks
+_OUTER = 1  # BLAS threads in effect when the outermost block began
 
 
 @contextmanager
@@ -126,7 +150,11 @@ def single_thread_blas():
             _ONE_THREAD -= 1
         return
     from threadpoolctl import threadpool_info, threadpool_limits
-    _OUTER = max([int(i.get("num_threads", 1)) for i in threadpool_info() if i.get("user_api") == "blas"] or [1])
+
+    _OUTER = max(
+        [int(i.get("num_threads", 1)) for i in threadpool_info() if i.get("user_api") == "blas"]
+        or [1]
+    )
     with threadpool_limits(1):
         _ONE_THREAD += 1
         try:
@@ -148,5 +176,6 @@ def outer_blas_threads():
         yield
         return
     from threadpoolctl import threadpool_limits
+
     with threadpool_limits(_OUTER, user_api="blas"):
         yield

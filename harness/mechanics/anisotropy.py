@@ -44,7 +44,9 @@ def pull_load(d, stress: float = 1.0, name: str = "pull") -> LoadCase:
     for a in range(3):
         if abs(d[a]) > 1e-12:
             for side, sgn in (("0", -1.0), ("1", 1.0)):
-                tr.append(Traction("xyz"[a] + side, tuple(float(v) for v in stress * d * d[a] * sgn)))
+                tr.append(
+                    Traction("xyz"[a] + side, tuple(float(v) for v in stress * d * d[a] * sgn))
+                )
     return LoadCase(name, HOLD, tuple(tr))
 
 
@@ -58,8 +60,10 @@ def pull_arrays(points, bbox, load: LoadCase) -> tuple[np.ndarray, np.ndarray]:
     for c in load.constraints:
         on = part_predicate(c.part, bbox)(points.T)
         if not on.any():
-            raise ModelError(f"no node on corner {c.part} for the direction pulls",
-                             fix="the body must be a box meshed to its corners")
+            raise ModelError(
+                f"no node on corner {c.part} for the direction pulls",
+                fix="the body must be a box meshed to its corners",
+            )
         fixed[np.ix_(on, list(c.components))] = True
     return ~fixed.ravel(), f.ravel()
 
@@ -68,7 +72,7 @@ def effective_strain(points, u) -> np.ndarray:
     """Symmetric part (3, 3) of H in the least-squares fit u = a + H x."""
     X = np.column_stack([np.ones(len(points)), np.asarray(points, float)])
     coef, *_ = np.linalg.lstsq(X, np.asarray(u, float), rcond=None)
-    H = coef[1:].T                       # u_i = a_i + H_ij x_j
+    H = coef[1:].T  # u_i = a_i + H_ij x_j
     return 0.5 * (H + H.T)
 
 
@@ -78,7 +82,10 @@ def measures(points, u, d, stress: float = 1.0) -> dict:
     eps = effective_strain(points, u)
     ed = eps @ d
     along = float(d @ ed)
-    return {"stiffness": stress / along, "drift": float(np.linalg.norm(ed - along * d)) / abs(along)}
+    return {
+        "stiffness": stress / along,
+        "drift": float(np.linalg.norm(ed - along * d)) / abs(along),
+    }
 
 
 def spread(values) -> tuple[float, float]:
@@ -91,12 +98,13 @@ def transversely_isotropic_modulus(angle_to_fibre, E_L, E_T, nu_LT, G_LT):
     """Closed-form Young's modulus at ``angle_to_fibre`` (radians) of a transversely
     isotropic material (fibre modulus E_L, cross modulus E_T)."""
     c, s = np.cos(angle_to_fibre), np.sin(angle_to_fibre)
-    return 1.0 / (c ** 4 / E_L + s ** 4 / E_T + (1.0 / G_LT - 2.0 * nu_LT / E_L) * c * c * s * s)
+    return 1.0 / (c**4 / E_L + s**4 / E_T + (1.0 / G_LT - 2.0 * nu_LT / E_L) * c * c * s * s)
 
 
 def solve_model(K, points, bbox, loads) -> list[np.ndarray]:
     """Displacements (n, 3) of a linear model (stiffness K, (3n, 3n)) under each pull load."""
     import scipy.sparse.linalg as spla
+
     K = K.tocsr()
     out = []
     lu, key = None, None

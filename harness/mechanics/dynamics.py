@@ -30,13 +30,14 @@ from harness.errors import SimulationError
 from harness.models.bc2000.pack import kernel_arrays
 
 INTEGRATORS = ("verlet", "symplectic-euler", "backward-euler")
-PROGRAM_DRAG = 5e-3      # the program's drag per step: -5e-3 d (physical 5e-3 h N s/m)
+PROGRAM_DRAG = 5e-3  # the program's drag per step: -5e-3 d (physical 5e-3 h N s/m)
 
 
 @dataclass(frozen=True)
 class Loading:
     """What acts on the particles: mass (n,) kg, fixed (n,) bool, gravity (3,) m/s^2,
     push (n, 3) constant forces N, drag (physical N s/m, force -drag v)."""
+
     mass: np.ndarray
     fixed: np.ndarray
     gravity: np.ndarray
@@ -44,8 +45,15 @@ class Loading:
     drag: float = 0.0
 
     @staticmethod
-    def from_flags(flags, *, mass=0.01, gravity=(0.0, -9.8, 0.0), push=(0.0, -1.0, 0.0),
-                   drag=0.0, observed_fixed: bool = False) -> "Loading":
+    def from_flags(
+        flags,
+        *,
+        mass=0.01,
+        gravity=(0.0, -9.8, 0.0),
+        push=(0.0, -1.0, 0.0),
+        drag=0.0,
+        observed_fixed: bool = False,
+    ) -> "Loading":
         """From the program's node flags: 1 fixed, 2 pushed/pulled (force ``push``),
         3 observed (free unless ``observed_fixed``, as in the program's non-MEASURE build)."""
         flags = np.asarray(flags)
@@ -53,8 +61,13 @@ class Loading:
         fixed = (flags == 1) | ((flags == 3) & observed_fixed)
         p = np.zeros((n, 3))
         p[flags == 2] = push
-        return Loading(np.broadcast_to(np.asarray(mass, float), (n,)).copy(), fixed,
-                       np.asarray(gravity, float), p, float(drag))
+        return Loading(
+            np.broadcast_to(np.asarray(mass, float), (n,)).copy(),
+            fixed,
+            np.asarray(gravity, float),
+            p,
+            float(drag),
+        )
 
     def external(self) -> np.ndarray:
         return self.mass[:, None] * self.gravity[None, :] + self.push
@@ -66,6 +79,7 @@ class Trajectory:
     observed (k, n_obs, 3) positions of the observed nodes, snapshots {step: (x, d)} with
     d = x_n - x_{n-1}; x, v at the end; energy (k,) (kinetic + gravity + model potential)
     if asked."""
+
     t: np.ndarray
     volume: np.ndarray
     observed: np.ndarray
@@ -89,10 +103,12 @@ def tet_volume(x, tets) -> float | np.ndarray:
 
 # -- compiled position Verlet (the program's loop) ---------------------------------------------
 
+
 def _kernel():
     """The compiled position-Verlet loop of the program (harness/models/bc2000/kernels.py;
     its arithmetic is rearranged, so it matches the program to rounding, not bit for bit)."""
     from harness.models.bc2000.kernels import run
+
     return run
 
 
@@ -107,9 +123,22 @@ def _tets_of(model):
     return np.zeros((0, 4), np.int64) if t is None else np.asarray(t, np.int64)
 
 
-def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str = "verlet",
-             snapshots=(), observe=(), x0=None, engine: str = "auto", energy: bool = False,
-             jacobian_every: int = 1, volume: bool = True, threads: int = 1) -> Trajectory:
+def simulate(
+    model,
+    loading: Loading,
+    dt: float,
+    steps: int,
+    *,
+    integrator: str = "verlet",
+    snapshots=(),
+    observe=(),
+    x0=None,
+    engine: str = "auto",
+    energy: bool = False,
+    jacobian_every: int = 1,
+    volume: bool = True,
+    threads: int = 1,
+) -> Trajectory:
     """Run ``steps`` steps of size ``dt`` from rest (x0 default: the rest points).
 
     ``snapshots``: step numbers whose full state is kept; ``observe``: node ids whose
@@ -118,8 +147,10 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     the elements on two threads (same result bit for bit; pays off on free cores).
     """
     if integrator not in INTEGRATORS:
-        raise SimulationError(f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}")
-    if engine not in ("auto", "numba", "numpy"):     # was silently the numpy engine
+        raise SimulationError(
+            f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}"
+        )
+    if engine not in ("auto", "numba", "numpy"):  # was silently the numpy engine
         raise SimulationError(f"unknown engine '{engine}'", fix="one of auto, numba, numpy")
     if dt <= 0 or steps < 0:
         raise SimulationError(f"need dt > 0 and steps >= 0 (got dt={dt}, steps={steps})")
@@ -129,9 +160,15 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
     obs = np.asarray(observe, np.int64).reshape(-1)
     tets = _tets_of(model) if volume else np.zeros((0, 4), np.int64)
     size = float((model.points.max(axis=0) - model.points.min(axis=0)).max()) or 1.0
-    arrays = _kernel_arrays(model, dt, threads) if integrator == "verlet" and engine in ("auto", "numba") else None
+    arrays = (
+        _kernel_arrays(model, dt, threads)
+        if integrator == "verlet" and engine in ("auto", "numba")
+        else None
+    )
     if engine == "numba" and arrays is None:
-        raise SimulationError("the compiled engine runs verlet on MassSpring or AnisotropicBody only")
+        raise SimulationError(
+            "the compiled engine runs verlet on MassSpring or AnisotropicBody only"
+        )
     vol = np.full(steps + 1, np.nan)
     observed = np.zeros((steps + 1, len(obs), 3))
     snaps = np.zeros((len(snap_steps), n, 3))
@@ -140,24 +177,68 @@ def simulate(model, loading: Loading, dt: float, steps: int, *, integrator: str 
         d = np.zeros((n, 3))
         springs, tet, hexa = arrays
         run = _kernel()
-        done = run(x, d, int(steps), float(dt), loading.mass.astype(float), ~loading.fixed,
-                   loading.mass[:, None] * loading.gravity[None, :], loading.push.astype(float),
-                   float(loading.drag / dt), springs, tet, hexa, tets, obs, snap_steps, snaps, snaps_d,
-                   vol, observed, 10.0 * size, threads >= 2)
+        done = run(
+            x,
+            d,
+            int(steps),
+            float(dt),
+            loading.mass.astype(float),
+            ~loading.fixed,
+            loading.mass[:, None] * loading.gravity[None, :],
+            loading.push.astype(float),
+            float(loading.drag / dt),
+            springs,
+            tet,
+            hexa,
+            tets,
+            obs,
+            snap_steps,
+            snaps,
+            snaps_d,
+            vol,
+            observed,
+            10.0 * size,
+            threads >= 2,
+        )
         if done < steps:
             _blow_up(model, loading, dt, done)
         v = d / dt
     else:
-        x, v = _numpy_run(model, loading, x, dt, steps, integrator, tets, obs, snap_steps, snaps, snaps_d,
-                          vol, observed, size, jacobian_every)
+        x, v = _numpy_run(
+            model,
+            loading,
+            x,
+            dt,
+            steps,
+            integrator,
+            tets,
+            obs,
+            snap_steps,
+            snaps,
+            snaps_d,
+            vol,
+            observed,
+            size,
+            jacobian_every,
+        )
     if len(tets) == 0:
         vol[:] = np.nan
     t = dt * np.arange(steps + 1)
     en = None
     if energy and len(snap_steps):
-        en = np.array([_energy(model, loading, snaps[k], snaps_d[k] / dt) for k in range(len(snap_steps))])
-    return Trajectory(t, vol, observed, {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
-                      x, v, dt, en)
+        en = np.array(
+            [_energy(model, loading, snaps[k], snaps_d[k] / dt) for k in range(len(snap_steps))]
+        )
+    return Trajectory(
+        t,
+        vol,
+        observed,
+        {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
+        x,
+        v,
+        dt,
+        en,
+    )
 
 
 def _energy(model, loading, x, v):
@@ -171,12 +252,30 @@ def _blow_up(model, loading, dt, step):
         est = f"{stable_step(model, loading):.3g} s"
     except Exception:  # the estimate is advice only
         est = "unknown"
-    raise SimulationError(f"the simulation blew up at step {step} with dt = {dt:g} s "
-                          f"(stable-step estimate 2/omega_max = {est})", fix="reduce dt or use integrator = 'backward-euler'")
+    raise SimulationError(
+        f"the simulation blew up at step {step} with dt = {dt:g} s "
+        f"(stable-step estimate 2/omega_max = {est})",
+        fix="reduce dt or use integrator = 'backward-euler'",
+    )
 
 
-def _numpy_run(model, loading, x, dt, steps, integrator, tets, obs, snap_steps, snaps, snaps_d, volume,
-               observed, size, jacobian_every):
+def _numpy_run(
+    model,
+    loading,
+    x,
+    dt,
+    steps,
+    integrator,
+    tets,
+    obs,
+    snap_steps,
+    snaps,
+    snaps_d,
+    volume,
+    observed,
+    size,
+    jacobian_every,
+):
     n = len(x)
     free = ~loading.fixed
     minv = np.where(free, 1.0 / loading.mass, 0.0)[:, None]
@@ -230,6 +329,7 @@ def _backward_euler_step(model, loading, x, v, dt, free, ext, J):
 
 # -- Jacobians ----------------------------------------------------------------------------------
 
+
 def distance2_colouring(graph: sp.spmatrix) -> np.ndarray:
     """Greedy colouring in which nodes within two edges of each other differ (columns of
     one colour can be perturbed together without their rows overlapping)."""
@@ -237,7 +337,7 @@ def distance2_colouring(graph: sp.spmatrix) -> np.ndarray:
     A2 = (A @ A).tocsr()
     colour = np.full(A.shape[0], -1)
     for i in range(A.shape[0]):
-        used = set(colour[A2.indices[A2.indptr[i]:A2.indptr[i + 1]]].tolist())
+        used = set(colour[A2.indices[A2.indptr[i] : A2.indptr[i + 1]]].tolist())
         c = 0
         while c in used:
             c += 1
@@ -270,7 +370,9 @@ def jacobian(force, x, graph, *, v=None, wrt: str = "x", h: float = 1e-30) -> sp
             for k in range(3):
                 rows.append(3 * r + k), cols.append(3 * j + comp), vals.append(im[r, k])
     N = 3 * n
-    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N))
+    return sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N)
+    )
 
 
 def stiffness(model, x=None) -> sp.csr_matrix:
@@ -295,8 +397,14 @@ def stable_step(model, loading: Loading, x=None) -> float:
     if Kf.shape[0] <= 200:
         lam = np.linalg.eigvalsh(Kf.toarray()).max()
     else:
-        lam = spla.eigsh(Kf, k=1, which="LA", return_eigenvectors=False, tol=1e-6,
-                         v0=np.random.default_rng(0).standard_normal(Kf.shape[0]))[0]  # seeded start
+        lam = spla.eigsh(
+            Kf,
+            k=1,
+            which="LA",
+            return_eigenvectors=False,
+            tol=1e-6,
+            v0=np.random.default_rng(0).standard_normal(Kf.shape[0]),
+        )[0]  # seeded start
     return float("inf") if lam <= 0 else 2.0 / np.sqrt(lam)
 
 

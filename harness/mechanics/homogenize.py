@@ -14,7 +14,8 @@ plane strain and in 3-D. Any other target nu (or an anisotropic target breaking 
 relations) is out of reach: the relative misfit of the best non-negative group
 constants is the error floor no optimiser can beat in the interior of a large grid under
 a uniform strain. It is not a floor for a finite network's G on particular loads: the
-boundary layers and the fit to those loads can take G well below it (docs/models.md, "The Cauchy limit").
+boundary layers and the fit to those loads can take G well below it (docs/models.md, "The Cauchy
+limit").
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ def cell_springs(structure: str, spacing) -> tuple[np.ndarray, np.ndarray, tuple
             names.append(g)
         vecs.append(np.asarray(v, float) * h)
         gids.append(names.index(g))
+
     if len(h) == 2:
         add([1, 0], "horizontal")
         add([0, 1], "vertical")
@@ -54,8 +56,14 @@ def cell_springs(structure: str, spacing) -> tuple[np.ndarray, np.ndarray, tuple
         add([0, 1, 0], "edge-y")
         add([0, 0, 1], "edge-z")
         if "face" in name:
-            for v, g in (([1, 1, 0], "face-xy"), ([-1, 1, 0], "face-xy"), ([1, 0, 1], "face-xz"),
-                         ([-1, 0, 1], "face-xz"), ([0, 1, 1], "face-yz"), ([0, -1, 1], "face-yz")):
+            for v, g in (
+                ([1, 1, 0], "face-xy"),
+                ([-1, 1, 0], "face-xy"),
+                ([1, 0, 1], "face-xz"),
+                ([-1, 0, 1], "face-xz"),
+                ([0, 1, 1], "face-yz"),
+                ([0, -1, 1], "face-yz"),
+            ):
                 add(v, g)
         if "body" in name:
             for v in ([1, 1, 1], [-1, 1, 1], [1, -1, 1], [1, 1, -1]):
@@ -68,14 +76,19 @@ def lattice_stiffness(vectors: np.ndarray, k: np.ndarray, cell_volume: float) ->
     vectors = np.asarray(vectors, float)
     L = np.linalg.norm(vectors, axis=1)
     a = voigt_dyad(vectors / L[:, None])
-    return np.einsum("m,mi,mj->ij", np.asarray(k, float) * L ** 2, a, a) / cell_volume
+    return np.einsum("m,mi,mj->ij", np.asarray(k, float) * L**2, a, a) / cell_volume
 
 
 def group_stiffness(structure: str, spacing) -> tuple[np.ndarray, tuple[str, ...]]:
     """C_g (groups, v, v): the lattice C per unit spring constant of each group."""
     vecs, gids, names = cell_springs(structure, spacing)
     V = float(np.prod(spacing))
-    Cg = np.array([lattice_stiffness(vecs[gids == g], np.ones((gids == g).sum()), V) for g in range(len(names))])
+    Cg = np.array(
+        [
+            lattice_stiffness(vecs[gids == g], np.ones((gids == g).sum()), V)
+            for g in range(len(names))
+        ]
+    )
     return Cg, names
 
 
@@ -83,11 +96,24 @@ def engineering_constants(C: np.ndarray) -> dict:
     """Young's moduli, Poisson ratios (nu_ij = -S_ij / S_ii) and shear moduli of Voigt C."""
     S = np.linalg.inv(C)
     if C.shape[0] == 3:
-        return {"E_x": 1 / S[0, 0], "E_y": 1 / S[1, 1], "nu_xy": -S[0, 1] / S[0, 0], "nu_yx": -S[0, 1] / S[1, 1],
-                "G_xy": 1 / S[2, 2]}
-    return {"E_x": 1 / S[0, 0], "E_y": 1 / S[1, 1], "E_z": 1 / S[2, 2], "nu_xy": -S[0, 1] / S[0, 0],
-            "nu_xz": -S[0, 2] / S[0, 0], "nu_yz": -S[1, 2] / S[1, 1], "G_yz": 1 / S[3, 3], "G_xz": 1 / S[4, 4],
-            "G_xy": 1 / S[5, 5]}
+        return {
+            "E_x": 1 / S[0, 0],
+            "E_y": 1 / S[1, 1],
+            "nu_xy": -S[0, 1] / S[0, 0],
+            "nu_yx": -S[0, 1] / S[1, 1],
+            "G_xy": 1 / S[2, 2],
+        }
+    return {
+        "E_x": 1 / S[0, 0],
+        "E_y": 1 / S[1, 1],
+        "E_z": 1 / S[2, 2],
+        "nu_xy": -S[0, 1] / S[0, 0],
+        "nu_xz": -S[0, 2] / S[0, 0],
+        "nu_yz": -S[1, 2] / S[1, 1],
+        "G_yz": 1 / S[3, 3],
+        "G_xz": 1 / S[4, 4],
+        "G_xy": 1 / S[5, 5],
+    }
 
 
 def cauchy_nu(dim: int, plane: str = "stress") -> float:
@@ -106,8 +132,9 @@ def fit_groups(Cg: np.ndarray, C_target: np.ndarray) -> tuple[np.ndarray, float]
     return k, float(np.linalg.norm(A @ k - b) / np.linalg.norm(b))
 
 
-def cauchy_report(structure: str, spacing, C_target: np.ndarray, plane: str = "stress",
-                  tol: float = 1e-6) -> dict:
+def cauchy_report(
+    structure: str, spacing, C_target: np.ndarray, plane: str = "stress", tol: float = 1e-6
+) -> dict:
     """How close the grid structure can get to C_target: best group constants, the
     relative misfit (the error floor), the lattice's engineering constants at the best
     fit, and ``reachable`` (misfit <= tol)."""
@@ -115,8 +142,14 @@ def cauchy_report(structure: str, spacing, C_target: np.ndarray, plane: str = "s
     k, misfit = fit_groups(Cg, np.asarray(C_target, float))
     C = np.einsum("g,gij->ij", k, Cg)
     dim = len(spacing)
-    out = {"structure": structure, "group_names": names, "k_groups": k, "misfit": misfit,
-           "reachable": misfit <= tol, "cauchy_nu": cauchy_nu(dim, plane)}
+    out = {
+        "structure": structure,
+        "group_names": names,
+        "k_groups": k,
+        "misfit": misfit,
+        "reachable": misfit <= tol,
+        "cauchy_nu": cauchy_nu(dim, plane),
+    }
     try:
         out["fit"] = engineering_constants(C)
     except np.linalg.LinAlgError:
@@ -125,7 +158,9 @@ def cauchy_report(structure: str, spacing, C_target: np.ndarray, plane: str = "s
     return out
 
 
-def boundary_share(points: np.ndarray, springs: np.ndarray, lo, hi, rtol: float = 1e-9) -> np.ndarray:
+def boundary_share(
+    points: np.ndarray, springs: np.ndarray, lo, hi, rtol: float = 1e-9
+) -> np.ndarray:
     """Fraction (e,) of the cells around a spring of the infinite lattice that lie in the
     box: 1/2 per axis along which the spring has no extent and lies on a box face. With
     k = k_group * share a finite grid is exactly the cell-wise assembly of the periodic

@@ -15,7 +15,9 @@ from harness.mechanics.statics import fixed_mask
 from harness.models.springs import incidence, stiffness_matrix
 
 
-def frequencies_arrays(points, springs, k, masses, free: np.ndarray, n_modes: int = 6) -> np.ndarray:
+def frequencies_arrays(
+    points, springs, k, masses, free: np.ndarray, n_modes: int = 6
+) -> np.ndarray:
     """First ``n_modes`` frequencies (Hz) on the free dofs (plain arrays)."""
     K = stiffness_matrix(incidence(points, springs), k)
     return matrix_frequencies(K, _positive(masses), free, n_modes)
@@ -25,8 +27,11 @@ def _positive(masses) -> np.ndarray:
     """The node masses, refused (one line) if any is <= 0: M would not be positive definite."""
     masses = np.asarray(masses, float)
     if np.any(masses <= 0):
-        raise ModelError(f"{int(np.sum(masses <= 0))} nodes have masses <= 0, so M is not positive definite",
-                         field="model.masses", fix="use masses = 'moments-nonneg', 'voronoi' or 'uniform'")
+        raise ModelError(
+            f"{int(np.sum(masses <= 0))} nodes have masses <= 0, so M is not positive definite",
+            field="model.masses",
+            fix="use masses = 'moments-nonneg', 'voronoi' or 'uniform'",
+        )
     return masses
 
 
@@ -48,12 +53,12 @@ def matrix_eigenvalues(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndar
     dim = K.shape[0] // len(masses)
     fd = np.flatnonzero(np.asarray(free, bool))
     Kf = sp.csr_matrix(K)[fd][:, fd]
-    s = 1 / np.sqrt(np.repeat(masses, dim)[fd])        # M^-1/2 K M^-1/2: same eigenvalues
+    s = 1 / np.sqrt(np.repeat(masses, dim)[fd])  # M^-1/2 K M^-1/2: same eigenvalues
     A = sp.diags(s) @ Kf @ sp.diags(s)
     n_modes = min(n_modes, len(fd))
     scale = max(abs(A).max(), 1e-300)
     symmetric = abs(A - A.T).max() <= 1e-12 * scale
-    v0 = np.random.default_rng(0).standard_normal(A.shape[0])   # seeded: same bits every run
+    v0 = np.random.default_rng(0).standard_normal(A.shape[0])  # seeded: same bits every run
     if len(fd) <= 1500:
         if symmetric:
             lam = sl.eigh(A.toarray(), eigvals_only=True, subset_by_index=[0, n_modes - 1])
@@ -62,8 +67,14 @@ def matrix_eigenvalues(K, masses, free: np.ndarray, n_modes: int = 6) -> np.ndar
     elif symmetric:
         lam = eigsh(A.tocsc(), k=n_modes, sigma=0.0, which="LM", return_eigenvectors=False, v0=v0)
     else:
-        lam = eigs(A.tocsc(), k=min(n_modes + 2, len(fd) - 2), sigma=0.0, which="LM",
-                   return_eigenvectors=False, v0=v0)
+        lam = eigs(
+            A.tocsc(),
+            k=min(n_modes + 2, len(fd) - 2),
+            sigma=0.0,
+            which="LM",
+            return_eigenvectors=False,
+            v0=v0,
+        )
     lam = np.asarray(lam)
     lam = lam[np.lexsort((lam.imag, lam.real))][:n_modes]
     return lam.real if symmetric else lam
@@ -74,6 +85,10 @@ def frequencies(network, case, n_modes: int = 6, load: str | None = None) -> np.
     (default: harness.case.loads.modal_load)."""
     lc = modal_load(case) if load is None else next(l for l in case.loads if l.name == load)
     free = ~fixed_mask(network.points, case, lc).ravel()
-    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
-        return matrix_frequencies(network.stiffness_matrix(), _positive(network.masses), free, n_modes)
-    return frequencies_arrays(network.points, network.springs, network.k, network.masses, free, n_modes)
+    if getattr(network, "volume", None) is not None:  # springs + volume: harness/models/volume.py
+        return matrix_frequencies(
+            network.stiffness_matrix(), _positive(network.masses), free, n_modes
+        )
+    return frequencies_arrays(
+        network.points, network.springs, network.k, network.masses, free, n_modes
+    )

@@ -20,8 +20,17 @@ from harness.mechanics.dynamics import Loading, _solve_regularised, stiffness
 
 # -- statics --------------------------------------------------------------------------------
 
-def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 30,
-                 x0=None, max_cuts: int = 8) -> np.ndarray:
+
+def solve_static(
+    model,
+    loading: Loading,
+    *,
+    load_steps: int = 5,
+    tol: float = 1e-9,
+    max_iter: int = 30,
+    x0=None,
+    max_cuts: int = 8,
+) -> np.ndarray:
     """Equilibrium positions f_int(x) + lambda f_ext = 0 on the free dofs, lambda raised in
     ``load_steps`` increments to 1 (an increment whose Newton iteration fails is halved, up
     to ``max_cuts`` times); Newton on K = -df/dx with a backtracking line search on |r|."""
@@ -39,8 +48,10 @@ def solve_static(model, loading: Loading, *, load_steps: int = 5, tol: float = 1
             continue
         cuts += 1
         if cuts > max_cuts:
-            raise SimulationError(f"Newton did not converge at load factor {target:g} (|r| = {res:.3g} N)",
-                                  fix="use more load_steps, or check that the body is held")
+            raise SimulationError(
+                f"Newton did not converge at load factor {target:g} (|r| = {res:.3g} N)",
+                fix="use more load_steps, or check that the body is held",
+            )
         dlam /= 2
     return x
 
@@ -51,6 +62,7 @@ class StaticPath:
     not reached), ``load_factor`` the highest load factor reached, ``folds`` the load
     factors at which the path turned back (limit points), ``status`` one line, ``x_limit``
     the equilibrium nearest the first limit point (None without one)."""
+
     x: np.ndarray | None
     load_factor: float
     folds: tuple
@@ -58,8 +70,16 @@ class StaticPath:
     x_limit: np.ndarray | None = None
 
 
-def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: float = 1e-9, max_iter: int = 12,
-                      max_cuts: int = 2, arc_steps: int = 150) -> StaticPath:
+def solve_static_path(
+    model,
+    loading: Loading,
+    *,
+    load_steps: int = 5,
+    tol: float = 1e-9,
+    max_iter: int = 12,
+    max_cuts: int = 2,
+    arc_steps: int = 150,
+) -> StaticPath:
     """Static equilibrium at the full load: load stepping as :func:`solve_static`; where an
     increment cannot converge even when cut ``max_cuts`` times, pseudo-arclength
     continuation (:func:`arclength`) from the last equilibrium for up to ``arc_steps``
@@ -87,21 +107,43 @@ def solve_static_path(model, loading: Loading, *, load_steps: int = 5, tol: floa
     folds = tuple(path["folds"])
     where = ", ".join(f"{f:.4g}" for f in folds)
     if path["x"] is not None:
-        status = (f"converged past limit point(s) at load factor {where} (snap-through of the model)"
-                  if folds else "converged (continuation)")
+        status = (
+            f"converged past limit point(s) at load factor {where} (snap-through of the model)"
+            if folds
+            else "converged (continuation)"
+        )
         return StaticPath(path["x"], 1.0, folds, status, path["x_limit"])
     if folds:
-        status = (f"limit point at load factor {folds[0]:.4g}: the tangent stiffness turns singular and the "
-                  f"equilibrium path turns back (a snap-through instability of the model, not a solver failure); "
-                  f"full load not regained in {arc_steps} continuation steps (load factor now {path['lam']:.3g})")
+        status = (
+            f"limit point at load factor {folds[0]:.4g}: the tangent stiffness turns "
+            "singular and the "
+            "equilibrium path turns back (a snap-through instability of the model, not a "
+            "solver failure); "
+            f"full load not regained in {arc_steps} continuation steps (load factor now "
+            f"{path['lam']:.3g})"
+        )
     else:
-        status = (f"stalled at load factor {path['lam_max']:.4g} (no limit point found: "
-                  f"{path['why']})")
+        status = (
+            f"stalled at load factor {path['lam_max']:.4g} (no limit point found: {path['why']})"
+        )
     return StaticPath(None, float(path["lam_max"]), folds, status, path["x_limit"])
 
 
-def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps: int = 150,
-              ds: float = 0.02, ds_min: float = 1e-7, ds_max: float = 0.2) -> dict:
+def arclength(
+    model,
+    graph,
+    x,
+    lam,
+    free,
+    ext,
+    tol,
+    *,
+    max_iter: int = 12,
+    steps: int = 150,
+    ds: float = 0.02,
+    ds_min: float = 1e-7,
+    ds_max: float = 0.2,
+) -> dict:
     """Pseudo-arclength continuation of f_int(x) + lambda f_ext = 0 from the equilibrium
     (x, lam) towards lambda = 1, in the scaled coordinates (u / c, lambda) with c the
     displacement per unit load factor at the start. Each step: predictor along the unit
@@ -134,13 +176,14 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
         if prev is not None and t @ prev < 0:
             t = -t
         return t
+
     t = tangent(b)
     folds, lam_max, why, x_limit = [], lam, "step size below the minimum", None
     for _ in range(steps):
         ok = False
         while ds >= ds_min:
             y, l = moved(x, ds * c * t[:-1]), lam + ds * t[-1]
-            for it in range(max_iter):      # Newton on the equilibrium + the arclength condition
+            for it in range(max_iter):  # Newton on the equilibrium + the arclength condition
                 r = residual(y, l)
                 g = t[:-1] @ ((y - x).ravel()[free] / c) + t[-1] * (l - lam) - ds
                 if np.linalg.norm(r, np.inf) <= tol and abs(g) <= 1e-10 and it > 0:
@@ -161,27 +204,32 @@ def arclength(model, graph, x, lam, free, ext, tol, *, max_iter: int = 12, steps
             ds /= 2
         if not ok:
             return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=why, x_limit=x_limit)
-        tn = tangent(lu.solve(f), t)         # K of the last iterate: the tangent to O(|du|)
-        if tn[-1] * t[-1] < 0:             # the fold lies between the two points
+        tn = tangent(lu.solve(f), t)  # K of the last iterate: the tangent to O(|du|)
+        if tn[-1] * t[-1] < 0:  # the fold lies between the two points
             folds.append(float(max(l, lam) if t[-1] > 0 else min(l, lam)))
             if x_limit is None:
                 x_limit = y if (l > lam) == (t[-1] > 0) else x
-        if l >= 1.0:            # passed the full load: settle on it with load control
+        if l >= 1.0:  # passed the full load: settle on it with load control
             xs, done, _ = _newton(model, graph, y if l - 1.0 < 1.0 - lam else x, free, ext, tol, 30)
             if done:
                 return dict(x=xs, lam=1.0, lam_max=1.0, folds=folds, why="", x_limit=x_limit)
             why = "Newton at the full load failed after the path crossed it"
-            return dict(x=None, lam=l, lam_max=max(lam_max, l), folds=folds, why=why, x_limit=x_limit)
+            return dict(
+                x=None, lam=l, lam_max=max(lam_max, l), folds=folds, why=why, x_limit=x_limit
+            )
         x, lam, t = y, l, tn
         lam_max = max(lam_max, lam)
         if it <= 4:
             ds = min(1.5 * ds, ds_max)
-    return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=f"{steps} steps used", x_limit=x_limit)
+    return dict(
+        x=None, lam=lam, lam_max=lam_max, folds=folds, why=f"{steps} steps used", x_limit=x_limit
+    )
 
 
 def _newton(model, graph, x, free, ext, tol, max_iter):
     def residual(y):
         return (model.forces(y) + ext).ravel()[free]
+
     r = residual(x)
     for _ in range(max_iter):
         if np.linalg.norm(r, np.inf) <= tol:
@@ -189,7 +237,9 @@ def _newton(model, graph, x, free, ext, tol, max_iter):
         K = stiffness(model, x)[free][:, free]
         dx = _solve_regularised(K, r)
         if dx is None:
-            raise SimulationError("singular stiffness", fix="fix more nodes: the body can move freely")
+            raise SimulationError(
+                "singular stiffness", fix="fix more nodes: the body can move freely"
+            )
         step, r0 = 1.0, np.linalg.norm(r)
         while True:
             y = x.copy().ravel()

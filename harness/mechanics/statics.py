@@ -44,8 +44,11 @@ def fixed_mask(points: np.ndarray, case, load) -> np.ndarray:
     for c in load.constraints:
         on = _predicate(case, c.part)(points.T)
         if not on.any():
-            raise ModelError(f"load '{load.name}': no node lies on constraint part '{c.part}'", field="model",
-                             fix="place nodes on that boundary (grid / random placements include the corners)")
+            raise ModelError(
+                f"load '{load.name}': no node lies on constraint part '{c.part}'",
+                field="model",
+                fix="place nodes on that boundary (grid / random placements include the corners)",
+            )
         for comp in c.components:
             fixed[on, comp] = True
     return fixed
@@ -77,19 +80,24 @@ def stress_forces(points: np.ndarray, case, stress) -> np.ndarray:
     on a quadrilateral (bilinear, exact on a parallelogram); a constant t gives each |F| t / k."""
     body = case.body
     if isinstance(stress, LoadCase):
-        field = lambda x: stress_field(stress, x)           # noqa: E731
+        field = lambda x: stress_field(stress, x)  # noqa: E731
     else:
-        if any(l.stress_gradient is not None and tuple(l.stress) == tuple(stress) for l in case.loads):
-            raise ModelError("a linear stress state's nodal forces need its load case, not its constant part",
-                             field="loads", fix="call stress_forces(points, case, load)")
+        if any(
+            l.stress_gradient is not None and tuple(l.stress) == tuple(stress) for l in case.loads
+        ):
+            raise ModelError(
+                "a linear stress state's nodal forces need its load case, not its constant part",
+                field="loads",
+                fix="call stress_forces(points, case, load)",
+            )
         sigma = stress_tensor(stress)
-        field = lambda x: np.broadcast_to(sigma, x.shape[:-1] + sigma.shape)   # noqa: E731
+        field = lambda x: np.broadcast_to(sigma, x.shape[:-1] + sigma.shape)  # noqa: E731
     if body.shape == "polygon":
         v = np.asarray(body.vertices, float)
         area = 0.5 * np.sum(v[:, 0] * np.roll(v[:, 1], -1) - np.roll(v[:, 0], -1) * v[:, 1])
         v = v if area > 0 else v[::-1]
         facets = [np.stack([np.arange(len(v)), (np.arange(len(v)) + 1) % len(v)], axis=1)]
-        corners, inside = v, [None]          # counter-clockwise: (dy, -dx) points out
+        corners, inside = v, [None]  # counter-clockwise: (dy, -dx) points out
     elif body.shape == "mesh":
         corners, facets, inside = mesh_surface(body.file, body.format)
     else:
@@ -102,16 +110,23 @@ def stress_forces(points: np.ndarray, case, stress) -> np.ndarray:
     for fac, cell_centre in zip(facets, inside):
         x = corners[fac]
         size, n = _facet_measure(x)
-        if cell_centre is not None:   # outwards, away from the facet's cell (cells may be numbered either way)
-            n *= np.where(np.einsum("ij,ij->i", n, x.mean(axis=1) - cell_centre) < 0, -1.0, 1.0)[:, None]
+        if (
+            cell_centre is not None
+        ):  # outwards, away from the facet's cell (cells may be numbered either way)
+            n *= np.where(np.einsum("ij,ij->i", n, x.mean(axis=1) - cell_centre) < 0, -1.0, 1.0)[
+                :, None
+            ]
         k = fac.shape[1]
-        t = np.einsum("mkab,mb->mka", field(x), n)             # traction at the facet's vertices
+        t = np.einsum("mkab,mb->mka", field(x), n)  # traction at the facet's vertices
         tc = t.mean(axis=1, keepdims=True)
         share = (size / k)[:, None, None] * (tc + (t - tc) / (k + 1 if k <= dim else 3))
         used = np.unique(fac)
         if np.any(dist[used] > tol):
-            raise ModelError("the stress loads need a node at every vertex of the body's surface",
-                             field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")
+            raise ModelError(
+                "the stress loads need a node at every vertex of the body's surface",
+                field="model.placement",
+                fix="use placement = 'mesh' (the mesh's own vertices)",
+            )
         np.add.at(f, node[fac].ravel(), share.reshape(-1, dim))
     return f
 
@@ -130,8 +145,11 @@ def _box_surface(points: np.ndarray, case) -> tuple[list, list]:
             tiles = [f for f in part_facets(points, case, _predicate(case, name)) if len(f)]
             covered = sum(_facet_measure(points[f])[0].sum() for f in tiles)
             if abs(covered - face) > 1e-9 * face:
-                raise ModelError(f"a stress on the whole boundary needs nodes at the corners of face {name}",
-                                 field="model.placement", fix="use a grid placement (its nodes include the corners)")
+                raise ModelError(
+                    f"a stress on the whole boundary needs nodes at the corners of face {name}",
+                    field="model.placement",
+                    fix="use a grid placement (its nodes include the corners)",
+                )
             out += tiles
     return out, [np.broadcast_to((lo + hi) / 2, (len(f), dim)) for f in out]
 
@@ -147,19 +165,26 @@ def force_vector(network, case, load) -> np.ndarray:
     for t in load.tractions:
         fac = part_facets(pts, case, _predicate(case, t.part))
         if not any(len(a) for a in fac):
-            raise ModelError(f"load '{load.name}': traction part '{t.part}' has no boundary facets", field="model",
-                             fix="put tractions on faces (2-D: edges) of the body, with nodes along them")
+            raise ModelError(
+                f"load '{load.name}': traction part '{t.part}' has no boundary facets",
+                field="model",
+                fix="put tractions on faces (2-D: edges) of the body, with nodes along them",
+            )
         f += facet_forces(pts, fac, t.vector, t.twist)
     if load.gravity is not None:
         f += network.masses[:, None] * np.asarray(load.gravity, float)[None]
     if load.body_force is not None:
-        f += (network.masses / case.material.density)[:, None] * np.asarray(load.body_force, float)[None]
+        f += (network.masses / case.material.density)[:, None] * np.asarray(load.body_force, float)[
+            None
+        ]
     return f
 
 
 def load_arrays(network, case, load) -> tuple[np.ndarray, np.ndarray]:
     """(free_mask (ndof,), f (ndof,)) with dof = dim*node + component."""
-    return ~fixed_mask(network.points, case, load).ravel(), force_vector(network, case, load).ravel()
+    return ~fixed_mask(network.points, case, load).ravel(), force_vector(
+        network, case, load
+    ).ravel()
 
 
 def all_load_arrays(network, case) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -175,6 +200,7 @@ def all_load_arrays(network, case) -> tuple[list[str], np.ndarray, np.ndarray]:
 
 
 # -- solving -----------------------------------------------------------------------------
+
 
 def _nodes(dofs, dim) -> list[int]:
     return sorted({int(d) // dim for d in dofs})
@@ -194,15 +220,22 @@ def check_connected(points, springs, free: np.ndarray, name: str = ""):
     lonely = np.flatnonzero((deg == 0) & free2.any(axis=1))
     where = f"load '{name}': " if name else ""
     if len(lonely):
-        raise ModelError(f"{where}floating nodes without springs: {_describe(list(lonely), points)}",
-                         field="model", fix="connect them or remove them")
+        raise ModelError(
+            f"{where}floating nodes without springs: {_describe(list(lonely), points)}",
+            field="model",
+            fix="connect them or remove them",
+        )
     g = sp.coo_matrix((np.ones(len(springs)), (springs[:, 0], springs[:, 1])), shape=(n, n))
     ncomp, lab = connected_components(g, directed=False)
     for c in range(ncomp):
         nodes = np.flatnonzero(lab == c)
         if not fixed_node[nodes].any():
-            raise ModelError(f"{where}a group of {len(nodes)} nodes is held by no constraint: {_describe(list(nodes), points)}",
-                             field="model", fix="connect it to the rest of the network")
+            raise ModelError(
+                f"{where}a group of {len(nodes)} nodes is held by no constraint: "
+                f"{_describe(list(nodes), points)}",
+                field="model",
+                fix="connect it to the rest of the network",
+            )
 
 
 def _mechanism(K: sp.spmatrix, free_dofs: np.ndarray, points, name: str, rtol: float = 1e-9):
@@ -222,17 +255,21 @@ def _mechanism(K: sp.spmatrix, free_dofs: np.ndarray, points, name: str, rtol: f
         dofs, count = free_dofs[K.diagonal() <= 0], -1
     nodes = _nodes(dofs, dim)
     modes = f"{count} zero-energy mode(s)" if count >= 0 else "a zero-energy mode"
-    raise ModelError(f"{where}the spring network is a mechanism ({modes}); nodes that move freely: "
-                     f"{_describe(nodes, points)}", field="model",
-                     fix="add springs (e.g. diagonals: structure = 'structure1') or constraints")
+    raise ModelError(
+        f"{where}the spring network is a mechanism ({modes}); nodes that move freely: "
+        f"{_describe(nodes, points)}",
+        field="model",
+        fix="add springs (e.g. diagonals: structure = 'structure1') or constraints",
+    )
 
 
-MULTIFRONTAL_MIN = 20_000   # free dofs from which a 3-D network is factorised by the multifrontal
+MULTIFRONTAL_MIN = 20_000  # free dofs from which a 3-D network is factorised by the multifrontal
 # Cholesky (harness/linalg/multifrontal.py): SuperLU took 15 s per load set on a 50k-tet mesh
 
 
 def _symmetric(K, rtol: float = 1e-12) -> bool:
-    """K equals K^T to rounding (a Cholesky reads one triangle: harness/models/mt.py's K is not symmetric)."""
+    """K equals K^T to rounding (a Cholesky reads one triangle: harness/models/mt.py's K is "
+    "not symmetric)."""
     return abs(K - K.T).max() <= rtol * max(abs(K).max(), 1e-300)
 
 
@@ -243,12 +280,14 @@ class _Factor:
         if np.any(d <= 0):
             _mechanism(K, free_dofs, points, name)
         self.lu = None
-        if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K):   # else LU (B&C's MT)
-            coords = np.repeat(points, 3, axis=0)[free_dofs]    # each dof at its node
+        if (
+            points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K)
+        ):  # else LU (B&C's MT)
+            coords = np.repeat(points, 3, axis=0)[free_dofs]  # each dof at its node
             try:
                 self.chol = MultifrontalCholesky(K, _symbolic(K, coords), name)
                 return
-            except ModelError:          # not positive definite: a mechanism; name its nodes
+            except ModelError:  # not positive definite: a mechanism; name its nodes
                 _mechanism(K, free_dofs, points, name)
         try:
             self.lu = spla.splu(K.tocsc())
@@ -284,6 +323,7 @@ class StaticsResult:
     """u (L, n, dim) displacements per load case ``names``; forces (L, n, dim);
     ``load_seconds`` (L,) the wall time of each load's factorisation and solve (loads that
     share one split it)."""
+
     names: tuple[str, ...]
     u: np.ndarray
     forces: np.ndarray
@@ -314,7 +354,7 @@ def solve_all(networks, case, loads=None) -> list[StaticsResult]:
 
 def _stiffness(network):
     K = stiffness_matrix(incidence(network.points, network.springs), network.k)
-    if getattr(network, "volume", None) is not None:    # springs + volume: harness/models/volume.py
+    if getattr(network, "volume", None) is not None:  # springs + volume: harness/models/volume.py
         K = K + network.volume.stiffness_matrix(network.points)
     return sp.csc_matrix(K)
 
@@ -322,7 +362,11 @@ def _stiffness(network):
 def _solve_all(networks, case, loads=None) -> list[StaticsResult]:
     loads = [l for l in case.loads if loads is None or l.name in loads]
     if not loads:
-        raise ModelError("no load cases to solve", field="loads", fix="add [loads] set = 'basic2d' or [[loads.case]]")
+        raise ModelError(
+            "no load cases to solve",
+            field="loads",
+            fix="add [loads] set = 'basic2d' or [[loads.case]]",
+        )
     first = networks[0]
     n, dim = first.points.shape
     arrays = [load_arrays(first, case, load) for load in loads]
@@ -347,11 +391,13 @@ def _solve_all(networks, case, loads=None) -> list[StaticsResult]:
             seconds[j, idx] = (time.perf_counter() - t0) / len(idx)
     forces = np.array([f.reshape(n, dim) for _, f in arrays])
     names = tuple(l.name for l in loads)
-    return [StaticsResult(names, u[j].reshape(len(loads), n, dim), forces, seconds[j])
-            for j in range(len(networks))]
+    return [
+        StaticsResult(names, u[j].reshape(len(loads), n, dim), forces, seconds[j])
+        for j in range(len(networks))
+    ]
 
 
-_SYMBOLIC: dict = {}        # the multifrontal Cholesky's symbolic factorisations by pattern and dof
+_SYMBOLIC: dict = {}  # the multifrontal Cholesky's symbolic factorisations by pattern and dof
 # locations: the networks of one mesh under different stiffness rules share them (a 104k-dof
 # network of a 200k-tet mesh: ~2 s and ~0.5 GB each; solve_all uses each one in a row)
 SYMBOLIC_KEEP = 2

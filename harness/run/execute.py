@@ -18,6 +18,7 @@ from harness.stages import StageContext, load_stages
 
 # -- executing one job (in a worker) ----------------------------------------------------
 
+
 class _Throttled:
     """``ctx.status``: forwards at most a few messages per second to ``sink``."""
 
@@ -53,6 +54,7 @@ class DaskSink:
 
     def __call__(self, label, msg):
         from distributed import get_worker
+
         get_worker().log_event(self.topic, {"label": label, "msg": msg})
 
 
@@ -60,6 +62,7 @@ def _seed_everything(seed: int):
     random.seed(seed)
     try:
         import numpy as np
+
         np.random.seed(seed % 2**32)
     except ImportError:  # pragma: no cover
         pass
@@ -79,16 +82,21 @@ def execute(job: Job, sink=None) -> JobResult:
         names = [m.NAME for m in modules]
         unknown = [w for w in wanted if w not in names]
         if unknown:
-            raise CaseError(f"unknown stage '{unknown[0]}'", file=job.rel_file, field="run.stages",
-                            fix=f"available: {', '.join(names) or 'none'}")
+            raise CaseError(
+                f"unknown stage '{unknown[0]}'",
+                file=job.rel_file,
+                field="run.stages",
+                fix=f"available: {', '.join(names) or 'none'}",
+            )
         rows = []
         for stage in modules:
             stage_name = stage.NAME
             if (wanted and stage.NAME not in wanted) or not stage.applies(case):
                 continue
             _seed_everything(job.seed)
-            ctx = StageContext(out_dir=tmp, mode=job.mode, seed=job.seed, status=status,
-                               n_seeds=job.n_seeds)
+            ctx = StageContext(
+                out_dir=tmp, mode=job.mode, seed=job.seed, status=status, n_seeds=job.n_seeds
+            )
             status(f"{stage.NAME}")
             t0 = time.perf_counter()
             out = stage.run(case, ctx) or []
@@ -103,25 +111,46 @@ def execute(job: Job, sink=None) -> JobResult:
                 row.setdefault("seconds", dt)
                 rows.append({str(k): _jsonable(v) for k, v in row.items()})
         if not rows:
-            rows = [{"case": job.case, "model": "", "stage": "", "seed": job.seed,
-                     "status": "no stage applies"}]
+            rows = [
+                {
+                    "case": job.case,
+                    "model": "",
+                    "stage": "",
+                    "seed": job.seed,
+                    "status": "no stage applies",
+                }
+            ]
         files = {}
         for f in sorted(tmp.rglob("*")):
             if f.is_file() and not f.is_symlink():
                 files[f.relative_to(tmp).as_posix()] = f.read_bytes()
-        return JobResult(job, "ok", rows, files, seconds=time.perf_counter() - t_job,
-                         code=loaded_sources(job.stages))
+        return JobResult(
+            job,
+            "ok",
+            rows,
+            files,
+            seconds=time.perf_counter() - t_job,
+            code=loaded_sources(job.stages),
+        )
     except SpringbenchError as exc:
         msg = str(exc).replace(job.case_file, job.rel_file or job.case_file)
         dt = time.perf_counter() - t_job
-        return JobResult(job, "error", [_error_row(job, stage_name, msg, dt)], error=msg, seconds=dt)
+        return JobResult(
+            job, "error", [_error_row(job, stage_name, msg, dt)], error=msg, seconds=dt
+        )
     except Exception as exc:  # a bug, not bad input: one line here, the traceback in a log
         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
         if len(msg) > 300:
             msg = msg[:297] + "..."
         dt = time.perf_counter() - t_job
-        return JobResult(job, "error", [_error_row(job, stage_name, msg, dt)], error=msg,
-                         traceback=traceback.format_exc(), seconds=dt)
+        return JobResult(
+            job,
+            "error",
+            [_error_row(job, stage_name, msg, dt)],
+            error=msg,
+            traceback=traceback.format_exc(),
+            seconds=dt,
+        )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
@@ -137,5 +166,3 @@ def _init_worker():
     _ignore_sigint()
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         os.environ.setdefault(var, "1")
-
-

@@ -19,23 +19,31 @@ from harness.stages import stage_modules
 
 HASH_VERSION = "springbench-job-1"
 # loaded sources that cannot change a result (drawing, tables, command-line plumbing)
-_NOT_CODE = ("harness/report/", "harness/outputs.py", "harness/paths.py", "harness/commands/", "harness/cli.py",
-             "harness/bench/")
+_NOT_CODE = (
+    "harness/report/",
+    "harness/outputs.py",
+    "harness/paths.py",
+    "harness/commands/",
+    "harness/cli.py",
+    "harness/bench/",
+)
 _NAME_OK = re.compile(r"[^A-Za-z0-9._+-]")
 
 
 # -- jobs and their identity ------------------------------------------------------------
 
+
 @dataclass(frozen=True)
 class Job:
     """One (case file, mode, seed) to run; everything a worker needs, picklable."""
+
     case_file: str
     mode: str
     seed: int
     suite: str
-    case: str          # folder name under results/<suite>/
+    case: str  # folder name under results/<suite>/
     n_seeds: int
-    key: str           # input hash
+    key: str  # input hash
     stages: tuple[str, ...]
     rel_file: str = ""  # the case file as shown in tables and messages
     expect: dict = field(default_factory=dict, hash=False, compare=False)
@@ -48,14 +56,15 @@ class Job:
 @dataclass
 class JobResult:
     """What a job produced: rows, data files (relative name -> bytes), error text."""
+
     job: Job
-    status: str                      # "ok" | "error" | "skipped" (finished earlier)
+    status: str  # "ok" | "error" | "skipped" (finished earlier)
     rows: list[dict]
     files: dict[str, bytes] = field(default_factory=dict)
     error: str = ""
     traceback: str = ""
     seconds: float = 0.0
-    log: str = ""                    # path of the traceback log, if any
+    log: str = ""  # path of the traceback log, if any
     code: dict = field(default_factory=dict)  # {source file: sha256} the job loaded
 
 
@@ -106,10 +115,21 @@ def input_hash(case, seed: int, stages) -> str:
 def safe_name(name: str, file: str) -> str:
     """The results folder name of a case: a path-like name (``../x``, ``/x``, ``a/b``) is
     rejected; other unusual characters (spaces, ...) become ``_``."""
-    if (not name or "/" in name or "\\" in name or name.startswith(".") or Path(name).is_absolute()
-            or "\0" in name or len(name) > 120):
-        raise CaseError(f"'{name}' cannot name a results folder", file=file, field="name",
-                        fix="use letters, digits, '-', '_' and '.', not a path")
+    if (
+        not name
+        or "/" in name
+        or "\\" in name
+        or name.startswith(".")
+        or Path(name).is_absolute()
+        or "\0" in name
+        or len(name) > 120
+    ):
+        raise CaseError(
+            f"'{name}' cannot name a results folder",
+            file=file,
+            field="name",
+            fix="use letters, digits, '-', '_' and '.', not a path",
+        )
     return _NAME_OK.sub("_", name)
 
 
@@ -119,10 +139,17 @@ def parse_seeds(case, file: str) -> list[int]:
     seeds = run.get("seeds", [0])
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         seeds = [seeds]
-    if (not isinstance(seeds, (list, tuple)) or not seeds
-            or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)):
-        raise CaseError(f"expected a non-negative integer or a non-empty list of them, got {seeds!r}",
-                        file=file, field="run.seeds", fix="e.g. seeds = [0, 1, 2]")
+    if (
+        not isinstance(seeds, (list, tuple))
+        or not seeds
+        or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds)
+    ):
+        raise CaseError(
+            f"expected a non-negative integer or a non-empty list of them, got {seeds!r}",
+            file=file,
+            field="run.seeds",
+            fix="e.g. seeds = [0, 1, 2]",
+        )
     if len(set(seeds)) != len(seeds):
         raise CaseError("repeated seed", file=file, field="run.seeds", fix="list each seed once")
     return list(seeds)
@@ -159,6 +186,7 @@ def _plain(obj):
 
 # -- planning ---------------------------------------------------------------------------
 
+
 def _rel(path: Path) -> str:
     try:
         return os.path.relpath(path)
@@ -185,19 +213,36 @@ def plan(paths, mode: str, stages=None) -> tuple[list[Job], list[JobResult]]:
             case = load_case(given, mode)
             name = safe_name(case.name, rel)
             if (suite, name) in used:
-                raise CaseError(f"name '{case.name}' is also used by {used[suite, name]} in suite {suite}",
-                                file=rel, field="name", fix="give each case of a suite its own name")
+                raise CaseError(
+                    f"name '{case.name}' is also used by {used[suite, name]} in suite {suite}",
+                    file=rel,
+                    field="name",
+                    fix="give each case of a suite its own name",
+                )
             used[suite, name] = rel
             seeds = parse_seeds(case, rel)
         except SpringbenchError as exc:
             job = Job(str(f), mode, 0, suite, safe_stem(f), 1, "", stage_names, rel)
-            failed.append(JobResult(job, "error", [_error_row(job, "case", str(exc))], error=str(exc)))
+            failed.append(
+                JobResult(job, "error", [_error_row(job, "case", str(exc))], error=str(exc))
+            )
             continue
         expect = _plain((case.section("expect") or {}).get("values", {}))
         for seed in seeds:
-            jobs.append(Job(str(f), mode, seed, suite, name, len(seeds),
-                            input_hash(case, seed, stage_names), stage_names, rel,
-                            expect if isinstance(expect, dict) else {}))
+            jobs.append(
+                Job(
+                    str(f),
+                    mode,
+                    seed,
+                    suite,
+                    name,
+                    len(seeds),
+                    input_hash(case, seed, stage_names),
+                    stage_names,
+                    rel,
+                    expect if isinstance(expect, dict) else {},
+                )
+            )
     return jobs, failed
 
 
@@ -206,7 +251,12 @@ def safe_stem(f: Path) -> str:
 
 
 def _error_row(job: Job, stage: str, message: str, seconds: float = 0.0) -> dict:
-    return {"case": job.case, "model": "", "stage": stage, "seed": job.seed, "status": "error",
-            "seconds": seconds, "error": message}
-
-
+    return {
+        "case": job.case,
+        "model": "",
+        "stage": stage,
+        "seed": job.seed,
+        "status": "error",
+        "seconds": seconds,
+        "error": message,
+    }

@@ -50,19 +50,25 @@ def run_lock(folder: Path):
         except FileExistsError:
             pid = _owner(path)
             if pid is not None and pid != os.getpid() and _alive(pid):
-                raise SpringbenchError(f"another springbench run (pid {pid}) is writing here", file=str(folder),
-                                       field="--results", fix="wait for it to finish or give another --results folder")
-            path.unlink(missing_ok=True)          # stale: its run was killed
-        except OSError as exc:                    # read-only folder, ...
+                raise SpringbenchError(
+                    f"another springbench run (pid {pid}) is writing here",
+                    file=str(folder),
+                    field="--results",
+                    fix="wait for it to finish or give another --results folder",
+                )
+            path.unlink(missing_ok=True)  # stale: its run was killed
+        except OSError as exc:  # read-only folder, ...
             raise os_error(exc, folder, "--results") from None
     else:
-        raise SpringbenchError("cannot take the results folder's lock", file=str(path), fix="remove the file")
+        raise SpringbenchError(
+            "cannot take the results folder's lock", file=str(path), fix="remove the file"
+        )
     try:
         try:
             os.write(fd, f"{os.getpid()}\n".encode())
         finally:
             os.close(fd)
-    except OSError as exc:                        # disk full: no lock, no empty lock file left
+    except OSError as exc:  # disk full: no lock, no empty lock file left
         path.unlink(missing_ok=True)
         raise os_error(exc, folder, "--results") from None
     try:
@@ -83,9 +89,9 @@ def clean_stale_scratch(root: Path | None = None) -> int:
     n = 0
     for d in root.glob(f"{SCRATCH}*-*"):
         try:
-            pid = int(d.name[len(SCRATCH):].split("-")[0])
+            pid = int(d.name[len(SCRATCH) :].split("-")[0])
         except ValueError:
-            continue                               # not ours (an old untagged name)
+            continue  # not ours (an old untagged name)
         if d.is_dir() and not _alive(pid):
             shutil.rmtree(d, ignore_errors=True)
             n += 1

@@ -54,9 +54,11 @@ DASK_CONNECT_TIMEOUT = "15s"
 
 # -- running a suite ---------------------------------------------------------------------
 
+
 @dataclass
 class RunReport:
     """What a run did: every job's result (skipped ones included), the suites touched."""
+
     results: list[JobResult]
     suites: list[Path]
     results_root: Path
@@ -82,11 +84,19 @@ class _Progress:
     def __init__(self, total: int, enabled):
 
         from tqdm import tqdm
+
         tty = sys.stderr.isatty() if enabled is None else bool(enabled)
         size = shutil.get_terminal_size((0, 0))  # a pty without a size (0 x 0) hides tqdm bars
-        self.bar = tqdm(total=total, desc="suite", unit="case", file=sys.stderr, disable=not tty,
-                        dynamic_ncols=size.columns > 0, ncols=None if size.columns > 0 else 100,
-                        nrows=None if size.lines > 0 else 24)
+        self.bar = tqdm(
+            total=total,
+            desc="suite",
+            unit="case",
+            file=sys.stderr,
+            disable=not tty,
+            dynamic_ncols=size.columns > 0,
+            ncols=None if size.columns > 0 else 100,
+            nrows=None if size.lines > 0 else 24,
+        )
         self.lines = enabled is None and not tty
         self.total, self.n = total, 0
         self.status: dict[str, str] = {}
@@ -116,7 +126,11 @@ class _Progress:
 
 def error_line(res: JobResult) -> str:
     """The one line that reports a failed job (its file is named once)."""
-    where = "" if res.job.rel_file and res.job.rel_file in res.error else f"{res.job.rel_file or res.job.label}: "
+    where = (
+        ""
+        if res.job.rel_file and res.job.rel_file in res.error
+        else f"{res.job.rel_file or res.job.label}: "
+    )
     if res.job.n_seeds > 1:
         where += f"seed {res.job.seed}: "
     extra = f" (traceback in {res.log})" if res.log else ""
@@ -130,9 +144,19 @@ def _default_jobs() -> int:
         return os.cpu_count() or 1
 
 
-def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, jobs: int | None = None,
-              executor: str = "local", scheduler: str | None = None, force: bool = False,
-              figures: bool = True, stages=None, progress=None) -> RunReport:
+def run_suite(
+    paths=(),
+    mode: str = "quick",
+    results: Path | None = None,
+    *,
+    jobs: int | None = None,
+    executor: str = "local",
+    scheduler: str | None = None,
+    force: bool = False,
+    figures: bool = True,
+    stages=None,
+    progress=None,
+) -> RunReport:
     """Run case files / suites; write results, tables, figures and the index.
 
     ``stages`` overrides the registered stages (module names); ``progress`` None
@@ -140,37 +164,80 @@ def run_suite(paths=(), mode: str = "quick", results: Path | None = None, *, job
     results = Path(results or DEFAULT_RESULTS)
     jobs_n = jobs or _default_jobs()
     if jobs_n < 1:
-        raise SpringbenchError(f"--jobs {jobs_n}: must be at least 1", field="--jobs", fix="e.g. --jobs 2")
+        raise SpringbenchError(
+            f"--jobs {jobs_n}: must be at least 1", field="--jobs", fix="e.g. --jobs 2"
+        )
     if executor not in ("local", "dask"):
-        raise SpringbenchError(f"unknown executor '{executor}'", field="--executor", fix="local or dask")
+        raise SpringbenchError(
+            f"unknown executor '{executor}'", field="--executor", fix="local or dask"
+        )
     if scheduler and executor != "dask":
-        raise SpringbenchError("--scheduler needs --executor dask", field="--scheduler",
-                               fix="add --executor dask")
+        raise SpringbenchError(
+            "--scheduler needs --executor dask", field="--scheduler", fix="add --executor dask"
+        )
     if results.exists() and not results.is_dir():
-        raise SpringbenchError("exists and is not a folder", file=str(results), field="--results",
-                               fix="give a folder for the results")
+        raise SpringbenchError(
+            "exists and is not a folder",
+            file=str(results),
+            field="--results",
+            fix="give a folder for the results",
+        )
     try:
         results.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise SpringbenchError(f"cannot create the results folder ({exc.strerror})", file=str(results),
-                               field="--results", fix="give a writable folder")
+        raise SpringbenchError(
+            f"cannot create the results folder ({exc.strerror})",
+            file=str(results),
+            field="--results",
+            fix="give a writable folder",
+        )
     clean_stale_scratch()
     with run_lock(results):
-        return _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress,
-                           collect())
+        return _run_locked(
+            paths,
+            mode,
+            results,
+            jobs_n,
+            executor,
+            scheduler,
+            force,
+            figures,
+            stages,
+            progress,
+            collect(),
+        )
 
 
-def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figures, stages, progress,
-                provenance=None) -> RunReport:
+def _run_locked(
+    paths,
+    mode,
+    results,
+    jobs_n,
+    executor,
+    scheduler,
+    force,
+    figures,
+    stages,
+    progress,
+    provenance=None,
+) -> RunReport:
     planned, failed = plan(list(paths), mode, stages)
     _prune_seeds(results, planned)
     done: list[JobResult] = []
     pending: list[Job] = []
     for job in planned:
         stored = None if force else read_result(result_path(results, job))
-        if (stored and stored.get("status") == "ok" and stored.get("input_hash") == job.key
-                and code_unchanged(stored.get("code"))):
-            done.append(JobResult(job, "skipped", stored.get("rows", []), seconds=stored.get("seconds", 0.0)))
+        if (
+            stored
+            and stored.get("status") == "ok"
+            and stored.get("input_hash") == job.key
+            and code_unchanged(stored.get("code"))
+        ):
+            done.append(
+                JobResult(
+                    job, "skipped", stored.get("rows", []), seconds=stored.get("seconds", 0.0)
+                )
+            )
         else:
             pending.append(job)
     bar = _Progress(len(planned) + len(failed), progress)
@@ -183,7 +250,10 @@ def _run_locked(paths, mode, results, jobs_n, executor, scheduler, force, figure
         all_results.append(res)
         if res.status == "error":
             bar.write(error_line(res))
-        bar.done(res.job.label, "error" if res.status == "error" else f"{res.status} ({res.seconds:.1f} s)")
+        bar.done(
+            res.job.label,
+            "error" if res.status == "error" else f"{res.status} ({res.seconds:.1f} s)",
+        )
 
     try:
         for res in failed:
@@ -229,8 +299,9 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
     with manager:
         q = manager.Queue()
         sink = QueueSink(q)
-        ex = ProcessPoolExecutor(max_workers=min(jobs_n, len(pending)), mp_context=ctx,
-                                 initializer=_init_worker)
+        ex = ProcessPoolExecutor(
+            max_workers=min(jobs_n, len(pending)), mp_context=ctx, initializer=_init_worker
+        )
         try:
             futs = {ex.submit(execute, job, sink): job for job in pending}
             waiting = set(futs)
@@ -254,8 +325,13 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
                         res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg)
                     except Exception as exc:  # e.g. a result that cannot be pickled
                         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
-                        res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
-                                        traceback=traceback.format_exc())
+                        res = JobResult(
+                            job,
+                            "error",
+                            [_error_row(job, "case", msg)],
+                            error=msg,
+                            traceback=traceback.format_exc(),
+                        )
                     finish(res)
         except BaseException:  # Ctrl-C or a bug here: stop the workers now, keep what finished
             procs = list((getattr(ex, "_processes", None) or {}).values())
@@ -265,7 +341,10 @@ def _pool_round(pending: list[Job], jobs_n: int, finish, bar, last: bool) -> lis
             raise
         ex.shutdown(wait=True)
     if lost:
-        bar.write(f"springbench: warning: a worker process died; retrying {len(lost)} job(s) one at a time")
+        bar.write(
+            f"springbench: warning: a worker process died; retrying {len(lost)} job(s) one "
+            "at a time"
+        )
     return lost
 
 
@@ -277,17 +356,22 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
     try:
         from distributed import Client, LocalCluster, wait
     except ImportError:
-        raise SpringbenchError("the Dask executor needs dask.distributed", field="--executor",
-                               fix="pip install 'springbench[dask]'")
+        raise SpringbenchError(
+            "the Dask executor needs dask.distributed",
+            field="--executor",
+            fix="pip install 'springbench[dask]'",
+        )
     cluster = None
     try:
         if scheduler:
             try:
                 client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT)
             except (OSError, TimeoutError, ValueError) as exc:
-                raise SpringbenchError(f"cannot connect to the Dask scheduler at {scheduler} ({exc})",
-                                       field="--scheduler",
-                                       fix="start one with 'dask scheduler' or check the address")
+                raise SpringbenchError(
+                    f"cannot connect to the Dask scheduler at {scheduler} ({exc})",
+                    field="--scheduler",
+                    fix="start one with 'dask scheduler' or check the address",
+                )
         else:
             cluster = LocalCluster(n_workers=jobs_n, threads_per_worker=1, processes=True)
             client = Client(cluster)
@@ -298,11 +382,19 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
             _, msg = event
             if isinstance(msg, dict):
                 latest[msg.get("label", "?")] = msg.get("msg", "")
+
         client.subscribe_topic(topic, on_event)
         with client:
-            futs = {client.submit(execute, job, DaskSink(topic), pure=False,
-                                  key=f"springbench-{job.label}-{uuid.uuid4().hex[:8]}"): job
-                    for job in pending}
+            futs = {
+                client.submit(
+                    execute,
+                    job,
+                    DaskSink(topic),
+                    pure=False,
+                    key=f"springbench-{job.label}-{uuid.uuid4().hex[:8]}",
+                ): job
+                for job in pending
+            }
             waiting = set(futs)
             while waiting:
                 try:
@@ -321,10 +413,17 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
                     except Exception as exc:  # worker lost, unpicklable result, ...
                         msg = f"{type(exc).__name__}: {exc}".replace("\n", " ")
                         if type(exc).__name__ == "KilledWorker":
-                            msg = ("its Dask worker died each time it ran this job (killed, or out "
-                                   "of memory?); the other jobs went on")
-                        res = JobResult(job, "error", [_error_row(job, "case", msg)], error=msg,
-                                        traceback=traceback.format_exc())
+                            msg = (
+                                "its Dask worker died each time it ran this job (killed, or out "
+                                "of memory?); the other jobs went on"
+                            )
+                        res = JobResult(
+                            job,
+                            "error",
+                            [_error_row(job, "case", msg)],
+                            error=msg,
+                            traceback=traceback.format_exc(),
+                        )
                     finish(res)
     finally:
         if cluster is not None:
@@ -334,5 +433,8 @@ def _run_dask(pending: list[Job], scheduler: str | None, jobs_n: int, finish, ba
 def run_paths(paths, mode: str = "quick", results: Path = DEFAULT_RESULTS, **kw):
     """Backward-compatible wrapper: ``{suite: DataFrame}`` of the suites touched."""
     import pandas as pd
+
     rep = run_suite(paths, mode, results, **kw)
-    return {s.name: pd.read_csv(s / "summary.csv") for s in rep.suites if (s / "summary.csv").exists()}
+    return {
+        s.name: pd.read_csv(s / "summary.csv") for s in rep.suites if (s / "summary.csv").exists()
+    }

@@ -15,6 +15,7 @@ RESULT_PREFIX = "result-seed"
 
 # -- storing results ---------------------------------------------------------------------
 
+
 def atomic_write(path: Path, data: bytes):
     """Write ``data`` to ``path`` so readers see the old file or the new one, never half; a
     full or read-only disk is one line naming the file (:mod:`harness.outputs`)."""
@@ -49,7 +50,7 @@ def store(results: Path, res: JobResult, provenance: dict | None = None) -> Path
     root = out.resolve()
     old = read_result(result_path(results, job)) or {}
     for name, data in res.files.items():
-        target = (out / name)
+        target = out / name
         if not target.resolve().is_relative_to(root):  # a stage cannot write outside its folder
             continue
         atomic_write(target, data)
@@ -65,11 +66,23 @@ def store(results: Path, res: JobResult, provenance: dict | None = None) -> Path
         log = str(logp)
         res.log = log
     manifest = {
-        "case": job.case, "suite": job.suite, "file": job.rel_file, "mode": job.mode,
-        "seed": job.seed, "n_seeds": job.n_seeds, "input_hash": job.key, "status": res.status,
-        "error": res.error, "log": log, "stages": list(job.stages), "expect": job.expect,
-        "files": sorted(res.files), "data_dir": "." if job.n_seeds == 1 else f"seed{job.seed}",
-        "seconds": res.seconds, "code": res.code, "rows": res.rows,
+        "case": job.case,
+        "suite": job.suite,
+        "file": job.rel_file,
+        "mode": job.mode,
+        "seed": job.seed,
+        "n_seeds": job.n_seeds,
+        "input_hash": job.key,
+        "status": res.status,
+        "error": res.error,
+        "log": log,
+        "stages": list(job.stages),
+        "expect": job.expect,
+        "files": sorted(res.files),
+        "data_dir": "." if job.n_seeds == 1 else f"seed{job.seed}",
+        "seconds": res.seconds,
+        "code": res.code,
+        "rows": res.rows,
     }
     if provenance is not None:
         manifest["provenance"] = provenance
@@ -88,5 +101,3 @@ def _prune_seeds(results: Path, jobs: list[Job]):
             m = re.fullmatch(rf"{RESULT_PREFIX}(\d+)\.json", f.name)
             if m and int(m.group(1)) not in seeds:
                 f.unlink()
-
-

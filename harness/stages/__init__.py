@@ -4,7 +4,8 @@ A stage is a module with ``NAME``, ``applies(case) -> bool`` and
 ``run(case, ctx) -> list[dict]`` (rows of the suite's summary table; every row has
 ``case`` and ``model``; the runner fills ``case``, ``stage``, ``seed``, ``status`` and
 ``seconds`` when a row leaves them out). ``ctx`` is a :class:`StageContext`. A new stage
-is one module and its line in ``harness.registry.STAGES``; a case's ``[run] stages = [NAME, ...]`` restricts it
+is one module and its line in ``harness.registry.STAGES``; a case's ``[run] stages = [NAME, ...]``
+restricts it
 to those stages. A stage may also have ``check(case)``: the case mistakes it can see
 without solving anything (raised as CaseError); ``springbench validate`` calls it.
 
@@ -40,6 +41,7 @@ class StageContext:
 
     ``n_seeds`` is how many seeds the case runs (its data files then live in a
     ``seed<N>/`` sub-folder of the case folder)."""
+
     out_dir: Path
     mode: str = "quick"
     seed: int = 0

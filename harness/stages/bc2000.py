@@ -52,7 +52,7 @@ from harness.stages.bc2000_build import (  # noqa: F401
 )
 
 NAME = "bc2000"
-PAPER_RATIO = {"tetra": 14.5, "hexa": 3.6}   # Table 1: model time / MS time
+PAPER_RATIO = {"tetra": 14.5, "hexa": 3.6}  # Table 1: model time / MS time
 
 
 def applies(case) -> bool:
@@ -82,9 +82,11 @@ def _simulate(case, ctx, model, dyn, mesh, name, field=None, **kw):
     t0 = time.perf_counter()
     try:
         tr = simulate(m, ld, dt, steps, integrator=dyn["integrator"], **kw)
-    except SimulationError as exc:   # a blow-up: the case's time step is the field to change
+    except SimulationError as exc:  # a blow-up: the case's time step is the field to change
         fld = "dynamics.hexa_model_dt" if dt != dyn["dt"] else "dynamics.dt"
-        raise SimulationError(f"{name}: {exc.message}", file=str(case.path), field=fld, fix=exc.fix) from None
+        raise SimulationError(
+            f"{name}: {exc.message}", file=str(case.path), field=fld, fix=exc.fix
+        ) from None
     return m, ld, tr, time.perf_counter() - t0
 
 
@@ -97,19 +99,28 @@ def volume(case, ctx, model, dyn):
         try:
             ref = np.loadtxt(f, skiprows=1)
         except (OSError, ValueError) as exc:
-            raise CaseError(f"cannot read the original curve ({exc})", file=str(case.path),
-                            field="dynamics.original", fix="give a whitespace table with a header line")
+            raise CaseError(
+                f"cannot read the original curve ({exc})",
+                file=str(case.path),
+                field="dynamics.original",
+                fix="give a whitespace table with a header line",
+            )
     for i, name in enumerate(model["models"]):
         m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name)
         dv = tr.volume_change_percent()
         curves[name] = dv
-        row = {"model": name, "mesh": _label(path, mesh), "steps": len(dv) - 1,
-               "peak_abs_dV_percent": float(np.abs(dv).max()), "final_dV_percent": float(dv[-1]),
-               "run_seconds": sec}
+        row = {
+            "model": name,
+            "mesh": _label(path, mesh),
+            "steps": len(dv) - 1,
+            "peak_abs_dV_percent": float(np.abs(dv).max()),
+            "final_dV_percent": float(dv[-1]),
+            "run_seconds": sec,
+        }
         if ref is not None and name in ("MS", "MT0", "MT"):
             col = ("MS", "MT0", "MT").index(name) + 1 if ref.shape[1] == 4 else 2
             k = min(len(ref), len(dv) - 1)
-            row["max_dev_vs_original_percent"] = float(np.abs(dv[1:k + 1] - ref[:k, col]).max())
+            row["max_dev_vs_original_percent"] = float(np.abs(dv[1 : k + 1] - ref[:k, col]).max())
         rows.append(row)
     t = dyn["dt"] * np.arange(len(next(iter(curves.values()))))
     pd.DataFrame({"t": t, **curves}).to_csv(ctx.file("volume.csv"), index=False)
@@ -128,11 +139,14 @@ def _pulled_measures(mesh, tr):
     their mean x, z displacement), both averaged over the second half of the run (lateral
     modes are barely damped and still swing), and drift / |elongation|."""
     sel = _pulled(mesh)
-    u = (tr.observed - mesh.points[sel]).mean(axis=1)       # (steps + 1, 3)
-    u = u[len(u) // 2:].mean(axis=0)
+    u = (tr.observed - mesh.points[sel]).mean(axis=1)  # (steps + 1, 3)
+    u = u[len(u) // 2 :].mean(axis=0)
     drift = float(np.hypot(u[0], u[2]))
-    return {"elongation": float(u[1]), "lateral_drift": drift,
-            "drift_ratio": drift / max(abs(float(u[1])), 1e-300)}
+    return {
+        "elongation": float(u[1]),
+        "lateral_drift": drift,
+        "drift_ratio": drift / max(abs(float(u[1])), 1e-300),
+    }
 
 
 def pull(case, ctx, model, dyn):
@@ -140,23 +154,40 @@ def pull(case, ctx, model, dyn):
     for path, mesh in _meshes(case, dyn):
         for name in model["models"]:
             m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name, observe=_pulled(mesh))
-            rows.append({"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
-                         **_pulled_measures(mesh, tr), "run_seconds": sec})
+            rows.append(
+                {
+                    "model": name,
+                    "mesh": _label(path, mesh),
+                    "steps": len(tr.t) - 1,
+                    **_pulled_measures(mesh, tr),
+                    "run_seconds": sec,
+                }
+            )
     return rows
 
 
 def _load_direction(case, load) -> np.ndarray:
     """Unit vector of a load's gravity, else of its first traction, else of its body force."""
-    v = load.gravity if load.gravity is not None else (load.tractions[0].vector if load.tractions else load.body_force)
+    v = (
+        load.gravity
+        if load.gravity is not None
+        else (load.tractions[0].vector if load.tractions else load.body_force)
+    )
     n = 0.0 if v is None else float(np.linalg.norm(v))
     if not n > 0:
-        raise CaseError(f"load '{load.name}' has no force: the tip ratio needs a direction", file=str(case.path),
-                        field="loads.case", fix="give it a non-zero gravity, traction or body_force")
+        raise CaseError(
+            f"load '{load.name}' has no force: the tip ratio needs a direction",
+            file=str(case.path),
+            field="loads.case",
+            fix="give it a non-zero gravity, traction or body_force",
+        )
     return np.asarray(v, float) / n
 
 
-COMPARISON = ("linear (small strain): the model linearised at rest vs linear FEM, same clamp, "
-              "gravity, density (consistent nodal masses), E, nu")
+COMPARISON = (
+    "linear (small strain): the model linearised at rest vs linear FEM, same clamp, "
+    "gravity, density (consistent nodal masses), E, nu"
+)
 
 
 def _fem_comparison(case, ref, mesh, m, tip) -> dict:
@@ -169,31 +200,44 @@ def _fem_comparison(case, ref, mesh, m, tip) -> dict:
     "ref-coarse" status when G_ref exceeds 10 % of the scaled G or the reference missed
     its tol."""
     from harness.stages import bc2000_linear as linear
+
     P = mesh.points
     masses = lumped_masses(P, _cells(mesh), case.material.density)
     loads = linear.case_loads(P, case, masses)
     u = linear.solve(stiffness(m), loads)
     u_ref = reference_displacements(ref, P, loads.names)
-    out = {"comparison": COMPARISON, "ref_error_estimate": float(max(ref.error_estimate.values())),
-           "ref_n_dofs": int(ref.n_dofs)}
+    out = {
+        "comparison": COMPARISON,
+        "ref_error_estimate": float(max(ref.error_estimate.values())),
+        "ref_n_dofs": int(ref.n_dofs),
+    }
     ratios = {}
     for i, load in enumerate(case.loads):
         d = _load_direction(case, load)
         um, uf = float((u[i][tip] @ d).mean()), float((u_ref[i][tip] @ d).mean())
         ratios[load.name] = um / uf
         if load.gravity is not None and "tip_ratio" not in out:
-            out.update({"tip_deflection_linear": float(u[i][tip, 1].mean()),
-                        "tip_deflection_fem": float(u_ref[i][tip, 1].mean()), "tip_ratio": um / uf,
-                        "E_bending": case.material.E / (um / uf)})
+            out.update(
+                {
+                    "tip_deflection_linear": float(u[i][tip, 1].mean()),
+                    "tip_deflection_fem": float(u_ref[i][tip, 1].mean()),
+                    "tip_ratio": um / uf,
+                    "E_bending": case.material.E / (um / uf),
+                }
+            )
             classes = classify_nodes(P, case.body.bbox())
             w = np.asarray(case_weights(case))[classes]
-            c = float(np.einsum("p,pd,pd->", w, u_ref[i], u[i]) / np.einsum("p,pd,pd->", w, u[i], u[i]))
-            s_raw = g_arrays(u_ref[i:i + 1], u[i:i + 1], classes, case_weights(case))
-            s_fit = g_arrays(u_ref[i:i + 1], c * u[i:i + 1], classes, case_weights(case))
+            c = float(
+                np.einsum("p,pd,pd->", w, u_ref[i], u[i]) / np.einsum("p,pd,pd->", w, u[i], u[i])
+            )
+            s_raw = g_arrays(u_ref[i : i + 1], u[i : i + 1], classes, case_weights(case))
+            s_fit = g_arrays(u_ref[i : i + 1], c * u[i : i + 1], classes, case_weights(case))
             out.update({"G_norm_gravity": s_raw.G_norm, "G_norm_gravity_scaled": s_fit.G_norm})
             # the reference's own error as G of the same load and nodes, against the smaller
             # (shape-only) G: a scaled G near the FEM's error is flagged
-            out.update(ref_columns(ref, P, [loads.names[i]], u_ref[i:i + 1], classes, case_weights(case)))
+            out.update(
+                ref_columns(ref, P, [loads.names[i]], u_ref[i : i + 1], classes, case_weights(case))
+            )
             out["status"] = ref_status(out["G_ref"], s_fit.G_norm, out.get("ref_met_tol"))
         else:
             out[f"tip_{load.name}_ratio"] = um / uf
@@ -221,18 +265,32 @@ def _static_columns(m, ld, tip, points, arc_steps: int = 150) -> dict:
     u[free] = spla.spsolve(K.tocsc(), ld.external().ravel()[free])
     lin = float(u.reshape(-1, 3)[tip, 1].mean())
     res = solve_static_path(m, ld, load_steps=10, arc_steps=arc_steps)
-    row = {"tip_deflection_linear_program_load": lin, "static_status": res.status,
-           "static_load_factor": res.load_factor}
+    row = {
+        "tip_deflection_linear_program_load": lin,
+        "static_status": res.status,
+        "static_load_factor": res.load_factor,
+    }
     if res.x is not None:
         st = float((res.x - points)[tip, 1].mean())
-        row.update({"tip_deflection_static": st, "static_nonlinearity": st / lin,
-                    "static_inverted_elements": inverted_elements(m, res.x)})
-    if res.x_limit is not None:     # what the model looks like where it loses stability
-        row.update({"limit_load_factor": res.folds[0],
-                    "limit_tip_deflection": float((res.x_limit - points)[tip, 1].mean()),
-                    "limit_inverted_elements": inverted_elements(m, res.x_limit)})
+        row.update(
+            {
+                "tip_deflection_static": st,
+                "static_nonlinearity": st / lin,
+                "static_inverted_elements": inverted_elements(m, res.x),
+            }
+        )
+    if res.x_limit is not None:  # what the model looks like where it loses stability
+        row.update(
+            {
+                "limit_load_factor": res.folds[0],
+                "limit_tip_deflection": float((res.x_limit - points)[tip, 1].mean()),
+                "limit_inverted_elements": inverted_elements(m, res.x_limit),
+            }
+        )
         if row["limit_inverted_elements"]:
-            row["static_status"] += f"; {row['limit_inverted_elements']} elements inside out at the limit point"
+            row["static_status"] += (
+                f"; {row['limit_inverted_elements']} elements inside out at the limit point"
+            )
     return row
 
 
@@ -244,9 +302,10 @@ def cantilever(case, ctx, model, dyn):
     rows = []
     ref = None
     if case.loads:
-        for load in case.loads:          # mistakes before the solves
+        for load in case.loads:  # mistakes before the solves
             _load_direction(case, load)
         from reference import solve as reference_solve
+
         ctx.status("FEM reference")
         ref = reference_solve(case)
     for path, mesh in _meshes(case, dyn):
@@ -254,10 +313,16 @@ def cantilever(case, ctx, model, dyn):
         for name in model["models"]:
             m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name, observe=tip)
             u = (tr.observed[:, :, 1] - mesh.points[tip, 1]).mean(axis=1)
-            late = u[len(u) // 2:]
-            row = {"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
-                   "tip_deflection": float(late.mean()), "tip_swing": float(np.ptp(late)),
-                   "tip_deflection_max": float(u.min()), "run_seconds": sec}
+            late = u[len(u) // 2 :]
+            row = {
+                "model": name,
+                "mesh": _label(path, mesh),
+                "steps": len(tr.t) - 1,
+                "tip_deflection": float(late.mean()),
+                "tip_swing": float(np.ptp(late)),
+                "tip_deflection_max": float(u.min()),
+                "run_seconds": sec,
+            }
             if dyn["static"]:
                 ctx.status(f"{name} statics")
                 row.update(_static_columns(m, ld, tip, mesh.points))
@@ -291,19 +356,35 @@ def _twist_thinning(mesh, x):
 def fibres(case, ctx, model, dyn):
     rows = []
     path, mesh = _meshes(case, dyn)[0]
-    fields = model["fibre_fields"] or ((model["fibre_field"],) if model["fibre_field"] else ("vertical",))
+    fields = model["fibre_fields"] or (
+        (model["fibre_field"],) if model["fibre_field"] else ("vertical",)
+    )
     names = [n for n in model["models"] if n != "MS"] or ["MT"]
     for k, field in enumerate(fields):
         for name in names:
-            m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name, field=field, observe=_pulled(mesh))
+            m, ld, tr, sec = _simulate(
+                case, ctx, model, dyn, mesh, name, field=field, observe=_pulled(mesh)
+            )
             twist, thin = _twist_thinning(mesh, tr.x)
-            rows.append({"model": f"{name}-{field}", "mesh": _label(path, mesh), "fibre_field": field,
-                         "steps": len(tr.t) - 1, **_pulled_measures(mesh, tr), "twist_deg": twist,
-                         "thinning": thin, "run_seconds": sec})
+            rows.append(
+                {
+                    "model": f"{name}-{field}",
+                    "mesh": _label(path, mesh),
+                    "fibre_field": field,
+                    "steps": len(tr.t) - 1,
+                    **_pulled_measures(mesh, tr),
+                    "twist_deg": twist,
+                    "thinning": thin,
+                    "run_seconds": sec,
+                }
+            )
             cells = _cells(mesh)
             a, e = fibre_angles(model, mesh.points, cells, field)
-            data = dict(points=mesh.points[cells].mean(axis=1), directions=frame(a, e)[:, 0],
-                        u=tr.x[cells].mean(axis=1) - mesh.points[cells].mean(axis=1))
+            data = dict(
+                points=mesh.points[cells].mean(axis=1),
+                directions=frame(a, e)[:, 0],
+                u=tr.x[cells].mean(axis=1) - mesh.points[cells].mean(axis=1),
+            )
             np.savez(ctx.file(f"fibres-{field}.npz"), **data)
             if k == 0 and name == names[0]:
                 np.savez(ctx.file("fibres.npz"), **data)
@@ -320,7 +401,7 @@ def timing(case, ctx, model, dyn):
             m = build(name, model, mesh, dt)
             ld = loading(model, dyn, mesh, dt)
             steps = int(round(1.0 / dt))
-            simulate(m, ld, dt, 2)           # compile / warm up
+            simulate(m, ld, dt, 2)  # compile / warm up
             best = np.inf
             for _ in range(dyn["repeats"]):
                 t0 = time.perf_counter()
@@ -328,10 +409,18 @@ def timing(case, ctx, model, dyn):
                 best = min(best, time.perf_counter() - t0)
             per[name] = best
             n_el = len(_cells(mesh))
-            rows.append({"model": name, "mesh": _label(path, mesh), "n_nodes": len(mesh.points),
-                         "n_elements": n_el, "dt": dt, "per_sim_second_ms": 1e3 * best})
+            rows.append(
+                {
+                    "model": name,
+                    "mesh": _label(path, mesh),
+                    "n_nodes": len(mesh.points),
+                    "n_elements": n_el,
+                    "dt": dt,
+                    "per_sim_second_ms": 1e3 * best,
+                }
+            )
         if "MS" in per:
-            for r in rows[-len(model["models"]):]:
+            for r in rows[-len(model["models"]) :]:
                 if r["model"] != "MS":
                     r["model_MS_ratio_per_second"] = per[r["model"]] / per["MS"]
                     r["paper_model_MS_ratio"] = PAPER_RATIO[kind]
@@ -344,8 +433,13 @@ def plain(case, ctx, model, dyn):
         for name in model["models"]:
             m, ld, tr, sec = _simulate(case, ctx, model, dyn, mesh, name)
             dv = tr.volume_change_percent()
-            rows.append({"model": name, "mesh": _label(path, mesh), "steps": len(tr.t) - 1,
-                         "final_dV_percent": float(dv[-1]), "run_seconds": sec})
+            rows.append(
+                {
+                    "model": name,
+                    "mesh": _label(path, mesh),
+                    "steps": len(tr.t) - 1,
+                    "final_dV_percent": float(dv[-1]),
+                    "run_seconds": sec,
+                }
+            )
     return rows
-
-

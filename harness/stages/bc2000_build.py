@@ -43,20 +43,34 @@ def fibre_angles(model: dict, points, cells, field: str | None = None, material=
     X = points[cells]
     g = X.mean(axis=1)
     fib = getattr(material, "fibre", None)
-    if fib is not None and not any(model.get(k) is not None for k in
-                                   ("direction", "azimuth_deg", "elevation_deg", "fibre_field")) and field is None:
-        model = dict(model, direction=fib.direction, azimuth_deg=fib.azimuth_deg,
-                     elevation_deg=fib.elevation_deg, fibre_field=fib.field, seed=fib.seed)
+    if (
+        fib is not None
+        and not any(
+            model.get(k) is not None
+            for k in ("direction", "azimuth_deg", "elevation_deg", "fibre_field")
+        )
+        and field is None
+    ):
+        model = dict(
+            model,
+            direction=fib.direction,
+            azimuth_deg=fib.azimuth_deg,
+            elevation_deg=fib.elevation_deg,
+            fibre_field=fib.field,
+            seed=fib.seed,
+        )
     field = field or model.get("fibre_field")
     if model.get("direction") is not None:
         a, e = angles_of(np.tile(model["direction"], (len(cells), 1)))
         return a, e
     if model.get("azimuth_deg") is not None or model.get("elevation_deg") is not None:
-        return (np.full(len(cells), np.deg2rad(model.get("azimuth_deg") or 0.0)),
-                np.full(len(cells), np.deg2rad(model.get("elevation_deg") or 0.0)))
+        return (
+            np.full(len(cells), np.deg2rad(model.get("azimuth_deg") or 0.0)),
+            np.full(len(cells), np.deg2rad(model.get("elevation_deg") or 0.0)),
+        )
     if field is None:
         field = "vertical" if cells.shape[1] == 4 else None
-    if field is None:           # hexa program: axes along x, y, z
+    if field is None:  # hexa program: axes along x, y, z
         return np.zeros(len(cells)), np.zeros(len(cells))
     return named_field_angles(field, g, model.get("seed", 0), model.get("fibre_origin"))
 
@@ -70,14 +84,29 @@ def build(name: str, model: dict, mesh, dt: float, field: str | None = None, mat
     a, e = fibre_angles(model, mesh.points, cells, field, material)
     ks = model["ks"] if len(model["ks"]) == 6 else model["ks"] * 6
     kd = model["kd"] if len(model["kd"]) == 3 else model["kd"] * 3
-    return build_anisotropic(mesh.points, cells, azimuth=a, elevation=e, ks=ks,
-                             kd=np.asarray(kd) * scale, kvs=model["kvs"], kvd=model["kvd"] * scale,
-                             volume=(name == "MT"), rest_angle=model["rest_angle"], seed=model["seed"])
+    return build_anisotropic(
+        mesh.points,
+        cells,
+        azimuth=a,
+        elevation=e,
+        ks=ks,
+        kd=np.asarray(kd) * scale,
+        kvs=model["kvs"],
+        kvd=model["kvd"] * scale,
+        volume=(name == "MT"),
+        rest_angle=model["rest_angle"],
+        seed=model["seed"],
+    )
 
 
 def loading(model: dict, dyn: dict, mesh, dt: float) -> Loading:
-    return Loading.from_flags(mesh.flags, mass=model["mass"], gravity=dyn["gravity"], push=dyn["push"],
-                              drag=dyn["drag"] * dt)
+    return Loading.from_flags(
+        mesh.flags,
+        mass=model["mass"],
+        gravity=dyn["gravity"],
+        push=dyn["push"],
+        drag=dyn["drag"] * dt,
+    )
 
 
 def _dt(dyn, mesh, name):

@@ -55,12 +55,13 @@ def current_parameters(model) -> np.ndarray:
 @dataclass(frozen=True)
 class Loads:
     """Per load case: names, free dof masks (L, 3n), forces (L, 3n)."""
+
     names: list
     free: np.ndarray
     forces: np.ndarray
 
 
-class _Net:            # what harness.mechanics.statics.load_arrays needs
+class _Net:  # what harness.mechanics.statics.load_arrays needs
     def __init__(self, points, masses):
         self.points, self.masses = points, masses
 
@@ -97,8 +98,10 @@ def solve(K, loads: Loads) -> np.ndarray:
         except RuntimeError:
             u = np.full(fr.sum(), np.nan)
         if not np.all(np.isfinite(u)):
-            raise ModelError(f"load '{loads.names[i]}': the linearised model is singular (a mechanism)",
-                             fix="hold more nodes, or use nonzero angular/volume stiffness")
+            raise ModelError(
+                f"load '{loads.names[i]}': the linearised model is singular (a mechanism)",
+                fix="hold more nodes, or use nonzero angular/volume stiffness",
+            )
         out[i][fr] = u
     return out.reshape(len(loads.names), -1, 3)
 
@@ -112,6 +115,7 @@ def fit(Ks, theta0, u_ref, loads: Loads, weights) -> tuple[np.ndarray, float, fl
         K = sum(t * Kj for t, Kj in zip(np.exp(logt), Ks))
         u = solve(K, loads)
         return ((u_ref - u).reshape(len(u), -1) * w).ravel()
+
     x0 = np.log(np.maximum(theta0, 1e-12 * max(theta0.max(), 1e-300)))
     r0 = resid(x0)
     res = least_squares(resid, x0, method="trf", x_scale=1.0, max_nfev=200)
@@ -143,7 +147,11 @@ def face_pull(points, K_of_direction, force: float = 1.0):
             u[free] = spla.spsolve(K, f.ravel()[free])
             u = u.reshape(n, 3)[pulled].mean(axis=0)
             along = float(u @ d)
-            rows.append({"direction": ("+" if sign > 0 else "-") + "xyz"[a],
-                         "stiffness": force * pulled.sum() / along,
-                         "drift": float(np.linalg.norm(u - along * d)) / along})
+            rows.append(
+                {
+                    "direction": ("+" if sign > 0 else "-") + "xyz"[a],
+                    "stiffness": force * pulled.sum() / along,
+                    "drift": float(np.linalg.norm(u - along * d)) / along,
+                }
+            )
     return rows

@@ -22,7 +22,7 @@ from harness.mechanics.modal import matrix_eigenvalues
 def rms_error(f, f_fem) -> float:
     """RMS relative error of frequencies f against the FEM's (same count)."""
     rel = np.asarray(f, float) / np.asarray(f_fem, float) - 1.0
-    return float(np.sqrt(np.mean(rel ** 2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
+    return float(np.sqrt(np.mean(rel**2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
 
 
 def heldout_modes(ref, case, masses, loads, Ks, theta_initial, theta_final) -> dict:
@@ -35,10 +35,16 @@ def heldout_modes(ref, case, masses, loads, Ks, theta_initial, theta_final) -> d
     first = modal_load(case).name
     f_fem = np.asarray(ref.frequencies(n, load=first), float)
     free = loads.free[loads.names.index(first)]
-    lam0, lam1 = (matrix_eigenvalues(sum(t * K for t, K in zip(theta, Ks)), masses, free, len(f_fem))
-                  for theta in (theta_initial, theta_final))
+    lam0, lam1 = (
+        matrix_eigenvalues(sum(t * K for t, K in zip(theta, Ks)), masses, free, len(f_fem))
+        for theta in (theta_initial, theta_final)
+    )
     f0, f1 = (np.sqrt(lam.astype(complex)).real / (2 * np.pi) for lam in (lam0, lam1))
     lam1 = lam1.astype(complex)
     unstable = int(np.sum((lam1.real <= 0) | (np.abs(lam1.imag) > 1e-8 * np.abs(lam1))))
-    return {"freq_error_heldout_initial": rms_error(f0, f_fem), "freq_error_heldout": rms_error(f1, f_fem),
-            "f1_ratio": float(f1[0] / f_fem[0]), "modes_unstable": unstable}
+    return {
+        "freq_error_heldout_initial": rms_error(f0, f_fem),
+        "freq_error_heldout": rms_error(f1, f_fem),
+        "f1_ratio": float(f1[0] / f_fem[0]),
+        "modes_unstable": unstable,
+    }

@@ -40,8 +40,22 @@ from harness.registry import ENGINES
 NAME = "engines"
 OWN = "own (E, nu)"
 EXPORT_ENGINE = "newton-springs"
-COLUMNS = ["body", "resolution", "n_tets", "nu", "engine", "model", "load", "G_norm", "max_error", "G_ref",
-           "engine_status", "steps", "wall_s", "note"]
+COLUMNS = [
+    "body",
+    "resolution",
+    "n_tets",
+    "nu",
+    "engine",
+    "model",
+    "load",
+    "G_norm",
+    "max_error",
+    "G_ref",
+    "engine_status",
+    "steps",
+    "wall_s",
+    "note",
+]
 
 
 def applies(case) -> bool:
@@ -52,13 +66,19 @@ def applies(case) -> bool:
 def check(case):
     """A mesh body in 3-D: the engines' models are tetrahedral."""
     if case.body.shape != "mesh" or case.dim != 3:
-        raise SpringbenchError("the engines stage needs a 3-D tetrahedral mesh body", file=str(case.path),
-                               field="body.shape", fix='shape = "mesh" with file = a tetrahedral mesh, dim = 3')
+        raise SpringbenchError(
+            "the engines stage needs a 3-D tetrahedral mesh body",
+            file=str(case.path),
+            field="body.shape",
+            fix='shape = "mesh" with file = a tetrahedral mesh, dim = 3',
+        )
 
 
 def cli(*argv) -> subprocess.CompletedProcess:
     """One springbench command in its own process, as a user runs it; output captured."""
-    return subprocess.run([sys.executable, "-m", "harness", *map(str, argv)], capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "harness", *map(str, argv)], capture_output=True, text=True
+    )
 
 
 def _why(proc) -> str:
@@ -74,14 +94,31 @@ def _installed(engine: str) -> bool:
     return importlib.util.find_spec(ENGINES.about[engine][0]) is not None
 
 
-def engine_rows(pack, pack_dir: Path, engine: str, loads, folder: Path, model_json=None) -> list[dict]:
+def engine_rows(
+    pack, pack_dir: Path, engine: str, loads, folder: Path, model_json=None
+) -> list[dict]:
     """Per load: one engine run through ``springbench engines run`` and scored."""
     if not _installed(engine):
-        return [dict(load=n, engine_status="not-installed", note=f"{EXTRA} installs {engine}") for n in loads]
+        return [
+            dict(load=n, engine_status="not-installed", note=f"{EXTRA} installs {engine}")
+            for n in loads
+        ]
     folder.mkdir(parents=True, exist_ok=True)
     out, log = folder / f"{engine}.npz", folder / f"{engine}.csv"
     extra = ("--model", model_json) if model_json else ()
-    proc = cli("engines", "run", engine, pack_dir, "--loads", ",".join(loads), "--out", out, "--log", log, *extra)
+    proc = cli(
+        "engines",
+        "run",
+        engine,
+        pack_dir,
+        "--loads",
+        ",".join(loads),
+        "--out",
+        out,
+        "--log",
+        log,
+        *extra,
+    )
     if not out.exists():
         return [dict(load=n, engine_status="failed", note=_why(proc)) for n in loads]
     run = pd.read_csv(log).set_index("load")
@@ -91,11 +128,18 @@ def engine_rows(pack, pack_dir: Path, engine: str, loads, folder: Path, model_js
     for name in loads:
         finite = bool(np.all(np.isfinite(fields[name])))
         s = scored[name]
-        rows.append(dict(load=name, G_norm=s["G_norm"] if finite else math.nan,
-                         max_error=s["max_error"] if finite else math.nan, G_ref=s["G_ref"],
-                         engine_status=run.status[name], steps=int(run.steps[name]),
-                         wall_s=float(run.wall_s[name]),
-                         note="" if pd.isna(run.note[name]) else str(run.note[name])))
+        rows.append(
+            dict(
+                load=name,
+                G_norm=s["G_norm"] if finite else math.nan,
+                max_error=s["max_error"] if finite else math.nan,
+                G_ref=s["G_ref"],
+                engine_status=run.status[name],
+                steps=int(run.steps[name]),
+                wall_s=float(run.wall_s[name]),
+                note="" if pd.isna(run.note[name]) else str(run.note[name]),
+            )
+        )
     return rows
 
 
@@ -109,24 +153,41 @@ def export(mesh: Path, material: tuple, groups: tuple, label: str, budget: float
     data = json.loads(out.with_suffix(".json").read_text())
     row = pd.read_csv(out.with_suffix(".csv")).query("exported").iloc[0]
     choice = data.get("choice") if label == "calibrated" else None
-    return (f"springbench {label}: " + (choice if choice and choice != "rule" else f"rule {row.stiffness}"),
-            out.with_suffix(".json"))
+    return (
+        f"springbench {label}: "
+        + (choice if choice and choice != "rule" else f"rule {row.stiffness}"),
+        out.with_suffix(".json"),
+    )
 
 
-def study(mesh: Path, E: float, nu: float, density: float, spec, scratch: Path, status=lambda msg: None):
+def study(
+    mesh: Path, E: float, nu: float, density: float, spec, scratch: Path, status=lambda msg: None
+):
     """The per-load rows of one mesh and material (``spec``: the ``[model]`` section)."""
     material, loads = material_args(E, nu, density), list(spec["loads"])
     groups = ("--clamp", spec["clamp"], "--load-region", spec["load_region"])
     status("pack")
-    proc = cli("pack", mesh, *material, *groups, "--peak-strain", repr(float(spec["peak_strain"])),
-               "--out", scratch / "pack")
+    proc = cli(
+        "pack",
+        mesh,
+        *material,
+        *groups,
+        "--peak-strain",
+        repr(float(spec["peak_strain"])),
+        "--out",
+        scratch / "pack",
+    )
     if proc.returncode != 0:
-        raise SpringbenchError(f"springbench pack failed: {_why(proc)}", file=str(mesh), field="body.file",
-                               fix="run springbench pack on the mesh to see why")
+        raise SpringbenchError(
+            f"springbench pack failed: {_why(proc)}",
+            file=str(mesh),
+            field="body.file",
+            fix="run springbench pack on the mesh to see why",
+        )
     pack = read_pack(scratch / "pack")
     runs = [(engine, OWN, None) for engine in spec["engines"]]
     for label in spec["exports"]:
-        if not _installed(EXPORT_ENGINE):       # its rows say so; no export to make
+        if not _installed(EXPORT_ENGINE):  # its rows say so; no export to make
             runs.append((EXPORT_ENGINE, f"springbench {label}", None))
             continue
         status(f"calibrate {label}")
@@ -143,8 +204,11 @@ def study(mesh: Path, E: float, nu: float, density: float, spec, scratch: Path, 
     return rows
 
 
-def with_means(df: pd.DataFrame, keys=("body", "resolution", "n_tets", "nu", "engine", "model"),
-               status: str = "engine_status") -> pd.DataFrame:
+def with_means(
+    df: pd.DataFrame,
+    keys=("body", "resolution", "n_tets", "nu", "engine", "model"),
+    status: str = "engine_status",
+) -> pd.DataFrame:
     """The per-load rows plus a ``mean`` row per ``keys`` (G_norm: the mean over the loads;
     max_error, G_ref: the largest; steps, wall_s: the sums)."""
     keys = [k for k in keys if k in df.columns]
@@ -152,10 +216,23 @@ def with_means(df: pd.DataFrame, keys=("body", "resolution", "n_tets", "nu", "en
     for key, g in df.groupby(keys, sort=False, dropna=False):
         out.append(g)
         settled = bool((g[status] == "settled").all())
-        out.append(pd.DataFrame([dict(zip(keys, key if isinstance(key, tuple) else (key,)), load="mean",
-                                      G_norm=float(g.G_norm.mean()), max_error=float(g.max_error.max()),
-                                      G_ref=float(g.G_ref.max()), **{status: "settled" if settled else "see loads"},
-                                      steps=float(g.steps.sum()), wall_s=float(g.wall_s.sum()), note="")]))
+        out.append(
+            pd.DataFrame(
+                [
+                    dict(
+                        zip(keys, key if isinstance(key, tuple) else (key,)),
+                        load="mean",
+                        G_norm=float(g.G_norm.mean()),
+                        max_error=float(g.max_error.max()),
+                        G_ref=float(g.G_ref.max()),
+                        **{status: "settled" if settled else "see loads"},
+                        steps=float(g.steps.sum()),
+                        wall_s=float(g.wall_s.sum()),
+                        note="",
+                    )
+                ]
+            )
+        )
     return pd.concat(out, ignore_index=True)
 
 
@@ -168,9 +245,15 @@ def case_rows(case, scratch: Path, spec=None, status=lambda msg: None) -> pd.Dat
     per-load rows and the ``mean`` rows."""
     spec = case.section("model") if spec is None else spec
     mesh = Path(case.body.file)
-    base = dict(body=spec.get("body") or mesh.stem, resolution=spec["resolution"], n_tets=n_tets(mesh),
-                nu=case.material.nu)
-    rows = study(mesh, case.material.E, case.material.nu, case.material.density, spec, scratch, status)
+    base = dict(
+        body=spec.get("body") or mesh.stem,
+        resolution=spec["resolution"],
+        n_tets=n_tets(mesh),
+        nu=case.material.nu,
+    )
+    rows = study(
+        mesh, case.material.E, case.material.nu, case.material.density, spec, scratch, status
+    )
     df = with_means(pd.DataFrame([dict(base, **r) for r in rows]).reindex(columns=COLUMNS))
     df["note"] = df["note"].fillna("")
     return df

@@ -4,7 +4,8 @@ run of the case (see optimiser_runs: [optimizer] method, each of ``compare``, an
 ``[optimizer.frequency]`` row that adds the natural frequencies to G, Deussen Section 8)
 and score each result: one row per run, all from the same initial model, reference and
 weights, so the table compares optimisers and not set-ups. With ``[optimizer.select]`` the
-springs' fit chooses its capacity by validation (harness/stages/sms_select.py). Every scored row carries
+springs' fit chooses its capacity by validation (harness/stages/sms_select.py). Every scored row
+carries
 ``G_ref`` (the reference's own estimated error as a normalised G at the same nodes, loads
 and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coarse" when
 G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
@@ -79,7 +80,10 @@ def _optimizer():
 def _expect(case) -> dict:
     sec = case.section("expect") or {}
     vals = dict(sec.get("values") or {})
-    return {"paper_G_initial": vals.get("G_initial", math.nan), "paper_G_final": vals.get("G_final", math.nan)}
+    return {
+        "paper_G_initial": vals.get("G_initial", math.nan),
+        "paper_G_final": vals.get("G_final", math.nan),
+    }
 
 
 def run(case, ctx) -> list[dict]:
@@ -92,14 +96,16 @@ def run(case, ctx) -> list[dict]:
     rows = []
     for name in names:
         cls = registry.MODEL_CLASSES.load(name)
-        rows += _run(case, dataclasses.replace(ctx, out_dir=ctx.out_dir / name), cls.spec(spec), cls)
+        rows += _run(
+            case, dataclasses.replace(ctx, out_dir=ctx.out_dir / name), cls.spec(spec), cls
+        )
     return rows
 
 
 def _run(case, ctx, spec, cls) -> list[dict]:
     """The rows of model class ``cls`` (harness/stages/classes/) on the case."""
     opt = case.section("optimizer") or {}
-    runs = cls.fit_runs(optimiser_runs(case, opt))      # case mistakes first, before any solve
+    runs = cls.fit_runs(optimiser_runs(case, opt))  # case mistakes first, before any solve
     label = cls.label(spec, case)
     skip = cls.skip(case, label)
     if skip:
@@ -118,20 +124,41 @@ def _run(case, ctx, spec, cls) -> list[dict]:
     fit = [names.index(n) for n in case.fit_loads]
     held = [names.index(n) for n in case.heldout]
     u_ref = scoring.reference_displacements(ref, base.points, names) if ref is not None else None
-    common = {"case": case.name, "n_nodes": base.n_nodes, "n_springs": base.n_springs, "weights": wlabel,
-              "seed": ctx.seed, "model_seed": base.info["seed"], "masses": spec["masses"], "mass_residual": base.info["mass_residual"],
-              "negative_masses": base.info["negative_masses"], **_expect(case)}
-    common.update(model_class=cls.name, nu=float(case.material.nu), dim=case.dim, **cls.columns(case, spec, base))
+    common = {
+        "case": case.name,
+        "n_nodes": base.n_nodes,
+        "n_springs": base.n_springs,
+        "weights": wlabel,
+        "seed": ctx.seed,
+        "model_seed": base.info["seed"],
+        "masses": spec["masses"],
+        "mass_residual": base.info["mass_residual"],
+        "negative_masses": base.info["negative_masses"],
+        **_expect(case),
+    }
+    common.update(
+        model_class=cls.name,
+        nu=float(case.material.nu),
+        dim=case.dim,
+        **cls.columns(case, spec, base),
+    )
     if spec["placement"] == "lloyd":
         common["lloyd_iterations"] = spec["lloyd_iterations"]
     cauchy = cls.lattice(case, spec)
     if cauchy is not None:
-        common.update(cauchy_misfit=cauchy["misfit"], cauchy_reachable=bool(cauchy["reachable"]),
-                      cauchy_nu=cauchy["cauchy_nu"])
+        common.update(
+            cauchy_misfit=cauchy["misfit"],
+            cauchy_reachable=bool(cauchy["reachable"]),
+            cauchy_nu=cauchy["cauchy_nu"],
+        )
     if "lloyd_std_distance" in base.info:
-        pd.DataFrame({"iteration": np.arange(len(base.info["lloyd_std_distance"])),
-                      "std_distance": base.info["lloyd_std_distance"],
-                      "std_area": base.info["lloyd_std_size"]}).to_csv(ctx.file("lloyd.csv"), index=False)
+        pd.DataFrame(
+            {
+                "iteration": np.arange(len(base.info["lloyd_std_distance"])),
+                "std_distance": base.info["lloyd_std_distance"],
+                "std_area": base.info["lloyd_std_size"],
+            }
+        ).to_csv(ctx.file("lloyd.csv"), index=False)
 
     def evaluate(net, res=None):
         """(statics (``res``, or solved here), score on the fitted loads, score on the
@@ -139,7 +166,9 @@ def _run(case, ctx, spec, cls) -> list[dict]:
         res = statics.solve(net, case) if res is None else res
         if u_ref is None:
             return res, None, None
-        sc, sh = scoring.fit_and_heldout(u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout)
+        sc, sh = scoring.fit_and_heldout(
+            u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout
+        )
         return res, sc, sh
 
     def write(net, res, tag):
@@ -158,34 +187,72 @@ def _run(case, ctx, spec, cls) -> list[dict]:
     rows, nets, made = [], {}, {}
     for rule in rules:
         t1 = time.perf_counter()
-        nets[rule] = base if rule == base.info["stiffness"] else base.with_k(
-            spring_constants(rule, base.points, base.springs, base.cells, case.material), stiffness=rule)
+        nets[rule] = (
+            base
+            if rule == base.info["stiffness"]
+            else base.with_k(
+                spring_constants(rule, base.points, base.springs, base.cells, case.material),
+                stiffness=rule,
+            )
+        )
         made[rule] = time.perf_counter() - t1
-    score = None if u_ref is None else lambda r: fit_score_of(r, case, u_ref, names, base.classes, weights)  # noqa: E731
-    solved, bounds = solve_rules(case, nets, score, rules[0] if opt.get("start", "first") != "best" else None,
-                                 ctx.status)
+    score = (
+        None
+        if u_ref is None
+        else lambda r: fit_score_of(r, case, u_ref, names, base.classes, weights)
+    )  # noqa: E731
+    solved, bounds = solve_rules(
+        case, nets, score, rules[0] if opt.get("start", "first") != "best" else None, ctx.status
+    )
     for rule in rules:
         t1 = time.perf_counter()
         net = nets[rule]
         if rule in bounds:
             write(net, None, rule)
-            rows.append({**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
-                         "seconds": build_seconds + made[rule], "G_fit_score_bound": bounds[rule],
-                         "note": "not solved under the clamps: half its free-traction score is above the best rule's "
-                                 "G_fit_score (large meshes, harness/stages/sms_rules.py)"})
+            rows.append(
+                {
+                    **common,
+                    "model": f"{label}[{rule}]",
+                    "stiffness": rule,
+                    "optimizer": "none",
+                    "seconds": build_seconds + made[rule],
+                    "G_fit_score_bound": bounds[rule],
+                    "note": "not solved under the clamps: half its free-traction score is "
+                    "above the best rule's "
+                    "G_fit_score (large meshes, harness/stages/sms_rules.py)",
+                }
+            )
             continue
         res, sc, sh = evaluate(net, solved[rule])
         write(net, res, rule)
-        row = {**common, "model": f"{label}[{rule}]", "stiffness": rule, "optimizer": "none",
-               "seconds": build_seconds + made[rule] + res.seconds + time.perf_counter() - t1,
-               **cls.constants(net)}
+        row = {
+            **common,
+            "model": f"{label}[{rule}]",
+            "stiffness": rule,
+            "optimizer": "none",
+            "seconds": build_seconds + made[rule] + res.seconds + time.perf_counter() - t1,
+            **cls.constants(net),
+        }
         if sc is not None:
-            row.update(G_initial=sc.G, G_final=sc.G, G_norm_initial=sc.G_norm, G_norm_final=sc.G_norm,
-                       G_s_initial=sc.G_s, G_s_final=sc.G_s, **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc),
-                       **measures.heldout_columns(sh))
+            row.update(
+                G_initial=sc.G,
+                G_final=sc.G,
+                G_norm_initial=sc.G_norm,
+                G_norm_final=sc.G_norm,
+                G_s_initial=sc.G_s,
+                G_s_final=sc.G_s,
+                **measures.per_load_columns(sc, sh),
+                **measures.fit_score(case, sc),
+                **measures.heldout_columns(sh),
+            )
         else:
-            row.update(G_initial=math.nan, G_final=math.nan, G_norm_initial=math.nan, G_norm_final=math.nan,
-                       note=f"no reference ({why})")
+            row.update(
+                G_initial=math.nan,
+                G_final=math.nan,
+                G_norm_initial=math.nan,
+                G_norm_final=math.nan,
+                note=f"no reference ({why})",
+            )
         rows.append(row)
 
     optimize = _optimizer()
@@ -196,11 +263,28 @@ def _run(case, ctx, spec, cls) -> list[dict]:
         start_row = min(rows, key=measures.rank)
         start = nets[start_row["stiffness"]]
     if runs and optimize is not None and u_ref is not None:
-        setting = Setting(case, ctx, spec, label, common, u_ref, names, fit, weights, fem_f, optimize, evaluate, write)
+        setting = Setting(
+            case,
+            ctx,
+            spec,
+            label,
+            common,
+            u_ref,
+            names,
+            fit,
+            weights,
+            fem_f,
+            optimize,
+            evaluate,
+            write,
+        )
         for run_ in runs:
             if run_.get("select") and cls.selects and getattr(start, "volume", None) is None:
                 from harness.stages import sms_select
-                row, net, trace = sms_select.optimise(setting, run_, start, start_row, solved.get(start_row["stiffness"]))
+
+                row, net, trace = sms_select.optimise(
+                    setting, run_, start, start_row, solved.get(start_row["stiffness"])
+                )
             else:
                 row, net, trace = cls.fit(setting, run_, start, start_row)
             rows.append(row)
@@ -211,20 +295,33 @@ def _run(case, ctx, spec, cls) -> list[dict]:
             pd.concat(traces, ignore_index=True).to_csv(ctx.file("trace.csv"), index=False)
         _time_to_reach(rows, traces)
     elif runs:
-        rows[0]["note"] = rows[0].get("note", "") or ("optimiser not available" if optimize is None else "")
+        rows[0]["note"] = rows[0].get("note", "") or (
+            "optimiser not available" if optimize is None else ""
+        )
 
-    if u_ref is not None:   # every net shares base's nodes, loads and weights: one G_ref for all rows
-        refcols = scoring.ref_columns(ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights)
+    if (
+        u_ref is not None
+    ):  # every net shares base's nodes, loads and weights: one G_ref for all rows
+        refcols = scoring.ref_columns(
+            ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights
+        )
         heldcols = {}
         if held:
-            hc = scoring.ref_columns(ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights)
+            hc = scoring.ref_columns(
+                ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights
+            )
             heldcols = {"G_ref_heldout": hc["G_ref"], "ref_error_heldout": hc["ref_error_max"]}
         for row in rows:
             if "G_norm_final" in row:
                 row.update(refcols, **heldcols)
-                row["status"] = scoring.ref_status(row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol"))
-                if held and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok":
-                    row["status"] = "ref-coarse"     # the held-out score is the reference's error too
+                row["status"] = scoring.ref_status(
+                    row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol")
+                )
+                if (
+                    held
+                    and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok"
+                ):
+                    row["status"] = "ref-coarse"  # the held-out score is the reference's error too
 
     freqs = measures.model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = measures.error_modes(opt, n_modes)
@@ -236,35 +333,55 @@ def _run(case, ctx, spec, cls) -> list[dict]:
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
             row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
             row["freq_error_final"] = measures.freq_error(freqs[tag], freqs["fem"], m)
-            start = row["stiffness"]         # the rule (an optimised row's start)
-            row["freq_error_initial"] = measures.freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
-            fitted = int(row.get("freq_modes", 0) or 0)     # modes the fit saw; the others are held out
+            start = row["stiffness"]  # the rule (an optimised row's start)
+            row["freq_error_initial"] = (
+                measures.freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
+            )
+            fitted = int(
+                row.get("freq_modes", 0) or 0
+            )  # modes the fit saw; the others are held out
             if len(freqs["fem"]) > fitted:
-                row["freq_error_heldout"] = measures.freq_error(freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted)
+                row["freq_error_heldout"] = measures.freq_error(
+                    freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted
+                )
     return rows
 
 
 # -- the case's optimiser runs ---------------------------------------------------------
 
+
 def check(case):
     """The [model] and [optimizer] mistakes the schema cannot see (for ``springbench validate``)."""
     spec = model_spec(case)
     grid = spec.get("grid")
-    if spec["placement"] == "grid" and not (isinstance(grid, (list, tuple)) and len(grid) == case.dim
-                                            and all(isinstance(g, int) and g >= 2 for g in grid)):
-        raise CaseError(f"grid = {grid!r} does not list {case.dim} node counts >= 2", file=case_file(case),
-                        field="model.grid", fix=f"e.g. grid = {[5] * case.dim}")
+    if spec["placement"] == "grid" and not (
+        isinstance(grid, (list, tuple))
+        and len(grid) == case.dim
+        and all(isinstance(g, int) and g >= 2 for g in grid)
+    ):
+        raise CaseError(
+            f"grid = {grid!r} does not list {case.dim} node counts >= 2",
+            file=case_file(case),
+            field="model.grid",
+            fix=f"e.g. grid = {[5] * case.dim}",
+        )
     if spec["placement"] == "grid" and spec.get("structure") is not None:
         known = STRUCTURES_2D if case.dim == 2 else STRUCTURES_3D
         if ALIASES.get(spec["structure"], spec["structure"]) not in known:
-            raise CaseError(f"unknown {case.dim}-D grid structure '{spec['structure']}'", file=case_file(case),
-                            field="model.structure", fix=f"one of {', '.join(known)}")
+            raise CaseError(
+                f"unknown {case.dim}-D grid structure '{spec['structure']}'",
+                file=case_file(case),
+                field="model.structure",
+                fix=f"one of {', '.join(known)}",
+            )
     opt = case.section("optimizer") or {}
     for run_ in optimiser_runs(case, opt):
         try:
             check_method_options(run_["method"], run_["options"])
-        except SpringbenchError as exc:   # named by the case field the options came from
-            field = (exc.field or "optimizer.options").replace("optimizer.options", run_["where"], 1)
+        except SpringbenchError as exc:  # named by the case field the options came from
+            field = (exc.field or "optimizer.options").replace(
+                "optimizer.options", run_["where"], 1
+            )
             raise CaseError(exc.message, file=case_file(case), field=field, fix=exc.fix) from None
     _check_modes(case, opt)
 
@@ -280,33 +397,68 @@ def optimiser_runs(case, opt) -> list[dict]:
     compare = list(opt.get("compare") or ())
     extra = dict(opt.get("compare_options") or {})
     if method in compare or len(set(compare)) != len(compare):
-        raise CaseError(f"compare repeats '{method if method in compare else compare[0]}'", file=file,
-                        field="optimizer.compare", fix="name each optimiser once (method is run already)")
+        raise CaseError(
+            f"compare repeats '{method if method in compare else compare[0]}'",
+            file=file,
+            field="optimizer.compare",
+            fix="name each optimiser once (method is run already)",
+        )
     stray = sorted(set(extra) - set(compare))
     if stray:
-        raise CaseError(f"options for '{stray[0]}', which compare does not list", file=file,
-                        field="optimizer.compare_options", fix=f"add '{stray[0]}' to compare or remove its options")
+        raise CaseError(
+            f"options for '{stray[0]}', which compare does not list",
+            file=file,
+            field="optimizer.compare_options",
+            fix=f"add '{stray[0]}' to compare or remove its options",
+        )
 
     def options(value, where):
         if not isinstance(value or {}, dict):
-            raise CaseError(f"expected a table of options, got {value!r}", file=file, field=where,
-                            fix="e.g. { maxiter = 100 }")
+            raise CaseError(
+                f"expected a table of options, got {value!r}",
+                file=file,
+                field=where,
+                fix="e.g. { maxiter = 100 }",
+            )
         return dict(value or {})
 
     mine = options(opt.get("options"), "optimizer.options")
-    if method == "none" and mine:          # would be silently ignored: no run takes them
-        raise CaseError(f"options {sorted(mine)} but method = 'none' runs no optimiser", file=file,
-                        field="optimizer.options", fix="set [optimizer] method, or remove the options")
-    runs = [] if method == "none" else [dict(method=method, options=mine, objective="G", where="optimizer.options")]
-    if runs and opt.get("select"):      # the validated fit (harness/stages/sms_select.py)
+    if method == "none" and mine:  # would be silently ignored: no run takes them
+        raise CaseError(
+            f"options {sorted(mine)} but method = 'none' runs no optimiser",
+            file=file,
+            field="optimizer.options",
+            fix="set [optimizer] method, or remove the options",
+        )
+    runs = (
+        []
+        if method == "none"
+        else [dict(method=method, options=mine, objective="G", where="optimizer.options")]
+    )
+    if runs and opt.get("select"):  # the validated fit (harness/stages/sms_select.py)
         runs[0]["select"] = dict(opt["select"])
-    runs += [dict(method=m, options=dict(extra.get(m) or {}), objective="G", where=f"optimizer.compare_options.{m}")
-             for m in compare]
+    runs += [
+        dict(
+            method=m,
+            options=dict(extra.get(m) or {}),
+            objective="G",
+            where=f"optimizer.compare_options.{m}",
+        )
+        for m in compare
+    ]
     fq = opt.get("frequency")
     if fq:
         where = "optimizer.frequency.options"
-        runs.append(dict(method=fq["method"], options=options(fq.get("options"), where), objective="G+freq",
-                         modes=int(fq["modes"]), weight=float(fq["weight"]), where=where))
+        runs.append(
+            dict(
+                method=fq["method"],
+                options=options(fq.get("options"), where),
+                objective="G+freq",
+                modes=int(fq["modes"]),
+                weight=float(fq["weight"]),
+                where=where,
+            )
+        )
     return runs
 
 
@@ -314,9 +466,12 @@ def _check_modes(case, opt) -> int:
     n = int(case.reference.modes or 0)
     fq = opt.get("frequency")
     if fq and fq["modes"] > n:
-        raise CaseError(f"frequency modes = {fq['modes']} but the reference computes {n}",
-                        file=case_file(case), field="optimizer.frequency.modes",
-                        fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes")
+        raise CaseError(
+            f"frequency modes = {fq['modes']} but the reference computes {n}",
+            file=case_file(case),
+            field="optimizer.frequency.modes",
+            fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes",
+        )
     return n
 
 
@@ -337,4 +492,6 @@ def _time_to_reach(rows, traces):
         hit = np.flatnonzero(t["G"].to_numpy() <= sa["G_final"] * (1 + 1e-9))
         steps = float(t["step"].iloc[-1])
         r["evals_to_sa_G"] = float(t["step"].iloc[hit[0]]) if len(hit) else math.nan
-        r["seconds_to_sa_G"] = r["seconds"] * r["evals_to_sa_G"] / steps if len(hit) and steps > 0 else math.nan
+        r["seconds_to_sa_G"] = (
+            r["seconds"] * r["evals_to_sa_G"] / steps if len(hit) and steps > 0 else math.nan
+        )

@@ -18,8 +18,21 @@ from harness.scoring import node_weights
 from harness.stages import sms_measures as measures
 from harness.stages.classes.base import Setting
 
-BUDGET_KEYS = ("temperatures", "max_steps", "max_seconds", "maxiter", "maxfun", "target", "tol", "ftol", "gtol",
-               "xatol", "fatol", "cg_maxiter", "chains")
+BUDGET_KEYS = (
+    "temperatures",
+    "max_steps",
+    "max_seconds",
+    "maxiter",
+    "maxfun",
+    "target",
+    "tol",
+    "ftol",
+    "gtol",
+    "xatol",
+    "fatol",
+    "cg_maxiter",
+    "chains",
+)
 
 
 def case_file(case) -> str | None:
@@ -36,7 +49,13 @@ def budget_label(options: dict) -> str:
 def optimise(setting: Setting, run_: dict, base, first: dict):
     """One optimiser run of a springs network on the fitted loads and its row."""
     case, ctx, optimize, spec = setting.case, setting.ctx, setting.optimize, setting.spec
-    u_ref, names, fit, weights, fem_f = setting.u_ref, setting.names, setting.fit, setting.weights, setting.fem_f
+    u_ref, names, fit, weights, fem_f = (
+        setting.u_ref,
+        setting.names,
+        setting.fit,
+        setting.weights,
+        setting.fem_f,
+    )
     method, objective = run_["method"], run_["objective"]
     stiff = base.info["stiffness"]
     tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
@@ -47,32 +66,64 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
     freq_kw = {}
     if objective != "G":
         if fem_f is None or len(fem_f) < run_["modes"]:
-            raise SpringbenchError("the frequency term needs the reference's natural frequencies", file=file,
-                                   field="optimizer.frequency", fix="use a reference with modes, or remove [optimizer.frequency]")
+            raise SpringbenchError(
+                "the frequency term needs the reference's natural frequencies",
+                file=file,
+                field="optimizer.frequency",
+                fix="use a reference with modes, or remove [optimizer.frequency]",
+            )
         if np.any(base.masses <= 0):
-            raise ModelError(f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies", file=file,
-                             field="optimizer.frequency", fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'")
+            raise ModelError(
+                f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies",
+                file=file,
+                field="optimizer.frequency",
+                fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'",
+            )
         modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
-        freq_kw = dict(masses=base.masses, freq_target=np.asarray(fem_f[:run_["modes"]], float),
-                       freq_weight=run_["weight"], modal_free=modal_free)
+        freq_kw = dict(
+            masses=base.masses,
+            freq_target=np.asarray(fem_f[: run_["modes"]], float),
+            freq_weight=run_["weight"],
+            modal_free=modal_free,
+        )
     k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
-    if getattr(base, "volume", None) is not None:    # springs + volume / kn: [k, kv], columns beside B
-        k0, groups, extra = base.params(), base.param_groups(spec["grouped"]), base.volume.columns(base.points)
-    problem = FitProblem.from_network(base.points, base.springs, k0, free, forces,
-                                      u_fit.reshape(len(names), -1), wdof, list(names),
-                                      groups=groups, extra_columns=extra, **freq_kw)
+    if (
+        getattr(base, "volume", None) is not None
+    ):  # springs + volume / kn: [k, kv], columns beside B
+        k0, groups, extra = (
+            base.params(),
+            base.param_groups(spec["grouped"]),
+            base.volume.columns(base.points),
+        )
+    problem = FitProblem.from_network(
+        base.points,
+        base.springs,
+        k0,
+        free,
+        forces,
+        u_fit.reshape(len(names), -1),
+        wdof,
+        list(names),
+        groups=groups,
+        extra_columns=extra,
+        **freq_kw,
+    )
     t0 = time.perf_counter()
     ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
     seed = int(base.info["seed"])
     try:
         res = optimize(problem, method, dict(run_["options"]), seed, status=ctx.status)
-    except SpringbenchError as exc:      # name the case file, and compare_options / frequency where they apply
+    except (
+        SpringbenchError
+    ) as exc:  # name the case file, and compare_options / frequency where they apply
         if exc.file is not None:
             raise
         field = exc.field or "optimizer"
         if field.startswith("optimizer.options"):
-            field = run_["where"] + field[len("optimizer.options"):]
-        elif field == "optimizer.method" and run_["where"] != "optimizer.options":   # the method came from there
+            field = run_["where"] + field[len("optimizer.options") :]
+        elif (
+            field == "optimizer.method" and run_["where"] != "optimizer.options"
+        ):  # the method came from there
             field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
         raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
     seconds = time.perf_counter() - t0
@@ -81,26 +132,43 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
     sres, sc, sh = setting.evaluate(net)
     setting.write(net, sres, tag)
     info = dict(getattr(res, "info", {}) or {})
-    row = {**setting.common, "model": f"{setting.label}[{stiff}]", "stiffness": stiff,
-           "optimizer": method, "grouped": bool(spec["grouped"]), "seconds": seconds,
-           "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
-           "G_s_initial": first.get("G_s_initial", math.nan),
-           "G_final": sc.G, "G_norm_final": sc.G_norm, "G_s_final": sc.G_s,
-           "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-           **measures.per_load_columns(sc, sh), **measures.fit_score(case, sc), **measures.heldout_columns(sh, first),
-           "objective": objective, "budget": budget_label(run_["options"]), "n_params": problem.n_params,
-           "_tag": tag}
+    row = {
+        **setting.common,
+        "model": f"{setting.label}[{stiff}]",
+        "stiffness": stiff,
+        "optimizer": method,
+        "grouped": bool(spec["grouped"]),
+        "seconds": seconds,
+        "G_initial": first["G_initial"],
+        "G_norm_initial": first["G_norm_initial"],
+        "G_s_initial": first.get("G_s_initial", math.nan),
+        "G_final": sc.G,
+        "G_norm_final": sc.G_norm,
+        "G_s_final": sc.G_s,
+        "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
+        **measures.per_load_columns(sc, sh),
+        **measures.fit_score(case, sc),
+        **measures.heldout_columns(sh, first),
+        "objective": objective,
+        "budget": budget_label(run_["options"]),
+        "n_params": problem.n_params,
+        "_tag": tag,
+    }
     if freq_kw:
         row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
     for key in ("n_steps", "accepted"):
         if hasattr(res, key):
             row[f"opt_{key}"] = getattr(res, key)
-    row["opt_seed"] = seed                   # the optimiser's random stream (SA); = model_seed
+    row["opt_seed"] = seed  # the optimiser's random stream (SA); = model_seed
     if "stop" in info:
         row["opt_stop"] = str(info["stop"])
     if info.get("init", "none") != "none":
-        row["opt_init"] = str(info["init"]) + (" (rejected: worse than k0)" if info.get("init_rejected") else "")
-    if "prior" in info:     # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
+        row["opt_init"] = str(info["init"]) + (
+            " (rejected: worse than k0)" if info.get("init_rejected") else ""
+        )
+    if (
+        "prior" in info
+    ):  # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
         row["opt_prior"] = float(info["prior"])
     row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:

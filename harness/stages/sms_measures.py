@@ -36,7 +36,9 @@ def fit_score(case, sc) -> dict:
     they are (harness/optimize/select.py ``training_score``: each load's own normalised G,
     families and clamped states weighted alike); 'best' starts the fits from its lowest."""
     names = list(case.fit_loads)
-    return {"G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names))}
+    return {
+        "G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names))
+    }
 
 
 def rank(row) -> tuple:
@@ -55,8 +57,10 @@ def heldout_columns(sh, first=None) -> dict:
     per = {f"G_heldout_{k}": float(v) for k, v in sh.per_load_norm.items()}
     out = {"G_heldout": sh.G_norm, "G_heldout_mean": float(np.mean(list(per.values()))), **per}
     if first is not None:
-        out.update(G_heldout_initial=first.get("G_heldout", math.nan),
-                   G_heldout_mean_initial=first.get("G_heldout_mean", math.nan))
+        out.update(
+            G_heldout_initial=first.get("G_heldout", math.nan),
+            G_heldout_mean_initial=first.get("G_heldout_mean", math.nan),
+        )
     return out
 
 
@@ -65,10 +69,15 @@ def engine_columns(net, p1: bool) -> dict:
     ``dt_stable`` (s, the symplectic Euler limit of the free, undamped model,
     harness.export.engine.stable_step; NaN without positive masses)."""
     k = np.asarray(net.k, float)
-    out = {"k_spread": float(k.max() / np.median(k)) if not p1 and len(k) and np.median(k) > 0 else math.nan}
+    out = {
+        "k_spread": float(k.max() / np.median(k))
+        if not p1 and len(k) and np.median(k) > 0
+        else math.nan
+    }
     try:
-        out["dt_stable"] = stable_step(net.points, net.springs, net.k, net.masses,
-                                       volume=getattr(net, "volume", None))["dt_stable"]
+        out["dt_stable"] = stable_step(
+            net.points, net.springs, net.k, net.masses, volume=getattr(net, "volume", None)
+        )["dt_stable"]
     except ModelError:
         out["dt_stable"] = math.nan
     return out
@@ -83,7 +92,7 @@ def error_modes(opt, n_modes) -> int:
 def freq_error(f, f_fem, m) -> float:
     """RMS relative error of the first m natural frequencies against the FEM ones."""
     rel = np.asarray(f[:m], float) / np.asarray(f_fem[:m], float) - 1.0
-    return float(np.sqrt(np.mean(rel ** 2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
+    return float(np.sqrt(np.mean(rel**2))) if len(rel) and np.all(np.isfinite(rel)) else math.nan
 
 
 def fem_frequencies(ref, n, load):

@@ -19,7 +19,7 @@ from harness.models.mt import PARAMS, unsupported
 from harness.scoring import node_weights
 
 METHOD = "least-squares"
-BUDGET = "max_nfev=200"          # bc2000_linear.fit's budget
+BUDGET = "max_nfev=200"  # bc2000_linear.fit's budget
 
 
 def skip_row(case, label: str) -> dict | None:
@@ -27,8 +27,17 @@ def skip_row(case, label: str) -> dict | None:
     why = unsupported(case.dim)
     if why is None:
         return None
-    return {"case": case.name, "model": label, "model_class": "mt", "nu": float(case.material.nu),
-            "dim": case.dim, "stiffness": "mt", "optimizer": "none", "status": "skip", "note": why}
+    return {
+        "case": case.name,
+        "model": label,
+        "model_class": "mt",
+        "nu": float(case.material.nu),
+        "dim": case.dim,
+        "stiffness": "mt",
+        "optimizer": "none",
+        "status": "skip",
+        "note": why,
+    }
 
 
 def runs(case_runs: list) -> list:
@@ -41,17 +50,26 @@ def runs(case_runs: list) -> list:
 def fit_theta(base, case, u_ref, names, fit, weights):
     """theta fitted on the loads ``fit`` (indices of ``names``) and the fit's G before/after."""
     from harness.stages import bc2000_linear as linear
+
     _, free, forces = statics.all_load_arrays(base, case)
     loads = linear.Loads([names[i] for i in fit], free[fit], forces[fit])
     term = base.volume
-    return linear.fit(list(term.units), term.kv, u_ref[fit], loads, node_weights(base.classes, weights))
+    return linear.fit(
+        list(term.units), term.kv, u_ref[fit], loads, node_weights(base.classes, weights)
+    )
 
 
 def optimise(setting, run_, base, first):
     """The fitted row, its network and no trace (``setting``: the class's
     :class:`harness.stages.classes.base.Setting`)."""
-    case, ctx, u_ref, names, fit, weights = (setting.case, setting.ctx, setting.u_ref, setting.names, setting.fit,
-                                             setting.weights)
+    case, ctx, u_ref, names, fit, weights = (
+        setting.case,
+        setting.ctx,
+        setting.u_ref,
+        setting.names,
+        setting.fit,
+        setting.weights,
+    )
     label, common, evaluate, write = setting.label, setting.common, setting.evaluate, setting.write
     ctx.status(f"mt: fitting {', '.join(PARAMS)} ({METHOD})")
     t0 = time.perf_counter()
@@ -61,15 +79,32 @@ def optimise(setting, run_, base, first):
     res, sc, sh = evaluate(net)
     tag = f"mt-{METHOD}"
     write(net, res, tag)
-    row = {**common, "model": f"{label}[mt]", "stiffness": "mt", "optimizer": METHOD, "grouped": False,
-           "seconds": seconds, "G_initial": first["G_initial"], "G_norm_initial": first["G_norm_initial"],
-           "G_s_initial": first.get("G_s_initial", math.nan), "G_final": sc.G, "G_norm_final": sc.G_norm,
-           "G_s_final": sc.G_s, "G_final_optimizer": g1, "objective": "G", "budget": BUDGET,
-           "n_params": len(theta), "_tag": tag}
+    row = {
+        **common,
+        "model": f"{label}[mt]",
+        "stiffness": "mt",
+        "optimizer": METHOD,
+        "grouped": False,
+        "seconds": seconds,
+        "G_initial": first["G_initial"],
+        "G_norm_initial": first["G_norm_initial"],
+        "G_s_initial": first.get("G_s_initial", math.nan),
+        "G_final": sc.G,
+        "G_norm_final": sc.G_norm,
+        "G_s_final": sc.G_s,
+        "G_final_optimizer": g1,
+        "objective": "G",
+        "budget": BUDGET,
+        "n_params": len(theta),
+        "_tag": tag,
+    }
     row.update({f"G_{k}": v for k, v in sc.per_load.items()})
     if sh is not None:
-        row.update({f"G_{k}": v for k, v in sh.per_load.items()}, G_heldout=sh.G_norm,
-                   G_heldout_initial=first.get("G_heldout", math.nan))
+        row.update(
+            {f"G_{k}": v for k, v in sh.per_load.items()},
+            G_heldout=sh.G_norm,
+            G_heldout_initial=first.get("G_heldout", math.nan),
+        )
     row.update({f"mt_{k}": float(v) for k, v in zip(PARAMS, theta)})
     return row, net, None
 
@@ -83,5 +118,16 @@ def save(path, net) -> None:
     """The model as .npz: theta, cells, the per-element constants (ks1..ks6, kvs) and the
     axes (faces' node ids and weights), enough to rebuild the nonlinear model."""
     m = net.volume.model()
-    np.savez(path, theta=net.volume.kv, params=np.array(PARAMS), cells=m.cells, ks=m.ks, kvs=m.kvs,
-             L0=m.L0, cos0=m.cos0, D0=m.D0, axis_nodes=m.axes.nodes, axis_weights=m.axes.weights)
+    np.savez(
+        path,
+        theta=net.volume.kv,
+        params=np.array(PARAMS),
+        cells=m.cells,
+        ks=m.ks,
+        kvs=m.kvs,
+        L0=m.L0,
+        cos0=m.cos0,
+        D0=m.D0,
+        axis_nodes=m.axes.nodes,
+        axis_weights=m.axes.weights,
+    )

@@ -23,7 +23,7 @@ from harness.mechanics.statics import StaticsResult
 from harness.optimize.select import training_score
 from harness.scoring import g_arrays
 
-ALL_RULES_DOFS = 60_000      # networks up to this many dofs solve every rule under every load
+ALL_RULES_DOFS = 60_000  # networks up to this many dofs solve every rule under every load
 
 
 def free_loads(case) -> list[str]:
@@ -34,11 +34,17 @@ def free_loads(case) -> list[str]:
 def _merge(a, b, names):
     """One StaticsResult over ``names`` from two that cover them."""
     pick = [(a, a.names.index(n)) if n in a.names else (b, b.names.index(n)) for n in names]
-    return StaticsResult(tuple(names), np.array([r.u[i] for r, i in pick]), np.array([r.forces[i] for r, i in pick]),
-                         np.array([r.load_seconds[i] for r, i in pick]))
+    return StaticsResult(
+        tuple(names),
+        np.array([r.u[i] for r, i in pick]),
+        np.array([r.forces[i] for r, i in pick]),
+        np.array([r.load_seconds[i] for r, i in pick]),
+    )
 
 
-def solve_rules(case, nets: dict, score, first: str | None = None, status=lambda msg: None) -> tuple[dict, dict]:
+def solve_rules(
+    case, nets: dict, score, first: str | None = None, status=lambda msg: None
+) -> tuple[dict, dict]:
     """({rule: StaticsResult over every load}, {rule: lower bound of its G_fit_score} for
     the rules left unsolved under the clamps). ``score(res)``: a complete result's
     G_fit_score, and of a free-traction-only result its free-traction part; ``first``: a
@@ -54,7 +60,10 @@ def solve_rules(case, nets: dict, score, first: str | None = None, status=lambda
         return dict(zip(rules, statics.solve_all(list(nets.values()), case))), {}
     status(f"statics of the {len(rules)} stiffness rules on the free-traction states")
     part = dict(zip(rules, statics.solve_all(list(nets.values()), case, free)))
-    halves = {r: 0.5 * score(part[r]) if len(free) < len(case.fit_loads) else score(part[r]) for r in rules}
+    halves = {
+        r: 0.5 * score(part[r]) if len(free) < len(case.fit_loads) else score(part[r])
+        for r in rules
+    }
     names = [l.name for l in case.loads]
     solved, bounds, best = {}, {}, math.inf
     for r in sorted(rules, key=lambda r: (r != first, halves[r])):
@@ -72,7 +81,13 @@ def fit_score_of(res, case, u_ref, names, classes, weights) -> float:
     """The G_fit_score of a statics result over the fitted loads it holds (of the
     free-traction states alone: their part of it)."""
     from harness.stages.sms_measures import families
+
     held = [n for n in case.fit_loads if n in res.names]
-    sc = g_arrays(u_ref[[names.index(n) for n in held]], res.u[[res.names.index(n) for n in held]], classes, weights,
-                  held)
+    sc = g_arrays(
+        u_ref[[names.index(n) for n in held]],
+        res.u[[res.names.index(n) for n in held]],
+        classes,
+        weights,
+        held,
+    )
     return training_score([sc.per_load_norm[n] for n in held], families(case, held))

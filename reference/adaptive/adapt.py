@@ -226,9 +226,8 @@ def solve_adaptive(case, status=lambda msg: None, records: list | None = None):
     d = Discretisation(mesh, spec.cell, spec.element)
     C0 = element_stiffness(case.material, d.centroids())
     solved = [l for l in case.loads if homogeneous_field(d, case, l, C0) is None]
-    est = {
-        n: (float("nan") if any(l.name == n for l in solved) else 0.0) for n in names
-    }  # closed forms: exact
+    # closed forms: exact
+    est = {n: (float("nan") if any(l.name == n for l in solved) else 0.0) for n in names}
     parts = UserMeshParts(case, mesh)
     budget = max(MAX_DOFS[dim], int(GROWTH * d.ndof))
     steps = STEPS_PER_REFINE[dim] * spec.max_refine if solved else 0

@@ -11,12 +11,11 @@ import skfem
 from reference.mesh import base_mesh
 from reference.problem import solve_mesh
 
-GRADE_PASSES = {
-    2: 4,
-    3: 0,
-}  # per level: extra halvings of the smallest element near a singular corner
+# per level: extra halvings of the smallest element near a singular corner
 # (2-D). In 3-D, grading towards the 12 box edges cost 9x the dofs for a 1.5x smaller
-# estimate (unit cube, shear, P2), so 3-D refines uniformly (boxes use reference/graded/levels.py).
+# estimate (unit cube, shear, P2), so 3-D refines uniformly (boxes use
+# reference/graded/levels.py).
+GRADE_PASSES = {2: 4, 3: 0}
 MAX_DOFS = {2: 400_000, 3: 200_000}  # refinement stops before a level would exceed this
 GRADE_SLOPE = 0.5  # element size / distance to the singular set in the graded zone
 

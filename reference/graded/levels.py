@@ -37,10 +37,8 @@ from reference.problem import solve_mesh
 
 FIRST = 2  # cells per end zone at level 0 when [reference] divisions is not set
 # (divisions counts cells along the shortest side: two end zones)
-MAX_DOFS = {
-    2: 400_000,
-    3: 64_000,
-}  # the largest system one level may solve (3-D: ~15 s a factorisation)
+# the largest system one level may solve (3-D: ~15 s a factorisation)
+MAX_DOFS = {2: 400_000, 3: 64_000}
 # ... with the fast-diagonalisation CG (solver 'auto' or 'tensor',
 # reference/solvers/tensorpre.py): no factorisation, K applied without assembly
 # (reference/solvers/tensorsolve.py), ~80-110 iterations at nu = 0.49; the limit is time

@@ -14,6 +14,7 @@ class Setting:
     indices of the fitted ones), the node-class weights, the FEM's natural frequencies
     ``fem_f``, the optimiser entry, and the stage's ``evaluate(net[, res])`` and
     ``write(net, res, tag)``."""
+
     case: Any
     ctx: Any
     spec: dict
@@ -48,6 +49,7 @@ class ModelClass:
     ``building`` is its status message; ``spring_constants`` whether its ``k`` are spring
     constants (the ``k_spread`` column); ``selects`` whether ``[optimizer.select]`` can
     choose its capacity."""
+
     name: str
     building: str = "building the model"
     spring_constants: bool = True

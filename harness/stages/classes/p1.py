@@ -13,7 +13,7 @@ from harness.stages.classes.base import ModelClass
 @dataclass(frozen=True)
 class P1Class(ModelClass):
     building: str = "building the P1 model"
-    spring_constants: bool = False      # its springs are only the connectivity
+    spring_constants: bool = False  # its springs are only the connectivity
 
     def build(self, case, spec: dict, seed: int = 0):
         return with_p1(build_network(case, spec, seed=seed), case.material)

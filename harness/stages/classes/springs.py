@@ -18,6 +18,7 @@ from harness.stages.classes.base import ModelClass, model_label
 @dataclass(frozen=True)
 class Springs(ModelClass):
     """``volume`` and ``kn``: the [model] keys of the extra term (``none``: springs alone)."""
+
     volume: str = "none"
     kn: str = "none"
     building: str = "building the spring/mass system"
@@ -30,7 +31,7 @@ class Springs(ModelClass):
         net = build_network(case, spec, seed=seed)
         if self.volume != "none":
             net = case_volume(net, case, spec)
-        if self.kn != "none":       # a ModelError if the volume term is there too
+        if self.kn != "none":  # a ModelError if the volume term is there too
             net = case_kn(net, case, spec)
         return net
 
@@ -50,6 +51,7 @@ class Springs(ModelClass):
 
     def fit(self, setting, run: dict, start, first: dict):
         from harness.stages.sms_fit import optimise
+
         return optimise(setting, run, start, first)
 
     def columns(self, case, spec: dict, net) -> dict:
@@ -75,10 +77,11 @@ class Springs(ModelClass):
 
 
 SPRINGS = Springs("springs")
-VOLUME_SHARED = Springs("springs+volume", volume="shared")              # one volume constant per body
-VOLUME_ELEMENT = Springs("springs+volume-element", volume="element")    # one per element
-NODE_VOLUME_SHARED = Springs("springs+node-volume", volume="node-shared")   # a volume term per node, one kv
-KN_SHARED = Springs("springs+kn", kn="shared")                          # Kot & Nagahashi 2015, one kn
+VOLUME_SHARED = Springs("springs+volume", volume="shared")  # one volume constant per body
+VOLUME_ELEMENT = Springs("springs+volume-element", volume="element")  # one per element
+# a volume term per node, one kv
+NODE_VOLUME_SHARED = Springs("springs+node-volume", volume="node-shared")
+KN_SHARED = Springs("springs+kn", kn="shared")  # Kot & Nagahashi 2015, one kn
 
 
 def of_spec(spec: dict) -> Springs:
@@ -87,6 +90,11 @@ def of_spec(spec: dict) -> Springs:
     if kn != "none":
         name = "springs+kn" if kn == "shared" else "springs+kn-node"
     else:
-        name = {"none": "springs", "shared": "springs+volume", "element": "springs+volume-element",
-                "node-shared": "springs+node-volume", "node": "springs+node-volume-node"}[volume]
+        name = {
+            "none": "springs",
+            "shared": "springs+volume",
+            "element": "springs+volume-element",
+            "node-shared": "springs+node-volume",
+            "node": "springs+node-volume-node",
+        }[volume]
     return Springs(name, volume=volume, kn=kn)
