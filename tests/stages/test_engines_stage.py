@@ -72,7 +72,7 @@ def test_an_engine_not_installed_leaves_rows_naming_the_extra(monkeypatch, tmp_p
     monkeypatch.setattr(S, "_installed", lambda engine: False)
     calls = []
     monkeypatch.setattr(S, "cli", lambda *argv: calls.append(argv[0]) or type("P", (), {"returncode": 0})())
-    monkeypatch.setattr("harness.export.pack.read_pack", lambda folder: None)
+    monkeypatch.setattr(S, "read_pack", lambda folder: None)
     spec = dict(load_case(FOLDER / "beam-coarse_nu0.30.toml").section("model"), loads=("tip",))
     rows = S.study(tmp_path / "m.msh", 1e5, 0.3, 1e3, spec, tmp_path)
     assert calls == ["pack"]                              # no export made for an engine that is missing
