@@ -101,7 +101,7 @@ OPTIMIZERS = Registry(
         "lbfgs": "harness.optimize.gradient:lbfgs",  # adjoint gradient, L-BFGS-B over log k
         "nelder-mead": "harness.optimize.gradient:nelder_mead",  # derivative-free (few groups)
         # Levenberg-Marquardt, CG on adjoint products
-        "gauss-newton": "harness.optimize.gradient:gauss_newton",
+        "gauss-newton": "harness.optimize.gauss_newton:gauss_newton",
         # the equation error: one sparse linear least squares
         "equilibrium-gap": "harness.optimize.equilibrium:equilibrium_gap",
         "none": "harness.optimize.keep:keep",  # k0 as it is (the unoptimised row)

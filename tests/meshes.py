@@ -130,7 +130,7 @@ def grid_bar(folder: Path, name: str = "bar.vtu"):
     """A 3 x 1 x 1 bar of 4 x 3 x 3 grid nodes, each cube split into 6 tetrahedra, as VTU:
     (path, tets)."""
     from harness.geometry import grid_points
-    from harness.models.anisotropic import hex_to_tets
+    from harness.models.cells import hex_to_tets
     from harness.models.topology import grid_structure
     shape = (4, 3, 3)
     pts = grid_points(np.zeros(3), np.array([3.0, 1.0, 1.0]), shape)

@@ -28,22 +28,31 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError
+from harness.models.cells import cell_graph, hex_to_tets
 
 TET_FACES = np.array([[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]])
-HEX_FACES = np.array([[0, 1, 2, 3], [4, 5, 6, 7], [0, 4, 7, 3], [1, 5, 6, 2], [4, 5, 1, 0], [7, 6, 2, 3]])
-EPSILON = 1e-6   # the Moller-Trumbore determinant threshold of the program
+HEX_FACES = np.array(
+    [[0, 1, 2, 3], [4, 5, 6, 7], [0, 4, 7, 3], [1, 5, 6, 2], [4, 5, 1, 0], [7, 6, 2, 3]]
+)
+EPSILON = 1e-6  # the Moller-Trumbore determinant threshold of the program
 
 
 # -- small vector helpers written out component by component: the program's order ----------
+
 
 def _dot(a, b):
     return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
 def _cross(a, b):
-    return np.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], axis=-1)
+    return np.stack(
+        [
+            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
+        ],
+        axis=-1,
+    )
 
 
 def _norm(a):
@@ -77,6 +86,7 @@ def angles_of(directions) -> tuple[np.ndarray, np.ndarray]:
 
 # -- axes of interest in the rest shape ----------------------------------------------------------
 
+
 def _moller_trumbore(orig, dirn, v0, v1, v2):
     """The program's non-culling ray/triangle test (a *line* test: t may be negative)."""
     e1, e2 = v1 - v0, v2 - v0
@@ -94,7 +104,7 @@ def _moller_trumbore(orig, dirn, v0, v1, v2):
 
 def _tet_face_hits(X, g, f):
     """X (m,4,3) vertices, g (m,3), f (m,3) -> hit (m,4), point (m,4,3), weights (m,4,3)."""
-    V = X[:, TET_FACES]                      # (m, 4 faces, 3 vertices, 3)
+    V = X[:, TET_FACES]  # (m, 4 faces, 3 vertices, 3)
     o, d = g[:, None, :], f[:, None, :]
     hit, u, v = _moller_trumbore(o, d, V[:, :, 0], V[:, :, 1], V[:, :, 2])
     w0 = (1.0 - u) - v
@@ -109,12 +119,20 @@ def _tet_face_hits(X, g, f):
 
 def _hex_face_hits(X, g, f):
     """X (m,8,3): each quad face is tested as triangles (q0,q1,q2) then (q0,q2,q3)."""
-    Q = X[:, HEX_FACES]                      # (m, 6, 4, 3)
+    Q = X[:, HEX_FACES]  # (m, 6, 4, 3)
     o, d = g[:, None, :], f[:, None, :]
     h1, u1, v1 = _moller_trumbore(o, d, Q[:, :, 0], Q[:, :, 1], Q[:, :, 2])
     h2, u2, v2 = _moller_trumbore(o, d, Q[:, :, 0], Q[:, :, 2], Q[:, :, 3])
-    ip1 = Q[:, :, 0] * ((1.0 - u1) - v1)[..., None] + Q[:, :, 1] * u1[..., None] + Q[:, :, 2] * v1[..., None]
-    ip2 = Q[:, :, 0] * ((1.0 - u2) - v2)[..., None] + Q[:, :, 2] * u2[..., None] + Q[:, :, 3] * v2[..., None]
+    ip1 = (
+        Q[:, :, 0] * ((1.0 - u1) - v1)[..., None]
+        + Q[:, :, 1] * u1[..., None]
+        + Q[:, :, 2] * v1[..., None]
+    )
+    ip2 = (
+        Q[:, :, 0] * ((1.0 - u2) - v2)[..., None]
+        + Q[:, :, 2] * u2[..., None]
+        + Q[:, :, 3] * v2[..., None]
+    )
     ip = np.where(h1[..., None], ip1, ip2)
     hit = h1 | h2
     l1, l3, l = Q[:, :, 1] - Q[:, :, 0], Q[:, :, 3] - Q[:, :, 0], ip - Q[:, :, 0]
@@ -124,8 +142,8 @@ def _hex_face_hits(X, g, f):
         c3 = _dot(l3, l) / (L3 * L)
     c1 = np.where(L > 0, c1, 0.0)
     c3 = np.where(L > 0, c3, 0.0)
-    zeta_c = (L1 - c1 * L) / L1              # the program's coefs[0] = 1 - zeta
-    eta_c = (L3 - c3 * L) / L3               # coefs[1] = 1 - eta
+    zeta_c = (L1 - c1 * L) / L1  # the program's coefs[0] = 1 - zeta
+    eta_c = (L3 - c3 * L) / L3  # coefs[1] = 1 - eta
     z, e = 1.0 - zeta_c, 1.0 - eta_c
     W = np.stack([zeta_c * eta_c, z * eta_c, z * e, zeta_c * e], axis=-1)
     return hit, ip, W
@@ -136,6 +154,7 @@ class Axes:
     """Rest-state axes: for element i, end j (0..5 = f1, f1', f2, f2', f3, f3'):
     ``face[i, j]`` (local face index), ``nodes[i, j]`` (global ids of the face's vertices),
     ``weights[i, j]`` and the rest intersection ``points[i, j]``."""
+
     face: np.ndarray
     nodes: np.ndarray
     weights: np.ndarray
@@ -158,12 +177,22 @@ def find_axes(points, cells, azimuth, elevation, seed: int = 0, frames=None) -> 
     if nv not in (4, 8):
         raise ModelError(f"elements with {nv} nodes: need tetrahedra (4) or hexahedra (8)")
     X = points[cells]
-    g = 0.25 * (((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) if nv == 4 else \
-        0.125 * (((((((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) + X[:, 4]) + X[:, 5]) + X[:, 6]) + X[:, 7])
+    g = (
+        0.25 * (((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3])
+        if nv == 4
+        else 0.125
+        * (
+            ((((((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) + X[:, 4]) + X[:, 5]) + X[:, 6])
+            + X[:, 7]
+        )
+    )
     hits_of = _tet_face_hits if nv == 4 else _hex_face_hits
     faces = TET_FACES if nv == 4 else HEX_FACES
-    F = frame(np.broadcast_to(azimuth, (m,)), np.broadcast_to(elevation, (m,))) if frames is None \
+    F = (
+        frame(np.broadcast_to(azimuth, (m,)), np.broadcast_to(elevation, (m,)))
+        if frames is None
         else np.broadcast_to(np.asarray(frames, float), (m, 3, 3))
+    )
     dirs = np.stack([F[:, 0], -F[:, 0], F[:, 1], -F[:, 1], F[:, 2], -F[:, 2]], axis=1)
     face = np.full((m, 6), -1)
     pts = np.zeros((m, 6, 3))
@@ -178,10 +207,10 @@ def find_axes(points, cells, azimuth, elevation, seed: int = 0, frames=None) -> 
         ok = hit & ~(_norm(ip - prev[:, None, :]) <= tol[:, None])
         j = np.argmax(ok, axis=1)
         found = ok[np.arange(m), j]
-        for el in np.flatnonzero(~found):      # rare: a line through an edge or a vertex
+        for el in np.flatnonzero(~found):  # rare: a line through an edge or a vertex
             for _ in range(100):
                 d = dirs[el, i] + 1e-6 * rng.random(3)
-                h1, ip1, W1 = hits_of(X[el:el + 1], g[el:el + 1], d[None])
+                h1, ip1, W1 = hits_of(X[el : el + 1], g[el : el + 1], d[None])
                 ok1 = h1[0] & ~(_norm(ip1[0] - prev[el]) <= tol[el])
                 if ok1.any():
                     jj = int(np.argmax(ok1))
@@ -200,6 +229,7 @@ def find_axes(points, cells, azimuth, elevation, seed: int = 0, frames=None) -> 
 
 # -- the model --------------------------------------------------------------------------------
 
+
 def _per_element(value, m, k, name):
     a = np.asarray(value, float)
     if a.ndim == 0:
@@ -209,7 +239,9 @@ def _per_element(value, m, k, name):
     elif a.shape == (m,) and k == 1:
         a = a[:, None]
     if a.shape != (m, k):
-        raise ModelError(f"{name}: expected a number, {k} numbers or an array ({m}, {k}); got shape {a.shape}")
+        raise ModelError(
+            f"{name}: expected a number, {k} numbers or an array ({m}, {k}); got shape {a.shape}"
+        )
     return a if k > 1 else a[:, 0]
 
 
@@ -224,6 +256,7 @@ class AnisotropicBody:
     ks (m, 6) = ks1..ks6, kd (m, 3) physical, kvs, kvd (m,), L0 (m, 3) rest axis lengths,
     cos0 (m, 3) rest cosines of the pairs (12, 13, 23) (zero: the program's form),
     D0 (m,) (tet: rest sum of centre distances) or (m, 8) (hex: rest radii)."""
+
     points: np.ndarray
     cells: np.ndarray
     axes: Axes
@@ -250,14 +283,16 @@ class AnisotropicBody:
 
     def node_graph(self) -> sp.csr_matrix:
         """n x n pattern: nodes that share an element."""
-        return _graph(self.cells, self.n_nodes)
+        return cell_graph(self.cells, self.n_nodes)
 
     def _scatter(self):
         S = getattr(self, "_S", None)
         if S is None:
             m, _, k = self.axes.nodes.shape
             cols = np.concatenate([self.axes.nodes.ravel(), self.cells.ravel()])
-            S = sp.csr_matrix((np.ones(len(cols)), (cols, np.arange(len(cols)))), shape=(self.n_nodes, len(cols)))
+            S = sp.csr_matrix(
+                (np.ones(len(cols)), (cols, np.arange(len(cols)))), shape=(self.n_nodes, len(cols))
+            )
             object.__setattr__(self, "_S", S)
         return S
 
@@ -304,7 +339,9 @@ class AnisotropicBody:
                 sv = self.kvs[:, None] * (D - self.D0)
                 if v is not None:
                     Vc = v[self.cells]
-                    sv = sv + self.kvd[:, None] * np.sum((Vc - Vc.mean(axis=1)[:, None]) * nd, axis=-1)
+                    sv = sv + self.kvd[:, None] * np.sum(
+                        (Vc - Vc.mean(axis=1)[:, None]) * nd, axis=-1
+                    )
                 fv = -sv[..., None] * nd
         else:
             fv = np.zeros((m, nv, 3), dtype=np.result_type(x, float))
@@ -345,13 +382,13 @@ class AnisotropicBody:
         x = self.points if x is None else np.asarray(x, float)
         X = x[self.cells]
         m, nv, _ = X.shape
-        blocks = np.empty((m, nv, 3, nv, 3))           # d f[a, i] / d x[b, j]
+        blocks = np.empty((m, nv, 3, nv, 3))  # d f[a, i] / d x[b, j]
         for b in range(nv):
             for j in range(3):
                 Xc = X.astype(complex)
                 Xc[:, b, j] += 1j * h
                 blocks[:, :, :, b, j] = np.imag(self.element_forces(Xc)) / h
-        dof = 3 * self.cells[:, :, None] + np.arange(3)            # (m, nv, 3)
+        dof = 3 * self.cells[:, :, None] + np.arange(3)  # (m, nv, 3)
         rows = np.broadcast_to(dof[:, :, :, None, None], blocks.shape).ravel()
         cols = np.broadcast_to(dof[:, None, None, :, :], blocks.shape).ravel()
         N = 3 * self.n_nodes
@@ -364,9 +401,17 @@ class AnisotropicBody:
         l = P[:, 0::2] - P[:, 1::2]
         L = np.linalg.norm(l, axis=-1)
         n = l / L[..., None]
-        c = np.stack([np.sum(n[:, 0] * n[:, 1], -1), np.sum(n[:, 0] * n[:, 2], -1),
-                      np.sum(n[:, 1] * n[:, 2], -1)], axis=1)
-        e = 0.5 * np.sum(self.ks[:, :3] * (L - self.L0) ** 2) + 0.5 * np.sum(self.ks[:, 3:] * (c - self.cos0) ** 2)
+        c = np.stack(
+            [
+                np.sum(n[:, 0] * n[:, 1], -1),
+                np.sum(n[:, 0] * n[:, 2], -1),
+                np.sum(n[:, 1] * n[:, 2], -1),
+            ],
+            axis=1,
+        )
+        e = 0.5 * np.sum(self.ks[:, :3] * (L - self.L0) ** 2) + 0.5 * np.sum(
+            self.ks[:, 3:] * (c - self.cos0) ** 2
+        )
         if self.volume:
             Xc = x[self.cells]
             D = np.linalg.norm(Xc - Xc.mean(axis=1)[:, None], axis=-1)
@@ -377,26 +422,21 @@ class AnisotropicBody:
         return float(e)
 
 
-def hex_to_tets(cells) -> np.ndarray:
-    """Six tetrahedra per hexahedron around the diagonal 0-6 (program vertex order)."""
-    c = np.asarray(cells)
-    split = np.array([[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]])
-    return c[:, split].reshape(-1, 4)
-
-
-def _graph(cells, n) -> sp.csr_matrix:
-    cells = np.asarray(cells)
-    k = cells.shape[1]
-    r = np.repeat(cells, k, axis=1).ravel()
-    c = np.tile(cells, (1, k)).ravel()
-    A = sp.csr_matrix((np.ones(len(r), bool), (r, c)), shape=(n, n))
-    A.sum_duplicates()
-    return A
-
-
-def build_anisotropic(points, cells, *, azimuth=0.0, elevation=np.pi / 2, ks=2.5, kd=0.0,
-                      kvs=0.0, kvd=0.0, volume: bool = True, rest_angle: str = "program",
-                      seed: int = 0, frames=None) -> AnisotropicBody:
+def build_anisotropic(
+    points,
+    cells,
+    *,
+    azimuth=0.0,
+    elevation=np.pi / 2,
+    ks=2.5,
+    kd=0.0,
+    kvs=0.0,
+    kvd=0.0,
+    volume: bool = True,
+    rest_angle: str = "program",
+    seed: int = 0,
+    frames=None,
+) -> AnisotropicBody:
     """Build the model. ``ks`` one number, six (ks1..ks6) or (m, 6); ``kd`` (physical
     N s/m) one number, three or (m, 3); ``kvs``/``kvd`` one number or (m,); azimuth and
     elevation (radians) one value or one per element. ``rest_angle``: "program" (90
@@ -414,15 +454,34 @@ def build_anisotropic(points, cells, *, azimuth=0.0, elevation=np.pi / 2, ks=2.5
         raise ModelError(f"{int(np.sum(L0 <= 0))} axes of zero rest length (flat elements?)")
     if rest_angle == "rest":
         n = l / L0[..., None]
-        cos0 = np.stack([_dot(n[:, 0], n[:, 1]), _dot(n[:, 0], n[:, 2]), _dot(n[:, 1], n[:, 2])], axis=1)
+        cos0 = np.stack(
+            [_dot(n[:, 0], n[:, 1]), _dot(n[:, 0], n[:, 2]), _dot(n[:, 1], n[:, 2])], axis=1
+        )
     else:
         cos0 = np.zeros((m, 3))
     X = points[cells]
     nv = cells.shape[1]
-    g = 0.25 * (((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) if nv == 4 else \
-        0.125 * (((((((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) + X[:, 4]) + X[:, 5]) + X[:, 6]) + X[:, 7])
+    g = (
+        0.25 * (((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3])
+        if nv == 4
+        else 0.125
+        * (
+            ((((((X[:, 0] + X[:, 1]) + X[:, 2]) + X[:, 3]) + X[:, 4]) + X[:, 5]) + X[:, 6])
+            + X[:, 7]
+        )
+    )
     Dk = _norm(X - g[:, None])
     D0 = Dk if nv == 8 else ((Dk[:, 0] + Dk[:, 1]) + Dk[:, 2]) + Dk[:, 3]
-    return AnisotropicBody(points, cells, axes, _per_element(ks, m, 6, "ks"), _per_element(kd, m, 3, "kd"),
-                           _per_element(kvs, m, 1, "kvs"), _per_element(kvd, m, 1, "kvd"),
-                           L0, cos0, D0, bool(volume))
+    return AnisotropicBody(
+        points,
+        cells,
+        axes,
+        _per_element(ks, m, 6, "ks"),
+        _per_element(kd, m, 3, "kd"),
+        _per_element(kvs, m, 1, "kvs"),
+        _per_element(kvd, m, 1, "kvd"),
+        L0,
+        cos0,
+        D0,
+        bool(volume),
+    )

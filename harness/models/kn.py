@@ -62,7 +62,7 @@ from harness.models.sms import SpringNetwork
 from harness.models.springs import incidence
 from harness.models.volume import SpringVolumeNetwork, initial_kv, oriented, simplices, volumes
 
-MODES = ("none", "node", "shared")      # [model] kn: none, one constant per node, one per body
+MODES = ("none", "node", "shared")  # [model] kn: none, one constant per node, one per body
 
 
 def node_volumes(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -80,6 +80,7 @@ class KNTerm:
     (at least one spring, positive volume), their spring counts N (m,), volumes V (m,)
     and constants kv (m,) (named as VolumeTerm's, so SpringVolumeNetwork fits them);
     ``shared``: fitted as one constant per body."""
+
     springs: np.ndarray
     L0: np.ndarray
     nodes: np.ndarray
@@ -118,8 +119,10 @@ class KNTerm:
             rows.append(np.flatnonzero(ok))
             cols.append(a[ok])
             vals.append(1.0 / (self.N[a[ok]] * self.L0[ok]))
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(len(self.springs), self.n_elements))
+        return sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(len(self.springs), self.n_elements),
+        )
 
     def mean_strains(self, x: np.ndarray) -> np.ndarray:
         """s_a (m,): the mean spring strain at each carrying node at positions x (n, dim)."""
@@ -137,11 +140,13 @@ class KNTerm:
         l = np.linalg.norm(d, axis=1)
         W = self._weights(len(x))
         s = W.T @ (l - self.L0)
-        T = W @ (self.kv * self.V * dim ** 2 * s)
-        g = T[:, None] * d / l[:, None]               # dE/dx_j for spring (i, j); -that at i
+        T = W @ (self.kv * self.V * dim**2 * s)
+        g = T[:, None] * d / l[:, None]  # dE/dx_j for spring (i, j); -that at i
         out = np.zeros(x.shape)
         for c in range(dim):
-            out[:, c] = np.bincount(self.springs[:, 0], g[:, c], len(x)) - np.bincount(self.springs[:, 1], g[:, c], len(x))
+            out[:, c] = np.bincount(self.springs[:, 0], g[:, c], len(x)) - np.bincount(
+                self.springs[:, 1], g[:, c], len(x)
+            )
         return out
 
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
@@ -162,19 +167,29 @@ def with_kn(net: SpringNetwork, mode: str, kn, elements=None) -> SpringNetwork:
     ``elements``, simplices): mode 'node' (one kn per node) or 'shared' (one per body);
     'none' returns net unchanged."""
     if mode not in MODES:
-        raise ModelError(f"kn = '{mode}' is not one of {', '.join(MODES)}", field="model.kn",
-                         fix="kn = 'shared' (one constant per body) or 'node' (one per node)")
+        raise ModelError(
+            f"kn = '{mode}' is not one of {', '.join(MODES)}",
+            field="model.kn",
+            fix="kn = 'shared' (one constant per body) or 'node' (one per node)",
+        )
     if mode == "none":
         return net
     if getattr(net, "volume", None) is not None:
-        raise ModelError("kn and volume both set: a model holds one extra term", field="model.kn",
-                         fix="set volume = 'none' or kn = 'none'")
+        raise ModelError(
+            "kn and volume both set: a model holds one extra term",
+            field="model.kn",
+            fix="set volume = 'none' or kn = 'none'",
+        )
     if elements is None:
         try:
             elements = simplices(net.cells, net.dim)
         except ModelError as exc:
-            raise ModelError(exc.message.replace("volume term", "kn term"), field="model.kn", fix=exc.fix) from None
-    term = KNTerm.build(net.points, net.springs, node_volumes(net.points, elements), kn, shared=(mode == "shared"))
+            raise ModelError(
+                exc.message.replace("volume term", "kn term"), field="model.kn", fix=exc.fix
+            ) from None
+    term = KNTerm.build(
+        net.points, net.springs, node_volumes(net.points, elements), kn, shared=(mode == "shared")
+    )
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     fields["info"] = MappingProxyType({**net.info, "kn": mode})
     return SpringVolumeNetwork(**fields, volume=term)
@@ -201,6 +216,8 @@ def load(path, net: SpringNetwork) -> SpringNetwork:
     d = np.load(path)
     V = np.zeros(net.n_nodes)
     V[d["nodes"]] = d["V"]
-    term = KNTerm.build(net.points, np.asarray(d["springs"], int), V, np.asarray(d["kv"], float), bool(d["shared"]))
+    term = KNTerm.build(
+        net.points, np.asarray(d["springs"], int), V, np.asarray(d["kv"], float), bool(d["shared"])
+    )
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     return SpringVolumeNetwork(**fields, volume=term)

@@ -40,20 +40,24 @@ import numpy as np
 from harness.errors import ModelError
 from harness.models.topology import element_pairs, simplex_quality
 
-NU0 = 0.3          # the centre of the nu features (t = nu - NU0)
+NU0 = 0.3  # the centre of the nu features (t = nu - NU0)
 SCALE = ("1", "nu", "nu^2")
-FEATURES = {3: SCALE + ("log_length", "boundary", "log_cells", "dihedral", "log_quality"),
-            2: SCALE + ("log_length", "boundary", "dihedral", "log_quality")}
+FEATURES = {
+    3: SCALE + ("log_length", "boundary", "log_cells", "dihedral", "log_quality"),
+    2: SCALE + ("log_length", "boundary", "dihedral", "log_quality"),
+}
 COEFFICIENTS = Path(__file__).with_name("learned_rule.json")
 SIMPLEX = {2: "triangle", 3: "tetra"}
-N_REG = 2 * np.pi / np.arccos(1 / 3)       # regular tetrahedra sharing one edge
-COS_REG = {3: 1 / 3, 2: 0.5}               # dihedral of a regular tetrahedron, angle of an equilateral triangle
+N_REG = 2 * np.pi / np.arccos(1 / 3)  # regular tetrahedra sharing one edge
+COS_REG = {3: 1 / 3, 2: 0.5}  # dihedral of a regular tetrahedron, angle of an equilateral triangle
 QUALITY_FLOOR = 1e-3
 
 
 def _edge_keys(springs: np.ndarray, n: int):
     """Sorted keys of the springs' node pairs and the order that sorts them."""
-    key = np.minimum(springs[:, 0], springs[:, 1]).astype(np.int64) * n + np.maximum(springs[:, 0], springs[:, 1])
+    key = np.minimum(springs[:, 0], springs[:, 1]).astype(np.int64) * n + np.maximum(
+        springs[:, 0], springs[:, 1]
+    )
     order = np.argsort(key)
     return key[order], order
 
@@ -93,7 +97,7 @@ def geometry(points, springs, cells) -> np.ndarray:
     points, springs = np.asarray(points, float), np.asarray(springs, int)
     n, dim = points.shape
     e = len(springs)
-    names = FEATURES[dim][len(SCALE):]
+    names = FEATURES[dim][len(SCALE) :]
     out = np.zeros((e, len(names)))
     ctype = SIMPLEX[dim]
     if set(cells) != {ctype} or e == 0:
@@ -103,7 +107,9 @@ def geometry(points, springs, cells) -> np.ndarray:
     deg = np.bincount(springs.ravel(), minlength=n)
     node_mean = np.bincount(springs.ravel(), np.repeat(L, 2), minlength=n) / np.maximum(deg, 1)
     col = dict(zip(names, range(len(names))))
-    out[:, col["log_length"]] = np.log(L / (0.5 * (node_mean[springs[:, 0]] + node_mean[springs[:, 1]])))
+    out[:, col["log_length"]] = np.log(
+        L / (0.5 * (node_mean[springs[:, 0]] + node_mean[springs[:, 1]]))
+    )
     keys, order = _edge_keys(springs, n)
     facets = _boundary_facets(c)
     on = np.zeros(e, bool)
@@ -155,16 +161,25 @@ def coefficients(dim: int, path: Path | None = None) -> np.ndarray:
     try:
         data = _read(str(path), path.stat().st_mtime)
     except (OSError, ValueError) as exc:
-        raise ModelError(f"cannot read the learned rule's coefficients {path} ({exc})", field="model.stiffness",
-                         fix="reinstall springbench, or refit them with 'springbench rules fit'") from None
+        raise ModelError(
+            f"cannot read the learned rule's coefficients {path} ({exc})",
+            field="model.stiffness",
+            fix="reinstall springbench, or refit them with 'springbench rules fit'",
+        ) from None
     entry = data.get("dims", {}).get(str(dim))
     if entry is None:
-        raise ModelError(f"the learned rule has no {dim}-D coefficients in {path}", field="model.stiffness",
-                         fix=f"fit them on {dim}-D meshes with 'springbench rules fit', or use 'vangelder'")
+        raise ModelError(
+            f"the learned rule has no {dim}-D coefficients in {path}",
+            field="model.stiffness",
+            fix=f"fit them on {dim}-D meshes with 'springbench rules fit', or use 'vangelder'",
+        )
     if tuple(entry.get("features", ())) != FEATURES[dim]:
-        raise ModelError(f"the learned rule's {dim}-D features in {path} are not this version's "
-                         f"({', '.join(FEATURES[dim])})", field="model.stiffness",
-                         fix="refit them with 'springbench rules fit'")
+        raise ModelError(
+            f"the learned rule's {dim}-D features in {path} are not this version's "
+            f"({', '.join(FEATURES[dim])})",
+            field="model.stiffness",
+            fix="refit them with 'springbench rules fit'",
+        )
     return np.asarray(entry["coefficients"], float)
 
 
@@ -174,7 +189,10 @@ def learned(points, springs, cells, material, base, coef=None) -> np.ndarray:
     points = np.asarray(points, float)
     dim = points.shape[1]
     if not cells:
-        raise ModelError("the learned rule needs cells (a triangulation, a grid or a mesh)", field="model.stiffness")
+        raise ModelError(
+            "the learned rule needs cells (a triangulation, a grid or a mesh)",
+            field="model.stiffness",
+        )
     c = coefficients(dim) if coef is None else np.asarray(coef, float)
     X = design(geometry(points, springs, cells), material.nu, dim)
     return np.asarray(base, float) * correction(X, c)

@@ -36,9 +36,10 @@ from harness.errors import ModelError
 from harness.geometry.bodies import BodyGeom, clip_box
 from harness.geometry.bodies import polygon as make_polygon
 from harness.geometry.placement import voronoi_cells_2d, voronoi_cells_sampled
-from harness.models.anisotropic import hex_to_tets
+from harness.models.cells import hex_to_tets
 
 RULES = ("moments", "moments-nonneg", "voronoi", "uniform", "lumped")
+
 
 def density_function(material, dim: int):
     """rho(points) for a ``harness.case.reader.Material`` (regions may override the density)."""
@@ -49,10 +50,15 @@ def body_moments(body: BodyGeom, material=None) -> np.ndarray:
     """Exact mass moments of the body; density regions (axis-aligned boxes) are exact
     for polygons and boxes when they do not overlap."""
     rho0 = float(material.density) if material is not None else 1.0
-    regions = [r for r in (material.regions if material is not None else ()) if r.density is not None]
+    regions = [
+        r for r in (material.regions if material is not None else ()) if r.density is not None
+    ]
     if body.kind == "mesh":
-        return mesh_moments(body.mesh_points, body.mesh_cells,
-                            density_function(material, body.dim) if material is not None else None)
+        return mesh_moments(
+            body.mesh_points,
+            body.mesh_cells,
+            density_function(material, body.dim) if material is not None else None,
+        )
 
     def moments(lo=None, hi=None):
         if body.kind == "polygon":
@@ -62,6 +68,7 @@ def body_moments(body: BodyGeom, material=None) -> np.ndarray:
             return box_moments(body.lo, body.hi)
         a, b = np.maximum(lo, body.lo), np.minimum(hi, body.hi)
         return box_moments(a, b) if np.all(b > a) else np.zeros(10)
+
     p = rho0 * moments()
     for r in regions:
         p = p + (r.density - rho0) * moments(np.asarray(r.lo, float), np.asarray(r.hi, float))
@@ -79,16 +86,26 @@ def _scaled_body(body: BodyGeom, c, s) -> BodyGeom:
         return make_polygon((body.vertices - c) / s)
     if body.kind == "box":
         from harness.geometry.bodies import box
+
         return box((body.lo - c) / s, (body.hi - c) / s)
     from harness.geometry.bodies import mesh_body
+
     return mesh_body((body.mesh_points - c) / s, body.mesh_cells)
 
 
 class _ScaledMaterial:
     def __init__(self, material, c, s):
         self.density = material.density if material is not None else 1.0
-        self.regions = tuple(Region(tuple((np.asarray(r.lo) - c) / s), tuple((np.asarray(r.hi) - c) / s), r.E,
-                                    r.nu, r.density) for r in (material.regions if material is not None else ()))
+        self.regions = tuple(
+            Region(
+                tuple((np.asarray(r.lo) - c) / s),
+                tuple((np.asarray(r.hi) - c) / s),
+                r.E,
+                r.nu,
+                r.density,
+            )
+            for r in (material.regions if material is not None else ())
+        )
 
 
 def min_norm_masses(A: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -97,24 +114,33 @@ def min_norm_masses(A: np.ndarray, p: np.ndarray) -> np.ndarray:
     try:
         x = np.linalg.solve(AAt, p)
     except np.linalg.LinAlgError:
-        raise ModelError("the points lie on a quadric, so A A^T is singular (eq. 7)", field="model.masses",
-                         fix="use more points or masses = 'voronoi'")
+        raise ModelError(
+            "the points lie on a quadric, so A A^T is singular (eq. 7)",
+            field="model.masses",
+            fix="use more points or masses = 'voronoi'",
+        )
     if np.linalg.cond(AAt) > 1e14:
-        raise ModelError("the points (nearly) lie on a quadric, so A A^T is singular (eq. 7)",
-                         field="model.masses", fix="use more points or masses = 'voronoi'")
+        raise ModelError(
+            "the points (nearly) lie on a quadric, so A A^T is singular (eq. 7)",
+            field="model.masses",
+            fix="use more points or masses = 'voronoi'",
+        )
     return A.T @ x
 
 
 @dataclass(frozen=True, eq=False)
 class MassResult:
     """masses (n,); residual = |A m - p| / |p| (centred, scaled coordinates); n_negative."""
+
     masses: np.ndarray
     rule: str
     residual: float
     n_negative: int
 
 
-def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None, seed: int = 0) -> MassResult:
+def compute_masses(
+    rule: str, points: np.ndarray, body: BodyGeom, material=None, seed: int = 0
+) -> MassResult:
     """Masses by the named rule (see the module docstring)."""
     points = np.asarray(points, float)
     c, s = _normaliser(body)
@@ -123,7 +149,7 @@ def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None,
     z = (points - c) / s
     A = monomials(z)
     p = body_moments(sb, sm)
-    scale = s ** body.dim
+    scale = s**body.dim
     if rule == "moments":
         m = min_norm_masses(A, p)
     elif rule == "moments-nonneg":
@@ -139,23 +165,35 @@ def compute_masses(rule: str, points: np.ndarray, body: BodyGeom, material=None,
         elif sb.kind == "box":
             sizes, cents = voronoi_cells_sampled(z, sb, 4000 * len(z), np.random.default_rng(seed))
         else:
-            raise ModelError("Voronoi masses need a rectangle, polygon or box", field="model.masses",
-                             fix="use masses = 'moments' for mesh bodies")
+            raise ModelError(
+                "Voronoi masses need a rectangle, polygon or box",
+                field="model.masses",
+                fix="use masses = 'moments' for mesh bodies",
+            )
         rho = density_function(sm, body.dim)(cents)
         m = sizes * rho
         m *= p[0] / m.sum()
     elif rule == "uniform":
         m = np.full(len(z), p[0] / len(z))
     elif rule == "lumped":
-        if sb.kind != "mesh" or sb.mesh_points.shape != z.shape or not np.allclose(sb.mesh_points, z, atol=1e-12):
-            raise ModelError("lumped masses need the nodes to be the mesh's own vertices", field="model.masses",
-                             fix="use placement = 'mesh', or masses = 'moments-nonneg'")
+        if (
+            sb.kind != "mesh"
+            or sb.mesh_points.shape != z.shape
+            or not np.allclose(sb.mesh_points, z, atol=1e-12)
+        ):
+            raise ModelError(
+                "lumped masses need the nodes to be the mesh's own vertices",
+                field="model.masses",
+                fix="use placement = 'mesh', or masses = 'moments-nonneg'",
+            )
         simp, vol = _simplices(z, sb.mesh_cells)
         rho = density_function(sm, body.dim)(z[simp].mean(axis=1))
         m = np.zeros(len(z))
         np.add.at(m, simp.ravel(), np.repeat(rho * vol / simp.shape[1], simp.shape[1]))
     else:
-        raise ModelError(f"unknown mass rule '{rule}'", field="model.masses", fix=f"one of {', '.join(RULES)}")
+        raise ModelError(
+            f"unknown mass rule '{rule}'", field="model.masses", fix=f"one of {', '.join(RULES)}"
+        )
     res = float(np.linalg.norm(A @ m - p) / np.linalg.norm(p))
     return MassResult(m * scale, rule, res, int(np.sum(m < 0)))
 
@@ -173,7 +211,7 @@ def lumped_masses(points, cells, density: float) -> np.ndarray:
 
 def sub_tet_volumes(points, cells) -> np.ndarray:
     """Signed volumes (m, k) of each element's tetrahedra (k = 1 for a tet, the hex split
-    of harness.models.anisotropic.hex_to_tets for a hex)."""
+    of harness.models.cells.hex_to_tets for a hex)."""
     tets = cells if cells.shape[1] == 4 else hex_to_tets(cells)
     X = np.asarray(points, float)[tets]
     v = np.einsum("ij,ij->i", np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]), X[:, 3] - X[:, 0]) / 6

@@ -16,12 +16,29 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError
-from harness.models.anisotropic import hex_to_tets
+from harness.models.cells import hex_to_tets
 
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-HEX_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4],
-                      [0, 4], [1, 5], [2, 6], [3, 7],
-                      [0, 6], [1, 7], [2, 4], [3, 5]])
+HEX_EDGES = np.array(
+    [
+        [0, 1],
+        [1, 2],
+        [2, 3],
+        [3, 0],
+        [4, 5],
+        [5, 6],
+        [6, 7],
+        [7, 4],
+        [0, 4],
+        [1, 5],
+        [2, 6],
+        [3, 7],
+        [0, 6],
+        [1, 7],
+        [2, 4],
+        [3, 5],
+    ]
+)
 
 
 def mesh_edges(cells) -> np.ndarray:
@@ -39,6 +56,7 @@ def mesh_edges(cells) -> np.ndarray:
 @dataclass(frozen=True, eq=False)
 class MassSpring:
     """points (n, 3) rest positions; springs (s, 2); L0, ks, kd (s,) (kd physical)."""
+
     points: np.ndarray
     springs: np.ndarray
     L0: np.ndarray
@@ -71,12 +89,21 @@ class MassSpring:
             s = s + self.kd * np.sum((v[p] - v[q]) * n, axis=-1)
         F = -s[:, None] * n
         out = np.zeros((self.n_nodes, 3), dtype=F.dtype)
-        for d in range(3):   # three scatters, vectorised over springs
+        for d in range(3):  # three scatters, vectorised over springs
             if np.iscomplexobj(F):
-                out[:, d] = (np.bincount(p, F[:, d].real, self.n_nodes) - np.bincount(q, F[:, d].real, self.n_nodes)
-                             + 1j * (np.bincount(p, F[:, d].imag, self.n_nodes) - np.bincount(q, F[:, d].imag, self.n_nodes)))
+                out[:, d] = (
+                    np.bincount(p, F[:, d].real, self.n_nodes)
+                    - np.bincount(q, F[:, d].real, self.n_nodes)
+                    + 1j
+                    * (
+                        np.bincount(p, F[:, d].imag, self.n_nodes)
+                        - np.bincount(q, F[:, d].imag, self.n_nodes)
+                    )
+                )
             else:
-                out[:, d] = np.bincount(p, F[:, d], self.n_nodes) - np.bincount(q, F[:, d], self.n_nodes)
+                out[:, d] = np.bincount(p, F[:, d], self.n_nodes) - np.bincount(
+                    q, F[:, d], self.n_nodes
+                )
         return out
 
     def energy(self, x) -> float:
@@ -98,7 +125,9 @@ class MassSpring:
             c = (3 * b[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
             rows.append(r.ravel()), cols.append(c.ravel()), vals.append((sgn * k).ravel())
         N = 3 * self.n_nodes
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N))
+        return sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(N, N)
+        )
 
 
 def build_massspring(points, cells, *, ks=2.5, kd=0.0) -> MassSpring:

@@ -41,12 +41,16 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError
-from harness.models.anisotropic import AnisotropicBody, build_anisotropic, hex_to_tets
+from harness.models.anisotropic import AnisotropicBody, build_anisotropic
+from harness.models.cells import hex_to_tets
 from harness.models.sms import SpringNetwork
 from harness.models.volume import SpringVolumeNetwork
 
-PARAMS = ("axial", "angular", "volume")         # theta, Pa
-NO_2D = "Bourguignon & Cani 2000 define their element model on tetrahedra and hexahedra only (no 2-D element)"
+PARAMS = ("axial", "angular", "volume")  # theta, Pa
+NO_2D = (
+    "Bourguignon & Cani 2000 define their element model on tetrahedra and hexahedra only "
+    "(no 2-D element)"
+)
 
 
 def unsupported(dim: int) -> str | None:
@@ -59,22 +63,31 @@ def mt_cells(cells) -> np.ndarray:
     blocks = {k: np.asarray(v, np.int64) for k, v in dict(cells or {}).items() if len(v)}
     if len(blocks) == 1 and next(iter(blocks)) in ("tetra", "hexahedron"):
         return next(iter(blocks.values()))
-    raise ModelError(f"model class 'mt': cells {sorted(blocks) or 'none'}; B&C's element needs one block of "
-                     "tetrahedra or hexahedra", field="model.classes",
-                     fix="use placement = 'grid' (hexahedra) or 'mesh' with a tetrahedral mesh")
+    raise ModelError(
+        f"model class 'mt': cells {sorted(blocks) or 'none'}; B&C's element needs one block of "
+        "tetrahedra or hexahedra",
+        field="model.classes",
+        fix="use placement = 'grid' (hexahedra) or 'mesh' with a tetrahedral mesh",
+    )
 
 
 def size_factors(body: AnisotropicBody) -> np.ndarray:
     """(m, 7): an element's ks1..ks6 and kvs per unit theta (axial, angular, volume)."""
     X = body.points[body.cells]
-    T = X[:, [0, 1, 2, 3]][:, None] if not body.is_hex else body.points[hex_to_tets(body.cells)].reshape(
-        len(X), 6, 4, 3)
+    T = (
+        X[:, [0, 1, 2, 3]][:, None]
+        if not body.is_hex
+        else body.points[hex_to_tets(body.cells)].reshape(len(X), 6, 4, 3)
+    )
     a = T[:, :, 1:] - T[:, :, :1]
-    V = np.abs(np.einsum("mtj,mtj->mt", a[:, :, 0], np.cross(a[:, :, 1], a[:, :, 2]))).sum(axis=1) / 6.0
+    V = (
+        np.abs(np.einsum("mtj,mtj->mt", a[:, :, 0], np.cross(a[:, :, 1], a[:, :, 2]))).sum(axis=1)
+        / 6.0
+    )
     L = body.L0
     pair = np.stack([L[:, 0] + L[:, 1], L[:, 0] + L[:, 2], L[:, 1] + L[:, 2]], axis=1) / 2
-    D2 = body.D0 ** 2 if not body.is_hex else np.sum(body.D0 ** 2, axis=1)
-    return np.concatenate([V[:, None] / L ** 2, V[:, None] / pair, (9 * V / D2)[:, None]], axis=1)
+    D2 = body.D0**2 if not body.is_hex else np.sum(body.D0**2, axis=1)
+    return np.concatenate([V[:, None] / L**2, V[:, None] / pair, (9 * V / D2)[:, None]], axis=1)
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,33 +96,51 @@ class MTTerm:
     theta (its ks, kvs = :func:`size_factors`), ``units`` the linearised K_j of each
     theta_j (3n square), ``kv`` = theta (3,). ``n_elements``/``kv``/``shared`` are the names
     SpringVolumeNetwork reads for its parameters [k, kv] (here three constants)."""
+
     body: AnisotropicBody
     units: tuple
     kv: np.ndarray
     shared: bool = False
-    symmetric: bool = False        # K is not B diag(k) B^T: harness/optimize cannot take it
+    symmetric: bool = False  # K is not B diag(k) B^T: harness/optimize cannot take it
 
     @classmethod
     def build(cls, points, cells, theta, seed: int = 0) -> "MTTerm":
         points = np.asarray(points, float)
         cells = np.asarray(cells, np.int64)
-        one = build_anisotropic(points, cells, frames=np.eye(3), ks=1.0, kvs=1.0, volume=True,
-                                rest_angle="rest", seed=seed)
+        one = build_anisotropic(
+            points,
+            cells,
+            frames=np.eye(3),
+            ks=1.0,
+            kvs=1.0,
+            volume=True,
+            rest_angle="rest",
+            seed=seed,
+        )
         s = size_factors(one)
         body = dataclasses.replace(one, ks=s[:, :6].copy(), kvs=s[:, 6].copy())
-        f = body.element_forces(points[cells])       # the rest shape must be force-free
+        f = body.element_forces(points[cells])  # the rest shape must be force-free
         scale = np.abs(s[:, :3] * body.L0).max(axis=1)
         bad = np.flatnonzero(np.abs(f).max(axis=(1, 2)) > 1e-9 * scale)
-        if len(bad):     # a hex face that is no rectangle: the program's bilinear weights miss the axis ends
-            raise ModelError(f"model class 'mt': elements {bad[:5].tolist()} are not force-free at rest (B&C's "
-                             "hexahedron weights its axis ends exactly on rectangular faces only)",
-                             field="model.classes", fix="use a grid of rectangular hexahedra or a tetrahedral mesh")
+        if len(
+            bad
+        ):  # a hex face that is no rectangle: the program's bilinear weights miss the axis ends
+            raise ModelError(
+                f"model class 'mt': elements {bad[:5].tolist()} are not force-free at rest (B&C's "
+                "hexahedron weights its axis ends exactly on rectangular faces only)",
+                field="model.classes",
+                fix="use a grid of rectangular hexahedra or a tetrahedral mesh",
+            )
         zero6, zero = np.zeros_like(body.ks), np.zeros_like(body.kvs)
         units = []
         for j, cols in enumerate(([0, 1, 2], [3, 4, 5], [])):
             ks = zero6.copy()
             ks[:, cols] = body.ks[:, cols]
-            units.append(dataclasses.replace(body, ks=ks, kvs=body.kvs if j == 2 else zero).tangent_stiffness())
+            units.append(
+                dataclasses.replace(
+                    body, ks=ks, kvs=body.kvs if j == 2 else zero
+                ).tangent_stiffness()
+            )
         theta = np.broadcast_to(np.asarray(theta, float), (len(PARAMS),)).copy()
         return cls(body, tuple(u.tocsr() for u in units), theta)
 
@@ -145,8 +176,12 @@ def with_mt(net: SpringNetwork, material, theta=None) -> SpringVolumeNetwork:
     why = unsupported(net.dim)
     if why:
         raise ModelError(why, field="model.classes", fix="list 'mt' only in 3-D cases")
-    term = MTTerm.build(net.points, mt_cells(net.cells), start_theta(material) if theta is None else theta,
-                        seed=int(net.info.get("seed", 0)))
+    term = MTTerm.build(
+        net.points,
+        mt_cells(net.cells),
+        start_theta(material) if theta is None else theta,
+        seed=int(net.info.get("seed", 0)),
+    )
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
     fields["k"] = np.zeros(net.n_springs)
     fields["info"] = MappingProxyType({**net.info, "stiffness": "mt"})

@@ -33,9 +33,9 @@ from harness.models.volume import SpringVolumeNetwork, oriented, simplices, volu
 def shape_gradients(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """grad N (m, dim+1, dim) of the linear shape functions of each simplex."""
     e = np.asarray(elements, int)
-    A = np.transpose(x[e[:, 1:]] - x[e[:, :1]], (0, 2, 1))   # columns: edges from node 0
+    A = np.transpose(x[e[:, 1:]] - x[e[:, :1]], (0, 2, 1))  # columns: edges from node 0
     g = np.zeros((len(e), x.shape[1] + 1, x.shape[1]))
-    g[:, 1:] = np.linalg.inv(A)                               # row j of A^-1 = grad N_{j+1}
+    g[:, 1:] = np.linalg.inv(A)  # row j of A^-1 = grad N_{j+1}
     g[:, 0] = -g[:, 1:].sum(axis=1)
     return g
 
@@ -45,9 +45,11 @@ def strain_matrices(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
     xy; engineering shear) from the element's nodal displacements (node-major)."""
     g = shape_gradients(x, elements)
     m, nn, dim = g.shape
-    pairs = [(0, 0), (1, 1), (0, 1)] if dim == 2 else [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
+    pairs = (
+        [(0, 0), (1, 1), (0, 1)] if dim == 2 else [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
+    )
     B = np.zeros((m, len(pairs), nn, dim))
-    for r, (i, j) in enumerate(pairs):       # eps_ij = (du_i/dx_j + du_j/dx_i) (/2 on the diagonal)
+    for r, (i, j) in enumerate(pairs):  # eps_ij = (du_i/dx_j + du_j/dx_i) (/2 on the diagonal)
         B[:, r, :, i] += g[:, :, j]
         if i != j:
             B[:, r, :, j] += g[:, :, i]
@@ -58,6 +60,7 @@ def strain_matrices(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
 class P1Term:
     """elements (m, dim+1) with rest volumes V0 (m,), Cholesky factors L (m, nv, nv) of
     their elastic tensors, kv (m*nv,) one scale per column (1: P1 itself)."""
+
     elements: np.ndarray
     V0: np.ndarray
     L: np.ndarray
@@ -80,7 +83,9 @@ class P1Term:
         """C (n*dim, m*nv): sqrt(V_e) B_e^T L_e, element by element."""
         n, dim = points.shape
         B = strain_matrices(np.asarray(points, float), self.elements)
-        c = np.einsum("mvk,mvw->mkw", B, self.L) * np.sqrt(self.V0)[:, None, None]   # (m, nn*dim, nv)
+        c = (
+            np.einsum("mvk,mvw->mkw", B, self.L) * np.sqrt(self.V0)[:, None, None]
+        )  # (m, nn*dim, nv)
         m, nd, nv = c.shape
         rows = (self.elements[:, :, None] * dim + np.arange(dim)).reshape(m, nd)
         rows = np.repeat(rows[:, :, None], nv, axis=2)

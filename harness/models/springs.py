@@ -26,7 +26,10 @@ def incidence(points: np.ndarray, springs: np.ndarray) -> sp.csc_matrix:
     n, dim = points.shape
     e = len(springs)
     d, _ = spring_directions(points, springs)
-    rows = np.concatenate([springs[:, 1, None] * dim + np.arange(dim), springs[:, 0, None] * dim + np.arange(dim)], axis=1)
+    rows = np.concatenate(
+        [springs[:, 1, None] * dim + np.arange(dim), springs[:, 0, None] * dim + np.arange(dim)],
+        axis=1,
+    )
     vals = np.concatenate([d, -d], axis=1)
     cols = np.repeat(np.arange(e), 2 * dim)
     return sp.csc_matrix((vals.ravel(), (rows.ravel(), cols)), shape=(n * dim, e))

@@ -23,7 +23,8 @@ it is E for isotropic material and follows fibres and regions.
              springs to the linear FEM stiffness (P1 triangles/tetrahedra, Q1 quads/hex,
              2x2(x2) Gauss) in the least-squares (Frobenius) sense, sum over the cells
              sharing a spring, and floor the (rare) non-positive sums at 1% of the median
-             (obtuse triangles have negative best-fit constants). For an equilateral triangle and nu = 1/3 the
+             (obtuse triangles have negative best-fit constants). For an equilateral triangle and
+             nu = 1/3 the
              match is exact and gives their closed form k = sqrt(3)/4 E t per triangle
              (derivation: spring energy sum k L^2 (n.eps.n)^2 / 2 over three directions 60
              deg apart is isotropic with lambda = mu = sqrt(3) k / (2 t); plane stress
@@ -61,7 +62,9 @@ from harness.models.springs import spring_directions
 from harness.models.topology import element_pairs
 from harness.registry import STIFFNESS_RULES
 
-RULES = STIFFNESS_RULES.names()      # each rule(points, springs, cells, material) -> k, registered by name
+RULES = (
+    STIFFNESS_RULES.names()
+)  # each rule(points, springs, cells, material) -> k, registered by name
 
 
 def voigt_dyad(n: np.ndarray) -> np.ndarray:
@@ -140,7 +143,10 @@ def _vangelder_cells(points, springs, cells, index):
 
 def vangelder(points, springs, cells, material) -> np.ndarray:
     if not cells:
-        raise ModelError("the van Gelder rule needs cells (a triangulation, a grid or a mesh)", field="model.stiffness")
+        raise ModelError(
+            "the van Gelder rule needs cells (a triangulation, a grid or a mesh)",
+            field="model.stiffness",
+        )
     d, L = spring_directions(points, springs)
     index = _spring_index(springs)
     acc = np.zeros(len(springs))
@@ -159,9 +165,22 @@ def vangelder(points, springs, cells, material) -> np.ndarray:
 
 # -- FEM element stiffness (for the Lloyd rule) --------------------------------------------
 
-_REF = {"quad": np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float),
-        "hexahedron": np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                                [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], float)}
+_REF = {
+    "quad": np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float),
+    "hexahedron": np.array(
+        [
+            [-1, -1, -1],
+            [1, -1, -1],
+            [1, 1, -1],
+            [-1, 1, -1],
+            [-1, -1, 1],
+            [1, -1, 1],
+            [1, 1, 1],
+            [-1, 1, 1],
+        ],
+        float,
+    ),
+}
 
 
 def _bmatrix(dN: np.ndarray) -> np.ndarray:
@@ -183,14 +202,18 @@ def _bmatrix(dN: np.ndarray) -> np.ndarray:
     return B
 
 
-def fem_element_stiffness(points: np.ndarray, c: np.ndarray, ctype: str, C: np.ndarray) -> np.ndarray:
+def fem_element_stiffness(
+    points: np.ndarray, c: np.ndarray, ctype: str, C: np.ndarray
+) -> np.ndarray:
     """Linear FEM element stiffness matrices (m, k*dim, k*dim) with dof = dim*local + comp."""
     p = points[c]
     if ctype in ("triangle", "tetra"):
         d = p.shape[2]
-        T = p[:, 1:] - p[:, :1]                       # (m, d, d) rows: edge vectors
+        T = p[:, 1:] - p[:, :1]  # (m, d, d) rows: edge vectors
         Tinv = np.linalg.inv(T)
-        G = np.concatenate([-Tinv.sum(axis=2, keepdims=True), Tinv], axis=2)  # (m, d, d+1): grad of N_i
+        G = np.concatenate(
+            [-Tinv.sum(axis=2, keepdims=True), Tinv], axis=2
+        )  # (m, d, d+1): grad of N_i
         dN = np.transpose(G, (0, 2, 1))
         vol = np.abs(np.linalg.det(T)) / (2 if d == 2 else 6)
         B = _bmatrix(dN)
@@ -200,16 +223,17 @@ def fem_element_stiffness(points: np.ndarray, c: np.ndarray, ctype: str, C: np.n
     g = 1 / np.sqrt(3)
     K = 0
     for xi in np.array(np.meshgrid(*[[-g, g]] * d, indexing="ij")).reshape(d, -1).T:
-        dNref = ref * np.prod(1 + ref * xi, axis=1, keepdims=True) / (1 + ref * xi) / 2 ** d  # (k, d)
-        J = np.einsum("kd,mke->mde", dNref, p)         # (m, d_ref, d_phys)
+        dNref = ref * np.prod(1 + ref * xi, axis=1, keepdims=True) / (1 + ref * xi) / 2**d  # (k, d)
+        J = np.einsum("kd,mke->mde", dNref, p)  # (m, d_ref, d_phys)
         dN = np.einsum("med,kd->mke", np.linalg.inv(J), dNref)
         B = _bmatrix(dN)
         K = K + np.abs(np.linalg.det(J))[:, None, None] * np.einsum("mvi,mvw,mwj->mij", B, C, B)
     return K
 
 
-def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs,
-                        nonneg: bool = False) -> tuple[np.ndarray, np.ndarray]:
+def fit_element_springs(
+    Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs, nonneg: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """Per element, k for the local ``pairs`` minimising ||Ke - sum k b b^T||_F (k >= 0
     with ``nonneg``). Returns k (m, len(pairs)) and the relative misfit (m,)."""
     m, k = c.shape
@@ -219,15 +243,18 @@ def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs
     for s, (i, j) in enumerate(pairs):
         v = p[:, j] - p[:, i]
         v /= np.linalg.norm(v, axis=1, keepdims=True)
-        bs[:, s, j * d:(j + 1) * d] = v
-        bs[:, s, i * d:(i + 1) * d] = -v
+        bs[:, s, j * d : (j + 1) * d] = v
+        bs[:, s, i * d : (i + 1) * d] = -v
     G = np.einsum("msi,mti->mst", bs, bs) ** 2
     h = np.einsum("msi,mij,msj->ms", bs, Ke, bs)
     # the minimum-norm least-squares solutions of all elements at once: lstsq's (rcond=None)
     # singular-value cut-off eps * size in a batched pseudo-inverse (a Python loop of lstsq
     # took 8 s on a 50k-tet mesh)
-    out = np.einsum("mst,mt->ms", np.linalg.pinv(G, rcond=np.finfo(float).eps * len(pairs)), h) if m else \
-        np.zeros((0, len(pairs)))
+    out = (
+        np.einsum("mst,mt->ms", np.linalg.pinv(G, rcond=np.finfo(float).eps * len(pairs)), h)
+        if m
+        else np.zeros((0, len(pairs)))
+    )
     for e in np.flatnonzero(out.min(axis=1, initial=0.0) < 0) if nonneg else ():
         # nnls on the Frobenius problem written as a least-squares system
         A = np.stack([np.outer(b, b).ravel() for b in bs[e]], 1)
@@ -239,7 +266,10 @@ def fit_element_springs(Ke: np.ndarray, points: np.ndarray, c: np.ndarray, pairs
 
 def lloyd(points, springs, cells, material) -> np.ndarray:
     if not cells:
-        raise ModelError("the Lloyd rule needs cells (a triangulation, a grid or a mesh)", field="model.stiffness")
+        raise ModelError(
+            "the Lloyd rule needs cells (a triangulation, a grid or a mesh)",
+            field="model.stiffness",
+        )
     index = _spring_index(springs)
     acc = np.zeros(len(springs))
     for ctype, c in cells.items():
@@ -267,7 +297,10 @@ def cauchy(points, springs, cells, material) -> np.ndarray:
     matches the material's Voigt C at the cell centre (least squares, minimum norm, k >= 0
     by NNLS only where needed), summed over the cells sharing a spring."""
     if not cells:
-        raise ModelError("the cauchy rule needs cells (a triangulation, a grid or a mesh)", field="model.stiffness")
+        raise ModelError(
+            "the cauchy rule needs cells (a triangulation, a grid or a mesh)",
+            field="model.stiffness",
+        )
     index = _spring_index(springs)
     acc = np.zeros(len(springs))
     for ctype, c in cells.items():
@@ -276,18 +309,25 @@ def cauchy(points, springs, cells, material) -> np.ndarray:
         pairs = element_pairs(ctype)
         ids = np.stack([_lookup(index, c[:, i], c[:, j]) for i, j in pairs], 1)
         present = ids >= 0
-        for pattern in np.unique(present, axis=0):        # cells with the same springs present: one batch
+        for pattern in np.unique(present, axis=0):  # cells with the same springs present: one batch
             rows = np.flatnonzero(np.all(present == pattern, axis=1))
             cols = np.flatnonzero(pattern)
             if len(cols) == 0:
                 continue
-            v = points[c[rows][:, [pairs[q][1] for q in cols]]] - points[c[rows][:, [pairs[q][0] for q in cols]]]
+            v = (
+                points[c[rows][:, [pairs[q][1] for q in cols]]]
+                - points[c[rows][:, [pairs[q][0] for q in cols]]]
+            )
             L = np.linalg.norm(v, axis=2)
-            a = voigt_dyad((v / L[..., None]).reshape(-1, v.shape[2])).reshape(len(rows), len(cols), -1)
-            M = (L[..., None, None] ** 2 * a[..., :, None] * a[..., None, :]).reshape(len(rows), len(cols), -1)
+            a = voigt_dyad((v / L[..., None]).reshape(-1, v.shape[2])).reshape(
+                len(rows), len(cols), -1
+            )
+            M = (L[..., None, None] ** 2 * a[..., :, None] * a[..., None, :]).reshape(
+                len(rows), len(cols), -1
+            )
             M = M.transpose(0, 2, 1) / vol[rows][:, None, None]
             target = Cc[rows].reshape(len(rows), -1)
-            k = np.einsum("mij,mj->mi", np.linalg.pinv(M), target)       # least squares, minimum norm
+            k = np.einsum("mij,mj->mi", np.linalg.pinv(M), target)  # least squares, minimum norm
             for e in np.flatnonzero(k.min(axis=1) < 0):
                 k[e] = nnls(M[e], target[e])[0]
             np.add.at(acc, ids[rows][:, cols].ravel(), k.ravel())
@@ -303,10 +343,19 @@ def learned(points, springs, cells, material) -> np.ndarray:
 def spring_constants(rule: str, points, springs, cells, material) -> np.ndarray:
     """k (e,) by the named rule."""
     if rule not in STIFFNESS_RULES:
-        raise ModelError(f"unknown stiffness rule '{rule}'", field="model.stiffness", fix=f"one of {', '.join(RULES)}")
-    k = STIFFNESS_RULES.load(rule)(np.asarray(points, float), np.asarray(springs, int), cells or {}, material)
+        raise ModelError(
+            f"unknown stiffness rule '{rule}'",
+            field="model.stiffness",
+            fix=f"one of {', '.join(RULES)}",
+        )
+    k = STIFFNESS_RULES.load(rule)(
+        np.asarray(points, float), np.asarray(springs, int), cells or {}, material
+    )
     if np.any(k <= 0):
         bad = np.flatnonzero(k <= 0)[:5]
-        raise ModelError(f"rule '{rule}' gives zero stiffness to springs {bad.tolist()} (no cell contains them)",
-                         field="model.stiffness", fix="use the 'deussen' rule or a topology whose springs lie in cells")
+        raise ModelError(
+            f"rule '{rule}' gives zero stiffness to springs {bad.tolist()} (no cell contains them)",
+            field="model.stiffness",
+            fix="use the 'deussen' rule or a topology whose springs lie in cells",
+        )
     return k

@@ -28,10 +28,21 @@ from scipy.spatial import Delaunay
 
 from harness.errors import ModelError
 
-STRUCTURES_2D = ("edges", "edges+diagonal", "structure1", "edges+diagonals", "edges+diagonals+second")
+STRUCTURES_2D = (
+    "edges",
+    "edges+diagonal",
+    "structure1",
+    "edges+diagonals",
+    "edges+diagonals+second",
+)
 STRUCTURES_3D = ("edges", "edges+face", "edges+face+body", "edges+body")
-ALIASES = {"edges+diagonals": "structure1", "structure 1": "structure1", "cubic": "edges",
-           "cubic+face": "edges+face", "cubic+face+body": "edges+face+body"}
+ALIASES = {
+    "edges+diagonals": "structure1",
+    "structure 1": "structure1",
+    "cubic": "edges",
+    "cubic+face": "edges+face",
+    "cubic+face+body": "edges+face+body",
+}
 
 
 @dataclass(frozen=True, eq=False)
@@ -46,8 +57,12 @@ def _finish(pairs, gids, names, cells) -> Topology:
     pairs = np.sort(np.asarray(pairs, int), axis=1)
     _, idx = np.unique(pairs, axis=0, return_index=True)
     idx = np.sort(idx)
-    return Topology(pairs[idx], np.asarray(gids, int)[idx], tuple(names),
-                    MappingProxyType({k: np.asarray(v, int) for k, v in cells.items()}))
+    return Topology(
+        pairs[idx],
+        np.asarray(gids, int)[idx],
+        tuple(names),
+        MappingProxyType({k: np.asarray(v, int) for k, v in cells.items()}),
+    )
 
 
 def grid_structure(shape, name: str) -> Topology:
@@ -58,8 +73,11 @@ def grid_structure(shape, name: str) -> Topology:
     ids = np.arange(int(np.prod(shape))).reshape(shape[::-1]).transpose()  # ids[i, j(, k)]
     known = STRUCTURES_2D if dim == 2 else STRUCTURES_3D
     if name not in known:
-        raise ModelError(f"unknown {dim}-D grid structure '{name}'", field="model.structure",
-                         fix=f"one of {', '.join(known)}")
+        raise ModelError(
+            f"unknown {dim}-D grid structure '{name}'",
+            field="model.structure",
+            fix=f"one of {', '.join(known)}",
+        )
     pairs, gids, names = [], [], []
 
     def add(a, b, gname):
@@ -67,6 +85,7 @@ def grid_structure(shape, name: str) -> Topology:
             names.append(gname)
         pairs.append(np.stack([a.ravel(), b.ravel()], 1))
         gids.append(np.full(a.size, names.index(gname)))
+
     if dim == 2:
         add(ids[:-1, :], ids[1:, :], "horizontal")
         add(ids[:, :-1], ids[:, 1:], "vertical")
@@ -77,8 +96,15 @@ def grid_structure(shape, name: str) -> Topology:
         if name == "edges+diagonals+second":
             add(ids[:-2, :], ids[2:, :], "second-horizontal")
             add(ids[:, :-2], ids[:, 2:], "second-vertical")
-        quads = np.stack([ids[:-1, :-1].ravel(), ids[1:, :-1].ravel(), ids[1:, 1:].ravel(),
-                          ids[:-1, 1:].ravel()], 1)
+        quads = np.stack(
+            [
+                ids[:-1, :-1].ravel(),
+                ids[1:, :-1].ravel(),
+                ids[1:, 1:].ravel(),
+                ids[:-1, 1:].ravel(),
+            ],
+            1,
+        )
         return _finish(np.concatenate(pairs), np.concatenate(gids), names, {"quad": quads})
     add(ids[:-1], ids[1:], "edge-x")
     add(ids[:, :-1], ids[:, 1:], "edge-y")
@@ -96,8 +122,22 @@ def grid_structure(shape, name: str) -> Topology:
         add(ids[:-1, 1:, :-1], ids[1:, :-1, 1:], "body")
         add(ids[:-1, :-1, 1:], ids[1:, 1:, :-1], "body")
     s = [slice(0, -1), slice(1, None)]
-    hexes = np.stack([ids[s[a], s[b], s[c]].ravel() for c, b, a in
-                      [(0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0), (1, 0, 0), (1, 0, 1), (1, 1, 1), (1, 1, 0)]], 1)
+    hexes = np.stack(
+        [
+            ids[s[a], s[b], s[c]].ravel()
+            for c, b, a in [
+                (0, 0, 0),
+                (0, 0, 1),
+                (0, 1, 1),
+                (0, 1, 0),
+                (1, 0, 0),
+                (1, 0, 1),
+                (1, 1, 1),
+                (1, 1, 0),
+            ]
+        ],
+        1,
+    )
     return _finish(np.concatenate(pairs), np.concatenate(gids), names, {"hexahedron": hexes})
 
 
@@ -110,7 +150,7 @@ def simplex_quality(points: np.ndarray, simplices: np.ndarray) -> np.ndarray:
     idx = [(i, j) for i in range(d + 1) for j in range(i + 1, d + 1)]
     L = np.sqrt(np.mean([np.sum((p[:, i] - p[:, j]) ** 2, axis=1) for i, j in idx], axis=0))
     regular = np.sqrt(3) / 4 if d == 2 else 1 / (6 * np.sqrt(2))
-    return vol / (regular * L ** d)
+    return vol / (regular * L**d)
 
 
 def delaunay(points: np.ndarray, body=None, min_quality: float = 1e-3) -> Topology:
@@ -128,12 +168,39 @@ def delaunay(points: np.ndarray, body=None, min_quality: float = 1e-3) -> Topolo
 
 _EDGES = {
     "triangle": [(0, 1), (1, 2), (0, 2)],
-    "quad": [(0, 1), (1, 2), (2, 3), (0, 3), (0, 2), (1, 3)],     # + both diagonals
+    "quad": [(0, 1), (1, 2), (2, 3), (0, 3), (0, 2), (1, 3)],  # + both diagonals
     "tetra": [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)],
     # hexahedron (meshio/VTK order): 12 edges, 12 face diagonals, 4 body diagonals
-    "hexahedron": [(0, 1), (1, 2), (2, 3), (0, 3), (4, 5), (5, 6), (6, 7), (4, 7), (0, 4), (1, 5), (2, 6), (3, 7),
-                   (0, 2), (1, 3), (4, 6), (5, 7), (0, 5), (1, 4), (1, 6), (2, 5), (2, 7), (3, 6), (0, 7), (3, 4),
-                   (0, 6), (1, 7), (2, 4), (3, 5)],
+    "hexahedron": [
+        (0, 1),
+        (1, 2),
+        (2, 3),
+        (0, 3),
+        (4, 5),
+        (5, 6),
+        (6, 7),
+        (4, 7),
+        (0, 4),
+        (1, 5),
+        (2, 6),
+        (3, 7),
+        (0, 2),
+        (1, 3),
+        (4, 6),
+        (5, 7),
+        (0, 5),
+        (1, 4),
+        (1, 6),
+        (2, 5),
+        (2, 7),
+        (3, 6),
+        (0, 7),
+        (3, 4),
+        (0, 6),
+        (1, 7),
+        (2, 4),
+        (3, 5),
+    ],
 }
 
 
@@ -149,13 +216,20 @@ def mesh_edges(cells: Mapping[str, np.ndarray], n_nodes: int | None = None) -> T
     pairs = []
     for ctype, c in cells.items():
         if ctype not in _EDGES:
-            raise ModelError(f"cell type '{ctype}' is not supported", field="body.file",
-                             fix="use triangle, quad, tetra or hexahedron cells")
+            raise ModelError(
+                f"cell type '{ctype}' is not supported",
+                field="body.file",
+                fix="use triangle, quad, tetra or hexahedron cells",
+            )
         c = np.asarray(c, int)
         pairs.extend(c[:, list(p)] for p in _EDGES[ctype])
     if not pairs:
         raise ModelError("no cells, hence no springs", field="model")
     pairs = np.unique(np.sort(np.concatenate(pairs), axis=1), axis=0)
     pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    return Topology(pairs, np.zeros(len(pairs), int), ("all",),
-                    MappingProxyType({k: np.asarray(v, int) for k, v in cells.items()}))
+    return Topology(
+        pairs,
+        np.zeros(len(pairs), int),
+        ("all",),
+        MappingProxyType({k: np.asarray(v, int) for k, v in cells.items()}),
+    )

@@ -47,7 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from harness.errors import ModelError, naming
-from harness.models.anisotropic import hex_to_tets
+from harness.models.cells import hex_to_tets
 from harness.models.sms import SpringNetwork
 
 # [model] volume (harness/case/sections.py): none; on the elements one kv each ('element')
@@ -58,7 +58,7 @@ MODES = ("none", "element", "shared", "node", "node-shared")
 def volumes(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
     """Signed volumes (3-D) or areas (2-D) (m,) of the simplices at positions x (n, dim)."""
     e = np.asarray(elements, int)
-    a = x[e[:, 1:]] - x[e[:, :1]]                  # (m, dim, dim) edge vectors from node 0
+    a = x[e[:, 1:]] - x[e[:, :1]]  # (m, dim, dim) edge vectors from node 0
     if x.shape[1] == 2:
         return 0.5 * (a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0])
     return np.einsum("ij,ij->i", a[:, 0], np.cross(a[:, 1], a[:, 2])) / 6.0
@@ -69,10 +69,10 @@ def volume_gradients(x: np.ndarray, elements: np.ndarray) -> np.ndarray:
     e = np.asarray(elements, int)
     a = x[e[:, 1:]] - x[e[:, :1]]
     g = np.zeros((len(e), x.shape[1] + 1, x.shape[1]))
-    if x.shape[1] == 2:   # A = (a0 x a1)/2: dA/da0 = (a1_y, -a1_x)/2, dA/da1 = (-a0_y, a0_x)/2
+    if x.shape[1] == 2:  # A = (a0 x a1)/2: dA/da0 = (a1_y, -a1_x)/2, dA/da1 = (-a0_y, a0_x)/2
         g[:, 1] = 0.5 * np.stack([a[:, 1, 1], -a[:, 1, 0]], axis=1)
         g[:, 2] = 0.5 * np.stack([-a[:, 0, 1], a[:, 0, 0]], axis=1)
-    else:                 # V = a0 . (a1 x a2)/6: cyclic cross products
+    else:  # V = a0 . (a1 x a2)/6: cyclic cross products
         g[:, 1] = np.cross(a[:, 1], a[:, 2]) / 6.0
         g[:, 2] = np.cross(a[:, 2], a[:, 0]) / 6.0
         g[:, 3] = np.cross(a[:, 0], a[:, 1]) / 6.0
@@ -106,8 +106,11 @@ def oriented(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
     scale = float(np.ptp(points, axis=0).max()) ** points.shape[1]
     flat = np.flatnonzero(np.abs(V) <= 1e-12 * scale)
     if len(flat):
-        raise ModelError(f"elements {flat[:5].tolist()} have zero rest volume", field="model.volume",
-                         fix="remove degenerate cells from the mesh")
+        raise ModelError(
+            f"elements {flat[:5].tolist()} have zero rest volume",
+            field="model.volume",
+            fix="remove degenerate cells from the mesh",
+        )
     neg = V < 0
     e[neg, 0], e[neg, 1] = e[neg, 1], e[neg, 0].copy()
     return e
@@ -117,6 +120,7 @@ def oriented(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
 class VolumeTerm:
     """elements (m, dim+1) node ids with positive rest volume V0 (m,) (2-D: area) and
     kv (m,) volume constants; ``shared``: fitted as one constant per body."""
+
     elements: np.ndarray
     V0: np.ndarray
     kv: np.ndarray
@@ -139,7 +143,9 @@ class VolumeTerm:
 
     def forces(self, x: np.ndarray) -> np.ndarray:
         """f = -dE/dx (n, dim) at positions x (n, dim)."""
-        return scaled_gradient_forces(x, self.elements, -self.kv * (volumes(x, self.elements) - self.V0) / self.V0)
+        return scaled_gradient_forces(
+            x, self.elements, -self.kv * (volumes(x, self.elements) - self.V0) / self.V0
+        )
 
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
         """C (n*dim, m): column e = grad V_e / sqrt(V0_e) at the rest positions ``points``."""
@@ -157,6 +163,7 @@ class NodeVolumeTerm:
     (m,); ``nodes`` (p,) the nodes that own volume, their rest volumes Vn (p,) and
     constants kv (p,) (named as VolumeTerm's, so SpringVolumeNetwork fits them);
     ``shared``: fitted as one constant per body."""
+
     elements: np.ndarray
     V0: np.ndarray
     nodes: np.ndarray
@@ -184,8 +191,10 @@ class NodeVolumeTerm:
         where = np.full(n, -1)
         where[self.nodes] = np.arange(len(self.nodes))
         m, k = self.elements.shape
-        return sp.csr_matrix((np.full(m * k, 1.0 / k), (np.repeat(np.arange(m), k), where[self.elements.ravel()])),
-                             shape=(m, len(self.nodes)))
+        return sp.csr_matrix(
+            (np.full(m * k, 1.0 / k), (np.repeat(np.arange(m), k), where[self.elements.ravel()])),
+            shape=(m, len(self.nodes)),
+        )
 
     def node_changes(self, x: np.ndarray) -> np.ndarray:
         """dV_a (p,): each node's share of its elements' volume change at positions x."""
@@ -204,8 +213,11 @@ class NodeVolumeTerm:
     def columns(self, points: np.ndarray) -> sp.csc_matrix:
         """C (n*dim, p): column a = sum_{e at a} grad V_e / ((dim + 1) sqrt(V0_a)) at rest."""
         points = np.asarray(points, float)
-        return (gradient_columns(points, self.elements) @ self._shares(len(points))
-                @ sp.diags(1.0 / np.sqrt(self.Vn))).tocsc()
+        return (
+            gradient_columns(points, self.elements)
+            @ self._shares(len(points))
+            @ sp.diags(1.0 / np.sqrt(self.Vn))
+        ).tocsc()
 
     def stiffness_matrix(self, points: np.ndarray, kv=None) -> sp.csc_matrix:
         """Linearised K_v = sum_a kv_a c_a c_a^T at rest (n*dim square)."""
@@ -216,6 +228,7 @@ class NodeVolumeTerm:
 @dataclass(frozen=True, eq=False)
 class SpringVolumeNetwork(SpringNetwork):
     """A SpringNetwork plus a VolumeTerm; its parameters are [k (springs), kv (elements)]."""
+
     volume: VolumeTerm | None = None
 
     def params(self) -> np.ndarray:
@@ -226,8 +239,8 @@ class SpringVolumeNetwork(SpringNetwork):
         k = np.asarray(k, float)
         vol = self.volume
         if k.shape == (self.n_springs + vol.n_elements,):
-            vol = dataclasses.replace(vol, kv=k[self.n_springs:].copy())
-            k = k[:self.n_springs]
+            vol = dataclasses.replace(vol, kv=k[self.n_springs :].copy())
+            k = k[: self.n_springs]
         net = super().with_k(k, **info)
         return dataclasses.replace(net, volume=vol)
 
@@ -258,11 +271,17 @@ def simplices(cells, dim: int) -> np.ndarray:
         elif ctype == "quad" and dim == 2:
             out.append(np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]]))
         else:
-            raise ModelError(f"volume term: cells of type '{ctype}' in a {dim}-D model", field="model.volume",
-                             fix="use triangle/quad (2-D) or tetra/hexahedron (3-D) cells")
+            raise ModelError(
+                f"volume term: cells of type '{ctype}' in a {dim}-D model",
+                field="model.volume",
+                fix="use triangle/quad (2-D) or tetra/hexahedron (3-D) cells",
+            )
     if not out:
-        raise ModelError("volume term: the model has no cells", field="model.volume",
-                         fix="use a placement with cells (grid, mesh, random, lloyd), or volume = 'none'")
+        raise ModelError(
+            "volume term: the model has no cells",
+            field="model.volume",
+            fix="use a placement with cells (grid, mesh, random, lloyd), or volume = 'none'",
+        )
     return np.concatenate(out)
 
 
@@ -291,9 +310,12 @@ def with_volume(net: SpringNetwork, mode: str, kv, elements=None) -> SpringNetwo
     per element), 'shared' (one per body), 'node' (one per node: NodeVolumeTerm) or
     'node-shared'; 'none' returns net unchanged."""
     if mode not in MODES:
-        raise ModelError(f"volume = '{mode}' is not one of {', '.join(MODES)}", field="model.volume",
-                         fix="volume = 'element' (one kv per element), 'shared' (one per body), 'node' (one per "
-                             "node) or 'node-shared'")
+        raise ModelError(
+            f"volume = '{mode}' is not one of {', '.join(MODES)}",
+            field="model.volume",
+            fix="volume = 'element' (one kv per element), 'shared' (one per body), 'node' (one per "
+            "node) or 'node-shared'",
+        )
     if mode == "none":
         return net
     el = simplices(net.cells, net.dim) if elements is None else np.asarray(elements, int)
@@ -319,7 +341,9 @@ def save(path, net) -> None:
     'node') beside its VTU."""
     v = net.volume
     on = "node" if isinstance(v, NodeVolumeTerm) else "element"
-    np.savez(path, elements=v.elements, V0=v.V0, kv=v.kv, shared=np.array(v.shared), on=np.array(on))
+    np.savez(
+        path, elements=v.elements, V0=v.V0, kv=v.kv, shared=np.array(v.shared), on=np.array(on)
+    )
 
 
 def load(path, net: SpringNetwork) -> SpringNetwork:
@@ -327,8 +351,10 @@ def load(path, net: SpringNetwork) -> SpringNetwork:
     d = np.load(path)
     el = np.asarray(d["elements"], int)
     if "on" in d and str(d["on"]) == "node":
-        vol = dataclasses.replace(NodeVolumeTerm.build(net.points, el, 1.0, bool(d["shared"])),
-                                  kv=np.asarray(d["kv"], float))
+        vol = dataclasses.replace(
+            NodeVolumeTerm.build(net.points, el, 1.0, bool(d["shared"])),
+            kv=np.asarray(d["kv"], float),
+        )
     else:
         vol = VolumeTerm(el, volumes(net.points, el), np.asarray(d["kv"], float), bool(d["shared"]))
     fields = {f.name: getattr(net, f.name) for f in dataclasses.fields(SpringNetwork)}
@@ -340,5 +366,9 @@ def effective_bulk_modulus(points, elements, u, p: float) -> float:
     whole surface (u (n, dim) its response; 2-D: the area modulus), with dV the linearised
     change of the elements' total volume, sum_e grad V_e . u."""
     e = oriented(points, elements)
-    dV = float(np.einsum("eid,eid->", volume_gradients(np.asarray(points, float), e), np.asarray(u, float)[e]))
+    dV = float(
+        np.einsum(
+            "eid,eid->", volume_gradients(np.asarray(points, float), e), np.asarray(u, float)[e]
+        )
+    )
     return p / (dV / float(volumes(np.asarray(points, float), e).sum()))

@@ -32,6 +32,7 @@ from harness.registry import OPTIMIZERS
 class FitResult:
     """k (e,) the best constants found; G before/after (G_final by a full re-solve);
     trace (m, 2) of (step, G); wall seconds; proposals/evaluations; accepted steps."""
+
     k: np.ndarray
     G_initial: float
     G_final: float
@@ -45,16 +46,25 @@ class FitResult:
 def check_method_options(method: str, options: dict) -> dict:
     """``options`` of ``method`` over its defaults, checked without running it (for
     ``springbench validate``: unknown keys and unusable values are one-line errors)."""
-    from harness.optimize import gradient  # slow to import (see tests/test_imports.py LAZY)
+    from harness.optimize import (
+        gauss_newton,
+        gradient,
+    )  # slow to import (tests/test_imports.py LAZY)
+
     if method in ("sa", "sa-refactor"):
         return annealing.check_options(options)
-    defaults = {"lbfgs": gradient.LBFGS_DEFAULTS, "nelder-mead": gradient.NM_DEFAULTS,
-                "gauss-newton": gradient.GN_DEFAULTS, "equilibrium-gap": equilibrium.EG_DEFAULTS}.get(method)
+    defaults = {
+        "lbfgs": gradient.LBFGS_DEFAULTS,
+        "nelder-mead": gradient.NM_DEFAULTS,
+        "gauss-newton": gauss_newton.GN_DEFAULTS,
+        "equilibrium-gap": equilibrium.EG_DEFAULTS,
+    }.get(method)
     return dict(options) if defaults is None else check_options(options, defaults, method)
 
 
-def optimize(problem: FitProblem, method: str, options: dict | None = None, seed: int = 0,
-             status=None) -> FitResult:
+def optimize(
+    problem: FitProblem, method: str, options: dict | None = None, seed: int = 0, status=None
+) -> FitResult:
     """Fit a model's constants to the reference.
 
     Parameters
@@ -77,8 +87,11 @@ def optimize(problem: FitProblem, method: str, options: dict | None = None, seed
         (method, seed, why it stopped, evaluations).
     """
     if method not in OPTIMIZERS:
-        raise SpringbenchError(f"unknown optimizer method '{method}'", field="optimizer.method",
-                               fix=f"use one of {sorted(OPTIMIZERS)}")
+        raise SpringbenchError(
+            f"unknown optimizer method '{method}'",
+            field="optimizer.method",
+            fix=f"use one of {sorted(OPTIMIZERS)}",
+        )
     with single_thread_blas():  # threads oversubscribe the 2 shared cores; chains use processes
         out = OPTIMIZERS.load(method)(problem, dict(options or {}), int(seed), status)
     info = {**out.pop("info"), "method": method, "seed": int(seed)}

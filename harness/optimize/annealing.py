@@ -23,26 +23,30 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.linalg.sparse import single_thread_blas
-from harness.optimize.incremental import IncrementalG, RefactorG
+from harness.optimize.incremental import IncrementalG
 from harness.optimize.options import check_options as check_numbers
 from harness.optimize.options import static_only
 from harness.optimize.problem import FitProblem
+from harness.optimize.refactor import RefactorG
 
 DEFAULTS = dict(
-    T0=1e-3,            # initial temperature, relative to G(k0)
-    r=0.98,             # temperature reduction, T_i = T_{i-1} r^i
+    T0=1e-3,  # initial temperature, relative to G(k0)
+    r=0.98,  # temperature reduction, T_i = T_{i-1} r^i
     temperatures=None,  # number of temperatures (None: 2 e, the paper's choice)
-    nlimit=None,        # proposals per temperature (None: 2 e)
-    glimit=None,        # improvements per temperature (None: e)
-    factor=0.2,         # proposal spread: k *= exp(factor * U(-1, 1))
-    tol=0.0,            # stop when a temperature improves G by < tol (relative) with no uphill move; 0: off
-    max_steps=None,     # budget in proposals (None: unlimited)
-    max_seconds=None,   # budget in wall seconds (None: unlimited)
-    chains=1,           # independent chains (seeds) in parallel processes; the best is kept
-    engine="auto",      # "auto" | "dense" | "sparse" (incremental) | "refactor"
-    refactor_every="auto",  # accepts between base renewals; "auto": dense 64, sparse flop balance 64..1024
-    dense_max=1200,     # largest free block (dofs) for the dense-inverse engine under "auto" (bench sa: crossover 1,000-1,800)
-    batch=64,           # proposals whose K0^-1 b_e are solved together
+    nlimit=None,  # proposals per temperature (None: 2 e)
+    glimit=None,  # improvements per temperature (None: e)
+    factor=0.2,  # proposal spread: k *= exp(factor * U(-1, 1))
+    tol=0.0,  # stop when a temperature improves G by < tol (relative) with no uphill move; 0: off
+    max_steps=None,  # budget in proposals (None: unlimited)
+    max_seconds=None,  # budget in wall seconds (None: unlimited)
+    chains=1,  # independent chains (seeds) in parallel processes; the best is kept
+    engine="auto",  # "auto" | "dense" | "sparse" (incremental) | "refactor"
+    # accepts between base renewals; "auto": dense 64, sparse flop balance 64..1024
+    refactor_every="auto",
+    # largest free block (dofs) for the dense-inverse engine under "auto" (bench sa: crossover
+    # 1,000-1,800)
+    dense_max=1200,
+    batch=64,  # proposals whose K0^-1 b_e are solved together
 )
 
 CHUNK = 256  # proposals drawn from the RNG at a time (fixed: the stream is engine-independent)
@@ -51,25 +55,46 @@ CHUNK = 256  # proposals drawn from the RNG at a time (fixed: the stream is engi
 def check_options(options: dict) -> dict:
     unknown = set(options) - set(DEFAULTS)
     if unknown:
-        raise SpringbenchError(f"unknown simulated-annealing option(s) {sorted(unknown)}", field="optimizer.options",
-                               fix=f"use some of {sorted(DEFAULTS)}")
+        raise SpringbenchError(
+            f"unknown simulated-annealing option(s) {sorted(unknown)}",
+            field="optimizer.options",
+            fix=f"use some of {sorted(DEFAULTS)}",
+        )
     numbers = [k for k in DEFAULTS if k not in ("engine", "refactor_every")]
-    check_numbers({k: options[k] for k in numbers if k in options}, dict.fromkeys(numbers, 0), "simulated-annealing")
+    check_numbers(
+        {k: options[k] for k in numbers if k in options},
+        dict.fromkeys(numbers, 0),
+        "simulated-annealing",
+    )
     if options.get("engine", "auto") not in ("auto", "dense", "sparse", "refactor"):
-        raise SpringbenchError(f"unknown engine {options['engine']!r}", field="optimizer.options.engine",
-                               fix="auto, dense, sparse or refactor")
+        raise SpringbenchError(
+            f"unknown engine {options['engine']!r}",
+            field="optimizer.options.engine",
+            fix="auto, dense, sparse or refactor",
+        )
     every = options.get("refactor_every", "auto")
-    if every != "auto" and not (isinstance(every, int) and not isinstance(every, bool) and every > 0):
-        raise SpringbenchError(f"refactor_every = {every!r} is not a count of accepts", field="optimizer.options.refactor_every",
-                               fix='"auto" or a whole number of accepts > 0')
+    if every != "auto" and not (
+        isinstance(every, int) and not isinstance(every, bool) and every > 0
+    ):
+        raise SpringbenchError(
+            f"refactor_every = {every!r} is not a count of accepts",
+            field="optimizer.options.refactor_every",
+            fix='"auto" or a whole number of accepts > 0',
+        )
     opts = {**DEFAULTS, **options}
     if not (0 < opts["r"] <= 1) or opts["T0"] < 0 or opts["factor"] <= 0:
-        raise SpringbenchError(f"need 0 < r <= 1, T0 >= 0, factor > 0 (got r={opts['r']}, T0={opts['T0']}, factor={opts['factor']})",
-                               field="optimizer.options", fix="e.g. T0 = 1e-3, r = 0.98, factor = 0.2")
+        raise SpringbenchError(
+            f"need 0 < r <= 1, T0 >= 0, factor > 0 (got r={opts['r']}, T0={opts['T0']}, "
+            f"factor={opts['factor']})",
+            field="optimizer.options",
+            fix="e.g. T0 = 1e-3, r = 0.98, factor = 0.2",
+        )
     return opts
 
 
-def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor: bool = False) -> dict:
+def anneal(
+    problem: FitProblem, options: dict, seed: int, status=None, refactor: bool = False
+) -> dict:
     """One chain. Returns a dict of FitResult fields (k, G_initial, G_final, trace,
     seconds, n_steps, accepted, info)."""
     opts = check_options(options)
@@ -88,10 +113,16 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
     if use_refactor:
         eng = RefactorG(problem, problem.k0)
     else:
-        eng = IncrementalG(problem, problem.k0, mode=opts["engine"], refactor_every=opts["refactor_every"],
-                           batch=int(opts["batch"]), dense_max=int(opts["dense_max"]))
+        eng = IncrementalG(
+            problem,
+            problem.k0,
+            mode=opts["engine"],
+            refactor_every=opts["refactor_every"],
+            batch=int(opts["batch"]),
+            dense_max=int(opts["dense_max"]),
+        )
     t_loop = time.perf_counter()
-    x = np.ones(npar)                      # factors of k0 per parameter
+    x = np.ones(npar)  # factors of k0 per parameter
     rng = np.random.default_rng(seed)
     G0 = eng.G()
     Gcur = G0
@@ -145,7 +176,11 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
             if max_steps is not None and steps >= max_steps:
                 stop = "max_steps"
                 break
-            if max_seconds is not None and (steps & 15) == 0 and time.perf_counter() - t_start >= max_seconds:
+            if (
+                max_seconds is not None
+                and (steps & 15) == 0
+                and time.perf_counter() - t_start >= max_seconds
+            ):
                 stop = "max_seconds"
                 break
         uphill_total += uphill
@@ -161,15 +196,36 @@ def anneal(problem: FitProblem, options: dict, seed: int, status=None, refactor:
         stop = "temperatures"
     loop_seconds = time.perf_counter() - t_loop
     k_best = problem.k_of(best_x)
-    G_final = problem.G(k_best)            # independent check: a full re-solve
+    G_final = problem.G(k_best)  # independent check: a full re-solve
     seconds = time.perf_counter() - t_start
-    return dict(k=k_best, G_initial=G0, G_final=G_final, trace=np.array(trace, float), seconds=seconds,
-                n_steps=steps, accepted=accepted,
-                info=dict(engine=eng.mode, stop=stop, temperatures_done=len(trace) - 1, temperatures=temperatures,
-                          nlimit=nlimit, glimit=glimit, T_abs0=opts["T0"] * G0, uphill=uphill_total,
-                          acceptance=accepted / max(steps, 1), G_best_tracked=best_G, seed=seed,
-                          rebases=eng.n_rebase, refactor_every=getattr(eng, "refactor_every", None), setup_seconds=t_loop - t_start, loop_seconds=loop_seconds,
-                          steps_per_s=steps / max(loop_seconds, 1e-12), e_squared_hours=e * e / max(steps / max(loop_seconds, 1e-12), 1e-12) / 3600))
+    return dict(
+        k=k_best,
+        G_initial=G0,
+        G_final=G_final,
+        trace=np.array(trace, float),
+        seconds=seconds,
+        n_steps=steps,
+        accepted=accepted,
+        info=dict(
+            engine=eng.mode,
+            stop=stop,
+            temperatures_done=len(trace) - 1,
+            temperatures=temperatures,
+            nlimit=nlimit,
+            glimit=glimit,
+            T_abs0=opts["T0"] * G0,
+            uphill=uphill_total,
+            acceptance=accepted / max(steps, 1),
+            G_best_tracked=best_G,
+            seed=seed,
+            rebases=eng.n_rebase,
+            refactor_every=getattr(eng, "refactor_every", None),
+            setup_seconds=t_loop - t_start,
+            loop_seconds=loop_seconds,
+            steps_per_s=steps / max(loop_seconds, 1e-12),
+            e_squared_hours=e * e / max(steps / max(loop_seconds, 1e-12), 1e-12) / 3600,
+        ),
+    )
 
 
 def _chain_worker(args):
@@ -183,7 +239,9 @@ def chain_seeds(seed: int, chains: int) -> list[int]:
     return [int(seed)] + [int(s) for s in extra]
 
 
-def run_chains(problem: FitProblem, options: dict, seed: int, status=None, refactor: bool = False) -> dict:
+def run_chains(
+    problem: FitProblem, options: dict, seed: int, status=None, refactor: bool = False
+) -> dict:
     """``chains`` independent chains; with more than one, each runs in its own process
     with single-threaded BLAS (env vars set before numpy loads there). Best G wins."""
     opts = check_options(options)
@@ -193,8 +251,11 @@ def run_chains(problem: FitProblem, options: dict, seed: int, status=None, refac
         with single_thread_blas():
             return anneal(problem, options, seed, status, refactor)
     import multiprocessing as mp
+
     ctx = mp.get_context("spawn")
-    saved = {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")}
+    saved = {
+        v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+    }
     os.environ.update({v: "1" for v in saved})
     try:
         with ctx.Pool(min(chains, os.cpu_count() or 1)) as pool:
@@ -206,8 +267,12 @@ def run_chains(problem: FitProblem, options: dict, seed: int, status=None, refac
             else:
                 os.environ[v] = old
     best = min(results, key=lambda r: r["G_final"])
-    best["info"] = {**best["info"], "chains": chains, "chain_seeds": seeds,
-                    "chain_G_final": [r["G_final"] for r in results]}
+    best["info"] = {
+        **best["info"],
+        "chains": chains,
+        "chain_seeds": seeds,
+        "chain_G_final": [r["G_final"] for r in results],
+    }
     return best
 
 

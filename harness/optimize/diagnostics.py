@@ -8,8 +8,10 @@ import math
 
 import numpy as np
 
-JACOBIAN_MAX = 4e6   # entries of the dense Jacobian the diagnostics may form (dense SVD: 1.4e6 entries
-                    # took 0.9 s, 1.1e7 took 21 s on one core; Deussen cases are below 1e6)
+JACOBIAN_MAX = (
+    4e6  # entries of the dense Jacobian the diagnostics may form (dense SVD: 1.4e6 entries
+)
+# took 0.9 s, 1.1e7 took 21 s on one core; Deussen cases are below 1e6)
 
 
 def fit_diagnostics(problem, k) -> dict:

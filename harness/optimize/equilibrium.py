@@ -34,9 +34,9 @@ from harness.optimize.options import check_options, static_only
 from harness.optimize.problem import FitProblem, value_and_grad
 
 EG_DEFAULTS = dict(
-    rtol=1e-10,         # relative residual of CG on the normal equations
-    maxiter=20000,      # CG iterations
-    reg=1e-10,          # Tikhonov weight towards k0, relative to each column's squared norm
+    rtol=1e-10,  # relative residual of CG on the normal equations
+    maxiter=20000,  # CG iterations
+    reg=1e-10,  # Tikhonov weight towards k0, relative to each column's squared norm
 )
 
 
@@ -45,7 +45,7 @@ def equation_error_system(problem: FitProblem):
     or per group in grouped mode): A (sum of free dofs over loads, n_params) csr, b."""
     rows, rhs = [], []
     for s in problem.load_sets():
-        C = s.B.T @ s.Uref                                   # (e, L): spring elongations of u*
+        C = s.B.T @ s.Uref  # (e, L): spring elongations of u*
         for j in range(C.shape[1]):
             f = s.F[:, j]
             rms = float(np.sqrt(np.mean(f * f)))
@@ -55,8 +55,13 @@ def equation_error_system(problem: FitProblem):
             rhs.append(sw * f)
     A = sp.vstack(rows).tocsr()
     if problem.groups is not None:
-        A = (A @ sp.csr_matrix((np.ones(problem.n_springs), (np.arange(problem.n_springs), problem.groups)),
-                               shape=(problem.n_springs, problem.n_params))).tocsr()
+        A = (
+            A
+            @ sp.csr_matrix(
+                (np.ones(problem.n_springs), (np.arange(problem.n_springs), problem.groups)),
+                shape=(problem.n_springs, problem.n_params),
+            )
+        ).tocsr()
     return A, np.concatenate(rhs)
 
 
@@ -69,25 +74,43 @@ def equilibrium_gap_factors(problem: FitProblem, options: dict | None = None):
     N = (A.T @ A).tocsr()
     d = N.diagonal()
     if not np.any(d > 0):
-        raise SpringbenchError("equilibrium-gap: the reference displacements stretch no spring",
-                               field="optimizer.method", fix="check the reference displacements or use lbfgs")
-    reg = float(opts["reg"]) * (d + 1e-3 * float(np.mean(d)))   # every column gets some: zero columns -> k0
+        raise SpringbenchError(
+            "equilibrium-gap: the reference displacements stretch no spring",
+            field="optimizer.method",
+            fix="check the reference displacements or use lbfgs",
+        )
+    reg = float(opts["reg"]) * (
+        d + 1e-3 * float(np.mean(d))
+    )  # every column gets some: zero columns -> k0
     N = (N + sp.diags(reg)).tocsr()
-    rhs = A.T @ b + reg                                          # reg * (x - 1): prior x = 1
+    rhs = A.T @ b + reg  # reg * (x - 1): prior x = 1
     its = [0]
 
     def cb(_):
         its[0] += 1
 
     M = sp.diags(1.0 / N.diagonal())
-    x, _ = spla.cg(N, rhs, x0=np.ones(len(d)), rtol=float(opts["rtol"]), maxiter=int(opts["maxiter"]), M=M, callback=cb)
+    x, _ = spla.cg(
+        N,
+        rhs,
+        x0=np.ones(len(d)),
+        rtol=float(opts["rtol"]),
+        maxiter=int(opts["maxiter"]),
+        M=M,
+        callback=cb,
+    )
     res = float(np.linalg.norm(N @ x - rhs) / max(np.linalg.norm(rhs), 1e-300))
     lo, hi = problem.bounds
     clipped = int(np.sum((x < lo) | (x > hi)))
     x = np.clip(x, lo, hi)
     gap = float(np.linalg.norm(A @ x - b) / max(np.linalg.norm(b), 1e-300))
-    return x, dict(eg_cg_iterations=its[0], eg_residual=res, eg_clipped=clipped, eg_gap=gap,
-                   eg_seconds=time.perf_counter() - t0)
+    return x, dict(
+        eg_cg_iterations=its[0],
+        eg_residual=res,
+        eg_clipped=clipped,
+        eg_gap=gap,
+        eg_seconds=time.perf_counter() - t0,
+    )
 
 
 def equilibrium_gap(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
@@ -100,11 +123,18 @@ def equilibrium_gap(problem: FitProblem, options: dict, seed: int = 0, status=No
     x, info = equilibrium_gap_factors(problem, options)
     k = problem.k_of(x)
     G = float(np.sqrt(value_and_grad(problem, k, grad=False)[0]))
-    if G > G0:                                  # keep the best point seen, as every optimiser does
+    if G > G0:  # keep the best point seen, as every optimiser does
         k, G, info["stop"] = problem.k0.copy(), G0, "worse than k0"
     else:
         info["stop"] = "solved"
     info["iterations"] = 1
-    return dict(k=k, G_initial=G0, G_final=G, trace=np.array([(0, G0), (1, G)]), seconds=time.perf_counter() - t0,
-                n_steps=1, accepted=1, info=info)
-
+    return dict(
+        k=k,
+        G_initial=G0,
+        G_final=G,
+        trace=np.array([(0, G0), (1, G)]),
+        seconds=time.perf_counter() - t0,
+        n_steps=1,
+        accepted=1,
+        info=info,
+    )

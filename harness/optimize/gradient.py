@@ -1,5 +1,5 @@
 """Gradient fits of the spring constants: adjoint gradient + L-BFGS-B, and Nelder-Mead
-for grouped mode.
+for grouped mode (Gauss-Newton on the same adjoint products: harness/optimize/gauss_newton.py).
 
 Adjoint gradient. Per load, G_i^2 = d^T W d + const with d = u_ref - u, K u = f,
 K = sum_e k_e b_e b_e^T. Differentiating K u = f gives K du/dk_e = -b_e (b_e.u), so
@@ -42,30 +42,30 @@ import scipy.sparse.linalg as spla
 
 from harness.errors import SpringbenchError
 from harness.optimize.equilibrium import equilibrium_gap_factors
-from harness.optimize.options import check_options, static_only
+from harness.optimize.options import check_options
 from harness.optimize.problem import FitProblem, stiffness, value_and_grad
 
 LBFGS_DEFAULTS = dict(
-    maxiter=15000,      # L-BFGS-B iterations
-    maxfun=None,        # function evaluations (None: 1.25 * maxiter)
-    max_seconds=None,   # wall-time budget
-    target=0.0,         # stop when G / G(k0) <= target
-    memory=20,          # L-BFGS history length (scipy's maxcor)
-    gtol=0.0,           # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
-    ftol=0.0,           # relative decrease tolerance of Phi
-    init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
-    scale=0.5,          # diagonal scaling of log k by (spring tension^2 at k0)^-scale; 0: none
-    prior=0.0,          # weight a of the prior a * mean_e log(k_e/k0_e)^2 (see above); 0: none
-    x0=None,            # start point log(k/k0) per parameter (a multi-start's other starts); None: by init
+    maxiter=15000,  # L-BFGS-B iterations
+    maxfun=None,  # function evaluations (None: 1.25 * maxiter)
+    max_seconds=None,  # wall-time budget
+    target=0.0,  # stop when G / G(k0) <= target
+    memory=20,  # L-BFGS history length (scipy's maxcor)
+    gtol=0.0,  # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
+    ftol=0.0,  # relative decrease tolerance of Phi
+    init="none",  # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
+    scale=0.5,  # diagonal scaling of log k by (spring tension^2 at k0)^-scale; 0: none
+    prior=0.0,  # weight a of the prior a * mean_e log(k_e/k0_e)^2 (see above); 0: none
+    x0=None,  # start point log(k/k0) per parameter (a multi-start's other starts); None: by init
 )
 
 NM_DEFAULTS = dict(
-    maxiter=None,       # Nelder-Mead iterations (None: 400 * parameters)
+    maxiter=None,  # Nelder-Mead iterations (None: 400 * parameters)
     max_seconds=None,
-    xatol=1e-10,        # simplex size in log k
-    fatol=0.0,          # objective spread (on Phi)
+    xatol=1e-10,  # simplex size in log k
+    fatol=0.0,  # objective spread (on Phi)
     target=0.0,
-    prior=0.0,          # as lbfgs's
+    prior=0.0,  # as lbfgs's
 )
 
 
@@ -75,7 +75,11 @@ def tension_scaling(problem: FitProblem, tension2: np.ndarray, power: float) -> 
     du/dlog k_e = -K^-1 b_e t_e, the curvature of G^2 along log k_e is t_e^2 |K^-1 b_e|^2:
     with the second factor taken as constant, power 1/2 is a Jacobi scaling, so weakly
     loaded springs get longer steps."""
-    e = tension2 if problem.groups is None else np.bincount(problem.groups, weights=tension2, minlength=problem.n_params)
+    e = (
+        tension2
+        if problem.groups is None
+        else np.bincount(problem.groups, weights=tension2, minlength=problem.n_params)
+    )
     m = float(np.mean(e))
     if power == 0 or m <= 0:
         return np.ones(problem.n_params)
@@ -90,14 +94,22 @@ def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
     n = K.shape[0]
     if n <= 600 or nk >= n - 1:
         import scipy.linalg as sla
+
         minv = 1.0 / np.sqrt(mt.m)
         A = (K.toarray() * minv[:, None]) * minv[None, :]
         mu, V = sla.eigh(A, subset_by_index=[0, nk - 1])
         phi = V * minv[:, None]
     else:
         import scipy.sparse as sp
-        mu, phi = spla.eigsh(K, k=nk, M=sp.diags(mt.m), sigma=0.0, which="LM",
-                             v0=np.random.default_rng(0).standard_normal(K.shape[0]))  # seeded start
+
+        mu, phi = spla.eigsh(
+            K,
+            k=nk,
+            M=sp.diags(mt.m),
+            sigma=0.0,
+            which="LM",
+            v0=np.random.default_rng(0).standard_normal(K.shape[0]),
+        )  # seeded start
         o = np.argsort(mu)
         mu, phi = mu[o], phi[:, o]
         phi = phi / np.sqrt(np.sum(phi * phi * mt.m[:, None], axis=0))[None, :]
@@ -111,7 +123,7 @@ def freq_term_and_grad(problem: FitProblem, k: np.ndarray):
     f, phi = frequencies(problem, k, vectors=True)
     rel = f / mt.target - 1.0
     val = mt.weight * float(rel @ rel)
-    dfdk = (mt.B.T @ phi) ** 2 / (8 * np.pi ** 2 * np.maximum(f, 1e-300))[None, :]
+    dfdk = (mt.B.T @ phi) ** 2 / (8 * np.pi**2 * np.maximum(f, 1e-300))[None, :]
     grad = mt.weight * (dfdk @ (2.0 * rel / mt.target))
     return val, grad
 
@@ -120,17 +132,23 @@ class Objective:
     """Phi(x) = G^2/G0^2 (+ frequency term) over x = log(k/k0) per parameter, with its
     gradient; remembers the best point and stops at a target or a time budget."""
 
-    def __init__(self, problem: FitProblem, target: float = 0.0, max_seconds=None, prior: float = 0.0):
+    def __init__(
+        self, problem: FitProblem, target: float = 0.0, max_seconds=None, prior: float = 0.0
+    ):
         self.p = problem
         self.prior = float(prior)
-        self.tension2 = np.zeros(problem.n_springs)     # squared spring tensions at k0 (for scalings)
+        self.tension2 = np.zeros(problem.n_springs)  # squared spring tensions at k0 (for scalings)
         self.G0sq, _ = value_and_grad(problem, problem.k0, grad=False, tension2=self.tension2)
         if self.G0sq <= 0:
-            raise SpringbenchError("G(k0) = 0: nothing to fit", field="optimizer", fix="check the reference displacements")
+            raise SpringbenchError(
+                "G(k0) = 0: nothing to fit",
+                field="optimizer",
+                fix="check the reference displacements",
+            )
         self.target, self.max_seconds = target, max_seconds
         self.t0 = time.perf_counter()
         self.n_eval = 0
-        self.phi0 = 1.0                   # Phi at k0: k0 is a point seen (a start elsewhere may be worse)
+        self.phi0 = 1.0  # Phi at k0: k0 is a point seen (a start elsewhere may be worse)
         if problem.modal is not None and problem.modal.weight > 0:
             self.phi0 += freq_term_and_grad(problem, problem.k0)[0]
         self.best = (self.phi0, np.zeros(problem.n_params), float(np.sqrt(self.G0sq)))
@@ -185,8 +203,9 @@ def prior_term(problem: FitProblem, x: np.ndarray, weight: float):
 # what scipy's L-BFGS-B means by a status whose detail it leaves empty (scipy >= 1.15 says
 # "ABNORMAL: " where the Fortran code said ABNORMAL_TERMINATION_IN_LNSRCH)
 SCIPY_DETAILS = {
-    "ABNORMAL": "the line search found no step that lowers the objective (ABNORMAL_TERMINATION_IN_LNSRCH): "
-                "rounding dominates the objective's changes, or its gradient disagrees with it",
+    "ABNORMAL": "the line search found no step that lowers the objective "
+    "(ABNORMAL_TERMINATION_IN_LNSRCH): "
+    "rounding dominates the objective's changes, or its gradient disagrees with it",
     "ERROR": "invalid input to L-BFGS-B",
     "WARNING": "stopped on a warning",
 }
@@ -205,14 +224,22 @@ def scipy_stop(res) -> str:
 def _result(obj: Objective, t0: float, stop: str, nit: int, extra: dict) -> dict:
     x = obj.best[1]
     k = obj.k(x)
-    G_final = obj.best[2]                    # evaluated by a fresh factorisation at k
+    G_final = obj.best[2]  # evaluated by a fresh factorisation at k
     info = dict(stop=stop, iterations=nit, evaluations=obj.n_eval, phi=float(obj.best[0]), **extra)
     if obj.p.modal is not None:
         f = frequencies(obj.p, k)
         info["frequencies"] = f.tolist()
         info["freq_rel_error"] = (f / obj.p.modal.target - 1).tolist()
-    return dict(k=k, G_initial=float(np.sqrt(obj.G0sq)), G_final=G_final, trace=np.array([(0, np.sqrt(obj.G0sq))] + obj.trace),
-                seconds=time.perf_counter() - t0, n_steps=obj.n_eval, accepted=nit, info=info)
+    return dict(
+        k=k,
+        G_initial=float(np.sqrt(obj.G0sq)),
+        G_final=G_final,
+        trace=np.array([(0, np.sqrt(obj.G0sq))] + obj.trace),
+        seconds=time.perf_counter() - t0,
+        n_steps=obj.n_eval,
+        accepted=nit,
+        info=info,
+    )
 
 
 class _Stop(Exception):
@@ -240,39 +267,52 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
         if obj.done():
             raise _Stop
 
-    d = tension_scaling(problem, obj.tension2, float(opts["scale"]))   # x = d y
+    d = tension_scaling(problem, obj.tension2, float(opts["scale"]))  # x = d y
     first = None
     if opts["x0"] is not None:
         first = (x0 / d, *obj(x0))
     elif opts["init"] != "none":
         first = (x0 / d, *obj(x0))
-        if first[1] > obj.phi0:         # the start is worse than k0: start from k0 instead
+        if first[1] > obj.phi0:  # the start is worse than k0: start from k0 instead
             x0, first = np.zeros(n), None
             init_info["init_rejected"] = True
 
     def fun(y):
         nonlocal first
-        if first is not None and np.array_equal(y, first[0]):   # scipy's first call: known
+        if first is not None and np.array_equal(y, first[0]):  # scipy's first call: known
             phi, gx = first[1:]
             first = None
         else:
             if obj.done():
                 raise _Stop
             phi, gx = obj(d * y)
-        if obj.done() == "target":      # no need to wait for the next call
+        if obj.done() == "target":  # no need to wait for the next call
             raise _Stop
         return phi, d * gx
 
     stop = None
     try:
-        res = so.minimize(fun, x0 / d, jac=True, method="L-BFGS-B", callback=cb,
-                          bounds=list(zip(np.log(lo) / d, np.log(hi) / d)),
-                          options=dict(maxiter=int(opts["maxiter"]), maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
-                                       maxcor=int(opts["memory"]), gtol=float(opts["gtol"]), ftol=float(opts["ftol"])))
+        res = so.minimize(
+            fun,
+            x0 / d,
+            jac=True,
+            method="L-BFGS-B",
+            callback=cb,
+            bounds=list(zip(np.log(lo) / d, np.log(hi) / d)),
+            options=dict(
+                maxiter=int(opts["maxiter"]),
+                maxfun=int(opts["maxfun"] or 1.25 * opts["maxiter"]),
+                maxcor=int(opts["memory"]),
+                gtol=float(opts["gtol"]),
+                ftol=float(opts["ftol"]),
+            ),
+        )
         stop = scipy_stop(res)
     except _Stop:
         stop = obj.done()
-    return _result(obj, t0, stop, nit[0], {"init": opts["init"], "prior": float(opts["prior"]), **init_info})
+    return _result(
+        obj, t0, stop, nit[0], {"init": opts["init"], "prior": float(opts["prior"]), **init_info}
+    )
 
 
 def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
@@ -280,8 +320,11 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
     so it also serves as an independent check of the gradient fits."""
     opts = check_options(options, NM_DEFAULTS, "nelder-mead")
     if problem.n_params > 50:
-        raise SpringbenchError(f"nelder-mead with {problem.n_params} parameters is hopeless", field="optimizer.method",
-                               fix="use grouped mode (groups) or method = 'lbfgs'")
+        raise SpringbenchError(
+            f"nelder-mead with {problem.n_params} parameters is hopeless",
+            field="optimizer.method",
+            fix="use grouped mode (groups) or method = 'lbfgs'",
+        )
     t0 = time.perf_counter()
     obj = Objective(problem, opts["target"], opts["max_seconds"], opts["prior"])
     lo, hi = problem.bounds
@@ -299,10 +342,20 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
 
     stop = None
     try:
-        res = so.minimize(fun, np.zeros(n), method="Nelder-Mead", callback=cb,
-                          bounds=[(np.log(lo), np.log(hi))] * n,
-                          options=dict(maxiter=int(opts["maxiter"] or 400 * n), maxfev=int(opts["maxiter"] or 400 * n) * 2,
-                                       xatol=float(opts["xatol"]), fatol=float(opts["fatol"]), adaptive=n > 4))
+        res = so.minimize(
+            fun,
+            np.zeros(n),
+            method="Nelder-Mead",
+            callback=cb,
+            bounds=[(np.log(lo), np.log(hi))] * n,
+            options=dict(
+                maxiter=int(opts["maxiter"] or 400 * n),
+                maxfev=int(opts["maxiter"] or 400 * n) * 2,
+                xatol=float(opts["xatol"]),
+                fatol=float(opts["fatol"]),
+                adaptive=n > 4,
+            ),
+        )
         stop = scipy_stop(res)
     except _Stop:
         stop = obj.done()
@@ -315,176 +368,12 @@ INITS = ("none", "equilibrium-gap")
 def start_point(problem: FitProblem, init: str):
     """x0 = log(k/k0) per parameter for option ``init``, and info about how it was found."""
     if init not in INITS:
-        raise SpringbenchError(f"unknown init '{init}'", field="optimizer.options.init", fix=f"use one of {list(INITS)}")
+        raise SpringbenchError(
+            f"unknown init '{init}'",
+            field="optimizer.options.init",
+            fix=f"use one of {list(INITS)}",
+        )
     if init == "none":
         return np.zeros(problem.n_params), {}
     x, info = equilibrium_gap_factors(problem)
     return np.log(x), info
-
-
-GN_DEFAULTS = dict(
-    maxiter=200,        # outer (Levenberg-Marquardt) iterations
-    cg_maxiter=200,     # inner CG iterations on the normal equations per outer step
-    cg_rtol=0.01,       # inner relative residual of CG
-    mu=1e-4,            # initial damping, relative to the mean diagonal of J^T J
-    probes=0,           # random probes for a Jacobi preconditioner diag(J^T J) ~ E[(J^T z)^2]; 0: none
-                        # (it did not help on grid networks, hence off; nor did the spring-tension
-                        # Jacobi estimate that helps lbfgs: fewer solves, same G per solve)
-    max_seconds=None,
-    target=0.0,         # stop when G / G(k0) <= target
-    init="none",        # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
-    ftol=1e-8,          # converged (as MINPACK's lmder): an accepted step lowers G^2, and its model
-                        # predicts, by less than ftol * G^2; or the damping exceeds 1e12 x its start
-)
-
-
-class _Jacobian:
-    """Residual r = sqrt(W) (u_ref - u) of all loads and products with its Jacobian with
-    respect to x = log k, at one k (one factorisation per load set, reused by every
-    product): J v = sqrt(W) K^-1 B (k v B^T u),  J^T y = sum_l k (B^T u_l)(B^T K^-1 sqrt(W) y_l)."""
-
-    def __init__(self, problem: FitProblem, k):
-        self.p, self.k = problem, k
-        self.parts = []
-        G2 = 0.0
-        for s in problem.load_sets():
-            fac = s.factor(k)
-            U = fac.solve(s.F).reshape(s.F.shape)
-            sw = np.sqrt(s.W)
-            R = sw * (s.Uref - U)
-            G2 += float(np.sum(R * R)) + s.const
-            self.parts.append((s, fac, sw, s.B.T @ U, R))
-        self.G2 = G2
-        self.n_solves = 0
-
-    def residual(self):
-        return np.concatenate([R.ravel() for *_, R in self.parts])
-
-    def matvec(self, v):
-        kv = self.k * v
-        out = []
-        for s, fac, sw, BtU, _ in self.parts:
-            X = fac.solve(s.B @ (kv[:, None] * BtU)).reshape(s.B.shape[0], BtU.shape[1])
-            out.append((sw * X).ravel())
-            self.n_solves += 1
-        return np.concatenate(out)
-
-    def rmatvec(self, y):
-        g = np.zeros(len(self.k))
-        pos = 0
-        for s, fac, sw, BtU, R in self.parts:
-            Y = y[pos:pos + R.size].reshape(R.shape)
-            pos += R.size
-            Lam = fac.solve(sw * Y).reshape(R.shape)
-            g += np.sum((s.B.T @ Lam) * BtU, axis=1)
-            self.n_solves += 1
-        return self.k * g
-
-
-def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
-    """Levenberg-Marquardt over x = log(k/k0) with CG on the normal equations (J^T J +
-    mu I) p = -J^T r: G is a least-squares norm, so Gauss-Newton uses its structure where
-    L-BFGS only sees a scalar; on recoverable problems (zero residual) it converges fast.
-    Each CG step costs one forward and one adjoint solve per load set with the kept
-    factorisation. Grouped mode sums the Jacobian columns of a group."""
-    import scipy.sparse.linalg as spla_
-    opts = check_options(options, GN_DEFAULTS, "gauss-newton")
-    static_only(problem, "gauss-newton")
-    t0 = time.perf_counter()
-    lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
-    npar = problem.n_params
-    groups = problem.groups
-
-    def expand(v):
-        return v if groups is None else v[groups]
-
-    def reduce(g):
-        return g if groups is None else np.bincount(groups, weights=g, minlength=npar)
-
-    x, init_info = start_point(problem, opts["init"])
-    t_fac = time.perf_counter()
-    Jc = _Jacobian(problem, problem.k_of(np.exp(x)))
-    t_fac = time.perf_counter() - t_fac     # one factorisation round: reserved at the deadline
-    G0sq = Jc.G2 if opts["init"] == "none" else value_and_grad(problem, problem.k0, grad=False)[0]
-    trace = [(0, np.sqrt(G0sq))] + ([] if opts["init"] == "none" else [(0, np.sqrt(Jc.G2))])
-    if Jc.G2 > G0sq:                        # a start worse than k0: fall back to k0
-        x, Jc = np.zeros(npar), _Jacobian(problem, problem.k0)
-        init_info["init_rejected"] = True
-    mu = None
-    stop, nit, n_solves, done_its = "maxiter", 0, 0, 0
-    deadline = None if opts["max_seconds"] is None else t0 + opts["max_seconds"]
-
-    class _Out(Exception):
-        pass
-
-    for nit in range(1, int(opts["maxiter"]) + 1):
-        if opts["target"] > 0 and Jc.G2 <= (opts["target"] ** 2) * G0sq:
-            stop = "target"
-            break
-        if deadline is not None and time.perf_counter() >= deadline:
-            stop = "max_seconds"
-            break
-        r = Jc.residual()
-        g = reduce(Jc.rmatvec(r))
-        rng = np.random.default_rng([seed, nit])
-        if opts["probes"] > 0:  # Hutchinson estimate of diag(J^T J)
-            diag = np.zeros(npar)
-            for _ in range(int(opts["probes"])):
-                diag += reduce(Jc.rmatvec(rng.choice([-1.0, 1.0], size=len(r)))) ** 2
-            diag /= opts["probes"]
-            diag = np.maximum(diag, 1e-12 * diag.max())
-        else:
-            diag = np.ones(npar)
-        if mu is None:
-            mu = mu0 = opts["mu"] * float(np.mean(diag))
-        A = spla_.LinearOperator((npar, npar), dtype=float,
-                                 matvec=lambda v: reduce(Jc.rmatvec(Jc.matvec(expand(v)))) + mu * v)
-        Minv = spla_.LinearOperator((npar, npar), dtype=float, matvec=lambda v: v / (diag + mu))
-
-        last = [None]
-
-        def cb(xk):
-            last[0] = np.array(xk)
-            if deadline is not None and time.perf_counter() >= deadline - t_fac:
-                raise _Out
-
-        rtol = float(opts["cg_rtol"])  # fixed: a loose Eisenstat-Walker forcing term did worse here
-        try:
-            p, _ = spla_.cg(A, -g, rtol=rtol, maxiter=int(opts["cg_maxiter"]), callback=cb, M=Minv)
-        except _Out:  # out of time: a truncated CG iterate is still a descent direction; try it once
-            stop = "max_seconds"
-            if last[0] is None:
-                break
-            p = last[0]
-        pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(expand(p)) ** 2)))  # model decrease of G^2/2
-        n_solves += Jc.n_solves
-        for t in ((1.0,) if stop == "max_seconds" else (1.0, 0.25, 1 / 16)):  # backtrack before giving up
-            if t < 1 and deadline is not None and time.perf_counter() >= deadline - t_fac:
-                stop = "max_seconds"
-                break
-            xn = np.clip(x + t * p, lo, hi)
-            Jn = _Jacobian(problem, problem.k_of(np.exp(xn)))
-            if Jn.G2 < Jc.G2:
-                break
-        actual = 0.5 * (Jc.G2 - Jn.G2)
-        if actual > 0:
-            small = 2 * max(actual, pred) <= float(opts["ftol"]) * Jc.G2
-            x, Jc = xn, Jn
-            rho = actual / max(pred, 1e-300)
-            mu *= 1 / 3 if (t == 1.0 and rho > 0.75) else (1.0 if t == 1.0 and rho > 0.25 else 4.0)
-        else:
-            mu *= 16.0
-            small = mu > 1e12 * mu0
-        if small and stop != "max_seconds":
-            stop = "converged"
-        trace.append((nit, np.sqrt(Jc.G2)))
-        done_its = nit
-        if status is not None:
-            status(f"gauss-newton it {nit} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}")
-        if stop in ("max_seconds", "converged"):
-            break
-    k = problem.k_of(np.exp(x))
-    G_final = float(np.sqrt(Jc.G2))          # from a fresh factorisation at k (no incremental state)
-    return dict(k=k, G_initial=float(np.sqrt(G0sq)), G_final=G_final, trace=np.array(trace), seconds=time.perf_counter() - t0,
-                n_steps=done_its, accepted=done_its, info=dict(stop=stop, iterations=done_its, solves=n_solves + Jc.n_solves, mu=mu,
-                                                     init=opts["init"], **init_info))

@@ -53,7 +53,7 @@ class _Set:
         self.Uref = ls.Uref[:, cols]
         self.w = ls.W[:, cols[0]].copy()
         self.const = const
-        self.Bt = ls.B.T.tocsr()   # rows b_e^T: a batch's right-hand sides
+        self.Bt = ls.B.T.tocsr()  # rows b_e^T: a batch's right-hand sides
 
 
 def _split(ls):
@@ -70,7 +70,7 @@ def _split(ls):
 
 
 SPARSE_MIN = 400  # below: the load set's dense Cholesky
-SOLVE_LEAF = 64   # dofs per leaf front of the engine's factorisation (see sparse_factor)
+SOLVE_LEAF = 64  # dofs per leaf front of the engine's factorisation (see sparse_factor)
 
 
 def sparse_factor(ls, k):
@@ -82,17 +82,19 @@ def sparse_factor(ls, k):
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
     K = ls.stiffness(k)
-    sym = per_matrix(ls.B, "symbolic-sa", lambda: Symbolic(K, ls.coords, leaf=SOLVE_LEAF))   # every engine's
+    sym = per_matrix(
+        ls.B, "symbolic-sa", lambda: Symbolic(K, ls.coords, leaf=SOLVE_LEAF)
+    )  # every engine's
     fac = MultifrontalCholesky(K, sym, ls.name)
-    if warm_up():   # compiled now, not in the timed loop; inverted diagonal blocks: every
-        fac._flat(drop=True)   # solve with this factor takes the compiled path
+    if warm_up():  # compiled now, not in the timed loop; inverted diagonal blocks: every
+        fac._flat(drop=True)  # solve with this factor takes the compiled path
     return fac
 
 
-AUTO_MIN, AUTO_MAX = 64, 1024   # bounds of the automatic renewal interval (accepts)
-AUTO_MEMORY = 400e6             # bytes for the held basis Z (S x interval x nfree doubles)
+AUTO_MIN, AUTO_MAX = 64, 1024  # bounds of the automatic renewal interval (accepts)
+AUTO_MEMORY = 400e6  # bytes for the held basis Z (S x interval x nfree doubles)
 DENSE_INTERVAL = 64
-NODE_FLOPS = 2e6                # a front's fixed cost in the factorisation, in flops (Python)
+NODE_FLOPS = 2e6  # a front's fixed cost in the factorisation, in flops (Python)
 
 
 def auto_interval(sets, mode: str) -> int:
@@ -117,8 +119,13 @@ def auto_interval(sets, mode: str) -> int:
         if id(st.fac) in seen:
             continue
         seen.add(id(st.fac))
-        R += sum(nd["nv"] ** 3 / 3 + nd["nv"] ** 2 * len(nd["U"]) + nd["nv"] * len(nd["U"]) ** 2 + NODE_FLOPS
-                 for nd in sym.nodes)
+        R += sum(
+            nd["nv"] ** 3 / 3
+            + nd["nv"] ** 2 * len(nd["U"])
+            + nd["nv"] * len(nd["U"]) ** 2
+            + NODE_FLOPS
+            for nd in sym.nodes
+        )
     nmax = max(st.n for st in sets)
     mem = AUTO_MEMORY / (8.0 * len(sets) * max(nmax, 1))
     return int(max(AUTO_MIN, min(np.sqrt(R / (1.7 * n)), AUTO_MAX, mem)))
@@ -139,8 +146,15 @@ class IncrementalG:
     in which M^-1 = T diag(1/sigma) T^T and u = u0 - V Cv with Cv's columns the s_j:
     an accept writes one row/column and touches nothing else of size m^2."""
 
-    def __init__(self, problem: FitProblem, k, mode: str = "auto", refactor_every="auto",
-                 batch: int = 64, dense_max: int = 1200):
+    def __init__(
+        self,
+        problem: FitProblem,
+        k,
+        mode: str = "auto",
+        refactor_every="auto",
+        batch: int = 64,
+        dense_max: int = 1200,
+    ):
         self.problem = problem
         self.k = np.array(k, float)
         lsets = problem.load_sets()
@@ -163,28 +177,37 @@ class IncrementalG:
         self.refactor_every = self.cap = max(cap, 1)
         nm, L, cap, q, P = self.nmax, self.L, self.cap, self.batch, self.gi.shape[2]
 
-        def zeros(*shape, dtype=float):   # written now: no page faults inside the SA loop
+        def zeros(*shape, dtype=float):  # written now: no page faults inside the SA loop
             a = np.empty(shape, dtype)
             a.fill(0)
             return a
-        self.Zt = zeros(S, cap, nm)              # rows: y = K0^-1 b of the accepted springs
-        self.T = zeros(S, cap, cap)              # V = Z T
-        self.Hz = zeros(S, cap, cap)             # V^T W V
-        self.sig = zeros(S, cap)                 # sigma_j = 1/delta_j + b_j^T z_j
-        self.Cv = zeros(S, L, cap)               # u = u0 - V Cv^T
-        self.PV = zeros(S, L, cap)               # V^T r0
-        self.acc_i = zeros(S, cap, P, dtype=np.int64)   # b of the accepted springs: rows ...
-        self.acc_v = zeros(S, cap, P)                   # ... and values
-        self.AV = zeros(S, cap, q)               # V^T W Y for the current batch
-        self.Yt = zeros(S, q, nm)                # rows: K0^-1 b for the batch's springs
-        self.YY = zeros(S, q, q)                 # Y^T W Y
-        self.YR = zeros(S, q, L)                 # Y^T r0
-        self.bY = zeros(S, q)                    # b_j^T y_j
-        self.scratch = (zeros(S, cap), zeros(S, cap), zeros(S), zeros(S, L), zeros(S), zeros(S, L), zeros(S))
+
+        self.Zt = zeros(S, cap, nm)  # rows: y = K0^-1 b of the accepted springs
+        self.T = zeros(S, cap, cap)  # V = Z T
+        self.Hz = zeros(S, cap, cap)  # V^T W V
+        self.sig = zeros(S, cap)  # sigma_j = 1/delta_j + b_j^T z_j
+        self.Cv = zeros(S, L, cap)  # u = u0 - V Cv^T
+        self.PV = zeros(S, L, cap)  # V^T r0
+        self.acc_i = zeros(S, cap, P, dtype=np.int64)  # b of the accepted springs: rows ...
+        self.acc_v = zeros(S, cap, P)  # ... and values
+        self.AV = zeros(S, cap, q)  # V^T W Y for the current batch
+        self.Yt = zeros(S, q, nm)  # rows: K0^-1 b for the batch's springs
+        self.YY = zeros(S, q, q)  # Y^T W Y
+        self.YR = zeros(S, q, L)  # Y^T r0
+        self.bY = zeros(S, q)  # b_j^T y_j
+        self.scratch = (
+            zeros(S, cap),
+            zeros(S, cap),
+            zeros(S),
+            zeros(S, L),
+            zeros(S),
+            zeros(S, L),
+            zeros(S),
+        )
         self._kp, self._ka = _kernels()
         self.m = 0
-        self.col: dict[int, int] = {}            # spring -> batch column
-        self._last_j = -1                        # batch column of the latest proposal
+        self.col: dict[int, int] = {}  # spring -> batch column
+        self._last_j = -1  # batch column of the latest proposal
         self.upcoming: np.ndarray = np.empty(0, int)
         self.n_rebase = 0
         self._pending = None
@@ -195,11 +218,48 @@ class IncrementalG:
     def _warm_up(self):
         """Compile or load the kernels now (not inside a timed SA loop): a proposal and an
         accept at m = 0 on the empty batch; the next real accept overwrites what they wrote."""
-        self._kp(0, 0, 1.0, self.gf[0], self.gv[0], self.U0f, self.Yt.reshape(-1), self.batch, self.nmax,
-                 self.acc_i, self.acc_v, self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV, self.YY,
-                 self.YR, self.bY, *self.scratch)
-        self._ka(0, 0, 1.0, self.gi[0], self.gv[0], self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
-                 self.YY, self.Yt, self.Zt, self.acc_i, self.acc_v, *self.scratch[:6])
+        self._kp(
+            0,
+            0,
+            1.0,
+            self.gf[0],
+            self.gv[0],
+            self.U0f,
+            self.Yt.reshape(-1),
+            self.batch,
+            self.nmax,
+            self.acc_i,
+            self.acc_v,
+            self.T,
+            self.Hz,
+            self.sig,
+            self.Cv,
+            self.PV,
+            self.AV,
+            self.YY,
+            self.YR,
+            self.bY,
+            *self.scratch,
+        )
+        self._ka(
+            0,
+            0,
+            1.0,
+            self.gi[0],
+            self.gv[0],
+            self.T,
+            self.Hz,
+            self.sig,
+            self.Cv,
+            self.PV,
+            self.AV,
+            self.YY,
+            self.Yt,
+            self.Zt,
+            self.acc_i,
+            self.acc_v,
+            *self.scratch[:6],
+        )
         self.T[:, 0, 0] = 0.0
 
     def _gather_maps(self):
@@ -224,7 +284,11 @@ class IncrementalG:
             key = id(st.ls)
             if key not in fac:
                 if self.mode == "dense":
-                    fac[key] = np.linalg.inv(st.ls.stiffness(self.k).toarray()) if st.n else np.zeros((0, 0))
+                    fac[key] = (
+                        np.linalg.inv(st.ls.stiffness(self.k).toarray())
+                        if st.n
+                        else np.zeros((0, 0))
+                    )
                 else:
                     fac[key] = sparse_factor(st.ls, self.k) if st.n else None
             if self.mode == "dense":
@@ -264,8 +328,8 @@ class IncrementalG:
             Ls = st.F.shape[1]
             U = self._solve(st, st.F)
             R = st.w[:, None] * (st.Uref - U)
-            self.U0[s, :st.n, :Ls] = U
-            self.R0[s, :st.n, :Ls] = R
+            self.U0[s, : st.n, :Ls] = U
+            self.R0[s, : st.n, :Ls] = R
             self.G2s[s] = float(np.sum((st.Uref - U) * R))
         self.U0f = self.U0.reshape(S * nm, L)
 
@@ -276,15 +340,15 @@ class IncrementalG:
         q = len(springs)
         sp_arr = np.asarray(springs)
         cols = np.broadcast_to(np.arange(q)[:, None], (q, self.gi.shape[2]))
-        for s, st in enumerate(self.sets):   # only rows < st.n of the first q of Yt are read
+        for s, st in enumerate(self.sets):  # only rows < st.n of the first q of Yt are read
             if st.n == 0:
                 continue
-            if self.mode == "dense":   # rows of the symmetric inverse: 4 n flops per spring
-                self.Yt[s, :q, :st.n] = st.Bt[springs] @ st.Kinv
-            else:                      # b_e as columns, scattered from the gather maps
+            if self.mode == "dense":  # rows of the symmetric inverse: 4 n flops per spring
+                self.Yt[s, :q, : st.n] = st.Bt[springs] @ st.Kinv
+            else:  # b_e as columns, scattered from the gather maps
                 rhs = np.zeros((st.n, q))
                 np.add.at(rhs, (self.gi[sp_arr, s], cols), self.gv[sp_arr, s])
-                self.Yt[s, :q, :st.n] = self._solve(st, rhs).T
+                self.Yt[s, :q, : st.n] = self._solve(st, rhs).T
         self.col = {sp: j for j, sp in enumerate(springs)}
         self._last_j = -1
         self._batch_grams(springs, self.m)
@@ -293,13 +357,15 @@ class IncrementalG:
         """V^T W Y (first m0 rows), Y^T W Y, Y^T r0, b_j^T y_j for the batch (BLAS-3)."""
         q = len(springs)
         sp_arr = np.asarray(springs)
-        gi, gv = self.gi[sp_arr], self.gv[sp_arr]            # (q, S, P)
+        gi, gv = self.gi[sp_arr], self.gv[sp_arr]  # (q, S, P)
         jj = np.arange(q)[:, None, None]
-        self.bY[:, :q] = np.einsum("jsp,jsp->sj", gv, self.Yt[np.arange(self.S)[None, :, None], jj, gi])
+        self.bY[:, :q] = np.einsum(
+            "jsp,jsp->sj", gv, self.Yt[np.arange(self.S)[None, :, None], jj, gi]
+        )
         for s, st in enumerate(self.sets):
             n = st.n
             Y = self.Yt[s, :q, :n]
-            YY = syrk(1.0, (Y * st.sw).T, trans=1)         # upper triangle: half the flops of (Y W) Y^T
+            YY = syrk(1.0, (Y * st.sw).T, trans=1)  # upper triangle: half the flops of (Y W) Y^T
             self.YY[s, :q, :q] = np.triu(YY) + np.triu(YY, 1).T
             self.YR[s, :q] = Y @ self.R0[s, :n]
             if m0:
@@ -322,9 +388,29 @@ class IncrementalG:
         if j is None:
             self._new_batch(e)
             j = self.col[e]
-        d2 = self._kp(self.m, j, delta, self.gf[e], self.gv[e], self.U0f, self.Yt.reshape(-1), self.batch,
-                      self.nmax, self.acc_i, self.acc_v, self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
-                      self.YY, self.YR, self.bY, *self.scratch)
+        d2 = self._kp(
+            self.m,
+            j,
+            delta,
+            self.gf[e],
+            self.gv[e],
+            self.U0f,
+            self.Yt.reshape(-1),
+            self.batch,
+            self.nmax,
+            self.acc_i,
+            self.acc_v,
+            self.T,
+            self.Hz,
+            self.sig,
+            self.Cv,
+            self.PV,
+            self.AV,
+            self.YY,
+            self.YR,
+            self.bY,
+            *self.scratch,
+        )
         self._pending = (e, k_new, (delta, j))
         self._last_j = j
         return float(np.sqrt(max(self.G2 + d2, 0.0)))
@@ -338,8 +424,25 @@ class IncrementalG:
         delta, j = pend
         m = self.m
         sc = self.scratch
-        self._ka(m, j, delta, self.gi[e], self.gv[e], self.T, self.Hz, self.sig, self.Cv, self.PV, self.AV,
-                 self.YY, self.Yt, self.Zt, self.acc_i, self.acc_v, *sc[:6])
+        self._ka(
+            m,
+            j,
+            delta,
+            self.gi[e],
+            self.gv[e],
+            self.T,
+            self.Hz,
+            self.sig,
+            self.Cv,
+            self.PV,
+            self.AV,
+            self.YY,
+            self.Yt,
+            self.Zt,
+            self.acc_i,
+            self.acc_v,
+            *sc[:6],
+        )
         self.G2s += sc[6]
         self.m = m + 1
         if self.m >= self.cap:
@@ -357,16 +460,16 @@ class IncrementalG:
         # the batch's columns still to come (after the last proposal) are carried over
         springs = sorted((sp for sp, j in self.col.items() if j > self._last_j), key=self.col.get)
         if self.mode == "dense":
-            springs = []        # a new batch is a cheap gather
+            springs = []  # a new batch is a cheap gather
         q = len(springs)
         T = self.T[:, :m, :m]
         if q:
             Y = self.Yt[:, [self.col[sp] for sp in springs]]
             self.Yt.fill(0.0)
             self.Yt[:, :q] = Y
-        if m and q:   # carried batch: y_new = y - V diag(1/sigma) V^T b, V = Z T
-            y_at = self.Yt[np.arange(self.S)[:, None, None], :q, self.acc_i[:, :m]]   # (S, m, P, q)
-            G = np.einsum("smp,smpj->smj", self.acc_v[:, :m], y_at)             # Z^T B
+        if m and q:  # carried batch: y_new = y - V diag(1/sigma) V^T b, V = Z T
+            y_at = self.Yt[np.arange(self.S)[:, None, None], :q, self.acc_i[:, :m]]  # (S, m, P, q)
+            G = np.einsum("smp,smpj->smj", self.acc_v[:, :m], y_at)  # Z^T B
             W2 = np.matmul(T, np.matmul(T.transpose(0, 2, 1), G) / self.sig[:, :m, None])
             self.Yt[:, :q] -= np.matmul(W2.transpose(0, 2, 1), self.Zt[:, :m])
         if self.mode == "dense" and m:
@@ -375,7 +478,7 @@ class IncrementalG:
                 if id(st.Kinv) in done or st.n == 0:
                     continue
                 done.add(id(st.Kinv))
-                Vt = T[s].T @ self.Zt[s, :m, :st.n]     # rows: accepted z_j
+                Vt = T[s].T @ self.Zt[s, :m, : st.n]  # rows: accepted z_j
                 st.Kinv -= Vt.T @ (Vt / self.sig[s, :m, None])
         elif m:
             self._factor_all()
@@ -386,50 +489,3 @@ class IncrementalG:
         self._last_j = -1
         if q:
             self._batch_grams(springs, 0)
-
-
-class RefactorG:
-    """The paper's way: every proposal re-assembles and re-factorises K for each load
-    set. Same interface as IncrementalG; the baseline of ``bench sa``. Best effort: each
-    load set's fastest solver of the project (``LoadSet.factor(kind="multifrontal")``:
-    nested-dissection multifrontal Cholesky above 2,000 dofs -- measured 1.5-2x faster
-    than SuperLU in nested-dissection order on the 2-D grids and 2-3x on the 3-D ones --,
-    SuperLU or dense Cholesky below)."""
-
-    mode = "refactor"
-
-    def __init__(self, problem: FitProblem, k, **_):
-        self.problem = problem
-        self.k = np.array(k, float)
-        self._G = self.G_of(self.k)
-        self._pending = None
-        self.upcoming = np.empty(0, int)
-        self.n_rebase = 0
-
-    def G_of(self, k) -> float:
-        G2 = 0.0
-        for ls in self.problem.load_sets():
-            U = ls.factor(k, kind="multifrontal").solve(ls.F).reshape(ls.F.shape)
-            D = ls.Uref - U
-            G2 += float(np.sum(D * (ls.W * D))) + ls.const
-        return float(np.sqrt(max(G2, 0.0)))
-
-    def G(self) -> float:
-        return self._G
-
-    def propose_k(self, k_new_vec) -> float:
-        G = self.G_of(k_new_vec)
-        self._pending = (np.array(k_new_vec, float), G)
-        return G
-
-    def propose(self, e: int, k_new: float) -> float:
-        k = self.k.copy()
-        k[e] = k_new
-        return self.propose_k(k)
-
-    def accept(self):
-        self.k, self._G = self._pending
-        self._pending = None
-
-    def reject(self):
-        self._pending = None

@@ -8,8 +8,35 @@ from __future__ import annotations
 import numpy as np
 
 
-def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, Cv, PV, AV,
-             YY, YR, bY, ct, Hct, bz, sv, zWz, zR0, d2s):
+def _propose(
+    m,
+    j,
+    delta,
+    gf,
+    gv,
+    U0f,
+    Ytf,
+    q,
+    nmax,
+    acc_i,
+    acc_v,
+    T,
+    Hz,
+    sig,
+    Cv,
+    PV,
+    AV,
+    YY,
+    YR,
+    bY,
+    ct,
+    Hct,
+    bz,
+    sv,
+    zWz,
+    zR0,
+    d2s,
+):
     """G^2 change of a proposal, for every stacked set s (compiled by numba; plain
     Python otherwise). Work O(m^2) per set, reading only the upper triangles of T and
     Hz; fills the scratch arrays ct, Hct, bz, sv, zWz, zR0, d2s that an accept uses."""
@@ -25,13 +52,13 @@ def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, C
                 acc += gv[s, p] * U0f[gf[s, p], l]
             bu[l] = acc
         row = (s * q + j) * nmax
-        for i in range(m):                       # g = Bm^T y (= Z^T b)
+        for i in range(m):  # g = Bm^T y (= Z^T b)
             acc = 0.0
             for p in range(P):
                 acc += acc_v[s, i, p] * Ytf[row + acc_i[s, i, p]]
             g[i] = acc
             gt[i] = 0.0
-        for i in range(m):                       # gt = T^T g (= V^T b), T unit upper
+        for i in range(m):  # gt = T^T g (= V^T b), T unit upper
             gi = g[i]
             if gi != 0.0:
                 Ti = T[s, i]
@@ -44,7 +71,7 @@ def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, C
             cs[i] = gt[i] / sig[s, i]
             btz += gt[i] * cs[i]
             hs[i] = 0.0
-        for i in range(m):                       # Hct = Hz ct, Hz symmetric (upper read)
+        for i in range(m):  # Hct = Hz ct, Hz symmetric (upper read)
             ci = cs[i]
             Hi = Hz[s, i]
             acc = Hi[i] * ci
@@ -74,20 +101,42 @@ def _propose(m, j, delta, gf, gv, U0f, Ytf, q, nmax, acc_i, acc_v, T, Hz, sig, C
     return total
 
 
-def _accept(m, j, delta, gi_e, gv_e, T, Hz, sig, Cv, PV, AV, YY, Yt, Zt, acc_i, acc_v,
-            ct, Hct, bz, sv, zWz, zR0):
+def _accept(
+    m,
+    j,
+    delta,
+    gi_e,
+    gv_e,
+    T,
+    Hz,
+    sig,
+    Cv,
+    PV,
+    AV,
+    YY,
+    Yt,
+    Zt,
+    acc_i,
+    acc_v,
+    ct,
+    Hct,
+    bz,
+    sv,
+    zWz,
+    zR0,
+):
     """Append the proposed z = y - V ct as basis column m (compiled by numba)."""
     S, L, q = T.shape[0], Cv.shape[1], AV.shape[2]
     for s in range(S):
         cs = ct[s]
-        for i in range(m):                       # T column m = [-T ct; 1]
+        for i in range(m):  # T column m = [-T ct; 1]
             Ti = T[s, i]
             acc = 0.0
             for k in range(i, m):
                 acc += Ti[k] * cs[k]
             Ti[m] = -acc
         T[s, m, m] = 1.0
-        for i in range(m):                       # Hz border: V^T W z = av - Hz ct
+        for i in range(m):  # Hz border: V^T W z = av - Hz ct
             h = AV[s, i, j] - Hct[s, i]
             Hz[s, i, m] = h
             Hz[s, m, i] = h
@@ -96,7 +145,7 @@ def _accept(m, j, delta, gi_e, gv_e, T, Hz, sig, Cv, PV, AV, YY, Yt, Zt, acc_i, 
         for l in range(L):
             Cv[s, l, m] = sv[s, l]
             PV[s, l, m] = zR0[s, l]
-        for jj in range(q):                      # AV row m: z^T W Y = YY[j] - ct^T AV
+        for jj in range(q):  # AV row m: z^T W Y = YY[j] - ct^T AV
             AV[s, m, jj] = YY[s, j, jj]
         Am = AV[s, m]
         for i in range(m):
@@ -118,8 +167,11 @@ def _kernels():
     if not _KERNELS:
         try:
             import numba
-            jit = numba.njit(cache=True, nogil=True, fastmath={"reassoc", "contract"})  # vectorised sums
+
+            jit = numba.njit(
+                cache=True, nogil=True, fastmath={"reassoc", "contract"}
+            )  # vectorised sums
             _KERNELS.update(propose=jit(_propose), accept=jit(_accept))
-        except ImportError:       # pragma: no cover - numba is a declared dependency
+        except ImportError:  # pragma: no cover - numba is a declared dependency
             _KERNELS.update(propose=_propose, accept=_accept)
     return _KERNELS["propose"], _KERNELS["accept"]

@@ -31,6 +31,7 @@ from harness.models.springs import incidence
 class LoadBlock:
     """One load case on its free dofs: B (nfree x e, csc), f, u_ref, w (nfree,), and
     const = sum of w |u_ref|^2 over the constrained dofs."""
+
     name: str
     B: sp.csc_matrix
     f: np.ndarray
@@ -44,6 +45,7 @@ class ModalTerm:
     """Optional frequency objective: the first len(target) natural frequencies of
     (K - lambda M) on the modal free dofs (B: nfree_m x e, m: diagonal of M there)
     against ``target``, relative error squared, times ``weight``."""
+
     B: sp.csc_matrix
     m: np.ndarray
     target: np.ndarray
@@ -54,39 +56,73 @@ class ModalTerm:
 class FitProblem:
     """Blocks + initial constants k0 (e,), optional groups (e,) int (grouped mode: one
     parameter per group, k = k0 * factor[group]) and bounds (lo, hi) as factors of k0."""
+
     blocks: tuple
     k0: np.ndarray
     groups: np.ndarray | None = None
     bounds: tuple = (1e-3, 1e3)
     modal: ModalTerm | None = None
-    coords: tuple | None = None   # per block (nfree, dim) dof positions: fill-reducing ordering
+    coords: tuple | None = None  # per block (nfree, dim) dof positions: fill-reducing ordering
 
     def __post_init__(self):
         k0 = np.asarray(self.k0, float)
         if k0.ndim != 1 or not np.all(np.isfinite(k0)) or np.any(k0 <= 0):
-            raise SpringbenchError("k0 must be a 1-D array of positive finite spring constants",
-                                   field="optimizer.k0", fix="check the model's stiffness rule")
+            raise SpringbenchError(
+                "k0 must be a 1-D array of positive finite spring constants",
+                field="optimizer.k0",
+                fix="check the model's stiffness rule",
+            )
         e = len(k0)
         for b in self.blocks:
-            if b.B.shape[1] != e or b.B.shape[0] != len(b.f) or len(b.u_ref) != len(b.f) or len(b.w) != len(b.f):
-                raise SpringbenchError(f"load '{b.name}': B is {b.B.shape}, f {len(b.f)}, u_ref {len(b.u_ref)}, w {len(b.w)} for {e} springs",
-                                       field="optimizer.blocks", fix="restrict B, f, u_ref, w to the same free dofs")
+            if (
+                b.B.shape[1] != e
+                or b.B.shape[0] != len(b.f)
+                or len(b.u_ref) != len(b.f)
+                or len(b.w) != len(b.f)
+            ):
+                raise SpringbenchError(
+                    f"load '{b.name}': B is {b.B.shape}, f {len(b.f)}, u_ref "
+                    f"{len(b.u_ref)}, w {len(b.w)} for {e} springs",
+                    field="optimizer.blocks",
+                    fix="restrict B, f, u_ref, w to the same free dofs",
+                )
         if self.groups is not None:
             g = np.asarray(self.groups)
             if g.shape != (e,) or g.min() < 0:
-                raise SpringbenchError(f"groups must be {e} non-negative ints", field="optimizer.groups",
-                                       fix="one group id per spring")
+                raise SpringbenchError(
+                    f"groups must be {e} non-negative ints",
+                    field="optimizer.groups",
+                    fix="one group id per spring",
+                )
         lo, hi = self.bounds
         if not (0 < lo <= 1 <= hi):
-            raise SpringbenchError(f"bounds {self.bounds} must satisfy 0 < lo <= 1 <= hi (factors of k0)",
-                                   field="optimizer.options.bounds", fix="e.g. [1e-3, 1e3]")
+            raise SpringbenchError(
+                f"bounds {self.bounds} must satisfy 0 < lo <= 1 <= hi (factors of k0)",
+                field="optimizer.options.bounds",
+                fix="e.g. [1e-3, 1e3]",
+            )
         object.__setattr__(self, "k0", k0)
 
     # --- construction -------------------------------------------------------------
     @classmethod
-    def from_network(cls, points, springs, k0, free_masks, forces, u_ref, dof_weights, names,
-                     groups=None, bounds=(1e-3, 1e3), masses=None, freq_target=None,
-                     freq_weight: float = 0.0, modal_free=None, extra_columns=None) -> "FitProblem":
+    def from_network(
+        cls,
+        points,
+        springs,
+        k0,
+        free_masks,
+        forces,
+        u_ref,
+        dof_weights,
+        names,
+        groups=None,
+        bounds=(1e-3, 1e3),
+        masses=None,
+        freq_target=None,
+        freq_weight: float = 0.0,
+        modal_free=None,
+        extra_columns=None,
+    ) -> "FitProblem":
         """Build the blocks from a network: free_masks, forces, u_ref are (L, ndof) with
         dof = dim*node + component; dof_weights (ndof,). The frequency term is used when
         masses and freq_target are given (modal_free: (ndof,) bool, default the first
@@ -102,8 +138,12 @@ class FitProblem:
         u_ref = np.asarray(u_ref, float).reshape(-1, ndof)
         w = np.asarray(dof_weights, float).reshape(ndof)
         if not (len(free_masks) == len(forces) == len(u_ref) == len(names)):
-            raise SpringbenchError(f"{len(names)} names, {len(free_masks)} free masks, {len(forces)} forces, {len(u_ref)} references",
-                                   field="optimizer.loads", fix="one row per load case")
+            raise SpringbenchError(
+                f"{len(names)} names, {len(free_masks)} free masks, {len(forces)} forces, "
+                f"{len(u_ref)} references",
+                field="optimizer.loads",
+                fix="one row per load case",
+            )
         blocks, coords = [], []
         cache = {}
         X = np.repeat(points, points.shape[1], axis=0)
@@ -112,17 +152,33 @@ class FitProblem:
             if key not in cache:  # identical free sets share one B (the optimisers group on it)
                 cache[key] = (B[free].tocsc(), X[free])
             fixed = ~free
-            blocks.append(LoadBlock(str(name), cache[key][0], f[free].copy(), ur[free].copy(), w[free].copy(),
-                                    float(np.sum(w[fixed] * ur[fixed] ** 2))))
+            blocks.append(
+                LoadBlock(
+                    str(name),
+                    cache[key][0],
+                    f[free].copy(),
+                    ur[free].copy(),
+                    w[free].copy(),
+                    float(np.sum(w[fixed] * ur[fixed] ** 2)),
+                )
+            )
             coords.append(cache[key][1])
         modal = None
         if masses is not None and freq_target is not None and len(freq_target) > 0:
             mfree = free_masks[0] if modal_free is None else np.asarray(modal_free, bool)
             dim = points.shape[1]
             mdof = np.repeat(np.asarray(masses, float), dim)
-            modal = ModalTerm(B[mfree].tocsc(), mdof[mfree], np.asarray(freq_target, float), float(freq_weight))
-        return cls(tuple(blocks), np.asarray(k0, float), None if groups is None else np.asarray(groups, int),
-                   tuple(bounds), modal, tuple(coords))
+            modal = ModalTerm(
+                B[mfree].tocsc(), mdof[mfree], np.asarray(freq_target, float), float(freq_weight)
+            )
+        return cls(
+            tuple(blocks),
+            np.asarray(k0, float),
+            None if groups is None else np.asarray(groups, int),
+            tuple(bounds),
+            modal,
+            tuple(coords),
+        )
 
     def with_reference(self, u_ref, const=None) -> "FitProblem":
         """The same network, loads and weights with another reference: ``u_ref`` is one
@@ -131,21 +187,27 @@ class FitProblem:
         factorisations, so a second reference on one network costs no new setup."""
         const = [0.0] * len(self.blocks) if const is None else list(const)
         if len(u_ref) != len(self.blocks) or len(const) != len(self.blocks):
-            raise SpringbenchError(f"{len(u_ref)} references for {len(self.blocks)} load blocks", field="optimizer.u_ref",
-                                   fix="one free-dof array per load block")
+            raise SpringbenchError(
+                f"{len(u_ref)} references for {len(self.blocks)} load blocks",
+                field="optimizer.u_ref",
+                fix="one free-dof array per load block",
+            )
         blocks = []
         for b, u, c in zip(self.blocks, u_ref, const):
             u = np.asarray(u, float)
             if u.shape != b.f.shape:
-                raise SpringbenchError(f"load '{b.name}': reference has shape {u.shape}, free dofs {b.f.shape}",
-                                       field="optimizer.u_ref", fix="restrict the reference to the block's free dofs")
+                raise SpringbenchError(
+                    f"load '{b.name}': reference has shape {u.shape}, free dofs {b.f.shape}",
+                    field="optimizer.u_ref",
+                    fix="restrict the reference to the block's free dofs",
+                )
             blocks.append(dataclasses.replace(b, u_ref=u.copy(), const=float(c)))
         new = dataclasses.replace(self, blocks=tuple(blocks))
         sets = self.__dict__.get("_sets")
         if sets is not None:
             moved = []
             for s in sets:
-                s = copy.copy(s)   # keeps the cached stiffness map and symbolic factorisation
+                s = copy.copy(s)  # keeps the cached stiffness map and symbolic factorisation
                 s.Uref = np.stack([blocks[i].u_ref for i in s.index], 1)
                 s.const = float(sum(blocks[i].const for i in s.index))
                 moved.append(s)
@@ -199,7 +261,8 @@ class FitProblem:
         return total
 
     def G_ref_norm(self) -> float:
-        """sqrt(sum w |u_ref|^2): the normaliser of the normalised G (docs/design.md, "The G criteria")."""
+        """sqrt(sum w |u_ref|^2): the normaliser of the normalised G (docs/design.md, "The "
+        "G criteria")."""
         return float(np.sqrt(sum(float(b.u_ref @ (b.w * b.u_ref)) + b.const for b in self.blocks)))
 
 
@@ -209,6 +272,7 @@ class LoadSet:
     W (nfree, L); ``perm`` is the fill-reducing order of SuperLU (None: its own). What
     depends on B alone (the map k -> K, the orderings) is kept per matrix
     (:func:`per_matrix`), so problems on subsets of the same blocks share it."""
+
     B: sp.csc_matrix
     index: list
     F: np.ndarray
@@ -217,14 +281,16 @@ class LoadSet:
     const: float
     name: str
     coords: np.ndarray | None = None
-    k0: np.ndarray | None = None        # the constants the ordering's pattern is built from
+    k0: np.ndarray | None = None  # the constants the ordering's pattern is built from
 
     @property
     def perm(self) -> np.ndarray | None:
         """Nested dissection by the coordinates (above 2,000 dofs), else None."""
         if self.coords is None or self.B.shape[0] <= 2000:
             return None
-        return per_matrix(self.B, "perm", lambda: nested_dissection(stiffness(self.B, self.k0), self.coords))
+        return per_matrix(
+            self.B, "perm", lambda: nested_dissection(stiffness(self.B, self.k0), self.coords)
+        )
 
     def stiffness(self, k) -> sp.csc_matrix:
         """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
@@ -241,15 +307,23 @@ class LoadSet:
         if self.B.shape[0] <= DENSE_FACTOR_MAX:
             return DenseFactor(self.stiffness(k).toarray(), self.name)
         if kind == "auto":
-            kind = "multifrontal" if self.coords is not None and self.coords.shape[1] == 3 else "superlu"
-        if kind == "multifrontal" and self.coords is not None:     # above DENSE_FACTOR_MAX: 1,680 dofs, 24
+            kind = (
+                "multifrontal"
+                if self.coords is not None and self.coords.shape[1] == 3
+                else "superlu"
+            )
+        if (
+            kind == "multifrontal" and self.coords is not None
+        ):  # above DENSE_FACTOR_MAX: 1,680 dofs, 24
             # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
             K = self.stiffness(k)
-            return MultifrontalCholesky(K, per_matrix(self.B, "symbolic", lambda: Symbolic(K, self.coords)), self.name)
+            return MultifrontalCholesky(
+                K, per_matrix(self.B, "symbolic", lambda: Symbolic(K, self.coords)), self.name
+            )
         return Factor(self.stiffness(k), self.perm, self.name)
 
 
-_PER_MATRIX: dict = {}      # id(B) -> (weakref to B, {name: value})
+_PER_MATRIX: dict = {}  # id(B) -> (weakref to B, {name: value})
 
 
 def per_matrix(B, name: str, make):
@@ -278,7 +352,9 @@ def _stiffness_map(B: sp.csc_matrix):
     pattern = (abs(B) @ abs(B).T).tocsc()
     pattern.sort_indices()
     pattern.data[:] = 0.0
-    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices  # col*n + row
+    keys = (
+        np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
+    )  # col*n + row
     cnt = np.diff(B.indptr)
     rows, cols, vals = [], [], []
     for a in range(cnt.max(initial=0)):
@@ -288,7 +364,9 @@ def _stiffness_map(B: sp.csc_matrix):
             rows.append(np.searchsorted(keys, ib.astype(np.int64) * n + ia))
             cols.append(ok)
             vals.append(B.data[B.indptr[ok] + a] * B.data[B.indptr[ok] + b])
-    P = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(keys), e))
+    P = sp.csr_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(keys), e)
+    )
     return pattern, P
 
 
@@ -312,10 +390,19 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
         idx = sorted(idx)
         bl = [problem.blocks[i] for i in idx]
         B = bl[0].B.tocsc()
-        out.append(LoadSet(B, idx, np.stack([b.f for b in bl], 1), np.stack([b.u_ref for b in bl], 1),
-                           np.stack([b.w for b in bl], 1), float(sum(b.const for b in bl)),
-                           "+".join(b.name for b in bl),
-                           None if problem.coords is None else problem.coords[idx[0]], problem.k0))
+        out.append(
+            LoadSet(
+                B,
+                idx,
+                np.stack([b.f for b in bl], 1),
+                np.stack([b.u_ref for b in bl], 1),
+                np.stack([b.w for b in bl], 1),
+                float(sum(b.const for b in bl)),
+                "+".join(b.name for b in bl),
+                None if problem.coords is None else problem.coords[idx[0]],
+                problem.k0,
+            )
+        )
     return out
 
 
@@ -324,7 +411,9 @@ def stiffness(B: sp.csc_matrix, k: np.ndarray) -> sp.csc_matrix:
     return (B.multiply(k[None, :]) @ B.T).tocsc()
 
 
-def value_and_grad(problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None):
+def value_and_grad(
+    problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None
+):
     """G^2 and dG^2/dk (e,) by the adjoint method. If ``tension2`` (e,) is given, the
     squared spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2,
     are added to it."""

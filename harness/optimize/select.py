@@ -58,27 +58,35 @@ class Candidate:
     c_j phi_j, the learned rule's geometric features phi_j of each spring: a handful of
     coefficients fitted on this mesh); ``volume``: '' (springs only), 'element' or 'node':
     that volume term's columns join, with one shared kv (its own parameter)."""
+
     name: str
     groups: str
     prior: float = 0.0
     volume: str = ""
 
 
-CANDIDATES = (Candidate("scale", "one"), Candidate("groups", "direction"),
-              Candidate("springs-prior10", "spring", 10.0),
-              Candidate("springs-prior1", "spring", 1.0), Candidate("springs-prior0.1", "spring", 0.1),
-              Candidate("scale+volume", "one", volume="element"),
-              Candidate("springs-prior1+volume", "spring", 1.0, volume="element"),
-              Candidate("springs-prior0.1+volume", "spring", 0.1, volume="element"),
-              Candidate("features", "features"), Candidate("features+volume", "features", volume="element"),
-              Candidate("scale+node-volume", "one", volume="node"),
-              Candidate("springs-prior1+node-volume", "spring", 1.0, volume="node"),
-              Candidate("springs-prior0.1+node-volume", "spring", 0.1, volume="node"))
+CANDIDATES = (
+    Candidate("scale", "one"),
+    Candidate("groups", "direction"),
+    Candidate("springs-prior10", "spring", 10.0),
+    Candidate("springs-prior1", "spring", 1.0),
+    Candidate("springs-prior0.1", "spring", 0.1),
+    Candidate("scale+volume", "one", volume="element"),
+    Candidate("springs-prior1+volume", "spring", 1.0, volume="element"),
+    Candidate("springs-prior0.1+volume", "spring", 0.1, volume="element"),
+    Candidate("features", "features"),
+    Candidate("features+volume", "features", volume="element"),
+    Candidate("scale+node-volume", "one", volume="node"),
+    Candidate("springs-prior1+node-volume", "spring", 1.0, volume="node"),
+    Candidate("springs-prior0.1+node-volume", "spring", 0.1, volume="node"),
+)
 
 
 if tuple(c.name for c in CANDIDATES) != SELECT_CANDIDATES:
-    raise ImportError("harness.optimize.select.CANDIDATES and the case schema's SELECT_CANDIDATES differ: "
-                      "name a new candidate in both")
+    raise ImportError(
+        "harness.optimize.select.CANDIDATES and the case schema's SELECT_CANDIDATES differ: "
+        "name a new candidate in both"
+    )
 
 
 @dataclass(frozen=True)
@@ -89,11 +97,12 @@ class Selection:
     table: one row per model (the rule first) with its score on each left-out family and
     the score that chose (``score``); ``stops``: the optimiser's stop message of each start
     (as ``starts``; none for the rule)."""
+
     choice: str
     starts: tuple
     table: tuple
     families: tuple
-    skipped: float = 0.0    # > 0: the validation did not run; the seconds it would need
+    skipped: float = 0.0  # > 0: the validation did not run; the seconds it would need
     stops: tuple = ()
 
     @property
@@ -103,7 +112,11 @@ class Selection:
     @property
     def volume(self) -> str:
         """The chosen model's volume term: '' (none), 'element' or 'node'."""
-        return "" if self.choice == "rule" else next(c for c in CANDIDATES if c.name == self.choice).volume
+        return (
+            ""
+            if self.choice == "rule"
+            else next(c for c in CANDIDATES if c.name == self.choice).volume
+        )
 
 
 def balanced(problem: FitProblem) -> FitProblem:
@@ -121,8 +134,14 @@ def subset(problem: FitProblem, keep) -> FitProblem:
     """The problem on the blocks ``keep`` (indices), nothing cached."""
     keep = list(keep)
     coords = None if problem.coords is None else tuple(problem.coords[i] for i in keep)
-    return FitProblem(tuple(problem.blocks[i] for i in keep), problem.k0, problem.groups, problem.bounds,
-                      problem.modal, coords)
+    return FitProblem(
+        tuple(problem.blocks[i] for i in keep),
+        problem.k0,
+        problem.groups,
+        problem.bounds,
+        problem.modal,
+        coords,
+    )
 
 
 def direction_groups(directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
@@ -135,8 +154,14 @@ def direction_groups(directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return ids
 
 
-def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, groups: np.ndarray,
-            volumes: dict | None = None) -> FitProblem:
+def columns(
+    problem: FitProblem,
+    n_springs: int,
+    cand: Candidate,
+    kv0: float,
+    groups: np.ndarray,
+    volumes: dict | None = None,
+) -> FitProblem:
     """The candidate's problem: its columns (springs, + its volume term's), start and
     parameter groups. ``volumes``: {'element' or 'node': (first, stop)}, where each volume
     term's columns sit in the problem (default: every column after the springs is an
@@ -147,16 +172,23 @@ def columns(problem: FitProblem, n_springs: int, cand: Candidate, kv0: float, gr
         keep = np.concatenate([keep, np.arange(*volumes[cand.volume])])
     e = len(keep)
     whole = e == problem.n_springs
-    sliced: dict = {}              # blocks with one B (the same free dofs) keep sharing one
+    sliced: dict = {}  # blocks with one B (the same free dofs) keep sharing one
     for b in problem.blocks:
         if id(b.B) not in sliced:
-            sliced[id(b.B)] = b.B if whole else per_matrix(b.B, f"columns:{cand.volume or 'springs'}",
-                                                           lambda: b.B[:, keep].tocsc())
+            sliced[id(b.B)] = (
+                b.B
+                if whole
+                else per_matrix(
+                    b.B, f"columns:{cand.volume or 'springs'}", lambda: b.B[:, keep].tocsc()
+                )
+            )
     blocks = tuple(dataclasses.replace(b, B=sliced[id(b.B)]) for b in problem.blocks)
     k0 = problem.k0[keep].copy()
     if cand.volume:
         k0[n_springs:] = kv0
-    g = {"one": np.zeros(n_springs, int), "direction": groups, "spring": None, "features": None}[cand.groups]
+    g = {"one": np.zeros(n_springs, int), "direction": groups, "spring": None, "features": None}[
+        cand.groups
+    ]
     if cand.volume:
         top = (int(g.max()) + 1) if g is not None else n_springs
         springs = g if g is not None else np.arange(n_springs)
@@ -176,7 +208,7 @@ def basis(problem: FitProblem, n_springs: int, features: np.ndarray) -> np.ndarr
     e = problem.n_springs
     M = np.zeros((e, 1 + features.shape[1] + (e > n_springs)))
     M[:n_springs, 0] = 1.0
-    M[:n_springs, 1:1 + features.shape[1]] = features
+    M[:n_springs, 1 : 1 + features.shape[1]] = features
     if e > n_springs:
         M[n_springs:, -1] = 1.0
     return M
@@ -204,20 +236,34 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> 
         if G2 / G0sq < best[0]:
             best[:] = [G2 / G0sq, np.array(x)]
         return G2 / G0sq, M.T @ (g * k) / G0sq
+
     from harness.optimize.gradient import scipy_stop
+
     x = np.zeros(M.shape[1]) if x0 is None else np.asarray(x0, float)
     try:
-        stop = scipy_stop(minimize(phi, x, jac=True, method="L-BFGS-B", bounds=[(-7.0, 7.0)] * len(x),
-                                   options={"maxiter": int(options.get("maxiter") or 200)}))
+        stop = scipy_stop(
+            minimize(
+                phi,
+                x,
+                jac=True,
+                method="L-BFGS-B",
+                bounds=[(-7.0, 7.0)] * len(x),
+                options={"maxiter": int(options.get("maxiter") or 200)},
+            )
+        )
     except Stop:
         stop = "max_seconds"
-    return {"k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)), "info": {"phi": float(best[0]), "stop": stop}}
+    return {
+        "k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)),
+        "info": {"phi": float(best[0]), "stop": stop},
+    }
 
 
 def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> dict:
     """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit
     ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features)."""
     from harness.optimize.gradient import lbfgs
+
     if cand.groups == "features":
         return features_fit(problem, basis(problem, len(features), features), options, x0)
     opts = dict(options)
@@ -246,7 +292,7 @@ def starts(problem: FitProblem, n: int, seed: int = 0, M: np.ndarray | None = No
         npar, scale = problem.n_params, np.ones(problem.n_params)
     else:
         npar = M.shape[1]
-        scale = np.linalg.lstsq(M, np.ones(len(M)), rcond=None)[0]      # M scale = 1: the global factor
+        scale = np.linalg.lstsq(M, np.ones(len(M)), rcond=None)[0]  # M scale = 1: the global factor
     out = [np.zeros(npar), math.log(best_scale(problem)) * scale]
     rng = np.random.default_rng(seed)
     out += [0.2 * rng.standard_normal(npar) for _ in range(max(n - 2, 0))]
@@ -263,10 +309,23 @@ def per_load(problem: FitProblem, k: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np.ndarray,
-           candidates=CANDIDATES, options: dict | None = None, final: dict | None = None, n_starts: int = 3,
-           seed: int = 0, status=lambda msg: None, features: np.ndarray | None = None,
-           rule_solve: tuple | None = None, volumes: dict | None = None, criterion: str = "ratio") -> Selection:
+def select(
+    problem: FitProblem,
+    n_springs: int,
+    families,
+    kv0: float,
+    groups: np.ndarray,
+    candidates=CANDIDATES,
+    options: dict | None = None,
+    final: dict | None = None,
+    n_starts: int = 3,
+    seed: int = 0,
+    status=lambda msg: None,
+    features: np.ndarray | None = None,
+    rule_solve: tuple | None = None,
+    volumes: dict | None = None,
+    criterion: str = "ratio",
+) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume terms] (k0 the rule's
     springs, anything positive for the volume terms; ``volumes`` says where each term's
@@ -289,7 +348,7 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
         scores, seconds = np.asarray(rule_solve[0], float), float(rule_solve[1])
         need = affordable(n_fits, maxiter, STEP_COST * seconds, options.get("max_seconds"))
     if not need:
-        scores = per_load(rule, rule.k0)         # the first solve builds what the fits share (per_matrix)
+        scores = per_load(rule, rule.k0)  # the first solve builds what the fits share (per_matrix)
         t0 = time.perf_counter()
         per_load(rule, rule.k0)
         step = STEP_COST * (time.perf_counter() - t0)
@@ -319,14 +378,21 @@ def select(problem: FitProblem, n_springs: int, families, kv0: float, groups: np
     for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
         status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
         r = fit_result(cp, cand, dict(final or options), x0, features)
-        fits.append((r["info"]["phi"], r["k"], str(r["info"].get("stop"))))   # the training objective, prior included
+        fits.append(
+            (r["info"]["phi"], r["k"], str(r["info"].get("stop")))
+        )  # the training objective, prior included
     fits.sort(key=lambda t: t[0])
-    return Selection(cand.name, tuple(k for _, k, _ in fits), tuple(table), tuple(names),
-                     stops=tuple(stop for _, _, stop in fits))
+    return Selection(
+        cand.name,
+        tuple(k for _, k, _ in fits),
+        tuple(table),
+        tuple(names),
+        stops=tuple(stop for _, _, stop in fits),
+    )
 
 
-STEP_COST = 1.5    # a fit's step (solve and adjoint) in solves of all training states
-MIN_STEPS = 0.5    # validation runs only if its fits can take this fraction of their maxiter
+STEP_COST = 1.5  # a fit's step (solve and adjoint) in solves of all training states
+MIN_STEPS = 0.5  # validation runs only if its fits can take this fraction of their maxiter
 
 
 def affordable(n_fits: int, maxiter: int, step: float, share) -> float:
@@ -339,7 +405,7 @@ def affordable(n_fits: int, maxiter: int, step: float, share) -> float:
     return n_fits * MIN_STEPS * maxiter * step
 
 
-CLAMPED = "clamped"     # the family of the training states that hold a face (not the linear sets')
+CLAMPED = "clamped"  # the family of the training states that hold a face (not the linear sets')
 
 
 def make_folds(families) -> dict:
@@ -372,10 +438,13 @@ def training_score(values, families) -> float:
     if not len(values):
         return math.nan
     folds = make_folds(families)
-    return summary({f: float(np.mean([values[i] for i in idx])) for f, idx in folds.items()}, folds)["score"]
+    return summary(
+        {f: float(np.mean([values[i] for i in idx])) for f, idx in folds.items()}, folds
+    )["score"]
 
 
-MARGIN = 0.01      # a candidate beats the rule by more than 1 % (of its score, or a ratio below 0.99): less is a tie
+# a candidate beats the rule by more than 1 % (of its score, or a ratio below 0.99): less is a tie
+MARGIN = 0.01
 
 
 def ratio_to_rule(row: dict, rule: dict) -> float:
@@ -400,6 +469,12 @@ def choose(table, criterion: str = "ratio") -> dict:
 
     def beats(a, b):
         return a < b - max(MARGIN * b, 1e-9)
-    ok = [r for r in table[1:] if math.isfinite(r["score"]) and beats(r["score"], rule["score"])
-          and not (math.isfinite(rule["clamped"]) and r["clamped"] > rule["clamped"] + 1e-9)]
+
+    ok = [
+        r
+        for r in table[1:]
+        if math.isfinite(r["score"])
+        and beats(r["score"], rule["score"])
+        and not (math.isfinite(rule["clamped"]) and r["clamped"] > rule["clamped"] + 1e-9)
+    ]
     return min(ok, key=lambda r: r["score"]) if ok else rule

@@ -53,7 +53,8 @@ def grid_network(shape, spacing=1.0, diagonals: str = "all"):
 
 
 def basic_loads(points: np.ndarray, s: float = 1.0):
-    """Load cases like basic2d/basic3d (docs/design.md, "Load sets for boxes") on the grid's bounding box.
+    """Load cases like basic2d/basic3d (docs/design.md, "Load sets for boxes") on the grid's
+    bounding box.
 
     Returns names, free_masks (L, ndof) bool, forces (L, ndof). Stretch-a: nodal force
     along +a on face a = a1, rollers (u_a = 0) on face a = a0, rigid motion removed at the
@@ -104,6 +105,7 @@ def basic_loads(points: np.ndarray, s: float = 1.0):
 def solve_network(points, springs, k, free_masks, forces) -> np.ndarray:
     """Linear statics per load case (u = 0 on constrained dofs), shape (L, ndof)."""
     import scipy.sparse.linalg as spla
+
     B = incidence(points, springs)
     K = stiffness_matrix(B, k)
     U = np.zeros_like(np.asarray(forces, float))
@@ -113,8 +115,15 @@ def solve_network(points, springs, k, free_masks, forces) -> np.ndarray:
     return U
 
 
-def recoverable_problem(shape, sigma: float = 0.3, seed: int = 0, grouped: bool = False,
-                        diagonals: str = "all", weights=None, spacing: float = 1.0):
+def recoverable_problem(
+    shape,
+    sigma: float = 0.3,
+    seed: int = 0,
+    grouped: bool = False,
+    diagonals: str = "all",
+    weights=None,
+    spacing: float = 1.0,
+):
     """A FitProblem whose reference comes from known perturbed constants (best G = 0).
 
     k0 = 1 per unit length (Deussen's E s0/4 up to a factor); the truth multiplies each
@@ -133,7 +142,9 @@ def recoverable_problem(shape, sigma: float = 0.3, seed: int = 0, grouped: bool 
     ndof = points.size
     w = np.ones(ndof) if weights is None else np.asarray(weights, float)
     g = groups if grouped else None
-    blank = FitProblem.from_network(points, springs, k0, frees, forces, np.zeros_like(forces), w, names, groups=g)
+    blank = FitProblem.from_network(
+        points, springs, k0, frees, forces, np.zeros_like(forces), w, names, groups=g
+    )
     prob = blank.with_reference(blank.solve(k_true))  # fast solver (ND ordering); shares the setup
     return prob, k_true
 
@@ -142,5 +153,10 @@ def noisy(prob, noise: float, seed: int):
     """The problem with its reference perturbed by noise * rms(u_ref) N(0, 1) per load
     (seeded): the best G is then unknown but at most G(k_true)."""
     rng = np.random.default_rng(seed)
-    return prob.with_reference([b.u_ref + noise * float(np.sqrt(np.mean(b.u_ref ** 2))) * rng.standard_normal(len(b.u_ref))
-                                for b in prob.blocks])
+    return prob.with_reference(
+        [
+            b.u_ref
+            + noise * float(np.sqrt(np.mean(b.u_ref**2))) * rng.standard_normal(len(b.u_ref))
+            for b in prob.blocks
+        ]
+    )

@@ -10,7 +10,7 @@ from scipy.spatial import Delaunay
 from scipy.spatial.transform import Rotation
 
 from harness.linalg.sparse import single_thread_blas
-from harness.models.anisotropic import hex_to_tets
+from harness.models.cells import hex_to_tets
 from harness.models.volume import VolumeTerm, volume_gradients, volumes
 from harness.optimize import FitProblem, optimize
 from harness.optimize.problem import value_and_grad

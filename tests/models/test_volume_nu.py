@@ -46,7 +46,7 @@ def bar(tmp_path_factory):
     import meshio
 
     from harness.geometry import grid_points
-    from harness.models.anisotropic import hex_to_tets
+    from harness.models.cells import hex_to_tets
     from harness.models.topology import grid_structure
     shape = (5, 3, 3)
     pts = grid_points(np.zeros(3), np.array([2.0, 1.0, 1.0]), shape)

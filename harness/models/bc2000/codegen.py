@@ -20,7 +20,8 @@ how a function was optimised. (With fastmath={"contract"} they were not: whether
 a given product depended on the module it was optimised in, i.e. on whether a caller was
 compiled in this process or loaded from numba's cache, so run_serial and run_threads could
 disagree in the last bits depending on the cache's history; tests/test_bc2000.py checks.)
-The results differ from the program's in the last bits: on the recorded runs (cube_343 MS / MT0 / MT, 2500 steps;
+The results differ from the program's in the last bits: on the recorded runs (cube_343 MS / MT0 /
+MT, 2500 steps;
 beam_336 MT0) the particles stay within 4e-15 m of the program's states, the volume
 curves within 6e-13 percent; tests/test_bc2000.py checks 1e-6 m and 1e-9 percent.
 
@@ -33,13 +34,22 @@ kernels.py is up to date.
 
 from pathlib import Path
 
-BLOCK = 32          # elements per block: a multiple of the SIMD width, buffers stay in L1
+BLOCK = 32  # elements per block: a multiple of the SIMD width, buffers stay in L1
 
 # rows of an element's column in the block matrix S (name, count), shared with pack.py
 LAYOUT = {
     "spring": (("ks", 1), ("kd", 1), ("L0", 1)),
     "tet": (("W", 12), ("ks", 6), ("kd", 3), ("L0", 3), ("cos0", 3), ("kvs", 1), ("D0", 1)),
-    "hex": (("W", 24), ("ks", 6), ("kd", 3), ("L0", 3), ("cos0", 3), ("kvs", 1), ("kvd", 1), ("D0", 8)),
+    "hex": (
+        ("W", 24),
+        ("ks", 6),
+        ("kd", 3),
+        ("L0", 3),
+        ("cos0", 3),
+        ("kvs", 1),
+        ("kvd", 1),
+        ("D0", 8),
+    ),
 }
 NV = {"tet": 4, "hex": 8}
 
@@ -88,7 +98,11 @@ def fma(typingctx, a, b, c):
 
 def _p(e):
     """Parenthesise an operand that is not a plain name or subscript."""
-    return f"({e})" if any(ch in e for ch in " +-*/") and not e.startswith("S[") and not e.startswith("P[") else e
+    return (
+        f"({e})"
+        if any(ch in e for ch in " +-*/") and not e.startswith("S[") and not e.startswith("P[")
+        else e
+    )
 
 
 def dot(pairs, base=None):
@@ -117,9 +131,11 @@ def spring_source():
     """Per block: P rows 0-2 the spring vector l = x_p - x_q, 3-5 the difference of the
     per-step displacements; R rows 0-2 the force on p (minus on q)."""
     r = rows("spring")
-    L = ["@njit(cache=True, error_model=\"numpy\")",
-         "def spring_block(S, P, R):",
-         "    for b in range(BLOCK):"]
+    L = [
+        '@njit(cache=True, error_model="numpy")',
+        "def spring_block(S, P, R):",
+        "    for b in range(BLOCK):",
+    ]
     a = L.append
     for c, cc in enumerate("xyz"):
         a(f"        l{cc} = P[{c} * BLOCK + b]; v{cc} = P[{3 + c} * BLOCK + b]")
@@ -139,16 +155,25 @@ def _axes(a, nv, r):
         a("        " + "; ".join(f"w{ax}_{i} = {_S(r['W'] + nv * ax + i)}" for i in range(nv)))
         for cc in "xyz":
             for pre, src in (("l", "p"), ("v", "u")):
-                a(f"        {pre}{ax}{cc} = " + dot([(f"w{ax}_{i}", f"{src}{i}{cc}") for i in range(nv)]))
+                a(
+                    f"        {pre}{ax}{cc} = "
+                    + dot([(f"w{ax}_{i}", f"{src}{i}{cc}") for i in range(nv)])
+                )
         a(f"        A{ax} = np.sqrt({norm2(f'l{ax}')})")
         a(f"        I{ax} = 1.0 / A{ax}")
         for cc in "xyz":
             a(f"        n{ax}{cc} = l{ax}{cc} * I{ax}")
     for j, (p, q) in enumerate(((0, 1), (0, 2), (1, 2))):
-        a(f"        K{p}{q} = -({_S(r['ks'] + 3 + j)} * ({dot3(f'n{p}', f'n{q}')} - {_S(r['cos0'] + j)}))")
+        a(
+            f"        K{p}{q} = -({_S(r['ks'] + 3 + j)} * ({dot3(f'n{p}', f'n{q}')} - "
+            f"{_S(r['cos0'] + j)}))"
+        )
     for ax in range(3):
-        a(f"        s{ax} = -fma({_S(r['ks'] + ax)}, A{ax} - {_S(r['L0'] + ax)}, {_S(r['kd'] + ax)}"
-          f" * {dot3(f'v{ax}', f'n{ax}')})")
+        a(
+            f"        s{ax} = -fma({_S(r['ks'] + ax)}, A{ax} - {_S(r['L0'] + ax)}, "
+            f"{_S(r['kd'] + ax)}"
+            f" * {dot3(f'v{ax}', f'n{ax}')})"
+        )
     for cc in "xyz":
         a(f"        G0{cc} = " + dot([(f"n0{cc}", "s0"), ("K01", f"n1{cc}"), ("K02", f"n2{cc}")]))
         a(f"        G1{cc} = " + dot([(f"n1{cc}", "s1"), ("K01", f"n0{cc}"), ("K12", f"n2{cc}")]))
@@ -160,8 +185,7 @@ def element_source(kind):
     displacement; R rows 3i+c the force on vertex i. Two loops (with and without the
     volume force) so that neither computes what it does not need."""
     nv, r = NV[kind], rows(kind)
-    L = ["@njit(cache=True, error_model=\"numpy\")",
-         f"def {kind}_block(S, P, R, vol):"]
+    L = ['@njit(cache=True, error_model="numpy")', f"def {kind}_block(S, P, R, vol):"]
     a = L.append
     for with_vol in (True, False):
         a(f"    {'if' if with_vol else 'else'}{' vol' if with_vol else ''}:")
@@ -170,33 +194,47 @@ def element_source(kind):
         b("    for b in range(BLOCK):")
         for i in range(nv):
             for c, cc in enumerate("xyz"):
-                b(f"        p{i}{cc} = P[{3 * i + c} * BLOCK + b]; u{i}{cc} = P[{3 * nv + 3 * i + c} * BLOCK + b]")
+                b(
+                    f"        p{i}{cc} = P[{3 * i + c} * BLOCK + b]; u{i}{cc} = "
+                    f"P[{3 * nv + 3 * i + c} * BLOCK + b]"
+                )
         _axes(b, nv, r)
         for i in range(nv):
             for cc in "xyz":
                 b(f"        r{i}{cc} = " + dot([(f"w{ax}_{i}", f"G{ax}{cc}") for ax in range(3)]))
         if with_vol:
             for cc in "xyz":
-                b(f"        g{cc} = {1.0 / nv!r} * (" + " + ".join(f"p{i}{cc}" for i in range(nv)) + ")")
+                b(
+                    f"        g{cc} = {1.0 / nv!r} * ("
+                    + " + ".join(f"p{i}{cc}" for i in range(nv))
+                    + ")"
+                )
                 if kind == "hex":
-                    b(f"        h{cc} = {1.0 / nv!r} * (" + " + ".join(f"u{i}{cc}" for i in range(nv)) + ")")
+                    b(
+                        f"        h{cc} = {1.0 / nv!r} * ("
+                        + " + ".join(f"u{i}{cc}" for i in range(nv))
+                        + ")"
+                    )
             for i in range(nv):
                 for cc in "xyz":
                     b(f"        d{i}{cc} = p{i}{cc} - g{cc}")
                 b(f"        R{i} = np.sqrt({norm2(f'd{i}')})")
-            if kind == "tet":    # the sum-of-distances form
+            if kind == "tet":  # the sum-of-distances form
                 b(f"        K = -({_S(r['kvs'])} * (R0 + R1 + R2 + R3 - {_S(r['D0'])}))")
                 for i in range(nv):
                     b(f"        J{i} = K / R{i}")
                     for c, cc in enumerate("xyz"):
                         b(f"        R[{3 * i + c} * BLOCK + b] = fma(d{i}{cc}, J{i}, r{i}{cc})")
-            else:                # eight damped radial springs
+            else:  # eight damped radial springs
                 for i in range(nv):
                     b(f"        J{i} = 1.0 / R{i}")
                     for cc in "xyz":
                         b(f"        m{i}{cc} = d{i}{cc} * J{i}")
                     rel = dot([(f"u{i}{cc} - h{cc}", f"m{i}{cc}") for cc in "xyz"])
-                    b(f"        s = -fma({_S(r['kvs'])}, R{i} - {_S(r['D0'] + i)}, {_S(r['kvd'])} * {rel})")
+                    b(
+                        f"        s = -fma({_S(r['kvs'])}, R{i} - {_S(r['D0'] + i)}, "
+                        f"{_S(r['kvd'])} * {rel})"
+                    )
                     for c, cc in enumerate("xyz"):
                         b(f"        R[{3 * i + c} * BLOCK + b] = fma(m{i}{cc}, s, r{i}{cc})")
         else:
@@ -212,15 +250,17 @@ def gather_scatter_source(kind):
     forces R added to f in element order. x, d, f are flat (3n,); ``idx`` (blocks, nv
     BLOCK) holds 3 * node as uint32, [b * nv + i]: no negative-index wraparound code."""
     nv = 2 if kind == "spring" else NV[kind]
-    L = ["@njit(cache=True, error_model=\"numpy\")",
-         f"def {kind}_gather(x, d, idx, P):",
-         "    for b in range(BLOCK):"]
+    L = [
+        '@njit(cache=True, error_model="numpy")',
+        f"def {kind}_gather(x, d, idx, P):",
+        "    for b in range(BLOCK):",
+    ]
     a = L.append
     for i in range(nv):
         a(f"        q{i} = idx[{nv} * b + {i}]")
     off = ("", " + ONE", " + TWO")
     for c in range(3):
-        if kind == "spring":     # the spring vector and the difference of the displacements
+        if kind == "spring":  # the spring vector and the difference of the displacements
             a(f"        P[{c} * BLOCK + b] = x[q0{off[c]}] - x[q1{off[c]}]")
             a(f"        P[{3 + c} * BLOCK + b] = d[q0{off[c]}] - d[q1{off[c]}]")
         else:
@@ -229,7 +269,7 @@ def gather_scatter_source(kind):
                 a(f"        P[{3 * nv + 3 * i + c} * BLOCK + b] = d[q{i}{off[c]}]")
     a("")
     a("")
-    a("@njit(cache=True, error_model=\"numpy\")")
+    a('@njit(cache=True, error_model="numpy")')
     a(f"def {kind}_scatter(f, idx, R, nb):")
     a("    for b in range(nb):")
     for i in range(nv):
@@ -243,7 +283,7 @@ def gather_scatter_source(kind):
                 a(f"        f[q{i}{off[c]}] += R[{3 * i + c} * BLOCK + b]")
     a("")
     a("")
-    a("@njit(cache=True, error_model=\"numpy\")")
+    a('@njit(cache=True, error_model="numpy")')
     a(f"def {kind}_forces(x, d, f, idx, S, P, R, m, vol):")
     a("    for k in range(S.shape[0]):")
     a(f"        {kind}_gather(x, d, idx[k], P[0])")
@@ -316,22 +356,26 @@ SERIAL_ELEMENTS = """        if tet[4] > 0:
         if hexa[4] > 0:
             hex_forces(x1, d1, f, *hexa)"""
 
+
 def threaded_elements():
     """The element pass on two threads, written out in the parallel run itself: numba can
     crash loading a cached serial function that calls a parallel one (numba issue 8578)."""
     L = []
     for kind, arg in (("tet", "tet"), ("hex", "hexa")):
-        L += [f"        if {arg}[4] > 0:",
-              f"            nb = {arg}[1].shape[0]",
-              "            half = (nb + 1) // 2",
-              "            for t in prange(2):",
-              "                lo = 0 if t == 0 else half",
-              "                hi = half if t == 0 else nb",
-              "                for k in range(lo, hi):",
-              f"                    {kind}_gather(x1, d1, {arg}[0][k], {arg}[2][k])",
-              f"                    {kind}_block({arg}[1][k], {arg}[2][k], {arg}[3][k], {arg}[5])",
-              "            for k in range(nb):",
-              f"                {kind}_scatter(f, {arg}[0][k], {arg}[3][k], min(BLOCK, {arg}[4] - k * BLOCK))"]
+        L += [
+            f"        if {arg}[4] > 0:",
+            f"            nb = {arg}[1].shape[0]",
+            "            half = (nb + 1) // 2",
+            "            for t in prange(2):",
+            "                lo = 0 if t == 0 else half",
+            "                hi = half if t == 0 else nb",
+            "                for k in range(lo, hi):",
+            f"                    {kind}_gather(x1, d1, {arg}[0][k], {arg}[2][k])",
+            f"                    {kind}_block({arg}[1][k], {arg}[2][k], {arg}[3][k], {arg}[5])",
+            "            for k in range(nb):",
+            f"                {kind}_scatter(f, {arg}[0][k], {arg}[3][k], min(BLOCK, "
+            f"{arg}[4] - k * BLOCK))",
+        ]
     return "\n".join(L)
 
 
@@ -353,10 +397,14 @@ def run(x, d, steps, h, mass, integrate, grav, push, drag_step, springs, tet, he
 def source() -> str:
     parts = [HEADER, spring_source(), element_source("tet"), element_source("hex")]
     parts += [gather_scatter_source(kind) for kind in ("spring", "tet", "hex")]
-    parts += [VOLUME.strip(),
-              RUN.format(flags="", name="run_serial", elements=SERIAL_ELEMENTS).strip(),
-              RUN.format(flags="parallel=True, ", name="run_threads", elements=threaded_elements()).strip(),
-              DISPATCH.strip() + "\n"]
+    parts += [
+        VOLUME.strip(),
+        RUN.format(flags="", name="run_serial", elements=SERIAL_ELEMENTS).strip(),
+        RUN.format(
+            flags="parallel=True, ", name="run_threads", elements=threaded_elements()
+        ).strip(),
+        DISPATCH.strip() + "\n",
+    ]
     return "\n\n\n".join(parts)
 
 

@@ -32,7 +32,7 @@ def _block_index(idx: np.ndarray) -> np.ndarray:
     """(m, nv) node ids -> (blocks, nv * BLOCK) uint32 of 3 * node (flat x), element b of
     block k at [k, b * nv + i]; padded with copies of element 0."""
     m, nv = idx.shape
-    if 3 * (int(idx.max(initial=0)) + 1) >= 2 ** 32:
+    if 3 * (int(idx.max(initial=0)) + 1) >= 2**32:
         raise ValueError("more than 1.4e9 nodes: the kernels index with uint32")
     nb = -(-m // BLOCK)
     out = np.empty((nb * BLOCK, nv), np.uint32)
@@ -45,7 +45,7 @@ def dense_axis_weights(cells, nodes, weights) -> np.ndarray:
     """W (m, 3, nv): axis k = P_k - P'_k = sum_i W[k, i] x_i, from the ends' faces
     (global node ids (m, 6, w)) and their barycentric / bilinear weights (m, 6, w)."""
     m, nv = cells.shape
-    local = np.argmax(cells[:, None, None, :] == nodes[..., None], axis=-1)       # (m, 6, w)
+    local = np.argmax(cells[:, None, None, :] == nodes[..., None], axis=-1)  # (m, 6, w)
     sign = np.where(np.arange(6) % 2 == 0, 1.0, -1.0)[None, :, None]
     W = np.zeros((m, 3, nv))
     e = np.broadcast_to(np.arange(m)[:, None, None], local.shape)
@@ -58,9 +58,16 @@ def _columns(kind, model) -> dict:
     if kind == "spring":
         return {"ks": model.ks[:, None], "kd": model.kd[:, None], "L0": model.L0[:, None]}
     m = len(model.cells)
-    return {"W": dense_axis_weights(model.cells, model.axes.nodes, model.axes.weights).reshape(m, -1),
-            "ks": model.ks, "kd": model.kd, "L0": model.L0, "cos0": model.cos0,
-            "kvs": model.kvs[:, None], "kvd": model.kvd[:, None], "D0": model.D0.reshape(m, -1)}
+    return {
+        "W": dense_axis_weights(model.cells, model.axes.nodes, model.axes.weights).reshape(m, -1),
+        "ks": model.ks,
+        "kd": model.kd,
+        "L0": model.L0,
+        "cos0": model.cos0,
+        "kvs": model.kvs[:, None],
+        "kvd": model.kvd[:, None],
+        "D0": model.D0.reshape(m, -1),
+    }
 
 
 def _static(kind, model):
@@ -68,12 +75,21 @@ def _static(kind, model):
     cache = getattr(model, "_kernel_blocks", None)
     if cache is None:
         cols = _columns(kind, model)
-        C = np.concatenate([np.asarray(cols[name], float).reshape(len(cols[name]), -1)
-                            for name, _ in LAYOUT[kind]], axis=1)
+        C = np.concatenate(
+            [
+                np.asarray(cols[name], float).reshape(len(cols[name]), -1)
+                for name, _ in LAYOUT[kind]
+            ],
+            axis=1,
+        )
         assert C.shape[1] == n_rows(kind)
         index = model.springs if kind == "spring" else model.cells
-        cache = (_block_index(np.asarray(index, np.int64)), _blocks(C), len(C),
-                 bool(getattr(model, "volume", False)))
+        cache = (
+            _block_index(np.asarray(index, np.int64)),
+            _blocks(C),
+            len(C),
+            bool(getattr(model, "volume", False)),
+        )
         object.__setattr__(model, "_kernel_blocks", cache)
     return cache
 
@@ -87,8 +103,14 @@ def empty(kind: str):
     """Arguments of a model part that is absent (no blocks)."""
     p, r = _scratch_rows(kind)
     width = 2 if kind == "spring" else NV[kind]
-    return (np.zeros((0, width * BLOCK), np.uint32), np.zeros((0, n_rows(kind) * BLOCK)), np.zeros((1, p * BLOCK)),
-            np.zeros((1, r * BLOCK)), 0, False)
+    return (
+        np.zeros((0, width * BLOCK), np.uint32),
+        np.zeros((0, n_rows(kind) * BLOCK)),
+        np.zeros((1, p * BLOCK)),
+        np.zeros((1, r * BLOCK)),
+        0,
+        False,
+    )
 
 
 def block_arrays(kind: str, model, dt: float, threads: int = 1):
@@ -100,7 +122,7 @@ def block_arrays(kind: str, model, dt: float, threads: int = 1):
     r = rows(kind)
     for name in DAMPING[kind]:
         k = dict(LAYOUT[kind])[name]
-        S[:, r[name] * BLOCK:(r[name] + k) * BLOCK] /= dt
+        S[:, r[name] * BLOCK : (r[name] + k) * BLOCK] /= dt
     p, q = _scratch_rows(kind)
     nb = len(S) if threads >= 2 else 1
     return index, S, np.zeros((nb, p * BLOCK)), np.zeros((nb, q * BLOCK)), m, vol
@@ -117,7 +139,7 @@ def kernel_arrays(model, dt: float, threads: int = 1):
         cache = {}
         try:
             object.__setattr__(model, "_kernel_args", cache)
-        except AttributeError:      # not a model of ours (slots): nothing to cache
+        except AttributeError:  # not a model of ours (slots): nothing to cache
             pass
     if key not in cache:
         if len(cache) > 8:

@@ -27,6 +27,7 @@ class SpringPlan:
     zero-force copy); thread t owns the nodes [nodes[t], nodes[t+1]) and the springs
     bounds[t]:bounds[t+1] with both ends among them (sorted by p); the springs
     bounds[T]: (ends of different threads) come last; scratch (T, 9 SB)."""
+
     p3: np.ndarray
     q3: np.ndarray
     ks: np.ndarray
@@ -44,43 +45,69 @@ def spring_plan(springs, ks, kd, L0, n_nodes: int, threads: int | None = None) -
     to whole blocks with copies with ks = kd = 0 (an exact zero force), then the springs
     between ranges."""
     springs = np.asarray(springs, np.int64)
-    if 3 * n_nodes >= 2 ** 32:
+    if 3 * n_nodes >= 2**32:
         raise ValueError("more than 1.4e9 nodes: the spring kernel indexes with uint32")
     T = max(1, int(threads or get_num_threads()))
     s = len(springs)
     p_sorted = np.sort(springs[:, 0])
-    cuts = [0] + [int(p_sorted[min(s - 1, (t * s) // T)]) if s else 0 for t in range(1, T)] + [n_nodes]
+    cuts = (
+        [0] + [int(p_sorted[min(s - 1, (t * s) // T)]) if s else 0 for t in range(1, T)] + [n_nodes]
+    )
     nodes = np.maximum.accumulate(np.asarray(cuts, np.int64))
     owner_p = np.searchsorted(nodes, springs[:, 0], side="right") - 1
     owner_q = np.searchsorted(nodes, springs[:, 1], side="right") - 1
-    group = np.where(owner_p == owner_q, owner_p, T)            # T: between ranges
+    group = np.where(owner_p == owner_q, owner_p, T)  # T: between ranges
     order = np.lexsort((springs[:, 1], springs[:, 0], group))
     parts, bounds = [], [0]
     for t in range(T + 1):
         g = order[group[order] == t]
         if len(g):
-            g = np.concatenate([g, np.full(-len(g) % SB, -1 - g[-1])])     # -1 - i: padding copy of i
+            g = np.concatenate([g, np.full(-len(g) % SB, -1 - g[-1])])  # -1 - i: padding copy of i
         parts.append(g)
         bounds.append(bounds[-1] + len(g))
     idx = np.concatenate(parts) if s else np.zeros(0, np.int64)
     real = idx >= 0
     src = np.where(real, idx, -1 - idx)
     k = [np.where(real, np.asarray(a, float)[src], z) for a, z in ((ks, 0.0), (kd, 0.0), (L0, 1.0))]
-    return SpringPlan((3 * springs[src, 0]).astype(np.uint32), (3 * springs[src, 1]).astype(np.uint32), *k,
-                      np.where(real, idx, -1), np.asarray(bounds, np.int64), nodes, np.zeros((T, 9 * SB)))
+    return SpringPlan(
+        (3 * springs[src, 0]).astype(np.uint32),
+        (3 * springs[src, 1]).astype(np.uint32),
+        *k,
+        np.where(real, idx, -1),
+        np.asarray(bounds, np.int64),
+        nodes,
+        np.zeros((T, 9 * SB)),
+    )
 
 
 def spring_forces(plan: SpringPlan, x, v, f):
     """f (n, 3) C-contiguous = the springs' forces F = -[ks (L - L0) + kd (dv . n)] n at p,
     -F at q. f is written in place: a copy (non-contiguous or not float64) would be lost."""
-    if not (isinstance(f, np.ndarray) and f.dtype == np.float64 and f.flags.c_contiguous
-            and f.size == 3 * int(plan.nodes[-1])):
-        raise ValueError(f"f must be a C-contiguous float64 array of {3 * int(plan.nodes[-1])} values")
-    _spring_forces(np.ascontiguousarray(x).reshape(-1), np.ascontiguousarray(v).reshape(-1), plan.p3, plan.q3,
-                   plan.ks, plan.kd, plan.L0, plan.bounds, plan.nodes, plan.scratch, f.reshape(-1))
+    if not (
+        isinstance(f, np.ndarray)
+        and f.dtype == np.float64
+        and f.flags.c_contiguous
+        and f.size == 3 * int(plan.nodes[-1])
+    ):
+        raise ValueError(
+            f"f must be a C-contiguous float64 array of {3 * int(plan.nodes[-1])} values"
+        )
+    _spring_forces(
+        np.ascontiguousarray(x).reshape(-1),
+        np.ascontiguousarray(v).reshape(-1),
+        plan.p3,
+        plan.q3,
+        plan.ks,
+        plan.kd,
+        plan.L0,
+        plan.bounds,
+        plan.nodes,
+        plan.scratch,
+        f.reshape(-1),
+    )
 
 
-SB = 64     # springs per block: gathered, then computed 4 at a time (AVX2), then added
+SB = 64  # springs per block: gathered, then computed 4 at a time (AVX2), then added
 ONE = np.uint32(1)
 TWO = np.uint32(2)
 
@@ -151,9 +178,9 @@ def _scatter(f, p3, q3, R):
 @njit(cache=True, error_model="numpy")
 def _spring_chunk(x, v, p3, q3, ks, kd, L0, k0, k1, P, R, f):
     for k in range(k0, k1, SB):
-        _gather(x, v, p3[k:k + SB], q3[k:k + SB], P)
-        _spring_block(P, R, ks[k:k + SB], kd[k:k + SB], L0[k:k + SB])
-        _scatter(f, p3[k:k + SB], q3[k:k + SB], R)
+        _gather(x, v, p3[k : k + SB], q3[k : k + SB], P)
+        _spring_block(P, R, ks[k : k + SB], kd[k : k + SB], L0[k : k + SB])
+        _scatter(f, p3[k : k + SB], q3[k : k + SB], R)
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
@@ -165,9 +192,34 @@ def _spring_forces(x, v, p3, q3, ks, kd, L0, bounds, nodes, scratch, f):
     for t in prange(T):
         for i in range(3 * nodes[t], 3 * nodes[t + 1]):
             f[i] = 0.0
-        _spring_chunk(x, v, p3, q3, ks, kd, L0, bounds[t], bounds[t + 1], scratch[t, :6 * SB],
-                      scratch[t, 6 * SB:], f)
-    _spring_chunk(x, v, p3, q3, ks, kd, L0, bounds[T], bounds[T + 1], scratch[0, :6 * SB], scratch[0, 6 * SB:], f)
+        _spring_chunk(
+            x,
+            v,
+            p3,
+            q3,
+            ks,
+            kd,
+            L0,
+            bounds[t],
+            bounds[t + 1],
+            scratch[t, : 6 * SB],
+            scratch[t, 6 * SB :],
+            f,
+        )
+    _spring_chunk(
+        x,
+        v,
+        p3,
+        q3,
+        ks,
+        kd,
+        L0,
+        bounds[T],
+        bounds[T + 1],
+        scratch[0, : 6 * SB],
+        scratch[0, 6 * SB :],
+        f,
+    )
 
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=True)
