@@ -13,13 +13,54 @@ from harness.report.engines import ENGINES_NOTE, engines_finding, engines_summar
 from harness.report.numbers import fmt
 
 MAX_ROWS = 40
-COLUMNS = {   # bench name -> the columns shown, in order (those present)
-    "calibrate": ["n_tets", "seconds", "rule_seconds", "peak_gb", "choice", "validation_skipped", "start_rule",
-                  "G_heldout_mean", "best_rule", "G_heldout_mean_best_rule", "reference_error_heldout"],
-    "reference": ["task", "dim", "element", "n_dofs", "solver", "method", "seconds", "ratio", "true_error",
-                  "estimate"],
-    "sa": ["dim", "n_springs", "method", "engine", "steps_per_s", "acceptance", "G_ratio", "speedup"],
-    "fit": ["dim", "n_springs", "method", "init", "noise", "G_ratio", "G_truth_ratio", "seconds", "stop", "met"],
+COLUMNS = {  # bench name -> the columns shown, in order (those present)
+    "calibrate": [
+        "n_tets",
+        "seconds",
+        "rule_seconds",
+        "peak_gb",
+        "choice",
+        "validation_skipped",
+        "start_rule",
+        "G_heldout_mean",
+        "best_rule",
+        "G_heldout_mean_best_rule",
+        "reference_error_heldout",
+    ],
+    "reference": [
+        "task",
+        "dim",
+        "element",
+        "n_dofs",
+        "solver",
+        "method",
+        "seconds",
+        "ratio",
+        "true_error",
+        "estimate",
+    ],
+    "sa": [
+        "dim",
+        "n_springs",
+        "method",
+        "engine",
+        "steps_per_s",
+        "acceptance",
+        "G_ratio",
+        "speedup",
+    ],
+    "fit": [
+        "dim",
+        "n_springs",
+        "method",
+        "init",
+        "noise",
+        "G_ratio",
+        "G_truth_ratio",
+        "seconds",
+        "stop",
+        "met",
+    ],
     "dynamics": ["bench", "case", "engine", "value", "unit", "ratio", "ratio_to_cxx"],
 }
 
@@ -35,6 +76,7 @@ def heldout_summary(df):
     """Per body, mesh and nu: calibrate's choice and the geometric mean over the loads of
     its error / the best rule's (the rule chosen in hindsight per mesh), < 1: calibrate wins."""
     import pandas as pd
+
     need = {"body", "nu", "model", "ratio_to_best_rule"}
     if not need <= set(df.columns):
         return None
@@ -43,11 +85,19 @@ def heldout_summary(df):
     for (body, nu), g in cal.groupby(["body", "nu"], sort=True):
         r = pd.to_numeric(g["ratio_to_best_rule"], errors="coerce")
         r = r[r > 0]
-        rows.append({"body": body, "tets": fmt(g["n_tets"].iloc[0]) if "n_tets" in g else "", "nu": f"{nu:g}",
-                     "choice": str(g["choice"].iloc[0]) if "choice" in g else "",
-                     "best rule": str(g["best_rule"].iloc[0]) if "best_rule" in g else "",
-                     "loads": str(len(r)),
-                     "calibrate / best rule (geometric mean)": fmt(float(np.exp(np.log(r).mean()))) if len(r) else ""})
+        rows.append(
+            {
+                "body": body,
+                "tets": fmt(g["n_tets"].iloc[0]) if "n_tets" in g else "",
+                "nu": f"{nu:g}",
+                "choice": str(g["choice"].iloc[0]) if "choice" in g else "",
+                "best rule": str(g["best_rule"].iloc[0]) if "best_rule" in g else "",
+                "loads": str(len(r)),
+                "calibrate / best rule (geometric mean)": fmt(float(np.exp(np.log(r).mean())))
+                if len(r)
+                else "",
+            }
+        )
     return pd.DataFrame(rows) if rows else None
 
 
@@ -56,13 +106,19 @@ def bench_table(name: str, df):
     if name == "engines":
         t = engines_summary(df)
         if t is not None:
-            return t, ENGINES_NOTE + engines_finding(df) + " Every load, step count and wall time is in engines.csv."
+            return t, ENGINES_NOTE + engines_finding(
+                df
+            ) + " Every load, step count and wall time is in engines.csv."
     if name == "heldout":
         t = heldout_summary(df)
         if t is not None:
-            return t, ("Each held-out gmsh body, its own loads and clamps, an independent P2 truth; per body and nu "
-                       "the geometric mean over the loads of calibrate's error / the best rule's (below 1: calibrate "
-                       "predicts better). Every load and rule is in heldout.csv.")
+            return t, (
+                "Each held-out gmsh body, its own loads and clamps, an independent P2 "
+                "truth; per body and nu "
+                "the geometric mean over the loads of calibrate's error / the best rule's "
+                "(below 1: calibrate "
+                "predicts better). Every load and rule is in heldout.csv."
+            )
     cols = COLUMNS.get(name) or [c for c in df.columns if not c.endswith("_version")][:8]
     more = f" (first {MAX_ROWS} of {len(df)} rows)" if len(df) > MAX_ROWS else ""
     return _display(df, cols), f"Key columns of {name}.csv{more}; every column is in the CSV."
@@ -72,4 +128,3 @@ def provenance_line(df) -> str:
     """The code and machine of a bench CSV (its first row's provenance columns)."""
     first = df.iloc[0] if len(df) else {}
     return describe({k: (first[k] if k in df.columns else None) for k in FIELDS})
-

@@ -9,17 +9,22 @@ Layout written by :mod:`harness.run.runner`::
     results/<suite>/<case>/result-seed<N>.json   manifest (input hash, status, files) + rows
     results/<suite>/<case>/[seed<N>/]<data files and fig-*.png>
 
-Summary columns: ``case, model, stage, seed, status, mode`` (quick or full), then the sizes and rule columns
+Summary columns: ``case, model, stage, seed, status, mode`` (quick or full), then the sizes and
+rule columns
 (``n_nodes, n_springs, n_elements, n_dofs, structure, rule, stiffness, optimizer, objective,
 grouped, weights``), then the scores (``G_initial, G_final`` = G_{a:b:c} with the case's
-``weights``, ``G_norm_initial, G_norm_final, G_ref, ref_error_max, G_s_initial, G_s_final, G_abc_initial,
-G_abc_final, freq_error, f1_ratio, freq_error_initial, freq_error_final``), then every other column a stage wrote, sorted by
+``weights``, ``G_norm_initial, G_norm_final, G_ref, ref_error_max, G_s_initial, G_s_final,
+G_abc_initial,
+G_abc_final, freq_error, f1_ratio, freq_error_initial, freq_error_final``), then every other
+column a stage wrote, sorted by
 name, then ``seconds`` and ``error``. ``G_ref`` is the reference's own estimated error as a
-normalised G (same weights, loads and nodes as the row's ``G_norm_*``; harness.scoring.g_ref_arrays),
+normalised G (same weights, loads and nodes as the row's ``G_norm_*``;
+harness.scoring.g_ref_arrays),
 ``ref_error_max`` its largest point value relative to the largest reference displacement.
 ``status``: ``ok``; ``ref-coarse`` (scored, but G_ref > 10 % of the row's final normalised G
 or the reference missed its tol: kept in every table, mean and paper comparison, and flagged);
-``error`` (excluded from the numbers). A case's ``[expect] values`` (the paper's numbers) add ``paper_<col>`` and
+``error`` (excluded from the numbers). A case's ``[expect] values`` (the paper's numbers) add
+``paper_<col>`` and
 ``ratio_<col>`` = ours / paper right after ``<col>`` (only on rows that have ``<col>``);
 rows with ``G_initial`` != ``G_final`` get ``improvement`` = G_initial / G_final and, where
 the paper gives both, ``paper_improvement``. ``values = {G_final = 0.55}`` applies
@@ -75,20 +80,65 @@ from harness.report.nu_sweep import markdown_section, skipped_lines, sweep_frame
 from harness.report.page import index_html, page_suites
 from harness.report.readme import readme_md
 
-HEAD = ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes", "n_springs", "n_elements",
-        "n_dofs", "structure", "rule", "stiffness", "optimizer", "objective", "grouped", "weights", "G_initial",
-        "G_final", "improvement", "G_norm_initial", "G_norm_final", "G_ref", "ref_error_max", "G_heldout_initial",
-        "G_heldout", "G_ref_heldout", "ref_error_heldout", "G_s_initial",
-        "G_s_final", "G_abc_initial", "G_abc_final", "freq_error", "f1_ratio", "freq_error_initial", "freq_error_final",
-        "freq_error_heldout", "error_estimate",
-        "closed_form_error", "tip_ratio", "flexion_ratio", "pull_stiffness_spread", "pull_drift_max",
-        "static_status", "engine", "G_norm", "max_error", "engine_status", "wall_s"]
+HEAD = [
+    "case",
+    "model",
+    "load",
+    "stage",
+    "seed",
+    "status",
+    "mode",
+    "n_nodes",
+    "n_springs",
+    "n_elements",
+    "n_dofs",
+    "structure",
+    "rule",
+    "stiffness",
+    "optimizer",
+    "objective",
+    "grouped",
+    "weights",
+    "G_initial",
+    "G_final",
+    "improvement",
+    "G_norm_initial",
+    "G_norm_final",
+    "G_ref",
+    "ref_error_max",
+    "G_heldout_initial",
+    "G_heldout",
+    "G_ref_heldout",
+    "ref_error_heldout",
+    "G_s_initial",
+    "G_s_final",
+    "G_abc_initial",
+    "G_abc_final",
+    "freq_error",
+    "f1_ratio",
+    "freq_error_initial",
+    "freq_error_final",
+    "freq_error_heldout",
+    "error_estimate",
+    "closed_form_error",
+    "tip_ratio",
+    "flexion_ratio",
+    "pull_stiffness_spread",
+    "pull_drift_max",
+    "static_status",
+    "engine",
+    "G_norm",
+    "max_error",
+    "engine_status",
+    "wall_s",
+]
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall|wall_s)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"
 
 
 # -- reading stored results -----------------------------------------------------------------
+
 
 def load_results(suite_dir: Path) -> list[dict]:
     """Stored result manifests of a suite, sorted by case then seed; if two case folders
@@ -100,14 +150,19 @@ def load_results(suite_dir: Path) -> list[dict]:
         except (OSError, ValueError):
             m = None
         if not isinstance(m, dict) or not isinstance(m.get("rows"), list):  # never skipped silently
-            raise SpringbenchError("not a result file springbench wrote (truncated or edited?)", file=str(f),
-                                   fix="delete it and re-run that case with 'springbench run'")
+            raise SpringbenchError(
+                "not a result file springbench wrote (truncated or edited?)",
+                file=str(f),
+                fix="delete it and re-run that case with 'springbench run'",
+            )
         m["_folder"] = f.parent.name
         key = (m.get("file") or f.parent.name, m.get("seed", 0))
         t = f.stat().st_mtime
         if key not in best or t > best[key][0]:
             best[key] = (t, m)
-    return sorted((m for _, m in best.values()), key=lambda m: (str(m.get("case")), m.get("seed", 0)))
+    return sorted(
+        (m for _, m in best.values()), key=lambda m: (str(m.get("case")), m.get("seed", 0))
+    )
 
 
 def _num(v) -> bool:
@@ -163,6 +218,7 @@ def order_columns(cols) -> list[str]:
 def summary_frame(manifests: list[dict]):
     """One DataFrame of every row of every stored result, columns in the stable order."""
     import pandas as pd
+
     rows = []
     for m in manifests:
         expect = m.get("expect") if isinstance(m.get("expect"), dict) else {}
@@ -178,8 +234,11 @@ def summary_frame(manifests: list[dict]):
 
 def key_columns(cols) -> list[str]:
     """The columns of summary.md: the stable head, the paper comparisons, the tail."""
-    return [c for c in cols if c in HEAD or c in TAIL or c.startswith(("paper_", "ratio_"))
-            or c == "lloyd_iterations"]
+    return [
+        c
+        for c in cols
+        if c in HEAD or c in TAIL or c.startswith(("paper_", "ratio_")) or c == "lloyd_iterations"
+    ]
 
 
 def comparable(df):
@@ -191,6 +250,7 @@ def seeds_frame(df):
     """Mean, standard deviation and count over seeds of every numeric score, for the
     cases that ran several seeds."""
     import pandas as pd
+
     if df.empty or "seed" not in df or "status" not in df:
         return pd.DataFrame()
     ok = df[df["status"].isin(SCORED)]
@@ -200,18 +260,27 @@ def seeds_frame(df):
         return pd.DataFrame()
     # an optimised row shares its model with the unoptimised one: tell them apart
     keys = [c for c in ("case", "model", "stage", "optimizer", "objective") if c in multi]
-    num = [c for c in multi.columns if c not in keys and c != "seed"
-           and pd.api.types.is_numeric_dtype(multi[c]) and not c.startswith(("paper_", "ratio_"))]
+    num = [
+        c
+        for c in multi.columns
+        if c not in keys
+        and c != "seed"
+        and pd.api.types.is_numeric_dtype(multi[c])
+        and not c.startswith(("paper_", "ratio_"))
+    ]
     g = multi.groupby(keys, sort=True, dropna=False)
     out = g[num].agg(["mean", "std"])
     out.columns = [f"{c}_{s}" for c, s in out.columns]
     out.insert(0, "n_seeds", g["seed"].nunique())
-    if (multi["status"] == REF_COARSE).any():   # the flag: how many of the averaged rows are ref-coarse
+    if (
+        multi["status"] == REF_COARSE
+    ).any():  # the flag: how many of the averaged rows are ref-coarse
         out.insert(1, "n_ref_coarse", g["status"].agg(lambda s: int((s == REF_COARSE).sum())))
     return out.reset_index()
 
 
 # -- markdown and html ---------------------------------------------------------------------
+
 
 def _flagged(df):
     """The table for Markdown with ref-coarse rows marked: their ``G_ref`` cell gets a
@@ -225,6 +294,7 @@ def _flagged(df):
 
 
 # -- building -----------------------------------------------------------------------------
+
 
 def data_folders(suite_dir: Path, manifests: list[dict]) -> list[Path]:
     """Every folder that holds a case's data files (the case folder, seed<N>/ folders)."""
@@ -242,8 +312,11 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     suite_dir = Path(suite_dir)
     manifests = load_results(suite_dir)
     if not manifests:
-        raise SpringbenchError("no stored results here", file=str(suite_dir),
-                               fix="give a folder results/<suite> written by 'springbench run'")
+        raise SpringbenchError(
+            "no stored results here",
+            file=str(suite_dir),
+            fix="give a folder results/<suite> written by 'springbench run'",
+        )
     df = summary_frame(manifests)
     origin.write(suite_dir, manifests)
     csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
@@ -257,46 +330,69 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
     n_err = int((df.get("status") == "error").sum()) if "status" in df else 0
     n_coarse = int((df.get("status") == REF_COARSE).sum()) if "status" in df else 0
     key = key_columns(df.columns)
-    md = [f"# {suite_dir.name}\n",
-          f"{len(manifests)} results, {len(df)} rows, {n_err} errors, {n_coarse} ref-coarse. The key columns "
-          f"are shown; all {len(df.columns)} (per-load G, stage details) are in summary.csv; column meanings in "
-          "docs/columns.md. The papers' absolute G depends on units they do not state: compare "
-          "`improvement` with `paper_improvement`, and trends.\n"]
+    md = [
+        f"# {suite_dir.name}\n",
+        f"{len(manifests)} results, {len(df)} rows, {n_err} errors, {n_coarse} ref-coarse. "
+        "The key columns "
+        f"are shown; all {len(df.columns)} (per-load G, stage details) are in summary.csv; "
+        "column meanings in "
+        "docs/columns.md. The papers' absolute G depends on units they do not state: compare "
+        "`improvement` with `paper_improvement`, and trends.\n",
+    ]
     if n_coarse:
-        md.append(f"**{n_coarse} rows are `ref-coarse`**: the reference's own estimated error at the row's "
-                  "nodes (`G_ref`, a normalised G like `G_norm_final`) is more than 10 % of the row's "
-                  "normalised G, or the reference missed its `tol`; their G says as much about the "
-                  "reference as about the model. They stay in every table and mean, marked by their status and "
-                  "a `!` after `G_ref`.\n")
+        md.append(
+            f"**{n_coarse} rows are `ref-coarse`**: the reference's own estimated error at "
+            "the row's "
+            "nodes (`G_ref`, a normalised G like `G_norm_final`) is more than 10 % of the row's "
+            "normalised G, or the reference missed its `tol`; their G says as much about the "
+            "reference as about the model. They stay in every table and mean, marked by "
+            "their status and "
+            "a `!` after `G_ref`.\n"
+        )
     md.append(markdown_table(_flagged(df[key])))
     if not seeds.empty:
         md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
     opts = optimizer_frame(df)
     if not opts.empty:
-        md += ["\n## Optimisers compared\n",
-               "Same initial model, reference and weights per case; means over seeds. `G_final_vs_sa` = "
-               "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals; "
-               "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches SA's G_final; "
-               "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
-               "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS relative error "
-               "of the first natural frequencies against the FEM; `G_ref`: the reference's own error as a "
-               "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the loads the fits "
-               "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
-               markdown_table(opts)]
+        md += [
+            "\n## Optimisers compared\n",
+            "Same initial model, reference and weights per case; means over seeds. "
+            "`G_final_vs_sa` = "
+            "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals; "
+            "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches "
+            "SA's G_final; "
+            "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
+            "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS "
+            "relative error "
+            "of the first natural frequencies against the FEM; `G_ref`: the reference's own "
+            "error as a "
+            "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the "
+            "loads the fits "
+            "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
+            markdown_table(opts),
+        ]
     sweep = sweep_table(sweep_frame(df))
     if not sweep.empty:
-        md += ["\n## Model classes against Poisson's ratio\n",
-               "Per body and nu, each model class's fitted row (`p1`: its only row, no constants): "
-               "`G_norm` on the fitted loads, `G_heldout` on the loads no fit saw; the classes share "
-               "nodes, masses, loads and reference. The frequency error, `k_spread` and `dt_stable` per "
-               "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n",
-               markdown_table(sweep)]
+        md += [
+            "\n## Model classes against Poisson's ratio\n",
+            "Per body and nu, each model class's fitted row (`p1`: its only row, no constants): "
+            "`G_norm` on the fitted loads, `G_heldout` on the loads no fit saw; the classes share "
+            "nodes, masses, loads and reference. The frequency error, `k_spread` and "
+            "`dt_stable` per "
+            "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n",
+            markdown_table(sweep),
+        ]
         skipped = skipped_lines(df)
         if skipped:
             md += ["\nNo rows (status `skip`):\n"] + skipped
         md += markdown_section(df)
-    sources = sorted({str(m["expect"].get("source", "")) for m in manifests
-                      if isinstance(m.get("expect"), dict) and m["expect"].get("source")})
+    sources = sorted(
+        {
+            str(m["expect"].get("source", ""))
+            for m in manifests
+            if isinstance(m.get("expect"), dict) and m["expect"].get("source")
+        }
+    )
     write_changed(md_path, "\n".join(md).encode())
     pngs = []
     if figures:
@@ -338,15 +434,21 @@ def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = Fa
             elif suites_under(p):
                 suites += suites_under(p)
             else:
-                raise SpringbenchError("no stored results here", file=str(p),
-                                       fix="give a folder results/<suite> written by 'springbench run'")
+                raise SpringbenchError(
+                    "no stored results here",
+                    file=str(p),
+                    fix="give a folder results/<suite> written by 'springbench run'",
+                )
         roots = {s.resolve().parent for s in suites}
     else:
         root = Path(results_root or DEFAULT_RUNS)
         suites = suites_under(root)
         if not suites:
-            raise SpringbenchError("no stored results", file=str(root),
-                                   fix="run 'springbench run' first, or report the published ones: --results results")
+            raise SpringbenchError(
+                "no stored results",
+                file=str(root),
+                fix="run 'springbench run' first, or report the published ones: --results results",
+            )
         roots = {root.resolve()}
     out = [build_suite(s, figures=figures, redraw=redraw) for s in suites]
     for r in roots:

@@ -18,6 +18,7 @@ def engines_summary(df):
     """Per body, mesh and nu: each engine's (and springbench export's) mean G_norm over the
     held-out loads; a cell says why when an engine found no equilibrium."""
     import pandas as pd
+
     st = _engine_status(df)
     if not {"body", "nu", "engine", "model", "load", "G_norm", st} <= set(df.columns):
         return None
@@ -27,7 +28,9 @@ def engines_summary(df):
     for (body, tets, nu), g in m.groupby(["body", "n_tets", "nu"], sort=False):
         row = {"body": body, "tets": fmt(tets), "nu": f"{nu:g}"}
         for _, r in g.iterrows():
-            row[r["who"]] = fmt(r["G_norm"]) if r[st] == "settled" else f"{fmt(r['G_norm'])} ({r[st]})"
+            row[r["who"]] = (
+                fmt(r["G_norm"]) if r[st] == "settled" else f"{fmt(r['G_norm'])} ({r[st]})"
+            )
         rows.append(row)
     return pd.DataFrame(rows).fillna("") if rows else None
 
@@ -44,17 +47,29 @@ def engines_finding(df) -> str:
     lo, hi = float(m["nu"].min()), float(m["nu"].max())
 
     def span(g) -> str:
-        return f"{100 * g['G_norm'].min():.0f}-{100 * g['G_norm'].max():.0f} %" if len(g) else "not run"
+        return (
+            f"{100 * g['G_norm'].min():.0f}-{100 * g['G_norm'].max():.0f} %"
+            if len(g)
+            else "not run"
+        )
+
     engines = ", ".join(sorted(own["engine"].unique()))
-    return (f"The engines' own models ({engines}) are {span(own[own['nu'] == lo])} from the FEM at nu = {lo:g} and "
-            f"{span(own[own['nu'] == hi])} at nu = {hi:g}; springbench's exports run in Newton are {span(ours)} at "
-            f"every nu; {int((runs[st] == 'settled').sum())} of {len(runs)} engine runs settled.")
+    return (
+        f"The engines' own models ({engines}) are {span(own[own['nu'] == lo])} from the FEM "
+        f"at nu = {lo:g} and "
+        f"{span(own[own['nu'] == hi])} at nu = {hi:g}; springbench's exports run in Newton "
+        f"are {span(ours)} at "
+        f"every nu; {int((runs[st] == 'settled').sum())} of {len(runs)} engine runs settled."
+    )
 
 
-ENGINES_NOTE = ("Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the mean over "
-                "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
-                "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated model) run in "
-                "Newton. ")
+ENGINES_NOTE = (
+    "Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the "
+    "mean over "
+    "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
+    "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated model) run in "
+    "Newton. "
+)
 
 
 def engines_tables(df) -> list:
@@ -62,5 +77,12 @@ def engines_tables(df) -> list:
     t = engines_summary(df)
     if t is None:
         return []
-    return [("Each engine's deformable body against the FEM", t,
-             ENGINES_NOTE + engines_finding(df) + " Every load, step count and wall time is in summary.csv.")]
+    return [
+        (
+            "Each engine's deformable body against the FEM",
+            t,
+            ENGINES_NOTE
+            + engines_finding(df)
+            + " Every load, step count and wall time is in summary.csv.",
+        )
+    ]

@@ -17,13 +17,16 @@ from __future__ import annotations
 
 import math
 
-MEMORISED = 3.0     # held-out G above this multiple of the fitted G: memorised
+MEMORISED = 3.0  # held-out G above this multiple of the fitted G: memorised
 LEGEND = {
-    "ref-coarse": "the FEM reference's own error is above a tenth of the model's, or it missed its tolerance: "
-                  "part of the error shown is the reference's",
-    "memorised": f"held-out G > {MEMORISED:g} x fitted G: the fit learned its training loads, not the body",
-    "fit-worse-than-rule": "the fit's held-out error is above the best stiffness rule's on the same mesh and loads "
-                           "(beyond the spread over its starts): the rule predicts better",
+    "ref-coarse": "the FEM reference's own error is above a tenth of the model's, or it "
+    "missed its tolerance: "
+    "part of the error shown is the reference's",
+    "memorised": f"held-out G > {MEMORISED:g} x fitted G: the fit learned its training "
+    "loads, not the body",
+    "fit-worse-than-rule": "the fit's held-out error is above the best stiffness rule's on "
+    "the same mesh and loads "
+    "(beyond the spread over its starts): the rule predicts better",
 }
 
 
@@ -44,8 +47,12 @@ def heldout_error(row) -> float:
 
 def fitted(row) -> bool:
     """Whether the row's constants were fitted (an optimiser ran), not a rule's."""
-    opt = row.get("optimizer", "none")     # "none+k-ratio 10": a rule's constants, capped
-    return isinstance(opt, str) and opt.split("+")[0] not in ("", "none") and row.get("choice") != "rule"
+    opt = row.get("optimizer", "none")  # "none+k-ratio 10": a rule's constants, capped
+    return (
+        isinstance(opt, str)
+        and opt.split("+")[0] not in ("", "none")
+        and row.get("choice") != "rule"
+    )
 
 
 def best_rule(rules):
@@ -74,7 +81,12 @@ def flags(row, rules=()) -> list[str]:
     if row.get("status") == "ref-coarse":
         out.append("ref-coarse")
     g_fit, g_held = number(row.get("G_norm_final")), heldout_error(row)
-    if fitted(row) and math.isfinite(g_fit) and math.isfinite(g_held) and g_held > MEMORISED * g_fit:
+    if (
+        fitted(row)
+        and math.isfinite(g_fit)
+        and math.isfinite(g_held)
+        and g_held > MEMORISED * g_fit
+    ):
         out.append("memorised")
     if fitted(row) and against_rule(row, rules)[0] == "worse":
         out.append("fit-worse-than-rule")
@@ -91,11 +103,14 @@ def _averaged(g):
     """The case's scored rows averaged over seeds: one dict per model (KEYS), with
     ``n_seeds``, the worst status and the first ``choice``."""
     import pandas as pd
+
     keys = [k for k in KEYS if k in g]
     out = []
     for _, r in g.groupby(keys, sort=False, dropna=False) if keys else [(None, g)]:
         row = {k: r[k].iloc[0] for k in keys}
-        row.update({c: float(pd.to_numeric(r[c], errors="coerce").mean()) for c in NUMBERS if c in r})
+        row.update(
+            {c: float(pd.to_numeric(r[c], errors="coerce").mean()) for c in NUMBERS if c in r}
+        )
         status = set(r["status"].astype(str)) if "status" in r else {"ok"}
         row["status"] = "ref-coarse" if "ref-coarse" in status else "ok"
         row["n_seeds"] = int(r["seed"].nunique()) if "seed" in r else 1
@@ -128,23 +143,42 @@ def is_rule(row) -> bool:
 def case_lines(df):
     """One line per case: ``case``, ``model`` (its best fit on the fitted loads, the one a
     fitter would export; else its best rule; else the model with the lowest G), ``fitted``
-    (normalised G on the fitted loads) and ``heldout`` (its held-out error), ``findings`` (LEGEND's, "error" when a row failed; a case
+    (normalised G on the fitted loads) and ``heldout`` (its held-out error), ``findings``
+    (LEGEND's, "error" when a row failed; a case
     without G: its worst status) and ``n_seeds``."""
     import pandas as pd
+
     out = []
     for case, g in df.groupby("case", sort=False):
         status = set(g["status"].astype(str)) if "status" in g else {"ok"}
-        line = {"case": case, "model": "", "fitted": math.nan, "heldout": math.nan, "findings": [], "n_seeds": 1}
-        scored = g[g["G_norm_final"].notna() & g["status"].isin(("ok", "ref-coarse"))] \
-            if {"G_norm_final", "status"} <= set(g) else g.iloc[:0]
+        line = {
+            "case": case,
+            "model": "",
+            "fitted": math.nan,
+            "heldout": math.nan,
+            "findings": [],
+            "n_seeds": 1,
+        }
+        scored = (
+            g[g["G_norm_final"].notna() & g["status"].isin(("ok", "ref-coarse"))]
+            if {"G_norm_final", "status"} <= set(g)
+            else g.iloc[:0]
+        )
         rows = _averaged(scored) if len(scored) else []
-        fits = [r for r in rows if fitted(r) and str(r.get("objective", "G")) in ("G", "nan")]   # not G+freq
+        fits = [
+            r for r in rows if fitted(r) and str(r.get("objective", "G")) in ("G", "nan")
+        ]  # not G+freq
         rules = [r for r in rows if is_rule(r)]
         pool = fits or rules or rows
         if pool:
             pick = min(pool, key=lambda r: number(r.get("G_norm_final")))
-            line.update(model=label(pick), fitted=number(pick.get("G_norm_final")),
-                        heldout=heldout_error(pick), findings=flags(pick, rules), n_seeds=pick["n_seeds"])
+            line.update(
+                model=label(pick),
+                fitted=number(pick.get("G_norm_final")),
+                heldout=heldout_error(pick),
+                findings=flags(pick, rules),
+                n_seeds=pick["n_seeds"],
+            )
         elif "ref-coarse" in status:
             line["findings"] = ["ref-coarse"]
         if "error" in status:

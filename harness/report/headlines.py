@@ -18,8 +18,14 @@ from harness.report.text import case_label
 
 ARROW = " \u2192 "
 DASH = "\u2013"
-METHOD_NAMES = {"sa": "SA", "sa-refactor": "SA (refactor)", "lbfgs": "L-BFGS-B", "gauss-newton": "Gauss-Newton",
-                "nelder-mead": "Nelder-Mead", "equilibrium-gap": "equilibrium gap"}
+METHOD_NAMES = {
+    "sa": "SA",
+    "sa-refactor": "SA (refactor)",
+    "lbfgs": "L-BFGS-B",
+    "gauss-newton": "Gauss-Newton",
+    "nelder-mead": "Nelder-Mead",
+    "equilibrium-gap": "equilibrium gap",
+}
 BC_MODELS = ("MS", "MT0", "MT")
 
 
@@ -48,6 +54,7 @@ def _scored(df):
 def _col(df, name):
     """Column ``name`` or an all-NaN one (a quick or foreign run may lack it)."""
     import pandas as pd
+
     return df[name] if name in df else pd.Series(math.nan, index=df.index)
 
 
@@ -74,8 +81,10 @@ def _label(case, n_seeds) -> str:
 
 # -- Deussen 1995 -------------------------------------------------------------------------
 
+
 def deussen_tables(df) -> list:
     import pandas as pd
+
     out = []
     fits = _fits(_scored(df))
     rows = []
@@ -87,22 +96,43 @@ def deussen_tables(df) -> list:
         p0, p1 = _mean(f, "paper_G_initial"), _mean(f, "paper_G_final")
         ours = g0 / g1 if g1 > 0 else math.nan
         paper = p0 / p1 if p1 > 0 else math.nan
-        rows.append({
-            "case": _label(case, _seeds(f)), "weights": next(iter(_col(f, "weights").dropna().astype(str)), ""),
-            "springs": fmt(_mean(f, "n_springs")), "fit": METHOD_NAMES.get(m, m),
-            "G before → after": pair(g0, g1),
-            "paper G before → after": f"{given(p0) or DASH}{ARROW}{given(p1)}" if math.isfinite(p1) else DASH,
-            "improvement ours / paper": " / ".join(f"{fmt(v, 2)}x" if math.isfinite(v) else DASH
-                                                   for v in (ours, paper)),
-            "normalised G before → after": pair(_mean(f, "G_norm_initial"), _mean(f, "G_norm_final")),
-            "held-out G (normalised)": pair(_mean(f, "G_heldout_initial"), _mean(f, "G_heldout")),
-            "G_ref": fmt(_mean(f, "G_ref"), 2), "status": _worst(f["status"]) if "status" in f else ""})
+        rows.append(
+            {
+                "case": _label(case, _seeds(f)),
+                "weights": next(iter(_col(f, "weights").dropna().astype(str)), ""),
+                "springs": fmt(_mean(f, "n_springs")),
+                "fit": METHOD_NAMES.get(m, m),
+                "G before → after": pair(g0, g1),
+                "paper G before → after": f"{given(p0) or DASH}{ARROW}{given(p1)}"
+                if math.isfinite(p1)
+                else DASH,
+                "improvement ours / paper": " / ".join(
+                    f"{fmt(v, 2)}x" if math.isfinite(v) else DASH for v in (ours, paper)
+                ),
+                "normalised G before → after": pair(
+                    _mean(f, "G_norm_initial"), _mean(f, "G_norm_final")
+                ),
+                "held-out G (normalised)": pair(
+                    _mean(f, "G_heldout_initial"), _mean(f, "G_heldout")
+                ),
+                "G_ref": fmt(_mean(f, "G_ref"), 2),
+                "status": _worst(f["status"]) if "status" in f else "",
+            }
+        )
     if rows:
-        out.append(("Deussen 1995: G before and after the fit, ours beside the paper's", pd.DataFrame(rows),
-                    "G is G_{a:b:c} with the case's weights, ours in metres; the paper's G is in units it does "
-                    "not state, so compare the improvement factors (G before / G after), not the values. "
-                    "Held-out: sag and tip loads never fitted. The fit is SA with the paper's schedule where "
-                    "the case ran it."))
+        out.append(
+            (
+                "Deussen 1995: G before and after the fit, ours beside the paper's",
+                pd.DataFrame(rows),
+                "G is G_{a:b:c} with the case's weights, ours in metres; the paper's G is "
+                "in units it does "
+                "not state, so compare the improvement factors (G before / G after), not "
+                "the values. "
+                "Held-out: sag and tip loads never fitted. The fit is SA with the paper's "
+                "schedule where "
+                "the case ran it.",
+            )
+        )
     for item in (_optimizers_table(df), _heldout_table(df), _rules_table(df), _frequency_table(df)):
         if item:
             out.append(item)
@@ -111,6 +141,7 @@ def deussen_tables(df) -> list:
 
 def _optimizers_table(df):
     import pandas as pd
+
     opts = optimizer_frame(df)
     if opts.empty:
         return None
@@ -119,24 +150,36 @@ def _optimizers_table(df):
     rows = []
     for case, g in opts.groupby("case", sort=False):
         g = g[g["model"] == g["model"].iloc[0]]
-        row = {"case": _label(case, int(g["n_seeds"].max())), "constants": fmt(_mean(g, "n_params"))}
+        row = {
+            "case": _label(case, int(g["n_seeds"].max())),
+            "constants": fmt(_mean(g, "n_params")),
+        }
         for m in methods:
             r = g[g["optimizer"] == m]
             row[f"{METHOD_NAMES.get(m, m)}: G (s)"] = (
-                f"{fmt(_mean(r, 'G_final'))} ({fmt(_mean(r, 'seconds'), 2)})" if len(r) else "")
+                f"{fmt(_mean(r, 'G_final'))} ({fmt(_mean(r, 'seconds'), 2)})" if len(r) else ""
+            )
         lb = g[g["optimizer"] == "lbfgs"]
         if len(lb) and "evals_to_sa_G" in lb:
             row["L-BFGS-B evaluations to SA's G"] = fmt(_mean(lb, "evals_to_sa_G"))
         rows.append(row)
-    return ("Optimisers compared on the same initial model (G, wall seconds)", pd.DataFrame(rows).fillna(""),
-            "Same reference, weights and start per case; means over seeds. The seconds are this run's, on a "
-            "busy machine they vary; G does not.")
+    return (
+        "Optimisers compared on the same initial model (G, wall seconds)",
+        pd.DataFrame(rows).fillna(""),
+        "Same reference, weights and start per case; means over seeds. The seconds are this "
+        "run's, on a "
+        "busy machine they vary; G does not.",
+    )
 
 
 def _heldout_table(df):
     import pandas as pd
+
     sc = _scored(df)
-    if not {"G_heldout", "G_norm_final", "optimizer", "stiffness"} <= set(sc) or not sc["G_heldout"].notna().any():
+    if (
+        not {"G_heldout", "G_norm_final", "optimizer", "stiffness"} <= set(sc)
+        or not sc["G_heldout"].notna().any()
+    ):
         return None
     rows = []
     for case, g in sc.groupby("case", sort=False):
@@ -146,18 +189,25 @@ def _heldout_table(df):
             means = rules.groupby("stiffness")[["G_norm_final", "G_heldout"]].mean()
             best = means["G_norm_final"].idxmin()
             row["best rule, no fit: fitted / held-out"] = (
-                f"{best}: {fmt(means.loc[best, 'G_norm_final'])} / {fmt(means.loc[best, 'G_heldout'])}")
+                f"{best}: {fmt(means.loc[best, 'G_norm_final'])} / "
+                f"{fmt(means.loc[best, 'G_heldout'])}"
+            )
         fits = _fits(g)
         for m in dict.fromkeys(fits["optimizer"].astype(str)):
             f = fits[fits["optimizer"] == m]
-            row[f"{METHOD_NAMES.get(m, m)}: fitted / held-out"] = \
+            row[f"{METHOD_NAMES.get(m, m)}: fitted / held-out"] = (
                 f"{fmt(_mean(f, 'G_norm_final'))} / {fmt(_mean(f, 'G_heldout'))}"
+            )
         if len(row) > 1:
             rows.append(row)
     if not rows:
         return None
-    return ("Held-out loads: normalised G on the fitted loads / on loads no fit saw", pd.DataFrame(rows).fillna(""),
-            "A model that only memorised its training loads has a small fitted G and a large held-out G.")
+    return (
+        "Held-out loads: normalised G on the fitted loads / on loads no fit saw",
+        pd.DataFrame(rows).fillna(""),
+        "A model that only memorised its training loads has a small fitted G and a large "
+        "held-out G.",
+    )
 
 
 def _rules_table(df):
@@ -167,27 +217,47 @@ def _rules_table(df):
     rules = sc[sc["optimizer"].astype(str) == "none"].dropna(subset=["G_norm_final"])
     if rules.empty:
         return None
-    t = rules.pivot_table(index="case", columns="stiffness", values="G_norm_final", aggfunc="mean", sort=False)
+    t = rules.pivot_table(
+        index="case", columns="stiffness", values="G_norm_final", aggfunc="mean", sort=False
+    )
     t = t.map(fmt).reset_index()
     t["case"] = [case_label(c) for c in t["case"]]
     t.columns.name = None
-    return ("Stiffness rules before any fit (normalised G on the fitted loads)", t,
-            "Each rule sets every spring constant from the geometry and the material alone (means over seeds).")
+    return (
+        "Stiffness rules before any fit (normalised G on the fitted loads)",
+        t,
+        "Each rule sets every spring constant from the geometry and the material alone "
+        "(means over seeds).",
+    )
 
 
 def _frequency_table(df):
     import pandas as pd
+
     f = _fits(_scored(df), "G+freq")
     if f.empty:
         return None
-    rows = [{"case": _label(case, _seeds(g)), "fit": METHOD_NAMES.get(str(g["optimizer"].iloc[0]), ""),
-             "frequency error before → after": pair(_mean(g, "freq_error_initial"), _mean(g, "freq_error_final")),
-             "G after": fmt(_mean(g, "G_final"))} for case, g in f.groupby("case", sort=False)]
-    return ("Fits with the frequency term (Deussen Sec. 8)", pd.DataFrame(rows),
-            "RMS relative error of the first natural frequencies against the FEM's, and G of the same fit.")
+    rows = [
+        {
+            "case": _label(case, _seeds(g)),
+            "fit": METHOD_NAMES.get(str(g["optimizer"].iloc[0]), ""),
+            "frequency error before → after": pair(
+                _mean(g, "freq_error_initial"), _mean(g, "freq_error_final")
+            ),
+            "G after": fmt(_mean(g, "G_final")),
+        }
+        for case, g in f.groupby("case", sort=False)
+    ]
+    return (
+        "Fits with the frequency term (Deussen Sec. 8)",
+        pd.DataFrame(rows),
+        "RMS relative error of the first natural frequencies against the FEM's, and G of "
+        "the same fit.",
+    )
 
 
 # -- Bourguignon & Cani 2000 ----------------------------------------------------------------
+
 
 def _bc_values(df, case, col, mesh=None, initial=None, digits=3, scale=1.0, suffix=""):
     g = df[df["case"] == case]
@@ -205,6 +275,7 @@ def _bc_values(df, case, col, mesh=None, initial=None, digits=3, scale=1.0, suff
 
 def bc2000_tables(df) -> list:
     import pandas as pd
+
     cases = set(df["case"])
     rows = []
 
@@ -217,80 +288,178 @@ def bc2000_tables(df) -> list:
     v = df[df["case"] == "volume_cube343"]
     limit = _mean(v, "paper_peak_abs_dV_percent")
     dev = _col(v, "max_dev_vs_original_percent").max()
-    add("Fig. 3 peak |dV/V| (%), tetra cube_343", "volume_cube343", "peak_abs_dV_percent",
-        (f"MT < {given(limit)} %" if math.isfinite(limit) else "") +
-        (f"; curves match the program to {fmt(dev, 1)} %" if math.isfinite(dev) else ""))
+    add(
+        "Fig. 3 peak |dV/V| (%), tetra cube_343",
+        "volume_cube343",
+        "peak_abs_dV_percent",
+        (f"MT < {given(limit)} %" if math.isfinite(limit) else "")
+        + (f"; curves match the program to {fmt(dev, 1)} %" if math.isfinite(dev) else ""),
+    )
     b = df[df["case"] == "volume_beam336"]
-    add("peak |dV/V| (%), tetra beam_336", "volume_beam336", "peak_abs_dV_percent",
-        f"the program's vol.txt, matched to {fmt(_col(b, 'max_dev_vs_original_percent').max(), 1)} %"
-        if len(b) else "")
-    add("normalised G vs FEM, tetra cube_333 (program constants scaled → fitted)", "fem_cube333_tetra",
-        "G_norm_final", "(the paper did not compare with FEM)", initial="G_norm_initial")
-    add("held-out sag + tip, normalised G, tetra cube_333 (scaled → fitted)", "fem_cube333_tetra", "G_heldout",
-        "never fitted", initial="G_heldout_initial")
-    add("normalised G vs FEM, hexa cube_333 (scaled → fitted)", "fem_cube333_hexa", "G_norm_final",
-        initial="G_norm_initial")
-    add("held-out sag + tip, hexa cube_333 (scaled → fitted)", "fem_cube333_hexa", "G_heldout",
-        initial="G_heldout_initial")
-    add("normalised G vs transversely isotropic FEM, uniform fibre (scaled → fitted)", "fem_cube333_tetra_fibre",
-        "G_norm_final", initial="G_norm_initial")
-    add("normalised G vs transversely isotropic FEM, helicoidal fibres (scaled → fitted)",
-        "fem_cube333_tetra_helicoidal", "G_norm_final", initial="G_norm_initial")
-    add("face-pull stiffness spread (%), tetra cube_333", "fem_cube333_tetra", "stiffness_spread",
-        "undesired anisotropy (Fig. 1a vs 5a)", scale=100.0, digits=2)
+    add(
+        "peak |dV/V| (%), tetra beam_336",
+        "volume_beam336",
+        "peak_abs_dV_percent",
+        "the program's vol.txt, matched to "
+        f"{fmt(_col(b, 'max_dev_vs_original_percent').max(), 1)} %"
+        if len(b)
+        else "",
+    )
+    add(
+        "normalised G vs FEM, tetra cube_333 (program constants scaled → fitted)",
+        "fem_cube333_tetra",
+        "G_norm_final",
+        "(the paper did not compare with FEM)",
+        initial="G_norm_initial",
+    )
+    add(
+        "held-out sag + tip, normalised G, tetra cube_333 (scaled → fitted)",
+        "fem_cube333_tetra",
+        "G_heldout",
+        "never fitted",
+        initial="G_heldout_initial",
+    )
+    add(
+        "normalised G vs FEM, hexa cube_333 (scaled → fitted)",
+        "fem_cube333_hexa",
+        "G_norm_final",
+        initial="G_norm_initial",
+    )
+    add(
+        "held-out sag + tip, hexa cube_333 (scaled → fitted)",
+        "fem_cube333_hexa",
+        "G_heldout",
+        initial="G_heldout_initial",
+    )
+    add(
+        "normalised G vs transversely isotropic FEM, uniform fibre (scaled → fitted)",
+        "fem_cube333_tetra_fibre",
+        "G_norm_final",
+        initial="G_norm_initial",
+    )
+    add(
+        "normalised G vs transversely isotropic FEM, helicoidal fibres (scaled → fitted)",
+        "fem_cube333_tetra_helicoidal",
+        "G_norm_final",
+        initial="G_norm_initial",
+    )
+    add(
+        "face-pull stiffness spread (%), tetra cube_333",
+        "fem_cube333_tetra",
+        "stiffness_spread",
+        "undesired anisotropy (Fig. 1a vs 5a)",
+        scale=100.0,
+        digits=2,
+    )
     fem = _mean(df[df["case"] == "fem_cube333_tetra"], "pull_stiffness_spread_fem")
-    add("pull stiffness spread max/min over 12 directions, tetra cube_333", "fem_cube333_tetra",
-        "pull_stiffness_spread", f"FEM {fmt(fem, 4)}" if math.isfinite(fem) else "")
+    add(
+        "pull stiffness spread max/min over 12 directions, tetra cube_333",
+        "fem_cube333_tetra",
+        "pull_stiffness_spread",
+        f"FEM {fmt(fem, 4)}" if math.isfinite(fem) else "",
+    )
     t = df[df["case"] == "timing_cube555"]
     for mesh in ("tetra", "hexa"):
         pr = _mean(t[_col(t, "mesh").astype(str).str.startswith(mesh)], "paper_model_MS_ratio")
-        add(f"Table 1: model / MS time per simulated second, {mesh} cube_555", "timing_cube555",
-            "model_MS_ratio_per_second", f"{given(pr)}x" if math.isfinite(pr) else "", mesh=mesh, digits=2,
-            suffix="x")
+        add(
+            f"Table 1: model / MS time per simulated second, {mesh} cube_555",
+            "timing_cube555",
+            "model_MS_ratio_per_second",
+            f"{given(pr)}x" if math.isfinite(pr) else "",
+            mesh=mesh,
+            digits=2,
+            suffix="x",
+        )
     for mesh in ("tetra", "hexa"):
-        add(f"cantilever beam_336 {mesh}: tip deflection / FEM (linear, small strain)", "cantilever_beam336",
-            "tip_ratio", "(the paper did not compare)", mesh=mesh)
+        add(
+            f"cantilever beam_336 {mesh}: tip deflection / FEM (linear, small strain)",
+            "cantilever_beam336",
+            "tip_ratio",
+            "(the paper did not compare)",
+            mesh=mesh,
+        )
     if not rows:
         return []
-    return [("Bourguignon & Cani 2000: MS, MT0 and MT", pd.DataFrame(rows),
-             "MS: classic springs on the mesh edges; MT0: the element model; MT: with volume forces. "
-             "Normalised G is dimensionless (the paper reports none); fitted: ks1..ks6 (and kvs) calibrated "
-             "against the FEM on the basic loads. Timings are this run's.")]
+    return [
+        (
+            "Bourguignon & Cani 2000: MS, MT0 and MT",
+            pd.DataFrame(rows),
+            "MS: classic springs on the mesh edges; MT0: the element model; MT: with volume "
+            "forces. "
+            "Normalised G is dimensionless (the paper reports none); fitted: ks1..ks6 (and "
+            "kvs) calibrated "
+            "against the FEM on the basic loads. Timings are this run's.",
+        )
+    ]
 
 
 # -- verification ---------------------------------------------------------------------------
+
 
 def verification_tables(df) -> list:
     """One row per case and check: what the FEM reference was verified against (the
     closed form where the load has one, else its own two-mesh error estimate; the
     cantilever's first frequency against Euler-Bernoulli) and to which error."""
     import pandas as pd
+
     rows = []
     for case, g in df.groupby("case", sort=False):
-        method = str(_col(g, "ref_method").dropna().iloc[0]) if _col(g, "ref_method").notna().any() else ""
+        method = (
+            str(_col(g, "ref_method").dropna().iloc[0])
+            if _col(g, "ref_method").notna().any()
+            else ""
+        )
         fem = f"{method}, {fmt(_col(g, 'n_dofs').max())} dofs".strip(", ")
         tol = _mean(g, "ref_tol")
         closed, est = _col(g, "closed_form_error"), _col(g, "error_estimate")
         has = closed.notna()
-        for what, errs, loads in (("closed-form solution", closed[has], g[has]),
-                                  ("its own error estimate (no closed form)", est[~has & est.notna()],
-                                   g[~has & est.notna()])):
+        for what, errs, loads in (
+            ("closed-form solution", closed[has], g[has]),
+            (
+                "its own error estimate (no closed form)",
+                est[~has & est.notna()],
+                g[~has & est.notna()],
+            ),
+        ):
             if len(errs):
-                rows.append({"case": case_label(case), "FEM": fem, "verified against": what,
-                             "loads": ", ".join(map(str, _col(loads, "load").dropna())) or str(len(errs)),
-                             "error (max)": fmt(errs.max(), 2),
-                             "within tol": f"{int((errs <= tol).sum())} of {len(errs)} (tol {tol:g})"
-                             if math.isfinite(tol) else ""})
+                rows.append(
+                    {
+                        "case": case_label(case),
+                        "FEM": fem,
+                        "verified against": what,
+                        "loads": ", ".join(map(str, _col(loads, "load").dropna()))
+                        or str(len(errs)),
+                        "error (max)": fmt(errs.max(), 2),
+                        "within tol": f"{int((errs <= tol).sum())} of {len(errs)} (tol {tol:g})"
+                        if math.isfinite(tol)
+                        else "",
+                    }
+                )
         f1 = _mean(g, "f1_eb_ratio")
         if math.isfinite(f1):
-            rows.append({"case": case_label(case), "FEM": fem, "verified against": "Euler-Bernoulli first frequency",
-                         "loads": "modes", "error (max)": fmt(abs(f1 - 1), 2), "within tol": ""})
+            rows.append(
+                {
+                    "case": case_label(case),
+                    "FEM": fem,
+                    "verified against": "Euler-Bernoulli first frequency",
+                    "loads": "modes",
+                    "error (max)": fmt(abs(f1 - 1), 2),
+                    "within tol": "",
+                }
+            )
     if not rows:
         return []
-    return [("What the FEM reference was verified against, and to which error", pd.DataFrame(rows),
-             "Errors relative to the largest displacement (frequency: relative). A closed form is met to rounding; "
-             "elsewhere the reference is only as good as its estimate (the difference from a refined mesh), and "
-             "a load above tol is ref-coarse: its rows are kept and flagged in every table.")]
+    return [
+        (
+            "What the FEM reference was verified against, and to which error",
+            pd.DataFrame(rows),
+            "Errors relative to the largest displacement (frequency: relative). A closed "
+            "form is met to rounding; "
+            "elsewhere the reference is only as good as its estimate (the difference from a "
+            "refined mesh), and "
+            "a load above tol is ref-coarse: its rows are kept and flagged in every table.",
+        )
+    ]
 
 
 def generic_tables(df) -> list:
@@ -302,12 +471,20 @@ def generic_tables(df) -> list:
         if t[c].dtype.kind == "f":
             t[c] = t[c].map(fmt)
     t["case"] = [case_label(c) for c in t["case"]]
-    return [("One line per case", t.fillna(""),
-             "Best stiffness rule and best fit by normalised G on the fitted loads; G_heldout of that fit; "
-             "G_ref the reference's own error.")]
+    return [
+        (
+            "One line per case",
+            t.fillna(""),
+            "Best stiffness rule and best fit by normalised G on the fitted loads; "
+            "G_heldout of that fit; "
+            "G_ref the reference's own error.",
+        )
+    ]
 
 
-FINDINGS_ONLY = ("nu_sweep",)    # sections that show their figures and findings (harness/report/claims.py), no table
+FINDINGS_ONLY = (
+    "nu_sweep",
+)  # sections that show their figures and findings (harness/report/claims.py), no table
 
 
 def headline_tables(suite: str, df) -> list:

@@ -21,8 +21,10 @@ def markdown_table(df) -> str:
     rather than via pandas.to_markdown so springbench needs no `tabulate` dependency."""
     cols = [str(c) for c in df.columns]
     numeric = [df[c].dtype.kind in "iuf" for c in df.columns]
-    lines = ["| " + " | ".join(c.replace("|", "\\|") for c in cols) + " |",
-             "| " + " | ".join("---:" if n else "---" for n in numeric) + " |"]
+    lines = [
+        "| " + " | ".join(c.replace("|", "\\|") for c in cols) + " |",
+        "| " + " | ".join("---:" if n else "---" for n in numeric) + " |",
+    ]
     for row in df.itertuples(index=False):
         lines.append("| " + " | ".join(cell(v) for v in row) + " |")
     return "\n".join(lines) + "\n"

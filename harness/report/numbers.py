@@ -15,9 +15,9 @@ def fmt(v, digits: int = 3) -> str:
         return str(v)
     if not math.isfinite(v):
         return ""
-    if abs(v) >= 10 ** digits:
+    if abs(v) >= 10**digits:
         return f"{v:,.0f}"
-    if v == int(v):   # counts: 72, not 72.0
+    if v == int(v):  # counts: 72, not 72.0
         return str(int(v))
     s = f"{v:#.{digits}g}"
     return s.rstrip(".") if "e" not in s else f"{v:.{digits - 1}e}"

@@ -27,10 +27,16 @@ def gather(manifests) -> dict:
             missing.append(label)
             continue
         p = {k: p.get(k) for k in FIELDS}
-        runs.setdefault(json.dumps(p, sort_keys=True), {"provenance": p, "cases": []})["cases"].append(label)
-    ordered = sorted(runs.values(), key=lambda r: (-len(r["cases"]), json.dumps(r["provenance"], sort_keys=True)))
-    return {"runs": [{"provenance": r["provenance"], "cases": sorted(r["cases"])} for r in ordered],
-            "not_recorded": sorted(missing)}
+        runs.setdefault(json.dumps(p, sort_keys=True), {"provenance": p, "cases": []})[
+            "cases"
+        ].append(label)
+    ordered = sorted(
+        runs.values(), key=lambda r: (-len(r["cases"]), json.dumps(r["provenance"], sort_keys=True))
+    )
+    return {
+        "runs": [{"provenance": r["provenance"], "cases": sorted(r["cases"])} for r in ordered],
+        "not_recorded": sorted(missing),
+    }
 
 
 def write(suite_dir: Path, manifests) -> Path:
@@ -49,7 +55,13 @@ def lines(suite_dir: Path) -> list[str]:
         return [f"{NOT_RECORDED}."]
     runs, missing = data.get("runs", []), data.get("not_recorded", [])
     total = sum(len(r.get("cases", [])) for r in runs) + len(missing)
-    out = [f"{len(r.get('cases', []))} of {total} results: {describe(r.get('provenance'))}." for r in runs]
+    out = [
+        f"{len(r.get('cases', []))} of {total} results: {describe(r.get('provenance'))}."
+        for r in runs
+    ]
     if missing:
-        out.append(f"{len(missing)} of {total} results: {NOT_RECORDED} (stored before provenance was recorded).")
+        out.append(
+            f"{len(missing)} of {total} results: {NOT_RECORDED} (stored before provenance "
+            "was recorded)."
+        )
     return out

@@ -77,11 +77,18 @@ def html_table(df) -> str:
     """A table of display strings; cells that look like numbers are right-aligned, rows
     whose status is ref-coarse or error are tinted."""
     cols = [str(c) for c in df.columns]
-    out = ["<table>", "<thead><tr>" + "".join(f"<th scope='col'>{_e(c)}</th>" for c in cols) + "</tr></thead>",
-           "<tbody>"]
+    out = [
+        "<table>",
+        "<thead><tr>" + "".join(f"<th scope='col'>{_e(c)}</th>" for c in cols) + "</tr></thead>",
+        "<tbody>",
+    ]
     for row in df.itertuples(index=False):
         cells = ["" if v is None or v != v else str(v) for v in row]
-        flag = " class='flag'" if "status" in cols and cells[cols.index("status")] in (REF_COARSE, "error") else ""
+        flag = (
+            " class='flag'"
+            if "status" in cols and cells[cols.index("status")] in (REF_COARSE, "error")
+            else ""
+        )
         tds = []
         for v in cells:
             num = v.replace(",", "").replace("x", "").strip()
@@ -99,15 +106,21 @@ def _figure(root: Path, png: Path, caption: str) -> str:
     size = png_size(png)
     wh = f" width='{size[0]}' height='{size[1]}'" if size else ""
     href = _href(root, png)
-    return (f"<figure><a href='{href}'><img src='{href}'{wh} alt='{_e(caption)}'></a>"
-            f"<figcaption>{_e(caption)} <a href='{href}'>{_e(png.relative_to(root).as_posix())}</a>"
-            "</figcaption></figure>")
+    return (
+        f"<figure><a href='{href}'><img src='{href}'{wh} alt='{_e(caption)}'></a>"
+        f"<figcaption>{_e(caption)} <a href='{href}'>{_e(png.relative_to(root).as_posix())}</a>"
+        "</figcaption></figure>"
+    )
 
 
 def _key_figures(suite: Path, pngs: list[Path]) -> list[tuple[Path, str]]:
     """The figures shown full width: the suite's curated list where present, else the
     suite-level figures and the first figure of each kind."""
-    chosen = [(suite / rel, cap) for rel, cap in KEY_FIGURES.get(suite.name, []) if (suite / rel).is_file()]
+    chosen = [
+        (suite / rel, cap)
+        for rel, cap in KEY_FIGURES.get(suite.name, [])
+        if (suite / rel).is_file()
+    ]
     if chosen:
         return chosen
     seen, out = set(), []
@@ -115,8 +128,12 @@ def _key_figures(suite: Path, pngs: list[Path]) -> list[tuple[Path, str]]:
         kind = p.name.split("-")[1].split(".")[0] if "-" in p.name else p.name
         if p.parent == suite or kind not in seen:
             seen.add(kind)
-            out.append((p, f"{case_label(p.parent.relative_to(suite).as_posix()) if p.parent != suite else suite.name}"
-                           f": {figure_caption(p.name)}"))
+            where = (
+                case_label(p.parent.relative_to(suite).as_posix())
+                if p.parent != suite
+                else suite.name
+            )
+            out.append((p, f"{where}: {figure_caption(p.name)}"))
     return out[:8]
 
 
@@ -126,6 +143,7 @@ def _col_or_empty(df, name) -> list:
 
 def _summary(suite: Path):
     import pandas as pd
+
     try:
         return pd.read_csv(suite / "summary.csv")
     except (OSError, ValueError, pd.errors.EmptyDataError):
@@ -139,20 +157,29 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
         parts.append(f"<p>{_e(text)}</p>")
     df = _summary(suite)
     if df is None:
-        parts.append(f"<p class='warn'>{_e(suite.name)}/summary.csv could not be read: run "
-                     "<code>springbench report</code> again.</p></section>")
+        parts.append(
+            f"<p class='warn'>{_e(suite.name)}/summary.csv could not be read: run "
+            "<code>springbench report</code> again.</p></section>"
+        )
         return parts
     status = df["status"].astype(str) if "status" in df else None
-    counts = ", ".join(f"{int((status == s).sum())} {s}" for s in ("ok", REF_COARSE, "error")
-                       if status is not None and (status == s).any())
+    counts = ", ".join(
+        f"{int((status == s).sum())} {s}"
+        for s in ("ok", REF_COARSE, "error")
+        if status is not None and (status == s).any()
+    )
     modes = sorted(set(df["mode"].dropna().astype(str))) if "mode" in df else []
-    parts.append(f"<p class='note'>{df['case'].nunique()} cases, {len(df)} rows ({counts}); budgets: "
-                 f"{_e(', '.join(modes) or 'unknown')}.</p>")
-    if "G_final" in df:   # the units caveat belongs to suites that report G
+    parts.append(
+        f"<p class='note'>{df['case'].nunique()} cases, {len(df)} rows ({counts}); budgets: "
+        f"{_e(', '.join(modes) or 'unknown')}.</p>"
+    )
+    if "G_final" in df:  # the units caveat belongs to suites that report G
         parts.append(f"<p class='caveat'>{_e(UNITS)}</p>")
     if "quick" in modes:
-        parts.append("<p class='warn'>Quick budgets: a smoke run, not the published numbers "
-                     "(those are the <code>--full</code> run in <code>results/</code>).</p>")
+        parts.append(
+            "<p class='warn'>Quick budgets: a smoke run, not the published numbers "
+            "(those are the <code>--full</code> run in <code>results/</code>).</p>"
+        )
     if status is not None and (status == "error").any():
         errs = df[status == "error"]
         msg = [e[:200] if isinstance(e, str) else "" for e in _col_or_empty(errs, "error")]
@@ -161,8 +188,12 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
     try:
         tables = headline_tables(suite.name, df)
     except Exception as exc:  # a foreign or damaged summary must not stop the page
-        print(f"springbench: warning: tables of {suite}: {type(exc).__name__}: {exc}".replace("\n", " "),
-              file=sys.stderr)
+        print(
+            f"springbench: warning: tables of {suite}: {type(exc).__name__}: {exc}".replace(
+                "\n", " "
+            ),
+            file=sys.stderr,
+        )
         tables = []
     for heading, table, note in tables:
         parts += [f"<h3>{_e(heading)}</h3>", f"<div class='scroll'>{html_table(table)}</div>"]
@@ -171,32 +202,48 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
     pngs = sorted(suite.rglob("fig-*.png"))
     key = _key_figures(suite, pngs)
     lists = suite_lists(suite.name, df)
-    if lists and key:          # findings read beside their figure
+    if lists and key:  # findings read beside their figure
         parts += [_figure(root, p, cap) for p, cap in key]
         key = []
     for heading, sentences in lists:
-        parts += [f"<h3>{_e(heading)}</h3>", "<ul class='findings'>" + "".join(f"<li>{_e(x)}</li>"
-                                                                               for x in sentences) + "</ul>"]
-    data = [f"<a href='{_href(root, suite / 'summary.csv')}'>summary.csv</a> (all {len(df)} rows, "
-            f"{len(df.columns)} columns: every score, per-load G and stage detail)"]
-    for name, what in (("summary.md", "the key columns as Markdown"), ("seeds.csv", "means and spreads over seeds")):
+        parts += [
+            f"<h3>{_e(heading)}</h3>",
+            "<ul class='findings'>" + "".join(f"<li>{_e(x)}</li>" for x in sentences) + "</ul>",
+        ]
+    data = [
+        f"<a href='{_href(root, suite / 'summary.csv')}'>summary.csv</a> (all {len(df)} rows, "
+        f"{len(df.columns)} columns: every score, per-load G and stage detail)"
+    ]
+    for name, what in (
+        ("summary.md", "the key columns as Markdown"),
+        ("seeds.csv", "means and spreads over seeds"),
+    ):
         if (suite / name).is_file():
             data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
     parts.append("<p>Full tables: " + "; ".join(data) + ".</p>")
-    parts.append("<details class='note'><summary>Code and machine</summary>"
-                 + "".join(f"<p>{_e(line)}</p>" for line in lines(suite)) + "</details>")
+    parts.append(
+        "<details class='note'><summary>Code and machine</summary>"
+        + "".join(f"<p>{_e(line)}</p>" for line in lines(suite))
+        + "</details>"
+    )
     if key:
         parts.append("<h3>Figures</h3>")
         parts += [_figure(root, p, cap) for p, cap in key]
     if pngs:
-        parts.append(f"<details><summary>All {len(pngs)} figures of this suite, by case</summary><ul class='figs'>")
+        parts.append(
+            f"<details><summary>All {len(pngs)} figures of this suite, by case</summary><ul "
+            "class='figs'>"
+        )
         by_folder: dict[Path, list[Path]] = {}
         for p in pngs:
             by_folder.setdefault(p.parent, []).append(p)
         for folder, files in by_folder.items():
             name = folder.relative_to(suite).as_posix()
-            links = ", ".join(f"<a href='{_href(root, p)}' title='{_e(figure_caption(p.name))}'>"
-                              f"{_e(p.name[4:-4])}</a>" for p in files)
+            links = ", ".join(
+                f"<a href='{_href(root, p)}' title='{_e(figure_caption(p.name))}'>"
+                f"{_e(p.name[4:-4])}</a>"
+                for p in files
+            )
             parts.append(f"<li>{_e(suite.name if name == '.' else name)}: {links}</li>")
         parts.append("</ul></details>")
     parts.append("</section>")
@@ -206,18 +253,24 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
 def _bench_section(root: Path, files: list[Path]) -> list[str]:
     import pandas as pd
 
-    parts = ["<section id='bench'><h2>Benchmarks</h2>",
-             "<p>Each benchmark is measured by <code>springbench bench NAME</code> (speeds as ratios against a "
-             "baseline measured in the same run); README.md gives the targets.</p>"]
+    parts = [
+        "<section id='bench'><h2>Benchmarks</h2>",
+        "<p>Each benchmark is measured by <code>springbench bench NAME</code> (speeds as "
+        "ratios against a "
+        "baseline measured in the same run); README.md gives the targets.</p>",
+    ]
     for png in sorted((root / "bench").glob("fig-*.png")):
         parts.append(_figure(root, png, figure_caption(png.name)))
     for f in files:
         parts.append(f"<h3>{_e(f.stem)}: {_e(BENCH.get(f.stem, 'benchmark'))}</h3>")
         try:
             table, note = bench_table(f.stem, pd.read_csv(f))
-            parts += [f"<div class='scroll'>{html_table(table)}</div>",
-                      f"<p class='note'>{_e(note)} Code and machine: {_e(provenance_line(pd.read_csv(f)))}. "
-                      f"<a href='{_href(root, f)}'>{_e(f.name)}</a></p>"]
+            parts += [
+                f"<div class='scroll'>{html_table(table)}</div>",
+                f"<p class='note'>{_e(note)} Code and machine: "
+                f"{_e(provenance_line(pd.read_csv(f)))}. "
+                f"<a href='{_href(root, f)}'>{_e(f.name)}</a></p>",
+            ]
         except (OSError, ValueError, pd.errors.EmptyDataError):
             parts.append(f"<p class='warn'>{_e(f.name)} could not be read.</p>")
     return parts + ["</section>"]
@@ -227,23 +280,33 @@ def _findings(suites: list[Path]) -> list[str]:
     items = headline_findings(suites)
     if not items:
         return []
-    return ["<section id='findings'><h2>Findings</h2><ul class='findings'>"
-            + "".join(f"<li>{_e(s)}</li>" for s in items) + "</ul>",
-            "<p class='note'>Each sentence is generated from the stored tables below (normalised G: RMS displacement "
-            "error relative to the FEM's, 0.05 = 5 %; held-out: loads no fit saw).</p></section>"]
+    return [
+        "<section id='findings'><h2>Findings</h2><ul class='findings'>"
+        + "".join(f"<li>{_e(s)}</li>" for s in items)
+        + "</ul>",
+        "<p class='note'>Each sentence is generated from the stored tables below "
+        "(normalised G: RMS displacement "
+        "error relative to the FEM's, 0.05 = 5 %; held-out: loads no fit saw).</p></section>",
+    ]
 
 
 def _glossary() -> list[str]:
     items = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in glossary())
-    return ["<section id='glossary'><h2>Columns</h2>", "<p class='note'>The columns a reader meets first; "
-            "every column of every summary.csv is explained in docs/columns.md.</p>", f"<dl>{items}</dl></section>"]
+    return [
+        "<section id='glossary'><h2>Columns</h2>",
+        "<p class='note'>The columns a reader meets first; "
+        "every column of every summary.csv is explained in docs/columns.md.</p>",
+        f"<dl>{items}</dl></section>",
+    ]
 
 
 def page_suites(root: Path) -> tuple[list[Path], list[Path]]:
     """(the suite folders of ``root`` (those holding a summary.csv) in page order, its
     benchmark CSVs)."""
-    suites = sorted((d for d in root.iterdir() if (d / "summary.csv").is_file()) if root.is_dir() else [],
-                    key=lambda s: (ORDER.index(s.name) if s.name in ORDER else len(ORDER), s.name))
+    suites = sorted(
+        (d for d in root.iterdir() if (d / "summary.csv").is_file()) if root.is_dir() else [],
+        key=lambda s: (ORDER.index(s.name) if s.name in ORDER else len(ORDER), s.name),
+    )
     bench = sorted((root / "bench").glob("*.csv")) if (root / "bench").is_dir() else []
     return suites, bench
 
@@ -257,16 +320,25 @@ def index_html(results_root) -> str:
     toc += [(s.name, SUITES.get(s.name, (s.name,))[0]) for s in suites]
     toc += [("bench", "Benchmarks")] if bench else []
     toc += [("glossary", "Columns")]
-    parts = ["<!DOCTYPE html>", "<html lang='en'><head><meta charset='utf-8'>",
-             "<meta name='viewport' content='width=device-width, initial-scale=1'>",
-             "<title>springbench results</title>", f"<style>{CSS}</style></head><body>",
-             "<header><h1>springbench results</h1>",
-             "<p>How well does a spring/mass model imitate linear elasticity? Each suite below reproduces a "
-             "paper's experiments against a verified scikit-fem reference and scores the models with Deussen's "
-             "G criterion. This page is rebuilt from the stored results by <code>springbench report</code>; "
-             "nothing on it is recomputed.</p>",
-             "<nav><ul>" + "".join(f"<li><a href='#{_e(a)}'>{_e(t)}</a></li>" for a, t in toc) + "</ul></nav>",
-             "</header><main>"] + findings
+    parts = [
+        "<!DOCTYPE html>",
+        "<html lang='en'><head><meta charset='utf-8'>",
+        "<meta name='viewport' content='width=device-width, initial-scale=1'>",
+        "<title>springbench results</title>",
+        f"<style>{CSS}</style></head><body>",
+        "<header><h1>springbench results</h1>",
+        "<p>How well does a spring/mass model imitate linear elasticity? Each suite below "
+        "reproduces a "
+        "paper's experiments against a verified scikit-fem reference and scores the models "
+        "with Deussen's "
+        "G criterion. This page is rebuilt from the stored results by <code>springbench "
+        "report</code>; "
+        "nothing on it is recomputed.</p>",
+        "<nav><ul>"
+        + "".join(f"<li><a href='#{_e(a)}'>{_e(t)}</a></li>" for a, t in toc)
+        + "</ul></nav>",
+        "</header><main>",
+    ] + findings
     for s in suites:
         parts += _suite_section(root, s)
     if bench:

@@ -1,7 +1,8 @@
 """Figure registry: each figure kind is one module listed in ``FIGURES``.
 
 A figure module has ``NAME``, ``SCOPE`` ("case": drawn per case data folder; "suite":
-drawn once per suite folder from its summary.csv; "bench": once from the bench CSVs), ``DATA`` (globs of the files it reads in
+drawn once per suite folder from its summary.csv; "bench": once from the bench CSVs), ``DATA``
+(globs of the files it reads in
 the folder; or ``inputs(folder) -> list[Path]`` when it reads others too), optionally
 ``CODE`` (the other modules its drawing depends on) and ``make(folder) -> list[Path]``,
 which reads stored data files (formats in :mod:`harness.report.build`), writes PNGs into
@@ -24,18 +25,23 @@ import numpy as np
 from harness.outputs import staged, write_changed
 
 FIGURES = [
-    "harness.report.figures.trace",        # G against SA steps (trace.csv)
-    "harness.report.figures.lloyd",        # Lloyd statistics against iterations, Deussen Fig. 2 (lloyd.csv)
-    "harness.report.figures.lloyd_bars",   # G per Lloyd iteration count, Deussen Fig. 12 (summary.csv)
-    "harness.report.figures.volume",       # volume variation, Bourguignon-Cani Fig. 3 (volume.csv)
-    "harness.report.figures.spectrum",     # natural frequencies model vs FEM (frequencies.csv)
-    "harness.report.figures.anisotropy",   # polar plot of effective stiffness (anisotropy.csv)
-    "harness.report.figures.deformed",     # reference vs model deformed shapes (deformed*.npz)
-    "harness.report.figures.fibres",       # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
-    "harness.report.figures.nu_sweep",     # G against Poisson's ratio per model class (summary.csv)
-    "harness.report.figures.engines",      # each engine's G_norm against nu (the engines suite's summary.csv)
-    "harness.report.figures.bench_reference",   # the benchmarks' plot: FEM solve time and error (bench/reference.csv)
-    "harness.report.figures.bench_engines",     # the engine table: each engine's G_norm against nu (bench/engines.csv)
+    "harness.report.figures.trace",  # G against SA steps (trace.csv)
+    # Lloyd statistics against iterations, Deussen Fig. 2 (lloyd.csv)
+    "harness.report.figures.lloyd",
+    # G per Lloyd iteration count, Deussen Fig. 12 (summary.csv)
+    "harness.report.figures.lloyd_bars",
+    "harness.report.figures.volume",  # volume variation, Bourguignon-Cani Fig. 3 (volume.csv)
+    "harness.report.figures.spectrum",  # natural frequencies model vs FEM (frequencies.csv)
+    "harness.report.figures.anisotropy",  # polar plot of effective stiffness (anisotropy.csv)
+    "harness.report.figures.deformed",  # reference vs model deformed shapes (deformed*.npz)
+    "harness.report.figures.fibres",  # fibre fields, Bourguignon-Cani Fig. 6 (fibres.npz)
+    "harness.report.figures.nu_sweep",  # G against Poisson's ratio per model class (summary.csv)
+    # each engine's G_norm against nu (the engines suite's summary.csv)
+    "harness.report.figures.engines",
+    # the benchmarks' plot: FEM solve time and error (bench/reference.csv)
+    "harness.report.figures.bench_reference",
+    # the engine table: each engine's G_norm against nu (bench/engines.csv)
+    "harness.report.figures.bench_engines",
 ]
 
 
@@ -50,8 +56,8 @@ def _make(mods, folder: Path) -> list[Path]:
         try:
             out += [Path(p) for p in m.make(Path(folder))]
         except Exception as exc:  # a broken data file must not stop the report
-            print(f"springbench: warning: figure {m.NAME} in {folder}: {type(exc).__name__}: {exc}"
-                  .replace("\n", " "), file=sys.stderr)
+            why = f"{type(exc).__name__}: {exc}".replace("\n", " ")
+            print(f"springbench: warning: figure {m.NAME} in {folder}: {why}", file=sys.stderr)
         finally:
             plt = sys.modules.get("matplotlib.pyplot")
             if plt is not None:
@@ -69,7 +75,9 @@ def _stamp(files, mods) -> str:
     for f in sorted(files, key=lambda f: f.name):
         h.update(f"{f.name}\0".encode())
         h.update(hashlib.sha256(f.read_bytes()).digest())
-    code = [sys.modules[__name__]] + [importlib.import_module(n) for m in mods for n in getattr(m, "CODE", ())]
+    code = [sys.modules[__name__]] + [
+        importlib.import_module(n) for m in mods for n in getattr(m, "CODE", ())
+    ]
     for m in mods + code:
         h.update(Path(m.__file__).read_bytes())
     return h.hexdigest()
@@ -80,7 +88,11 @@ def _data_files(folder: Path, mods) -> list[Path]:
     ``DATA`` globs): what a stamp hashes, and nothing else."""
     files = set()
     for m in mods:
-        files |= set(m.inputs(folder)) if hasattr(m, "inputs") else {f for g in m.DATA for f in folder.glob(g)}
+        files |= (
+            set(m.inputs(folder))
+            if hasattr(m, "inputs")
+            else {f for g in m.DATA for f in folder.glob(g)}
+        )
     return sorted(f for f in files if f.is_file())
 
 
@@ -130,8 +142,10 @@ def make_bench_figures(bench_dir, redraw: bool = False) -> list[Path]:
 def pyplot():
     """matplotlib.pyplot on the Agg backend (no display needed)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
     return plt
 
 
@@ -142,6 +156,7 @@ def read_csv(folder: Path, name: str):
     if not src.exists():
         return None
     import pandas as pd
+
     return pd.read_csv(src)
 
 
@@ -150,13 +165,17 @@ def subplots(*args, **kwargs):
     return pyplot().subplots(*args, **kwargs)
 
 
-LENGTH_UNIT = "m"   # case files are in SI units (lengths m, stresses Pa, times s)
+LENGTH_UNIT = "m"  # case files are in SI units (lengths m, stresses Pa, times s)
 
 
 def title(folder: Path) -> str:
     """The case a data folder belongs to, for figure titles: ``case`` or ``case seed<N>``."""
     folder = Path(folder)
-    return f"{folder.parent.name} {folder.name}" if re.fullmatch(r"seed\d+", folder.name) else folder.name
+    return (
+        f"{folder.parent.name} {folder.name}"
+        if re.fullmatch(r"seed\d+", folder.name)
+        else folder.name
+    )
 
 
 def log_if_decades(ax, values, axis: str = "y", decades: float = 1.5) -> bool:
@@ -164,7 +183,7 @@ def log_if_decades(ax, values, axis: str = "y", decades: float = 1.5) -> bool:
     decades (then small values stay readable beside large ones); True if it did."""
     v = np.asarray(values, float).ravel()
     v = v[np.isfinite(v)]
-    if not len(v) or (v <= 0).any() or v.max() / v.min() < 10 ** decades:
+    if not len(v) or (v <= 0).any() or v.max() / v.min() < 10**decades:
         return False
     (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
     return True
@@ -174,6 +193,6 @@ def save(fig, path: Path, tight: bool = True) -> Path:
     """Write ``fig`` as PNG (``tight``: tight_layout first, which draws the figure twice)."""
     if tight:
         fig.tight_layout()
-    with staged([path]) as (tmp,):     # never half a PNG (disk full): the old one stays
+    with staged([path]) as (tmp,):  # never half a PNG (disk full): the old one stays
         fig.savefig(tmp, dpi=100, format="png", metadata={"Software": None})
     return path

@@ -14,7 +14,7 @@ import numpy as np
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "anisotropy", "case"
-DATA = ("anisotropy.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("anisotropy.csv",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:
@@ -26,17 +26,22 @@ def make(folder: Path) -> list[Path]:
     for model, g in groups:
         g = g.sort_values("angle")
         a, k = g["angle"].to_numpy(float), g["stiffness"].to_numpy(float)
-        if a.max() < 180:                      # the same pull at angle + 180
+        if a.max() < 180:  # the same pull at angle + 180
             a, k = np.append(a, a + 180), np.append(k, k)
         th = np.deg2rad(a)
         style = "k--" if str(model) == "FEM" else "o-"
         ax.plot(np.append(th, th[:1]), np.append(k, k[:1]), style, ms=3, label=str(model))
     ax.set_ylim(bottom=0)
-    ax.set_rlabel_position(112.5)   # between the 90 and 135 degree spokes
+    ax.set_rlabel_position(112.5)  # between the 90 and 135 degree spokes
     from matplotlib.ticker import FuncFormatter
+
     ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g} Pa"))
     ax.tick_params(axis="y", labelsize=8)
     ax.set_xlabel("pull direction in the x-y plane (degrees from x)", fontsize=9)
-    ax.set_title(f"{title(folder)}: effective Young's modulus E_d against pull direction", fontsize=10, pad=18)
+    ax.set_title(
+        f"{title(folder)}: effective Young's modulus E_d against pull direction",
+        fontsize=10,
+        pad=18,
+    )
     ax.legend(fontsize=8, loc="center left", bbox_to_anchor=(1.08, 0.5))
     return [save(fig, folder / "fig-anisotropy.png")]

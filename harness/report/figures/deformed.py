@@ -15,8 +15,8 @@ import numpy as np
 from harness.report.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "deformed", "case"
-DATA = ("deformed*.npz",)      # the files it reads (globs in the folder): its figures' stamp
-VIEW = (22.0, -58.0)   # elevation, azimuth (degrees) of the 3-D panels
+DATA = ("deformed*.npz",)  # the files it reads (globs in the folder): its figures' stamp
+VIEW = (22.0, -58.0)  # elevation, azimuth (degrees) of the 3-D panels
 
 
 def make(folder: Path) -> list[Path]:
@@ -27,22 +27,27 @@ def visible_surface(p, springs, view=VIEW):
     """3-D: (nodes (n,) bool, springs (e,) bool) on the hull faces whose outward normal
     points towards the viewer; everything when the points span no volume."""
     from scipy.spatial import ConvexHull, QhullError
+
     n = len(p)
     try:
-        eq = np.unique(np.round(ConvexHull(p).equations, 9), axis=0)   # coplanar facets: one plane
+        eq = np.unique(np.round(ConvexHull(p).equations, 9), axis=0)  # coplanar facets: one plane
     except (QhullError, ValueError):
         return np.ones(n, bool), np.ones(len(springs) if springs is not None else 0, bool)
     el, az = np.deg2rad(view)
     eye = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     eq = eq[eq[:, :3] @ eye > 1e-9]
     tol = 1e-6 * (float(np.ptp(p, axis=0).max()) or 1.0)
-    on = np.abs(p @ eq[:, :3].T + eq[:, 3]) <= tol        # (n, planes)
-    keep = (on[springs[:, 0]] & on[springs[:, 1]]).any(axis=1) if springs is not None else np.zeros(0, bool)
+    on = np.abs(p @ eq[:, :3].T + eq[:, 3]) <= tol  # (n, planes)
+    keep = (
+        (on[springs[:, 0]] & on[springs[:, 1]]).any(axis=1)
+        if springs is not None
+        else np.zeros(0, bool)
+    )
     return on.any(axis=1), keep
 
 
 def _one(src: Path, folder: Path) -> Path | None:
-    suffix = src.stem[len("deformed"):]
+    suffix = src.stem[len("deformed") :]
     with np.load(src) as z:
         data = {k: z[k] for k in z.files}
     p = np.asarray(data["points"], float)
@@ -53,19 +58,28 @@ def _one(src: Path, folder: Path) -> Path | None:
         keep, on = visible_surface(p, springs)
         if springs is not None:
             springs = springs[on]
-    loads = sorted(k[len("u_ref_"):] for k in data if k.startswith("u_ref_"))
+    loads = sorted(k[len("u_ref_") :] for k in data if k.startswith("u_ref_"))
     if not loads:
         return None
     size = float(np.ptp(p, axis=0).max()) or 1.0
-    us = {l: (np.asarray(data[f"u_ref_{l}"], float),
-              np.asarray(data.get(f"u_{l}", np.full_like(data[f"u_ref_{l}"], np.nan)), float)) for l in loads}
+    us = {
+        l: (
+            np.asarray(data[f"u_ref_{l}"], float),
+            np.asarray(data.get(f"u_{l}", np.full_like(data[f"u_ref_{l}"], np.nan)), float),
+        )
+        for l in loads
+    }
     umax = max(float(np.nanmax(np.abs(np.concatenate(u)))) for u in us.values())
-    frac = 0.2 if dim == 3 else 0.1   # default magnification: the largest displacement at this part of the size
+    frac = (
+        0.2 if dim == 3 else 0.1
+    )  # default magnification: the largest displacement at this part of the size
     scale = float(data["scale"]) if "scale" in data else (frac * size / umax if umax > 0 else 1.0)
     cols = min(len(loads), 3 if len(loads) > 4 else 2 if len(loads) > 1 else 1)
     rows = math.ceil(len(loads) / cols)
     fig = pyplot().figure(figsize=(3.6 * cols, (3.9 if dim == 3 else 3.5) * rows))
-    kw = {"projection": "3d", "computed_zorder": False} if dim == 3 else {}   # 3-D: drawn in call order
+    kw = (
+        {"projection": "3d", "computed_zorder": False} if dim == 3 else {}
+    )  # 3-D: drawn in call order
     for i, load in enumerate(loads):
         ax = fig.add_subplot(rows, cols, i + 1, **kw)
         u_ref, u = us[load]
@@ -93,17 +107,23 @@ def _one(src: Path, folder: Path) -> Path | None:
             ax.set_xlabel(f"x ({LENGTH_UNIT})", fontsize=7)
             ax.set_ylabel(f"y ({LENGTH_UNIT})", fontsize=7)
     view = ", surface facing the viewer" if dim == 3 else ""
-    fig.suptitle(f"{title(folder)}{suffix}: model (blue) vs FEM (red dots), displacements x{scale:.3g}{view}",
-                 fontsize=9)
+    fig.suptitle(
+        f"{title(folder)}{suffix}: model (blue) vs FEM (red dots), displacements "
+        f"x{scale:.3g}{view}",
+        fontsize=9,
+    )
     fig.subplots_adjust(left=0.07, right=0.97, bottom=0.06, top=0.92, wspace=0.3, hspace=0.35)
     return save(fig, folder / f"fig-deformed{suffix}.png", tight=False)
 
 
 def _lines(ax, p, springs, dim, colors, linewidths):
     seg = p[springs]
-    if dim == 3:   # one polyline, the springs separated by NaN gaps (plain matplotlib, no mpl_toolkits)
+    if (
+        dim == 3
+    ):  # one polyline, the springs separated by NaN gaps (plain matplotlib, no mpl_toolkits)
         gaps = np.concatenate([seg, np.full((len(seg), 1, 3), np.nan)], axis=1).reshape(-1, 3)
         ax.plot(gaps[:, 0], gaps[:, 1], gaps[:, 2], color=colors, linewidth=linewidths)
     else:
         from matplotlib.collections import LineCollection
+
         ax.add_collection(LineCollection(seg, colors=colors, linewidths=linewidths))

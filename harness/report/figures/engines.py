@@ -34,13 +34,28 @@ def draw(df, out: Path) -> list[Path]:
         tets = {r: int(g["n_tets"].iloc[0]) for r, g in b.groupby("resolution", sort=False)}
         for (label, res), g in b.groupby(["who", "resolution"], sort=False):
             g = g.sort_values("nu")
-            ax.plot(g["nu"], g["G_norm"], "o-" if res == "fine" else "o--", ms=3, lw=1, color=colours[label])
-        ax.set(yscale="log", xlabel="Poisson's ratio nu", ylabel="mean G_norm over the held-out loads",
-               title=f"{body} (" + ", ".join(f"{r} {n} tets" for r, n in tets.items()) + ")")
+            ax.plot(
+                g["nu"],
+                g["G_norm"],
+                "o-" if res == "fine" else "o--",
+                ms=3,
+                lw=1,
+                color=colours[label],
+            )
+        ax.set(
+            yscale="log",
+            xlabel="Poisson's ratio nu",
+            ylabel="mean G_norm over the held-out loads",
+            title=f"{body} (" + ", ".join(f"{r} {n} tets" for r, n in tets.items()) + ")",
+        )
         ax.grid(True, which="major", lw=0.3)
-    handles = [axes[0][0].plot([], [], "o-", ms=3, lw=1, color=c, label=w)[0] for w, c in colours.items()]
-    handles += [axes[0][0].plot([], [], ls, color="grey", lw=1, label=f"{res} mesh")[0]
-                for ls, res in (("--", "coarse"), ("-", "fine"))]
+    handles = [
+        axes[0][0].plot([], [], "o-", ms=3, lw=1, color=c, label=w)[0] for w, c in colours.items()
+    ]
+    handles += [
+        axes[0][0].plot([], [], ls, color="grey", lw=1, label=f"{res} mesh")[0]
+        for ls, res in (("--", "coarse"), ("-", "fine"))
+    ]
     fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.tight_layout(rect=(0, 0.14, 1, 1))
     return [save(fig, out, tight=False)]

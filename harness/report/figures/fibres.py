@@ -10,7 +10,7 @@ import numpy as np
 from harness.report.figures import LENGTH_UNIT, pyplot, save, title
 
 NAME, SCOPE = "fibres", "case"
-DATA = ("fibres*.npz",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("fibres*.npz",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:
@@ -18,7 +18,7 @@ def make(folder: Path) -> list[Path]:
 
 
 def _one(src: Path, folder: Path) -> Path:
-    suffix = src.stem[len("fibres"):]
+    suffix = src.stem[len("fibres") :]
     with np.load(src) as z:
         p = np.asarray(z["points"], float)
         d = np.asarray(z["directions"], float)

@@ -8,7 +8,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots, title
 
 NAME, SCOPE = "lloyd", "case"
-DATA = ("lloyd.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("lloyd.csv",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:
@@ -17,8 +17,12 @@ def make(folder: Path) -> list[Path]:
         return []
     fig, axes = subplots(1, 2, figsize=(10, 3.8))
     units = (LENGTH_UNIT, f"{LENGTH_UNIT}\u00b2 in 2-D, {LENGTH_UNIT}\u00b3 in 3-D")
-    for ax, col, label, unit in zip(axes, ("std_distance", "std_area"),
-                                    ("std of neighbour distances", "std of region sizes"), units):
+    for ax, col, label, unit in zip(
+        axes,
+        ("std_distance", "std_area"),
+        ("std of neighbour distances", "std of region sizes"),
+        units,
+    ):
         if col in df:
             ax.plot(df["iteration"], df[col], "o-", ms=3)
             log_if_decades(ax, df[col])

@@ -1,6 +1,7 @@
 """G per Lloyd iteration count (Deussen Fig. 12) from the suite's summary.csv rows that
 carry ``lloyd_iterations`` (the optimised rows if any, one bar per optimiser): left, our
-G before and after (mean and std over seeds); right, the trend G_final / G_final(fewest iterations), ours
+G before and after (mean and std over seeds); right, the trend G_final / G_final(fewest
+iterations), ours
 beside the paper's (absolute G values are not comparable: the paper does not state units)."""
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ import numpy as np
 from harness.report.figures import LENGTH_UNIT, log_if_decades, read_csv, save, subplots
 
 NAME, SCOPE = "lloyd_bars", "suite"
-DATA = ("summary.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("summary.csv",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:
@@ -20,6 +21,7 @@ def make(folder: Path) -> list[Path]:
     if df is None:
         return []
     import pandas as pd
+
     if "lloyd_iterations" not in df or "G_final" not in df:
         return []
     df = df.dropna(subset=["lloyd_iterations", "G_final"])
@@ -34,19 +36,32 @@ def make(folder: Path) -> list[Path]:
     methods = list(dict.fromkeys(df["optimizer"].fillna("none"))) if "optimizer" in df else ["none"]
     key = df["optimizer"].fillna("none") if "optimizer" in df else pd.Series("none", index=df.index)
     first = df[key == methods[0]]
-    g = first.groupby("lloyd_iterations")[[c for c in ("G_initial", "G_final", "paper_G_final") if c in df]].agg(["mean", "std"])
+    g = first.groupby("lloyd_iterations")[
+        [c for c in ("G_initial", "G_final", "paper_G_final") if c in df]
+    ].agg(["mean", "std"])
     its = g.index.to_numpy()
     label = {m: "" if len(methods) == 1 else f" {m}" for m in methods}
     bars = {"G_initial": g["G_initial"]} if "G_initial" in g else {}
     for m in methods:
-        bars[f"G_final{label[m]}"] = df[key == m].groupby("lloyd_iterations")["G_final"].agg(["mean", "std"]).reindex(its)
+        bars[f"G_final{label[m]}"] = (
+            df[key == m].groupby("lloyd_iterations")["G_final"].agg(["mean", "std"]).reindex(its)
+        )
     x = np.arange(len(its))
     fig, (ax, ax2) = subplots(1, 2, figsize=(10, 4))
     w = 0.8 / len(bars)
     for i, (c, v) in enumerate(bars.items()):
-        ax.bar(x + (i - (len(bars) - 1) / 2) * w, v["mean"], w, yerr=v["std"].fillna(0), label=c, capsize=2)
+        ax.bar(
+            x + (i - (len(bars) - 1) / 2) * w,
+            v["mean"],
+            w,
+            yerr=v["std"].fillna(0),
+            label=c,
+            capsize=2,
+        )
     if log_if_decades(ax, np.concatenate([v["mean"].to_numpy(float) for v in bars.values()])):
-        ax.set_ylim(bottom=0.5 * min(float(v["mean"].min()) for v in bars.values()))  # bars start below the data
+        ax.set_ylim(
+            bottom=0.5 * min(float(v["mean"].min()) for v in bars.values())
+        )  # bars start below the data
     ax.set_title("ours: G before / after optimisation (mean, std over seeds)", fontsize=9)
     ax.set_ylabel(f"G ({LENGTH_UNIT})")
     series = {f"ours{label[m]}": bars[f"G_final{label[m]}"]["mean"].to_numpy() for m in methods}

@@ -18,9 +18,9 @@ from harness.report.figures import read_csv, save, subplots
 from harness.report.nu_sweep import CAUCHY_NU, families_of, family_frame, sweep_frame
 
 NAME, SCOPE = "nu_sweep", "suite"
-DATA = ("summary.csv",)      # the files it reads (globs in the folder): its figures' stamp
-CODE = ("harness.report.nu_sweep",)     # the other code its figures depend on
-FLOOR = 1e-6    # G below this (P1 on a linear field: exact to rounding) is drawn at it
+DATA = ("summary.csv",)  # the files it reads (globs in the folder): its figures' stamp
+CODE = ("harness.report.nu_sweep",)  # the other code its figures depend on
+FLOOR = 1e-6  # G below this (P1 on a linear field: exact to rounding) is drawn at it
 RULE_COLOURS = ("tab:gray", "tab:brown", "tab:olive", "tab:cyan", "tab:pink", "black")
 
 
@@ -40,8 +40,14 @@ def make(folder: Path) -> list[Path]:
 
 def _cauchy(ax, dim: int) -> None:
     ax.axvline(CAUCHY_NU[dim], color="k", ls=":", lw=1)
-    ax.text(CAUCHY_NU[dim], 0.98, f" Cauchy nu = {'1/4' if dim == 3 else '1/3'}", transform=ax.get_xaxis_transform(),
-            fontsize=7, va="top")
+    ax.text(
+        CAUCHY_NU[dim],
+        0.98,
+        f" Cauchy nu = {'1/4' if dim == 3 else '1/3'}",
+        transform=ax.get_xaxis_transform(),
+        fontsize=7,
+        va="top",
+    )
 
 
 def _dim(b) -> int:
@@ -59,17 +65,33 @@ def _classes(folder: Path, frame) -> Path:
             if c.empty:
                 continue
             colour = f"C{i}"
-            ax.plot(c["nu"], c["G_norm_final"].clip(lower=FLOOR), "o-", color=colour, label=f"{cls} (fitted loads)")
+            ax.plot(
+                c["nu"],
+                c["G_norm_final"].clip(lower=FLOOR),
+                "o-",
+                color=colour,
+                label=f"{cls} (fitted loads)",
+            )
             if "G_heldout" in c and c["G_heldout"].notna().any():
-                ax.plot(c["nu"], c["G_heldout"].clip(lower=FLOOR), "s--", color=colour, mfc="none", label=f"{cls} (held out)")
+                ax.plot(
+                    c["nu"],
+                    c["G_heldout"].clip(lower=FLOOR),
+                    "s--",
+                    color=colour,
+                    mfc="none",
+                    label=f"{cls} (held out)",
+                )
         _cauchy(ax, _dim(b))
         ax.set_yscale("log")
         ax.set_xlabel("Poisson's ratio nu")
         ax.set_ylabel("normalised G (RMS error / RMS displacement)")
         ax.set_title(body, fontsize=9)
     axes[0][0].legend(fontsize=6)
-    fig.suptitle(f"{folder.name}: how close each model class gets to the FEM, per nu "
-                 f"(G < {FLOOR:g}, exact to rounding, drawn at {FLOOR:g})", fontsize=10)
+    fig.suptitle(
+        f"{folder.name}: how close each model class gets to the FEM, per nu "
+        f"(G < {FLOOR:g}, exact to rounding, drawn at {FLOOR:g})",
+        fontsize=10,
+    )
     return save(fig, folder / "fig-nu-sweep.png")
 
 
@@ -78,10 +100,16 @@ def _families(folder: Path, frame) -> Path:
     fams = families_of(frame)
     models = list(dict.fromkeys(frame["model"]))
     classes = [m for m in models if not m.startswith("rule: ")]
-    style = {m: dict(color=f"C{i}", ls="-", marker="o", lw=1.6, ms=4) for i, m in enumerate(classes)}
-    style.update({m: dict(color=RULE_COLOURS[i % len(RULE_COLOURS)], ls="--", marker="x", lw=1.0, ms=4)
-                  for i, m in enumerate(m for m in models if m.startswith("rule: "))})
-    legend = 0.35 + 0.2 * ((len(models) + 4) // 5)      # inches under the panels for the legend's rows
+    style = {
+        m: dict(color=f"C{i}", ls="-", marker="o", lw=1.6, ms=4) for i, m in enumerate(classes)
+    }
+    style.update(
+        {
+            m: dict(color=RULE_COLOURS[i % len(RULE_COLOURS)], ls="--", marker="x", lw=1.0, ms=4)
+            for i, m in enumerate(m for m in models if m.startswith("rule: "))
+        }
+    )
+    legend = 0.35 + 0.2 * ((len(models) + 4) // 5)  # inches under the panels for the legend's rows
     height = 2.9 * len(bodies) + legend + 0.4
     fig, axes = subplots(len(bodies), len(fams), figsize=(3.4 * len(fams), height), squeeze=False)
     for r, body in enumerate(bodies):
@@ -90,8 +118,15 @@ def _families(folder: Path, frame) -> Path:
             ax = axes[r][c]
             if not b[fam].notna().any():
                 ax.axis("off")
-                ax.text(0.5, 0.5, f"{body}: no {fam} load", ha="center", va="center", fontsize=8,
-                        transform=ax.transAxes)
+                ax.text(
+                    0.5,
+                    0.5,
+                    f"{body}: no {fam} load",
+                    ha="center",
+                    va="center",
+                    fontsize=8,
+                    transform=ax.transAxes,
+                )
                 continue
             for m in models:
                 s = b[b["model"] == m].sort_values("nu")
@@ -109,8 +144,17 @@ def _families(folder: Path, frame) -> Path:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, h)
     labels = list(handles)
-    fig.legend([handles[k] for k in labels], labels, loc="lower center", ncol=min(len(labels), 5), fontsize=7)
-    fig.suptitle(f"{folder.name}: held-out G per load family (never fitted, never used to choose); classes "
-                 "solid (their fitted rows), the unfitted stiffness rules dashed", fontsize=10)
+    fig.legend(
+        [handles[k] for k in labels],
+        labels,
+        loc="lower center",
+        ncol=min(len(labels), 5),
+        fontsize=7,
+    )
+    fig.suptitle(
+        f"{folder.name}: held-out G per load family (never fitted, never used to choose); classes "
+        "solid (their fitted rows), the unfitted stiffness rules dashed",
+        fontsize=10,
+    )
     fig.tight_layout(rect=(0, legend / height, 1, 1 - 0.4 / height))
     return save(fig, folder / "fig-nu-sweep-families.png", tight=False)

@@ -7,7 +7,7 @@ from pathlib import Path
 from harness.report.figures import log_if_decades, read_csv, save, subplots, title
 
 NAME, SCOPE = "spectrum", "case"
-DATA = ("frequencies.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("frequencies.csv",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:

@@ -7,7 +7,7 @@ from pathlib import Path
 from harness.report.figures import LENGTH_UNIT, read_csv, save, subplots, title
 
 NAME, SCOPE = "trace", "case"
-DATA = ("trace.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("trace.csv",)  # the files it reads (globs in the folder): its figures' stamp
 
 
 def make(folder: Path) -> list[Path]:
@@ -26,7 +26,9 @@ def make(folder: Path) -> list[Path]:
         # SA takes thousands of proposals, a gradient fit tens of evaluations: log steps
         ax.set_xscale("symlog", linthresh=1)
         ax.set_xlim(left=0)
-        ax.set_xlabel("step (SA proposals, L-BFGS-B / Nelder-Mead evaluations, Gauss-Newton iterations)")
+        ax.set_xlabel(
+            "step (SA proposals, L-BFGS-B / Nelder-Mead evaluations, Gauss-Newton iterations)"
+        )
     else:
         ax.set_xlabel("step")
     ax.set_ylabel(f"G (weighted root-sum-square displacement error, {LENGTH_UNIT})")

@@ -13,20 +13,23 @@ import numpy as np
 from harness.report.figures import read_csv, save, subplots, title
 
 NAME, SCOPE = "volume", "case"
-DATA = ("volume.csv",)      # the files it reads (globs in the folder): its figures' stamp
+DATA = ("volume.csv",)  # the files it reads (globs in the folder): its figures' stamp
 MODELS = ("MS", "MT0", "MT")
 
 
 def original_record(folder: Path) -> Path | None:
     """The original program's record (``[dynamics] original``) named by the case file of the
     first stored result in ``folder``; None when there is none or it cannot be found."""
-    manifests = sorted(folder.glob("result-seed*.json")) or sorted(folder.parent.glob("result-seed*.json"))
+    manifests = sorted(folder.glob("result-seed*.json")) or sorted(
+        folder.parent.glob("result-seed*.json")
+    )
     for m in manifests[:1]:
         try:
             case = Path(json.loads(m.read_text())["file"])
             if not case.is_file():  # results moved: the checkout's own cases/<suite>/
                 case = m.parents[2].parent / "cases" / m.parents[1].name / case.name
             import tomllib
+
             name = tomllib.loads(case.read_text()).get("dynamics", {}).get("original")
         except (OSError, ValueError, KeyError, TypeError, IndexError):
             return None
@@ -71,8 +74,14 @@ def make(folder: Path) -> list[Path]:
         return []
     dev = deviations(df, original_curves(folder))
     cols = [c for c in df.columns if c != "t"]
-    fig, axes = subplots(2 if dev else 1, 1, figsize=(9, 6.5 if dev else 4.5), squeeze=False,
-                         sharex=True, gridspec_kw={"height_ratios": [3, 1.3]} if dev else None)
+    fig, axes = subplots(
+        2 if dev else 1,
+        1,
+        figsize=(9, 6.5 if dev else 4.5),
+        squeeze=False,
+        sharex=True,
+        gridspec_kw={"height_ratios": [3, 1.3]} if dev else None,
+    )
     ax = axes[0, 0]
     for i, col in enumerate(cols):
         ax.plot(df["t"], df[col], lw=1.6, color=f"C{i}", label=f"{col} (ours)")
@@ -81,7 +90,10 @@ def make(folder: Path) -> list[Path]:
         axes[1, 0].plot(t, d, lw=1, color=f"C{cols.index(col)}", label=col)
     ax.axhline(0, color="k", lw=0.5)
     ax.set_ylabel("volume variation 100 (V - V0) / V0 (%)")
-    ax.set_title(f"{title(folder)}: volume variation" + (", ours vs the original program (dashed)" if dev else ""))
+    ax.set_title(
+        f"{title(folder)}: volume variation"
+        + (", ours vs the original program (dashed)" if dev else "")
+    )
     ax.legend(fontsize=8)
     ax.grid(True, lw=0.3)
     if dev:
