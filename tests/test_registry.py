@@ -35,6 +35,9 @@ def test_each_kind_has_its_interface():
         assert isinstance(mod.HELP, str) and callable(mod.add_arguments) and callable(mod.main), name
     for name, mod in registry.STAGES.items():
         assert mod.NAME == name and callable(mod.applies) and callable(mod.run)
+        # the runner asks hasattr(stage, "check"): an imported function of that name is not one
+        for attr in ("applies", "run", "check"):
+            assert getattr(getattr(mod, attr, None), "__module__", mod.__name__) == mod.__name__, (name, attr)
     for name, mod in registry.BENCHES.items():
         assert list(inspect.signature(mod.run).parameters) == ["quick"], name
     for reg in (registry.OPTIMIZERS, registry.STIFFNESS_RULES, registry.LOAD_SETS, registry.EXPERIMENTS):
@@ -65,7 +68,7 @@ def test_the_case_schema_reads_its_vocabularies_from_the_registries():
     assert sections.STIFFNESS_RULES == registry.STIFFNESS_RULES.names()
     assert sections.ENGINE_NAMES == registry.ENGINES.names()
     assert sections.DYNAMICS["experiment"].choices == registry.EXPERIMENTS.names()
-    from harness.case.reader import LOADS
+    from harness.case.fields import LOADS
     assert LOADS["set"].choices == registry.LOAD_SETS.names()
 
 

@@ -19,7 +19,8 @@ it, the way a bar, a beam or an organ held at one end is.
 The ends are end faces (harness.io.end_faces): the boundary facets within a band of 5 %
 of the length at each end of the axis whose outward normals point along it (cos >= 0.5;
 a pointed end, which has no such face: cos >= 0), the band widened (x 1.5 at a time)
-until the clamp holds three non-collinear nodes (two in 2-D) and the tip a facet. Either may instead be a named group of the mesh (``calibrate
+until the clamp holds three non-collinear nodes (two in 2-D) and the tip a facet. Either may
+instead be a named group of the mesh (``calibrate
 --clamp`` / ``--load-region``). The FEM and the springs are clamped and loaded on the same
 facets (harness.case.facet_loads).
 
@@ -43,7 +44,9 @@ from harness.io.end_faces import BAND, COS, end_facets, outward_normals
 from harness.io.meshfile import boundary_facets
 
 PEAK_STRAIN = 1e-3
-SIDE_BAND = 0.25     # of the side faces, a fraction of the body's extent across (a curved side: a wide cap)
+SIDE_BAND = (
+    0.25  # of the side faces, a fraction of the body's extent across (a curved side: a wide cap)
+)
 
 
 @dataclass(frozen=True)
@@ -52,6 +55,7 @@ class Section:
     A = V / L, second moments I (dim,) of the section about the centroidal axis
     (I[b] = int (x_b - xbar_b)^2 dV / L), extreme-fibre distances c (dim,), the tip face's
     area and its radius about the axis through its area centroid (its farthest node)."""
+
     L: float
     A: float
     I: tuple[float, ...]
@@ -62,20 +66,24 @@ class Section:
 
 @dataclass(frozen=True)
 class EndLoads:
-    axis: int                      # the longest axis: clamp at its low end, tip at its high end
-    across: int                    # the sag's and tip's direction (the thinnest other axis)
-    clamp: str | None              # a mesh group's name, or None: the low end face
-    tip: str | None                # a mesh group's name, or None: the high end face
-    band: float                    # of the end faces, a fraction of the length
+    axis: int  # the longest axis: clamp at its low end, tip at its high end
+    across: int  # the sag's and tip's direction (the thinnest other axis)
+    clamp: str | None  # a mesh group's name, or None: the low end face
+    tip: str | None  # a mesh group's name, or None: the high end face
+    band: float  # of the end faces, a fraction of the length
     section: Section
     dim: int = 3
-    clamp_info: str = ""           # where the clamp is: centroid, normal, node count
-    cos: float = COS               # of the end faces: outward normals n . e >= cos
-    sides: tuple = ()              # (axis b, band, cos) of the side clamps' end faces
+    clamp_info: str = ""  # where the clamp is: centroid, normal, node count
+    cos: float = COS  # of the end faces: outward normals n . e >= cos
+    sides: tuple = ()  # (axis b, band, cos) of the side clamps' end faces
 
     @property
     def names(self) -> tuple[str, ...]:
-        return ("sag", "tip", "tip2", "torsion", "bridge") if self.dim == 3 else ("sag", "tip", "bridge")
+        return (
+            ("sag", "tip", "tip2", "torsion", "bridge")
+            if self.dim == 3
+            else ("sag", "tip", "bridge")
+        )
 
     @property
     def training(self) -> tuple[str, ...]:
@@ -87,7 +95,12 @@ class EndLoads:
 
     def _side_states(self):
         """(name, side axis b, traction axis c) of the side states."""
-        return [(f"train-{'xyz'[b]}-{'xyz'[c]}", b, c) for b, *_ in self.sides for c in range(self.dim) if c != b]
+        return [
+            (f"train-{'xyz'[b]}-{'xyz'[c]}", b, c)
+            for b, *_ in self.sides
+            for c in range(self.dim)
+            if c != b
+        ]
 
     @property
     def second(self) -> int:
@@ -100,26 +113,41 @@ class EndLoads:
 
     def describe(self) -> str:
         a, b = "xyz"[self.axis], "xyz"[self.across]
-        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"   # noqa: E731
-        extra = (f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' (a twist about {a})"
-                 if self.dim == 3 else "")
-        band = "" if isinstance(self.clamp, str) and isinstance(self.tip, str) else \
-            f" (facets within {self.band:.3g} of the length of each end, normals n . e_{a} >= {self.cos:g})"
-        return (f"held-out loads: 'sag' (body force along -{b}), 'tip' (traction along -{b}){extra} on "
-                f"{where(self.tip, '1')}, 'bridge' (the sag with both ends clamped); {where(self.clamp, '0')} "
-                f"clamped{band}{self.clamp_info}")
+        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"  # noqa: E731
+        extra = (
+            f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' (a twist about {a})"
+            if self.dim == 3
+            else ""
+        )
+        band = (
+            ""
+            if isinstance(self.clamp, str) and isinstance(self.tip, str)
+            else f" (facets within {self.band:.3g} of the length of each end, "
+            f"normals n . e_{a} >= {self.cos:g})"
+        )
+        return (
+            f"held-out loads: 'sag' (body force along -{b}), 'tip' (traction along -{b}){extra} on "
+            f"{where(self.tip, '1')}, 'bridge' (the sag with both ends clamped); "
+            f"{where(self.clamp, '0')} "
+            f"clamped{band}{self.clamp_info}"
+        )
 
-    def magnitudes(self, E: float, nu: float, density: float, peak_strain: float = PEAK_STRAIN) -> dict:
+    def magnitudes(
+        self, E: float, nu: float, density: float, peak_strain: float = PEAK_STRAIN
+    ) -> dict:
         """{load: magnitude} for a peak strain of about ``peak_strain`` (module doc): the
         tip tractions in Pa, the body force's acceleration in m/s^2, the twist w in Pa/m."""
         s, eps, b, t = self.section, float(peak_strain), self.across, self.second
-        bend = lambda i: eps * E * s.I[i] / s.c[i]      # noqa: E731  the moment M at the peak strain
-        out = {"sag": 2 * bend(b) / (density * s.A * s.L ** 2), "tip": bend(b) / (s.tip_area * s.L),
-               "bridge": 12 * bend(b) / (density * s.A * s.L ** 2)}
+        bend = lambda i: eps * E * s.I[i] / s.c[i]  # noqa: E731  the moment M at the peak strain
+        out = {
+            "sag": 2 * bend(b) / (density * s.A * s.L**2),
+            "tip": bend(b) / (s.tip_area * s.L),
+            "bridge": 12 * bend(b) / (density * s.A * s.L**2),
+        }
         if self.dim == 3:
             out["tip2"] = bend(t) / (s.tip_area * s.L)
             out["torsion"] = 2 * eps * E / (2 * (1 + nu)) / s.tip_radius
-        out["side"] = 2 * eps * E / (2 * (1 + nu))       # a shear traction tau = 2 G eps: eps_bc ~ eps
+        out["side"] = 2 * eps * E / (2 * (1 + nu))  # a shear traction tau = 2 G eps: eps_bc ~ eps
         return out
 
     def toml(self, magnitudes: dict) -> tuple[str, str]:
@@ -130,20 +158,40 @@ class EndLoads:
             v = [0.0] * dim
             v[axis] = float(value)
             return v
-        part = lambda p, side: (f"{{ group = {json.dumps(p)} }}" if isinstance(p, str) else      # noqa: E731
-                                f'{{ end = "{"xyz"[self.axis]}{side}", band = {float(self.band)!r}, '
-                                f'cos = {float(self.cos)!r} }}')
-        hold = lambda name: f'[[loads.case.constraint]]\npart = "{name}"\ncomponents = "all"\n'   # noqa: E731
-        load = lambda name: f'[[loads.case]]\nname = "{name}"\n'                                    # noqa: E731
-        trac = lambda **kv: "[[loads.case.traction]]\npart = \"tip\"\n" + "".join(                 # noqa: E731
-            f"{k} = {v}\n" for k, v in kv.items())
-        cases = (load("sag") + f"gravity = {vec(self.across, -m['sag'])}\n" + hold("clamp")
-                 + load("tip") + hold("clamp") + trac(vector=vec(self.across, -m["tip"])))
+
+        part = lambda p, side: (
+            f"{{ group = {json.dumps(p)} }}"
+            if isinstance(p, str)
+            # noqa: E731
+            else f'{{ end = "{"xyz"[self.axis]}{side}", band = {float(self.band)!r}, '
+            f"cos = {float(self.cos)!r} }}"
+        )
+        hold = lambda name: f'[[loads.case.constraint]]\npart = "{name}"\ncomponents = "all"\n'  # noqa: E731
+        load = lambda name: f'[[loads.case]]\nname = "{name}"\n'  # noqa: E731
+        trac = lambda **kv: (
+            '[[loads.case.traction]]\npart = "tip"\n'
+            + "".join(  # noqa: E731
+                f"{k} = {v}\n" for k, v in kv.items()
+            )
+        )
+        cases = (
+            load("sag")
+            + f"gravity = {vec(self.across, -m['sag'])}\n"
+            + hold("clamp")
+            + load("tip")
+            + hold("clamp")
+            + trac(vector=vec(self.across, -m["tip"]))
+        )
         if dim == 3:
             cases += load("tip2") + hold("clamp") + trac(vector=vec(self.second, -m["tip2"]))
             cases += load("torsion") + hold("clamp") + trac(twist=vec(self.axis, m["torsion"]))
-        cases += load("bridge") + f"gravity = {vec(self.across, -m['bridge'])}\n" + hold("clamp") + hold("tip")
-        back = lambda **kv: trac(**kv).replace('part = "tip"', 'part = "clamp"')    # noqa: E731
+        cases += (
+            load("bridge")
+            + f"gravity = {vec(self.across, -m['bridge'])}\n"
+            + hold("clamp")
+            + hold("tip")
+        )
+        back = lambda **kv: trac(**kv).replace('part = "tip"', 'part = "clamp"')  # noqa: E731
         cases += load("train-tip") + hold("tip") + back(vector=vec(self.across, m["tip"]))
         if dim == 3:
             cases += load("train-tip2") + hold("tip") + back(vector=vec(self.second, m["tip2"]))
@@ -151,16 +199,24 @@ class EndLoads:
         parts = f"clamp = {part(self.clamp, 0)}\ntip = {part(self.tip, 1)}\n"
         for b, band, cos in self.sides:
             for side in (0, 1):
-                parts += (f'side-{"xyz"[b]}{side} = {{ end = "{"xyz"[b]}{side}", band = {float(band)!r}, '
-                          f'cos = {float(cos)!r} }}\n')
+                parts += (
+                    f'side-{"xyz"[b]}{side} = {{ end = "{"xyz"[b]}{side}", band = {float(band)!r}, '
+                    f"cos = {float(cos)!r} }}\n"
+                )
         for name, b, c in self._side_states():
-            cases += (load(name) + hold(f"side-{'xyz'[b]}0") + trac(vector=vec(c, m["side"])).replace(
-                'part = "tip"', f'part = "side-{"xyz"[b]}1"'))
+            cases += (
+                load(name)
+                + hold(f"side-{'xyz'[b]}0")
+                + trac(vector=vec(c, m["side"])).replace(
+                    'part = "tip"', f'part = "side-{"xyz"[b]}1"'
+                )
+            )
         return parts, cases
 
 
-def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None,
-              groups=None) -> EndLoads:
+def end_loads(
+    points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None, groups=None
+) -> EndLoads:
     """The end loads of a mesh (points (n, dim), meshio-style cells): its end faces along
     the longest axis, or the mesh groups named ``clamp`` / ``tip`` (``groups``:
     harness.io.meshfile.Mesh.groups), and the side states' faces (the end faces of the
@@ -176,24 +232,53 @@ def end_loads(points: np.ndarray, cells, clamp: str | None = None, tip: str | No
     def group_facets(name):
         g = groups[name]
         held = np.zeros(len(points), bool)
-        held[np.unique(np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes]).astype(int))] = True
+        held[
+            np.unique(np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes]).astype(int))
+        ] = True
         return [f[held[f].all(axis=1)] for f in facets]
 
     def holds(fac):
         nodes = np.unique(np.concatenate([f.ravel() for f in fac]))
         c = points[nodes] - points[nodes].mean(axis=0) if len(nodes) else np.zeros((0, dim))
         return len(nodes) >= dim and np.linalg.matrix_rank(c, tol=1e-9 * size.max()) >= dim - 1
+
     if clamp is not None and not holds(group_facets(clamp)):
-        raise SpringbenchError(f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
-                               f"needed)", field="--clamp", fix="name a face group of the mesh")
+        raise SpringbenchError(
+            f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
+            f"needed)",
+            field="--clamp",
+            fix="name a face group of the mesh",
+        )
     for band, cos in _bands(BAND):
-        cf = group_facets(clamp) if clamp is not None else end_facets(points, facets, inside, axis, 0, band, cos)
-        tf = group_facets(tip) if tip is not None else end_facets(points, facets, inside, axis, 1, band, cos)
+        cf = (
+            group_facets(clamp)
+            if clamp is not None
+            else end_facets(points, facets, inside, axis, 0, band, cos)
+        )
+        tf = (
+            group_facets(tip)
+            if tip is not None
+            else end_facets(points, facets, inside, axis, 1, band, cos)
+        )
         if holds(cf) and any(len(f) for f in tf):
-            return EndLoads(axis, across, clamp, tip, band, _section(points, cells, axis, tf), dim,
-                            _where(points, facets, inside, cf), cos, _sides(points, facets, inside, axis, holds))
-    raise SpringbenchError("no end of the mesh's longest axis can be clamped (no face there whose normals point "
-                           "along the axis)", field="mesh", fix="name a face group with --clamp, or --heldout none")
+            return EndLoads(
+                axis,
+                across,
+                clamp,
+                tip,
+                band,
+                _section(points, cells, axis, tf),
+                dim,
+                _where(points, facets, inside, cf),
+                cos,
+                _sides(points, facets, inside, axis, holds),
+            )
+    raise SpringbenchError(
+        "no end of the mesh's longest axis can be clamped (no face there whose normals point "
+        "along the axis)",
+        field="mesh",
+        fix="name a face group with --clamp, or --heldout none",
+    )
 
 
 def _bands(start: float):
@@ -210,13 +295,17 @@ def _bands(start: float):
 def _sides(points, facets, inside, axis: int, holds) -> tuple:
     """((b, band, cos), ...) per axis b but ``axis``: the first :func:`_bands` from
     SIDE_BAND in which b's low end face holds and its high one has a facet (none: no entry)."""
+
     def first(b):
         for band, cos in _bands(SIDE_BAND):
             lo, hi = (end_facets(points, facets, inside, b, side, band, cos) for side in (0, 1))
             if holds(lo) and any(len(f) for f in hi):
                 return b, band, cos
         return None
-    return tuple(f for f in (first(b) for b in range(points.shape[1]) if b != axis) if f is not None)
+
+    return tuple(
+        f for f in (first(b) for b in range(points.shape[1]) if b != axis) if f is not None
+    )
 
 
 def _where(points, facets, inside, fac) -> str:
@@ -230,7 +319,7 @@ def _where(points, facets, inside, fac) -> str:
         c, n = outward_normals(points, f[keep], cell[keep])
         area, centre, normal = area + a.sum(), centre + a @ c, normal + a @ n
     nodes = len(np.unique(np.concatenate([f.ravel() for f in fac])))
-    fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)     # noqa: E731
+    fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
     n = normal / max(np.linalg.norm(normal), 1e-300)
     return f": centroid ({fmt(centre / area)}), normal ({fmt(n)}), {nodes} nodes"
 
@@ -240,7 +329,7 @@ def _rows(f: np.ndarray, chosen: list[np.ndarray]) -> np.ndarray:
     same = [c for c in chosen if c.shape[1] == f.shape[1] and len(c)]
     if not same:
         return np.zeros(len(f), bool)
-    key = lambda a: [tuple(r) for r in np.sort(a, axis=1)]    # noqa: E731
+    key = lambda a: [tuple(r) for r in np.sort(a, axis=1)]  # noqa: E731
     want = set(key(np.concatenate(same)))
     return np.array([r in want for r in key(f)], bool)
 
@@ -260,11 +349,13 @@ def _section(points, cells, axis: int, tip_facets) -> Section:
     """The body's Section along ``axis`` (its exact volume moments, harness.case.moments;
     the tip face from ``tip_facets``)."""
     dim = points.shape[1]
-    m = mesh_moments(points, cells)                 # int x^e dV for the exponents e of EXPONENTS
-    V, mean = m[0], m[1:1 + dim] / m[0]
-    square = [m[EXPONENTS[dim].index(tuple(2 * int(a == i) for a in range(dim)))] for i in range(dim)]
+    m = mesh_moments(points, cells)  # int x^e dV for the exponents e of EXPONENTS
+    V, mean = m[0], m[1 : 1 + dim] / m[0]
+    square = [
+        m[EXPONENTS[dim].index(tuple(2 * int(a == i) for a in range(dim)))] for i in range(dim)
+    ]
     L = float(np.ptp(points[:, axis]))
-    I = (np.array(square) / V - mean ** 2) * V / L
+    I = (np.array(square) / V - mean**2) * V / L
     c = np.abs(points - mean).max(axis=0)
     tip = [f for f in tip_facets if len(f)]
     areas = [_areas(points, f) for f in tip]
@@ -273,5 +364,11 @@ def _section(points, cells, axis: int, tip_facets) -> Section:
     nodes = np.unique(np.concatenate([f.ravel() for f in tip]))
     r = points[nodes] - centroid
     r[:, axis] = 0.0
-    return Section(L, float(V / L), tuple(map(float, I)), tuple(map(float, c)), tip_area,
-                   float(np.linalg.norm(r, axis=1).max()) if dim == 3 else math.nan)
+    return Section(
+        L,
+        float(V / L),
+        tuple(map(float, I)),
+        tuple(map(float, c)),
+        tip_area,
+        float(np.linalg.norm(r, axis=1).max()) if dim == 3 else math.nan,
+    )

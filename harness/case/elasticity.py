@@ -86,7 +86,10 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 def in_region(region, points: np.ndarray) -> np.ndarray:
     """Mask of the points (n, dim) inside a ``harness.case.reader.Region`` box."""
-    return np.all((points >= np.asarray(region.lo) - 1e-12) & (points <= np.asarray(region.hi) + 1e-12), axis=1)
+    return np.all(
+        (points >= np.asarray(region.lo) - 1e-12) & (points <= np.asarray(region.hi) + 1e-12),
+        axis=1,
+    )
 
 
 def densities(material, points: np.ndarray) -> np.ndarray:
@@ -122,9 +125,19 @@ def element_stiffness(material, centroids: np.ndarray) -> np.ndarray:
         for val in np.unique(nu):
             out[nu == val] = np.linalg.inv(isotropic_compliance(material.E, val))
     else:
-        C = np.linalg.inv(transversely_isotropic_compliance(f.E_fibre, f.E_cross, f.nu_fibre, f.nu_cross, f.G_fibre))
-        d = fibre_directions(centroids, direction=f.direction, azimuth_deg=f.azimuth_deg,
-                             elevation_deg=f.elevation_deg, field=f.field, seed=f.seed)
+        C = np.linalg.inv(
+            transversely_isotropic_compliance(
+                f.E_fibre, f.E_cross, f.nu_fibre, f.nu_cross, f.G_fibre
+            )
+        )
+        d = fibre_directions(
+            centroids,
+            direction=f.direction,
+            azimuth_deg=f.azimuth_deg,
+            elevation_deg=f.elevation_deg,
+            field=f.field,
+            seed=f.seed,
+        )
         out = rotate(C, d)
     out = out * scale[:, None, None]
     return plane(out, material.plane) if dim == 2 else out

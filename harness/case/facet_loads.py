@@ -35,8 +35,11 @@ def part_facets(points: np.ndarray, case, on_part) -> list[np.ndarray]:
         ok = on_part(mpoints[fac.ravel()].T).reshape(fac.shape).all(axis=1)
         ok[ok] = on_part(mpoints[fac[ok]].mean(axis=1).T)
         if np.any(dist[fac[ok]] > tol):
-            raise ModelError("a traction on a mesh body needs a node at every vertex of its facets",
-                             field="model.placement", fix="use placement = 'mesh' (the mesh's own vertices)")
+            raise ModelError(
+                "a traction on a mesh body needs a node at every vertex of its facets",
+                field="model.placement",
+                fix="use placement = 'mesh' (the mesh's own vertices)",
+            )
         out.append(node[fac[ok]])
     return out
 
@@ -57,13 +60,13 @@ def _planar_triangles(points: np.ndarray, on_part) -> np.ndarray:
         return seg[on_part(points[seg].mean(axis=1).T)]
     uv = q @ vt[:2].T
     normal = int(np.argmax(np.abs(vt[2])))
-    if np.isclose(abs(vt[2][normal]), 1.0):     # a face of an axis-aligned box: its own two axes
+    if np.isclose(abs(vt[2][normal]), 1.0):  # a face of an axis-aligned box: its own two axes
         uv = points[idx][:, [a for a in range(3) if a != normal]]
     tiles = _grid_rectangles(idx, uv)
     if tiles is None:
         try:
             tiles = idx[Delaunay(uv).simplices]
-        except QhullError:                       # the nodes lie on a line: no area to carry
+        except QhullError:  # the nodes lie on a line: no area to carry
             return np.zeros((0, 3), int)
     return tiles[on_part(points[tiles].mean(axis=1).T)]
 
@@ -85,7 +88,9 @@ def _grid_rectangles(idx: np.ndarray, uv: np.ndarray) -> np.ndarray | None:
     grid[iu, iv] = idx
     if np.any(grid < 0):
         return None
-    return np.stack([grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]], axis=-1).reshape(-1, 4)
+    return np.stack([grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]], axis=-1).reshape(
+        -1, 4
+    )
 
 
 def _simplices(facets: np.ndarray):
@@ -97,7 +102,7 @@ def _simplices(facets: np.ndarray):
         return ids, np.broadcast_to([1.0, 0.0, 0.0, 0.0], ids.shape)
     ids, wts = [], []
     for i in range(4):
-        corner = lambda j: np.repeat(facets[:, [j], None], 4, axis=2)   # noqa: E731
+        corner = lambda j: np.repeat(facets[:, [j], None], 4, axis=2)  # noqa: E731
         ids.append(np.concatenate([facets[:, None, :], corner(i), corner((i + 1) % 4)], axis=1))
         w = np.zeros((len(facets), 3, 4))
         w[:, 0], w[:, 1:, 0] = 0.25, 1.0
@@ -117,14 +122,17 @@ def facet_forces(points: np.ndarray, facets: list[np.ndarray], vector, twist=Non
     wts = np.concatenate([w for _, w in pairs])
     x = np.einsum("mkj,mkjd->mkd", wts, points[ids])
     e = x[:, 1:] - x[:, :1]
-    size = np.linalg.norm(e[:, 0], axis=1) if x.shape[1] == 2 else 0.5 * np.linalg.norm(
-        np.cross(e[:, 0], e[:, 1]), axis=1)
+    size = (
+        np.linalg.norm(e[:, 0], axis=1)
+        if x.shape[1] == 2
+        else 0.5 * np.linalg.norm(np.cross(e[:, 0], e[:, 1]), axis=1)
+    )
     t = np.broadcast_to(np.asarray(vector, float), x.shape).copy()
     if twist is not None:
         c = np.einsum("m,md->d", size, x.mean(axis=1)) / size.sum()
         t += np.cross(np.asarray(twist, float), x - c)
     k = x.shape[1]
-    share = size[:, None, None] / (k * (k + 1)) * (t + t.sum(axis=1, keepdims=True))    # (m, k, dim)
+    share = size[:, None, None] / (k * (k + 1)) * (t + t.sum(axis=1, keepdims=True))  # (m, k, dim)
     f = np.zeros((n, dim))
     np.add.at(f, ids.ravel(), (wts[..., None] * share[:, :, None, :]).reshape(-1, dim))
     return f

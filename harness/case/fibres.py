@@ -14,7 +14,9 @@ NAMED_FIELDS = ("vertical", "horizontal", "diagonal", "hemicircular", "helicoida
 
 def azimuth_elevation(a: np.ndarray | float, e: np.ndarray | float) -> np.ndarray:
     """Unit vectors (n, 3) for azimuth a and elevation e in radians."""
-    a, e = np.broadcast_arrays(np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(e, float)))
+    a, e = np.broadcast_arrays(
+        np.atleast_1d(np.asarray(a, float)), np.atleast_1d(np.asarray(e, float))
+    )
     return np.stack([np.cos(a) * np.cos(e), np.sin(e), np.sin(a) * np.cos(e)], axis=1)
 
 
@@ -59,8 +61,16 @@ def named_field_angles(name: str, centroids: np.ndarray, seed: int = 0, origin=N
     raise ValueError(f"unknown fibre field '{name}' (known: {', '.join(NAMED_FIELDS)})")
 
 
-def fibre_directions(centroids: np.ndarray, *, direction=None, azimuth_deg=None,
-                     elevation_deg=None, field=None, seed: int = 0, origin=None) -> np.ndarray:
+def fibre_directions(
+    centroids: np.ndarray,
+    *,
+    direction=None,
+    azimuth_deg=None,
+    elevation_deg=None,
+    field=None,
+    seed: int = 0,
+    origin=None,
+) -> np.ndarray:
     """Unit fibre direction per element, shape (n, dim), dim taken from ``centroids``."""
     centroids = np.asarray(centroids, float)
     n, dim = centroids.shape

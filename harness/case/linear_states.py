@@ -48,11 +48,12 @@ def gradient_states(dim: int) -> list[tuple[str, str, np.ndarray]]:
     nv = len(VOIGT[dim])
     out = []
 
-    def state(name, fam, *terms):           # terms: (i, j, k, coefficient): sigma_ij += c xi_k
+    def state(name, fam, *terms):  # terms: (i, j, k, coefficient): sigma_ij += c xi_k
         G = np.zeros((dim, nv))
         for i, j, k, c in terms:
             G[k, _voigt_index(dim, i, j)] += c
         out.append((name, fam, G))
+
     for i in range(dim):
         for k in range(dim):
             if k != i:
@@ -65,7 +66,9 @@ def gradient_states(dim: int) -> list[tuple[str, str, np.ndarray]]:
     for i in range(dim):
         for j in range(dim):
             if j != i:
-                state(f"sgrad-{AXES[i]}{AXES[j]}", "shear-gradient", (i, i, i, 1.0), (i, j, j, -1.0))
+                state(
+                    f"sgrad-{AXES[i]}{AXES[j]}", "shear-gradient", (i, i, i, 1.0), (i, j, j, -1.0)
+                )
     for a in range(dim):
         state(f"gravity-{AXES[a]}", "gravity", (a, a, a, 1.0))
     return out
@@ -75,7 +78,10 @@ def divergence(G, size: float) -> np.ndarray:
     """div sigma (dim,) of the linear field with gradient G (dim, nv) in xi = x / size."""
     G = np.asarray(G, float)
     dim = G.shape[0]
-    return np.array([sum(G[j, _voigt_index(dim, i, j)] for j in range(dim)) for i in range(dim)]) / size
+    return (
+        np.array([sum(G[j, _voigt_index(dim, i, j)] for j in range(dim)) for i in range(dim)])
+        / size
+    )
 
 
 def linear_states(dim: int, s: float, anchors, frame: Frame) -> tuple[LoadCase, ...]:
@@ -89,9 +95,17 @@ def linear_states(dim: int, s: float, anchors, frame: Frame) -> tuple[LoadCase, 
     zero = (0.0,) * len(VOIGT[dim])
     for name, fam, G in gradient_states(dim):
         b = -divergence(s * G, frame.size)
-        out.append(LoadCase(name, cons, stress=zero, stress_gradient=tuple(map(tuple, (s * G).tolist())),
-                            frame=frame, family=fam,
-                            body_force=tuple((b + 0.0).tolist()) if np.any(b) else None))
+        out.append(
+            LoadCase(
+                name,
+                cons,
+                stress=zero,
+                stress_gradient=tuple(map(tuple, (s * G).tolist())),
+                frame=frame,
+                family=fam,
+                body_force=tuple((b + 0.0).tolist()) if np.any(b) else None,
+            )
+        )
     return tuple(out)
 
 
@@ -116,7 +130,9 @@ def linear_closed_form(load: LoadCase, points, compliance, anchors) -> np.ndarra
     eps0 = _tensor_strain(S @ np.asarray(voigt, float))
     if load.stress_gradient is not None:
         c, L = np.asarray(load.frame.centroid, float), load.frame.size
-        e = _tensor_strain(np.asarray(load.stress_gradient, float) @ S.T / L).transpose(1, 2, 0)   # e[i, j, k]
+        e = _tensor_strain(np.asarray(load.stress_gradient, float) @ S.T / L).transpose(
+            1, 2, 0
+        )  # e[i, j, k]
         D = e + e.transpose(0, 2, 1) - e.transpose(2, 0, 1)
     else:
         c, D = np.zeros(dim), np.zeros((dim, dim, dim))
@@ -130,6 +146,7 @@ def linear_closed_form(load: LoadCase, points, compliance, anchors) -> np.ndarra
         if dim == 2:
             return np.hstack([np.eye(2), [[-x[1]], [x[0]]]])
         return np.hstack([np.eye(3), [[0, x[2], -x[1]], [-x[2], 0, x[0]], [x[1], -x[0], 0]]])
+
     rows, rhs = [], []
     for con, x in zip(load.constraints, np.asarray(anchors, float)):
         R, u = rigid(x), field(x)[0]
@@ -138,7 +155,9 @@ def linear_closed_form(load: LoadCase, points, compliance, anchors) -> np.ndarra
             rhs.append(-u[comp])
     coef = np.linalg.solve(np.array(rows), np.array(rhs))
     a, w = coef[:dim], coef[dim:]
-    spin = np.cross(w, points) if dim == 3 else w[0] * np.stack([-points[:, 1], points[:, 0]], axis=1)
+    spin = (
+        np.cross(w, points) if dim == 3 else w[0] * np.stack([-points[:, 1], points[:, 0]], axis=1)
+    )
     return field(points) + a + spin
 
 

@@ -27,9 +27,12 @@ from harness.errors import CaseError, SpringbenchError
 from harness.io.meshfile import boundary_facets, read_mesh
 
 if TYPE_CHECKING:
-    from harness.case.reader import Body
+    from harness.case.case import Body
 
-ANCHORED = ("homogeneous", "linear")   # sets whose loads are held at anchor points (boxes: only linear)
+ANCHORED = (
+    "homogeneous",
+    "linear",
+)  # sets whose loads are held at anchor points (boxes: only linear)
 
 
 def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tuple[int, ...]:
@@ -37,8 +40,12 @@ def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tupl
         return tuple(range(dim))
     comps = sorted({AXES.index(c) for c in names})
     if comps and comps[-1] >= dim:
-        raise CaseError(f"component '{AXES[comps[-1]]}' does not exist in {dim}-D", file=file, field=where,
-                        fix=f"use {', '.join(AXES[:dim])} or all")
+        raise CaseError(
+            f"component '{AXES[comps[-1]]}' does not exist in {dim}-D",
+            file=file,
+            field=where,
+            fix=f"use {', '.join(AXES[:dim])} or all",
+        )
     return tuple(comps)
 
 
@@ -47,8 +54,12 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
     if l["set"] is not None:
         want, make = registry.LOAD_SETS.about[l["set"]], registry.LOAD_SETS.load(l["set"])
         if want != dim:
-            raise CaseError(f"load set '{l['set']}' is {want}-D but dim = {dim}", file=file,
-                            field="loads.set", fix=f"use basic{dim}d")
+            raise CaseError(
+                f"load set '{l['set']}' is {want}-D but dim = {dim}",
+                file=file,
+                field="loads.set",
+                fix=f"use basic{dim}d",
+            )
         anchors = None
         if anchored(l["set"], body) and ANCHORS[0] in body.parts:
             anchors = np.array([body.parts[a][0] for a in ANCHORS[:dim]])
@@ -58,38 +69,71 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
     for i, u in enumerate(l["case"]):
         where = f"loads.case[{i}]"
         if u["name"] in names:
-            raise CaseError(f"duplicate load case name '{u['name']}'", file=file, field=where + ".name",
-                            fix="give each load case its own name (the standard set uses stretch-x, shear-x, ...)")
+            raise CaseError(
+                f"duplicate load case name '{u['name']}'",
+                file=file,
+                field=where + ".name",
+                fix="give each load case its own name (the standard set uses stretch-x, "
+                "shear-x, ...)",
+            )
         names.add(u["name"])
         cons = []
         for j, c in enumerate(u["constraint"]):
             _check_part(c["part"], dim, body, file, f"{where}.constraint[{j}].part")
-            cons.append(Constraint(c["part"], _components(c["components"], dim, file,
-                                                          f"{where}.constraint[{j}].components")))
+            cons.append(
+                Constraint(
+                    c["part"],
+                    _components(c["components"], dim, file, f"{where}.constraint[{j}].components"),
+                )
+            )
         tracs = []
         for j, t in enumerate(u["traction"]):
             _check_part(t["part"], dim, body, file, f"{where}.traction[{j}].part")
             if t["vector"] is None and t["twist"] is None:
-                raise CaseError("a traction needs a vector or a twist", file=file, field=f"{where}.traction[{j}]",
-                                fix=f"add vector = [{', '.join(['0.0'] * dim)}] (stress units) or twist = [wx, wy, wz]")
+                raise CaseError(
+                    "a traction needs a vector or a twist",
+                    file=file,
+                    field=f"{where}.traction[{j}]",
+                    fix=f"add vector = [{', '.join(['0.0'] * dim)}] (stress units) or twist "
+                    "= [wx, wy, wz]",
+                )
             if t["vector"] is not None and len(t["vector"]) != dim:
-                raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.traction[{j}].vector")
+                raise CaseError(
+                    f"expected {dim} entries", file=file, field=f"{where}.traction[{j}].vector"
+                )
             if t["twist"] is not None and dim != 3:
-                raise CaseError("a twist (torsion) needs dim = 3", file=file, field=f"{where}.traction[{j}].twist",
-                                fix="use vector in 2-D")
+                raise CaseError(
+                    "a twist (torsion) needs dim = 3",
+                    file=file,
+                    field=f"{where}.traction[{j}].twist",
+                    fix="use vector in 2-D",
+                )
             vector = tuple(t["vector"]) if t["vector"] is not None else (0.0,) * dim
-            tracs.append(Traction(t["part"], vector, None if t["twist"] is None else tuple(t["twist"])))
+            tracs.append(
+                Traction(t["part"], vector, None if t["twist"] is None else tuple(t["twist"]))
+            )
         for key in ("gravity", "body_force"):
             if u[key] is not None and len(u[key]) != dim:
                 raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.{key}")
         if not cons:
-            raise CaseError("no constraint: the body can move freely", file=file,
-                            field=where + ".constraint", fix="add [[loads.case.constraint]] with a part")
+            raise CaseError(
+                "no constraint: the body can move freely",
+                file=file,
+                field=where + ".constraint",
+                fix="add [[loads.case.constraint]] with a part",
+            )
         given = tracs or any(u[key] is not None for key in ("gravity", "body_force"))
-        if given and not any(any(t.vector) or any(t.twist or ()) for t in tracs) and not any(
-                any(u[key] or ()) for key in ("gravity", "body_force")):   # constraints alone: a modal case
-            raise CaseError(f"load '{u['name']}' is zero: nothing moves (G would be 0/0)", file=file, field=where,
-                            fix="give a non-zero traction vector, twist, gravity or body_force")
+        if (
+            given
+            and not any(any(t.vector) or any(t.twist or ()) for t in tracs)
+            and not any(any(u[key] or ()) for key in ("gravity", "body_force"))
+        ):  # constraints alone: a modal case
+            raise CaseError(
+                f"load '{u['name']}' is zero: nothing moves (G would be 0/0)",
+                file=file,
+                field=where,
+                fix="give a non-zero traction vector, twist, gravity or body_force",
+            )
         cases.append(LoadCase(u["name"], tuple(cons), tuple(tracs), u["gravity"], u["body_force"]))
     return tuple(cases), l["set"]
 
@@ -101,19 +145,36 @@ def parse_heldout(l: dict, loads, file: str) -> tuple[str, ...]:
     for key in ("fit", "heldout"):
         for n in l[key] or ():
             if n not in names:
-                raise CaseError(f"no load case '{n}'", file=file, field=f"loads.{key}",
-                                fix=f"one of {', '.join(names)}")
+                raise CaseError(
+                    f"no load case '{n}'",
+                    file=file,
+                    field=f"loads.{key}",
+                    fix=f"one of {', '.join(names)}",
+                )
     fit, held = l["fit"], l["heldout"]
     if fit is not None and held is not None:
         both = sorted(set(fit) & set(held))
         rest = [n for n in names if n not in fit and n not in held]
         if both or rest:
-            raise CaseError(f"load case '{(both or rest)[0]}' is {'in both' if both else 'in neither'} of fit and heldout",
-                            file=file, field="loads.heldout", fix="list every load case in exactly one of them")
-    held = tuple(held) if held is not None else tuple(n for n in names if fit is not None and n not in fit)
+            raise CaseError(
+                f"load case '{(both or rest)[0]}' is {'in both' if both else 'in neither'} "
+                "of fit and heldout",
+                file=file,
+                field="loads.heldout",
+                fix="list every load case in exactly one of them",
+            )
+    held = (
+        tuple(held)
+        if held is not None
+        else tuple(n for n in names if fit is not None and n not in fit)
+    )
     if names and len(held) == len(names):
-        raise CaseError("every load case is held out: nothing to fit", file=file, field="loads.fit",
-                        fix="fit at least one load case")
+        raise CaseError(
+            "every load case is held out: nothing to fit",
+            file=file,
+            field="loads.fit",
+            fix="fit at least one load case",
+        )
     return tuple(n for n in names if n in held)
 
 
@@ -123,7 +184,9 @@ def anchored(load_set: str | None, body: Body) -> bool:
     on any body."""
     name = load_set or ""
     boxed = body.shape in ("rectangle", "box")
-    return any(name.startswith(a) for a in ANCHORED) and not (boxed and name.startswith("homogeneous"))
+    return any(name.startswith(a) for a in ANCHORED) and not (
+        boxed and name.startswith("homogeneous")
+    )
 
 
 def body_frame(body: Body) -> Frame:
@@ -137,7 +200,7 @@ def body_frame(body: Body) -> Frame:
         mesh = read_mesh(body.file, body.format)
         m = mesh_moments(mesh.points, mesh.cells)
     dim = len(lo)
-    return Frame(tuple(float(v) for v in m[1:1 + dim] / m[0]), float(np.max(hi - lo)))
+    return Frame(tuple(float(v) for v in m[1 : 1 + dim] / m[0]), float(np.max(hi - lo)))
 
 
 def with_anchors(l: dict, body: Body, file: str) -> Body:
@@ -155,15 +218,27 @@ def with_anchors(l: dict, body: Body, file: str) -> Body:
         try:
             m = read_mesh(body.file, body.format)
         except SpringbenchError as exc:
-            raise CaseError(exc.message, file=str(body.file), field="body.file", fix=exc.fix) from None
-        boundary = m.points[np.unique(np.concatenate([f.ravel() for f in boundary_facets(m.cells)]))]
+            raise CaseError(
+                exc.message, file=str(body.file), field="body.file", fix=exc.fix
+            ) from None
+        boundary = m.points[
+            np.unique(np.concatenate([f.ravel() for f in boundary_facets(m.cells)]))
+        ]
     taken = [a for a in ANCHORS if a in body.parts]
     if taken:
-        raise CaseError(f"part name '{taken[0]}' is reserved for the {l['set']} loads' constraints", file=file,
-                        field=f"body.parts.{taken[0]}", fix="rename that part")
-    if len(boundary) < 3:    # a closed surface has no boundary facets
-        raise CaseError("the body has no boundary to anchor its loads on", file=file, field="body",
-                        fix="give a volume mesh (tetrahedra or hexahedra; 2-D: triangles or quads)")
+        raise CaseError(
+            f"part name '{taken[0]}' is reserved for the {l['set']} loads' constraints",
+            file=file,
+            field=f"body.parts.{taken[0]}",
+            fix="rename that part",
+        )
+    if len(boundary) < 3:  # a closed surface has no boundary facets
+        raise CaseError(
+            "the body has no boundary to anchor its loads on",
+            file=file,
+            field="body",
+            fix="give a volume mesh (tetrahedra or hexahedra; 2-D: triangles or quads)",
+        )
     pts = anchor_points(boundary)
     parts = dict(body.parts, **{a: (tuple(p), tuple(p)) for a, p in zip(ANCHORS, pts)})
     return replace(body, parts=MappingProxyType(parts))
@@ -172,8 +247,12 @@ def with_anchors(l: dict, body: Body, file: str) -> Body:
 def _check_part(name: str, dim: int, body: Body, file: str, where: str):
     if not part_exists(name, dim, body.parts):
         user = ", ".join(body.parts) or "none defined"
-        raise CaseError(f"boundary part '{name}' does not exist", file=file, field=where,
-                        fix=f"use a face name like x0, x1, x0y0 or a part from [body.parts] ({user})")
+        raise CaseError(
+            f"boundary part '{name}' does not exist",
+            file=file,
+            field=where,
+            fix=f"use a face name like x0, x1, x0y0 or a part from [body.parts] ({user})",
+        )
 
 
 def modal_load(case):
@@ -184,12 +263,18 @@ def modal_load(case):
     not resist a point support, so its lowest frequencies under one fall with every
     refinement (cube_333 held by the stretch-x corners: 0.47, 0.27, 0.18 Hz; clamped:
     1.136, 1.125, 1.122 Hz)."""
+
     def clamps(load):
         for c in load.constraints:
-            faces = parse_face_name(c.part, case.dim)     # None: a user part or a group
-            if len(set(c.components)) == case.dim and (faces is None or len(faces) == 1) and c.part not in ANCHORS:
+            faces = parse_face_name(c.part, case.dim)  # None: a user part or a group
+            if (
+                len(set(c.components)) == case.dim
+                and (faces is None or len(faces) == 1)
+                and c.part not in ANCHORS
+            ):
                 return True
         return False
+
     held = [l for l in case.loads if l.name in set(case.heldout)]
     fitted = [l for l in case.loads if l.name not in set(case.heldout)]
     return next((l for l in held + fitted if clamps(l)), case.loads[0])

@@ -18,6 +18,7 @@ AXES = "xyz"
 @dataclass(frozen=True)
 class Constraint:
     """Displacement components ``components`` (0=x, 1=y, 2=z) are zero on ``part``."""
+
     part: str
     components: tuple[int, ...]
 
@@ -28,6 +29,7 @@ class Traction:
     thickness) on the boundary ``part``. With ``twist`` w (3-D; stress per length) it is
     t(x) = vector + w x (x - c), c the area centroid of the part's facets: w x (x - c)
     has no resultant, only the torque int (x - c) x (w x (x - c)) dA (torsion)."""
+
     part: str
     vector: tuple[float, ...]
     twist: tuple[float, ...] | None = None
@@ -37,6 +39,7 @@ class Traction:
 class Frame:
     """A body's centroid and size L (its largest bounding-box extent): the scaled
     coordinates xi = (x - centroid) / L of the linear stress states, |xi| <~ 1."""
+
     centroid: tuple[float, ...]
     size: float
 
@@ -50,11 +53,13 @@ class LoadCase:
     """One static load case. ``gravity`` is an acceleration (force = density * g);
     ``body_force`` a force per volume; both may be None. ``stress`` (Voigt, VOIGT
     order) is a stress state whose traction sigma . n acts on the whole boundary (the
-    ``homogeneous`` sets on bodies that are not boxes, the ``linear`` sets on any): constant, or with
+    ``homogeneous`` sets on bodies that are not boxes, the ``linear`` sets on any): constant, or
+    with
     ``stress_gradient`` G (dim rows of Voigt entries, G[k] = d sigma / d xi_k in the
     coordinates of ``frame``) the linear field sigma(x) = stress + sum_k xi_k G[k]
     (:func:`stress_field`); ``stress`` is then its value at the frame's centroid.
     ``family`` groups the states of a set (:func:`family`); None for user loads."""
+
     name: str
     constraints: tuple[Constraint, ...]
     tractions: tuple[Traction, ...] = ()
@@ -67,7 +72,9 @@ class LoadCase:
 
     def __post_init__(self):
         if self.stress_gradient is not None and (self.stress is None or self.frame is None):
-            raise ValueError(f"load '{self.name}': a stress gradient needs its constant part and its frame")
+            raise ValueError(
+                f"load '{self.name}': a stress gradient needs its constant part and its frame"
+            )
 
     @property
     def parts(self) -> set[str]:
@@ -90,10 +97,16 @@ def _unit(dim: int, axis: int, s: float) -> tuple[float, ...]:
 def basic2d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
     """Deussen Fig. 4: two stretches (rollers + one pinned corner) and two shears."""
     return (
-        LoadCase("stretch-x", (Constraint("x0", (0,)), Constraint("x0y0", (1,))),
-                 (Traction("x1", (s, 0.0)),)),
-        LoadCase("stretch-y", (Constraint("y0", (1,)), Constraint("x0y0", (0,))),
-                 (Traction("y1", (0.0, s)),)),
+        LoadCase(
+            "stretch-x",
+            (Constraint("x0", (0,)), Constraint("x0y0", (1,))),
+            (Traction("x1", (s, 0.0)),),
+        ),
+        LoadCase(
+            "stretch-y",
+            (Constraint("y0", (1,)), Constraint("x0y0", (0,))),
+            (Traction("y1", (0.0, s)),),
+        ),
         LoadCase("shear-x", (Constraint("y0", (0, 1)),), (Traction("y1", (s, 0.0)),)),
         LoadCase("shear-y", (Constraint("x0", (0, 1)),), (Traction("x1", (0.0, s)),)),
     )
@@ -113,19 +126,26 @@ def basic3d(s: float, anchors=None, frame=None) -> tuple[LoadCase, ...]:
         A, B, C = AXES[a], AXES[b], AXES[c]
         corner0 = "".join(sorted([f"{A}0", f"{B}0", f"{C}0"], key=lambda t: AXES.index(t[0])))
         corner1 = "".join(sorted([f"{A}0", f"{B}1", f"{C}0"], key=lambda t: AXES.index(t[0])))
-        cases.append(LoadCase(
-            f"stretch-{A}",
-            (Constraint(f"{A}0", (a,)), Constraint(corner0, (b, c)), Constraint(corner1, (c,))),
-            (Traction(f"{A}1", _unit(3, a, s)),)))
+        cases.append(
+            LoadCase(
+                f"stretch-{A}",
+                (Constraint(f"{A}0", (a,)), Constraint(corner0, (b, c)), Constraint(corner1, (c,))),
+                (Traction(f"{A}1", _unit(3, a, s)),),
+            )
+        )
     for a, b in ((0, 1), (1, 0), (0, 2), (2, 0), (1, 2), (2, 1)):
-        cases.append(LoadCase(
-            f"shear-{AXES[a]}{AXES[b]}", (Constraint(f"{AXES[b]}0", (0, 1, 2)),),
-            (Traction(f"{AXES[b]}1", _unit(3, a, s)),)))
+        cases.append(
+            LoadCase(
+                f"shear-{AXES[a]}{AXES[b]}",
+                (Constraint(f"{AXES[b]}0", (0, 1, 2)),),
+                (Traction(f"{AXES[b]}1", _unit(3, a, s)),),
+            )
+        )
     return tuple(cases)
 
 
 VOIGT = {2: ((0, 0), (1, 1), (0, 1)), 3: ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))}
-ANCHORS = ("anchor-a", "anchor-b", "anchor-c")   # part names of the minimal constraints
+ANCHORS = ("anchor-a", "anchor-b", "anchor-c")  # part names of the minimal constraints
 
 
 def stress_tensor(voigt) -> "np.ndarray":
@@ -155,11 +175,14 @@ def anchor_points(points) -> np.ndarray:
     smallest point, so rounding the coordinates cannot change the choice."""
     p = np.asarray(points, float)
     tol = 1e-9 * float(np.ptp(p, axis=0).max())
-    key = np.round(p / max(tol, 1e-300) / 1e3) if tol > 0 else p       # lexicographic on rounded coordinates
+    key = (
+        np.round(p / max(tol, 1e-300) / 1e3) if tol > 0 else p
+    )  # lexicographic on rounded coordinates
 
     def pick(score):
         cand = np.flatnonzero(score >= score.max() - tol * 1e3)
         return p[cand[np.lexsort(key[cand].T[::-1])[0]]]
+
     a = pick(np.linalg.norm(p - p.mean(0), axis=1))
     b = pick(np.linalg.norm(p - a, axis=1))
     if p.shape[1] == 2:
@@ -176,7 +199,10 @@ def minimal_constraints(anchors, names=ANCHORS) -> tuple[Constraint, ...]:
     p = np.asarray(anchors, float)
     dim = p.shape[1]
     main = int(np.argmax(np.abs(p[1] - p[0])))
-    cons = [Constraint(names[0], tuple(range(dim))), Constraint(names[1], tuple(c for c in range(dim) if c != main))]
+    cons = [
+        Constraint(names[0], tuple(range(dim))),
+        Constraint(names[1], tuple(c for c in range(dim) if c != main)),
+    ]
     if dim == 3:
         n = np.cross(p[1] - p[0], p[2] - p[0])
         cons.append(Constraint(names[2], (int(np.argmax(np.abs(n))),)))
@@ -195,7 +221,9 @@ def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
         voigt[I] = s
         name = f"s{AXES[i]}{AXES[j]}"
         if anchors is not None:
-            out.append(LoadCase(name, minimal_constraints(anchors), stress=tuple(voigt), family="constant"))
+            out.append(
+                LoadCase(name, minimal_constraints(anchors), stress=tuple(voigt), family="constant")
+            )
             continue
         sig = stress_tensor(voigt)
         tracs = []
@@ -206,8 +234,14 @@ def homogeneous(dim: int, s: float, anchors=None) -> tuple[LoadCase, ...]:
                     tracs.append(Traction(f"{AXES[a]}{side}", tuple(float(v) for v in t)))
         corners = [(0,) * dim, (1,) + (0,) * (dim - 1), (0, 1) + (0,) * (dim - 2)]
         names = ["".join(f"{AXES[a]}{c[a]}" for a in range(dim)) for c in corners]
-        out.append(LoadCase(name, minimal_constraints(np.array(corners[:dim], float), names), tuple(tracs),
-                            family="constant"))
+        out.append(
+            LoadCase(
+                name,
+                minimal_constraints(np.array(corners[:dim], float), names),
+                tuple(tracs),
+                family="constant",
+            )
+        )
     return tuple(out)
 
 

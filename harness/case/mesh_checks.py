@@ -25,7 +25,14 @@ from harness.errors import SpringbenchError
 #: faces of each volume cell type (local node indices); an edge list for surface cells
 FACES = {
     "tetra": ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3)),
-    "hexahedron": ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)),
+    "hexahedron": (
+        (0, 1, 2, 3),
+        (4, 5, 6, 7),
+        (0, 1, 5, 4),
+        (1, 2, 6, 5),
+        (2, 3, 7, 6),
+        (3, 0, 4, 7),
+    ),
     "triangle": ((0, 1), (1, 2), (2, 0)),
     "quad": ((0, 1), (1, 2), (2, 3), (3, 0)),
 }
@@ -57,8 +64,22 @@ def signed_size(points: np.ndarray, kind: str, cells: np.ndarray) -> np.ndarray:
         return np.einsum("ij,ij->i", np.cross(a, b), c) / 6.0
     if kind == "hexahedron":
         # derivative of the trilinear map at the centre, node order as VTK / the bc2000 program
-        s = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                      [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], float) / 8.0
+        s = (
+            np.array(
+                [
+                    [-1, -1, -1],
+                    [1, -1, -1],
+                    [1, 1, -1],
+                    [-1, 1, -1],
+                    [-1, -1, 1],
+                    [1, -1, 1],
+                    [1, 1, 1],
+                    [-1, 1, 1],
+                ],
+                float,
+            )
+            / 8.0
+        )
         J = np.einsum("ekd,kr->edr", p, s)  # (e, dim, ref)
         return np.linalg.det(J) * 8.0
     raise ValueError(kind)
@@ -74,7 +95,10 @@ def coordinate_problem(points) -> str | None:
     if extent < SMALLEST:
         return f"the body is {extent:.3g} across, too small to compute with"
     if extent < EXTENT_RTOL * big:
-        return f"the body is {extent:.3g} across but {big:.3g} from the origin (too few significant digits)"
+        return (
+            f"the body is {extent:.3g} across but {big:.3g} from the origin "
+            "(too few significant digits)"
+        )
     return None
 
 
@@ -108,52 +132,75 @@ def check_mesh(mesh, file: str | None = None) -> None:
     for kind, c in cells.items():
         if c.min() < 0 or c.max() >= n:
             row = np.flatnonzero((c < 0).any(1) | (c >= n).any(1))
-            fail(f"{kind} cells {_first(row)} refer to nodes that do not exist (mesh has {n} nodes)",
-                 "node indices must be 0 .. n-1")
+            fail(
+                f"{kind} cells {_first(row)} refer to nodes that do not exist (mesh has {n} nodes)",
+                "node indices must be 0 .. n-1",
+            )
         s = np.sort(c, axis=1)
         rep = np.flatnonzero((s[:, 1:] == s[:, :-1]).any(1))
         if len(rep):
-            fail(f"{kind} cells {_first(rep)} repeat a node (collapsed cells)", "remove or fix those cells")
+            fail(
+                f"{kind} cells {_first(rep)} repeat a node (collapsed cells)",
+                "remove or fix those cells",
+            )
         used[c.ravel()] = True
         _, first, counts = np.unique(s, axis=0, return_index=True, return_counts=True)
         if (counts > 1).any():
-            fail(f"{int((counts > 1).sum())} {kind} cells appear twice (e.g. cell {first[counts > 1][0]})",
-                 "remove duplicate cells")
+            fail(
+                f"{int((counts > 1).sum())} {kind} cells appear twice (e.g. cell "
+                f"{first[counts > 1][0]})",
+                "remove duplicate cells",
+            )
     scale = float(np.linalg.norm(pts.max(0) - pts.min(0))) or 1.0
     from scipy.spatial import cKDTree
+
     pairs = cKDTree(pts).query_pairs(1e-10 * scale, output_type="ndarray")
     if len(pairs):
-        fail(f"duplicate nodes: {len(pairs)} pairs at the same position (e.g. nodes {pairs[0, 0]} and {pairs[0, 1]})",
-             "merge duplicate nodes (e.g. meshio/gmsh 'Coherence' or remove_duplicate_points)")
+        fail(
+            f"duplicate nodes: {len(pairs)} pairs at the same position (e.g. nodes "
+            f"{pairs[0, 0]} and {pairs[0, 1]})",
+            "merge duplicate nodes (e.g. meshio/gmsh 'Coherence' or remove_duplicate_points)",
+        )
     unused = np.flatnonzero(~used)
     if len(unused):
-        fail(f"{len(unused)} nodes belong to no cell (nodes {_first(unused)})",
-             "remove unused nodes (meshio: mesh.remove_orphaned_nodes())")
+        fail(
+            f"{len(unused)} nodes belong to no cell (nodes {_first(unused)})",
+            "remove unused nodes (meshio: mesh.remove_orphaned_nodes())",
+        )
     for kind, c in cells.items():
         v = signed_size(pts, kind, c)
         ref = np.median(np.abs(v))
         degen = np.flatnonzero(np.abs(v) <= DEGENERATE_RTOL * max(ref, np.finfo(float).tiny))
         if len(degen) or ref == 0:
             degen = degen if len(degen) else np.arange(len(c))
-            fail(f"{len(degen)} degenerate {kind} cells with zero size (cells {_first(degen)})",
-                 "remove flat or collapsed cells")
+            fail(
+                f"{len(degen)} degenerate {kind} cells with zero size (cells {_first(degen)})",
+                "remove flat or collapsed cells",
+            )
         pos, neg = np.flatnonzero(v > 0), np.flatnonzero(v < 0)
         if len(pos) and len(neg):
             wrong = neg if len(neg) <= len(pos) else pos
-            fail(f"{len(wrong)} inverted {kind} cells (cells {_first(wrong)}) have the opposite orientation to the rest",
-                 "reorder their nodes so every cell has positive volume")
-    if len(cells) > 1:    # the FEM reference meshes one cell type: it would drop the others
+            fail(
+                f"{len(wrong)} inverted {kind} cells (cells {_first(wrong)}) have the "
+                "opposite orientation to the rest",
+                "reorder their nodes so every cell has positive volume",
+            )
+    if len(cells) > 1:  # the FEM reference meshes one cell type: it would drop the others
         split = "hexahedra into tetrahedra" if "hexahedron" in cells else "quads into triangles"
-        fail(f"the mesh mixes {' and '.join(sorted(cells))} cells",
-             f"give one cell type, e.g. split the {split}")
+        fail(
+            f"the mesh mixes {' and '.join(sorted(cells))} cells",
+            f"give one cell type, e.g. split the {split}",
+        )
     for kind, c in cells.items():
         faces = np.concatenate([np.sort(c[:, list(f)], axis=1) for f in FACES[kind]])
         _, counts = np.unique(faces, axis=0, return_counts=True)
         over = int((counts > 2).sum())
         if over:
             what = "edges" if kind in ("triangle", "quad") else "faces"
-            fail(f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
-                 "each face may belong to at most two cells; remove overlapping or duplicate cells")
+            fail(
+                f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
+                "each face may belong to at most two cells; remove overlapping or duplicate cells",
+            )
     _check_connected(pts, cells, fail)
 
 
@@ -163,25 +210,35 @@ def _surface(pts, cells, fail):
     what = " and ".join(f"{len(c)} {kind}s" for kind, c in sorted(cells.items()))
     z = pts[:, 2]
     if np.ptp(z) <= 1e-12 * max(float(np.ptp(pts[:, :2], axis=0).max()), np.finfo(float).tiny):
-        fail(f"a flat mesh of {what} at z = {z[0]:g}: 2-D meshes lie in the plane z = 0",
-             "move it to z = 0, or give volume cells (tetrahedra or hexahedra)")
-    fail(f"no volume cells: the mesh is a surface in 3-D ({what})",
-         "tetrahedralise it first, e.g. with gmsh")
+        fail(
+            f"a flat mesh of {what} at z = {z[0]:g}: 2-D meshes lie in the plane z = 0",
+            "move it to z = 0, or give volume cells (tetrahedra or hexahedra)",
+        )
+    fail(
+        f"no volume cells: the mesh is a surface in 3-D ({what})",
+        "tetrahedralise it first, e.g. with gmsh",
+    )
 
 
 def _check_connected(pts, cells, fail):
     """One piece: every node reachable from every other through the cells."""
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
-    rows = np.concatenate([np.repeat(c[:, :1], c.shape[1] - 1, axis=1).ravel() for c in cells.values()])
+
+    rows = np.concatenate(
+        [np.repeat(c[:, :1], c.shape[1] - 1, axis=1).ravel() for c in cells.values()]
+    )
     cols = np.concatenate([c[:, 1:].ravel() for c in cells.values()])
     n = len(pts)
-    count, label = connected_components(sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)),
-                                        directed=False)
+    count, label = connected_components(
+        sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n)), directed=False
+    )
     if count > 1:
         sizes = np.bincount(label)
         small = int(np.argmin(sizes))
-        fail(f"the mesh is {count} disconnected pieces (node counts {sorted(sizes.tolist(), reverse=True)[:5]}; "
-             f"node {int(np.flatnonzero(label == small)[0])} is in one of {sizes[small]} nodes)",
-             "mesh the body as one connected piece, or remove the loose pieces")
-
+        fail(
+            f"the mesh is {count} disconnected pieces (node counts "
+            f"{sorted(sizes.tolist(), reverse=True)[:5]}; "
+            f"node {int(np.flatnonzero(label == small)[0])} is in one of {sizes[small]} nodes)",
+            "mesh the body as one connected piece, or remove the loose pieces",
+        )

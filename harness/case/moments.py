@@ -8,7 +8,18 @@ import numpy as np
 
 EXPONENTS = {
     2: [(0, 0), (1, 0), (0, 1), (1, 1), (2, 0), (0, 2)],
-    3: [(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 0), (1, 0, 1), (0, 1, 1), (2, 0, 0), (0, 2, 0), (0, 0, 2)],
+    3: [
+        (0, 0, 0),
+        (1, 0, 0),
+        (0, 1, 0),
+        (0, 0, 1),
+        (1, 1, 0),
+        (1, 0, 1),
+        (0, 1, 1),
+        (2, 0, 0),
+        (0, 2, 0),
+        (0, 0, 2),
+    ],
 }
 
 
@@ -24,21 +35,29 @@ def polygon_moments(v: np.ndarray) -> np.ndarray:
     x, y = v[:, 0], v[:, 1]
     xn, yn = np.roll(x, -1), np.roll(y, -1)
     c = x * yn - xn * y
-    return np.array([
-        c.sum() / 2,
-        ((x + xn) * c).sum() / 6,
-        ((y + yn) * c).sum() / 6,
-        ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * c).sum() / 24,
-        ((x * x + x * xn + xn * xn) * c).sum() / 12,
-        ((y * y + y * yn + yn * yn) * c).sum() / 12,
-    ])
+    return np.array(
+        [
+            c.sum() / 2,
+            ((x + xn) * c).sum() / 6,
+            ((y + yn) * c).sum() / 6,
+            ((x * yn + 2 * x * y + 2 * xn * yn + xn * y) * c).sum() / 24,
+            ((x * x + x * xn + xn * xn) * c).sum() / 12,
+            ((y * y + y * yn + yn * yn) * c).sum() / 12,
+        ]
+    )
 
 
 def box_moments(lo, hi) -> np.ndarray:
     """Exact moments of an axis-aligned box (any dim; unit density)."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    return np.array([np.prod([(hi[a] ** (e[a] + 1) - lo[a] ** (e[a] + 1)) / (e[a] + 1) for a in range(len(lo))])
-                     for e in EXPONENTS[len(lo)]])
+    return np.array(
+        [
+            np.prod(
+                [(hi[a] ** (e[a] + 1) - lo[a] ** (e[a] + 1)) / (e[a] + 1) for a in range(len(lo))]
+            )
+            for e in EXPONENTS[len(lo)]
+        ]
+    )
 
 
 _TET_A, _TET_B = 0.5854101966249685, 0.1381966011250105
@@ -55,7 +74,14 @@ def _simplices(points: np.ndarray, cells) -> tuple[np.ndarray, np.ndarray]:
         elif ctype == "quad":
             simp += [c[:, [0, 1, 2]], c[:, [0, 2, 3]]]
         elif ctype == "hexahedron":
-            for t in ([0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]):
+            for t in (
+                [0, 1, 2, 6],
+                [0, 2, 3, 6],
+                [0, 3, 7, 6],
+                [0, 7, 4, 6],
+                [0, 4, 5, 6],
+                [0, 5, 1, 6],
+            ):
                 simp.append(c[:, t])
     simp = np.concatenate(simp)
     p = points[simp]

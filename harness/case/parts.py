@@ -35,7 +35,7 @@ def parse_face_name(name: str, dim: int) -> list[tuple[int, int]] | None:
     return out
 
 
-RTOL = 1e-8   # a point is on a face or in a part within RTOL times the body's diagonal
+RTOL = 1e-8  # a point is on a face or in a part within RTOL times the body's diagonal
 
 
 def geometric_tol(bbox, rtol: float = RTOL) -> float:
@@ -44,9 +44,12 @@ def geometric_tol(bbox, rtol: float = RTOL) -> float:
     return rtol * float(np.linalg.norm(hi - lo))
 
 
-def part_predicate(name: str, bbox: tuple[np.ndarray, np.ndarray],
-                   user_parts: Mapping[str, tuple] | None = None,
-                   rtol: float = RTOL) -> Callable[[np.ndarray], np.ndarray]:
+def part_predicate(
+    name: str,
+    bbox: tuple[np.ndarray, np.ndarray],
+    user_parts: Mapping[str, tuple] | None = None,
+    rtol: float = RTOL,
+) -> Callable[[np.ndarray], np.ndarray]:
     """Predicate for the named part; raises KeyError for an unknown name."""
     lo, hi = (np.asarray(b, float) for b in bbox)
     tol = geometric_tol(bbox, rtol)
@@ -60,6 +63,7 @@ def part_predicate(name: str, bbox: tuple[np.ndarray, np.ndarray],
         def in_box(x):
             x = np.asarray(x, float)
             return np.all((x >= plo[:, None] - tol) & (x <= phi[:, None] + tol), axis=0)
+
         return in_box
     faces = parse_face_name(name, len(lo))
     if faces is None:
@@ -71,6 +75,7 @@ def part_predicate(name: str, bbox: tuple[np.ndarray, np.ndarray],
         for axis, side in faces:
             mask &= np.abs(x[axis] - (hi if side else lo)[axis]) <= tol
         return mask
+
     return on_faces
 
 
@@ -78,9 +83,11 @@ def part_exists(name: str, dim: int, user_parts: Mapping | None = None) -> bool:
     return bool(user_parts and name in user_parts) or parse_face_name(name, dim) is not None
 
 
-def classify_nodes(points: np.ndarray, bbox, boundary: np.ndarray | None = None,
-                   rtol: float = RTOL) -> np.ndarray:
-    """Node classes for the G weights: 0 inner, 1 border, 2 corner (docs/design.md, "The G criteria").
+def classify_nodes(
+    points: np.ndarray, bbox, boundary: np.ndarray | None = None, rtol: float = RTOL
+) -> np.ndarray:
+    """Node classes for the G weights: 0 inner, 1 border, 2 corner (docs/design.md, "The G
+    criteria").
 
     ``points`` is (n, dim). A corner is a vertex of the bounding box; a border node
     is any other node on the boundary: on a bounding-box face, or flagged in

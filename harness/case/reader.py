@@ -10,236 +10,30 @@ from __future__ import annotations
 
 import hashlib
 import tomllib
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
-from typing import Mapping
 
 import numpy as np
 
-from harness import registry
 from harness.case import sections as case_sections
+from harness.case.case import Body, Case, Fibre, Material, ReferenceSpec, Region
 from harness.case.elasticity import transversely_isotropic_compliance
-from harness.case.fibres import NAMED_FIELDS
+from harness.case.fields import (
+    GRADED_LEVELS,
+    TOP,
+)
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
-from harness.case.loadsets import LoadCase
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean
 from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
-from harness.io.meshfile import mesh_points, read_mesh
+from harness.io.meshfile import read_mesh
 
 MODES = ("quick", "full")
 
-# -- schema ---------------------------------------------------------------------------
-
-BODY = {
-    "shape": Field("str", choices=("rectangle", "box", "polygon", "mesh"),
-                   doc="rectangle (2-D), box (3-D), polygon (2-D) or mesh"),
-    "origin": Field("floats", None, length=(2, 3)),
-    "size": Field("floats", None, length=(2, 3), min=0, min_exclusive=True,
-                  doc="positive extents"),
-    "vertices": Field("matrix", None, doc="polygon vertices [[x, y], ...] in order"),
-    "file": Field("str", None, doc="mesh file, relative to the case file"),
-    "format": Field("str", None, doc="meshio format name or 'bc2000'; guessed if absent"),
-    "parts": Field("any", {}, doc="named boxes: name = {box = [[lo...], [hi...]]}, mesh groups: "
-                                  "name = {group = \"physical group\"}, or a mesh's end faces: name = "
-                                  "{end = \"x1\", band = 0.05, cos = 0.5} (boundary facets within band x the "
-                                  "extent of that end whose outward normals point along the axis, cos >= cos)"),
-}
-
-FIBRE = {
-    "E_fibre": Field("float", min=0, min_exclusive=True, doc="Young's modulus along the fibre"),
-    "E_cross": Field("float", min=0, min_exclusive=True, doc="Young's modulus across the fibre"),
-    "nu_fibre": Field("float", None, min=-1, max=0.5, min_exclusive=True,
-                      doc="major Poisson ratio nu_LT (strain across / strain along); default nu"),
-    "nu_cross": Field("float", None, min=-1, max=1, min_exclusive=True, max_exclusive=True,
-                      doc="Poisson ratio in the isotropic cross plane nu_TT; default nu"),
-    "G_fibre": Field("float", None, min=0, min_exclusive=True,
-                     doc="shear modulus G_LT; default E_fibre E_cross / (E_fibre + E_cross (1 + 2 nu_fibre))"),
-    "direction": Field("floats", None, length=(2, 3)),
-    "azimuth_deg": Field("float", None),
-    "elevation_deg": Field("float", None),
-    "field": Field("str", None, choices=NAMED_FIELDS),
-    "seed": Field("int", 0, min=0, doc="seed of a random fibre field (>= 0)"),
-}
-
-REGION = {
-    "box": Field("matrix", doc="[[lo...], [hi...]]"),
-    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
-    "nu": Field("float", None, min=-1, max=0.5, min_exclusive=True, max_exclusive=True),
-    "density": Field("float", None, min=0, min_exclusive=True),
-}
-
-MATERIAL = {
-    "E": Field("float", min=0, min_exclusive=True, doc="Young's modulus > 0"),
-    "nu": Field("float", min=-1, max=0.5, min_exclusive=True, max_exclusive=True,
-                doc="Poisson ratio in (-1, 0.5)"),
-    "density": Field("float", 1.0, min=0, min_exclusive=True),
-    "plane": Field("str", "stress", choices=("stress", "strain")),
-    "fibre": Field("table", None, spec=FIBRE),
-    "regions": Field("tables", (), spec=REGION),
-}
-
-COMPONENTS = ("x", "y", "z", "all")
-CONSTRAINT = {
-    "part": Field("str"),
-    "components": Field("strs", ("all",), choices=COMPONENTS),
-}
-TRACTION = {"part": Field("str"), "vector": Field("floats", None, length=(2, 3)),
-            "twist": Field("floats", None, length=3, doc="w: adds w x (x - c), c the part's centroid (torsion)")}
-USER_LOAD = {
-    "name": Field("str"),
-    "constraint": Field("tables", (), spec=CONSTRAINT),
-    "traction": Field("tables", (), spec=TRACTION),
-    "gravity": Field("floats", None, length=(2, 3), doc="acceleration, e.g. [0, -9.81]"),
-    "body_force": Field("floats", None, length=(2, 3), doc="force per volume"),
-}
-LOADS = {
-    "set": Field("str", None, choices=registry.LOAD_SETS.names()),
-    "magnitude": Field("float", 1.0, doc="traction s of the standard set (stress units), not 0",
-                       check=lambda v: "a zero traction moves nothing (G would be 0/0)" if v == 0 else None),
-    "case": Field("tables", (), spec=USER_LOAD),
-    "fit": Field("strs", None, doc="the load cases a fit may use (default: all that are not held out)"),
-    "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
-}
-
-GRADED_LEVELS = 8   # default max_refine of the graded method: n = 2..10 cells per end zone. A cube's
-# shears reach 7e-5 at n = 8 (tests/reference/test_graded_vs_independent.py) and stop there (tol);
-# a 10:1 box at nu = 0.49 reaches 6.6e-5 at n = 10 against the independent truth (2.5e-4 at n = 6);
-# the dof budget (reference/graded/levels.py) stops earlier where a level would not fit
-
-REFERENCE = {
-    "element": Field("str", "P2", choices=("P1", "P2")),
-    "cell": Field("str", None, choices=("tri", "quad", "tet", "hex")),
-    "divisions": Field("int", None, min=1, max=4096, doc="initial elements along the shortest side"),
-    "tol": Field("float", 1e-4, min=0, min_exclusive=True),
-    "max_refine": Field("int", None, min=0, doc="further refinement levels (default 3; graded 8, "
-                                                "within a 400k-dof system in 3-D with the default solver, 64k with a factorising one)"),
-    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg", "two-level", "tensor")),
-    "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
-    "method": Field("str", "auto", choices=("auto", "graded", "refine"),
-                    doc="graded: Q2 hexes/quads graded towards the faces, levels extrapolated "
-                        "(boxes, rectangles); refine: uniform/adaptive refinement of the cell's mesh; "
-                        "auto: graded for a box unless cell or element say otherwise, else refine"),
-}
-
-TOP = {
-    "name": Field("str", doc="a short identifier"),
-    "dim": Field("int", choices=(2, 3), doc="2 or 3"),
-    "description": Field("str", ""),
-    "tags": Field("strs", ()),
-    "body": Field("table", spec=BODY),
-    "material": Field("table", spec=MATERIAL),
-    "loads": Field("table", {}, spec=LOADS),
-    "reference": Field("table", {}, spec=REFERENCE),
-}
-
-
-# -- dataclasses ----------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Body:
-    shape: str
-    origin: tuple[float, ...] | None = None
-    size: tuple[float, ...] | None = None
-    vertices: tuple[tuple[float, ...], ...] | None = None
-    file: Path | None = None
-    format: str | None = None
-    parts: Mapping[str, tuple] = field(default_factory=dict)
-
-    def bbox(self) -> tuple[np.ndarray, np.ndarray]:
-        """(lo, hi) of the body."""
-        if self.shape in ("rectangle", "box"):
-            lo = np.asarray(self.origin, float)
-            return lo, lo + np.asarray(self.size, float)
-        if self.shape == "polygon":
-            v = np.asarray(self.vertices, float)
-            return v.min(0), v.max(0)
-        p = mesh_points(self.file, self.format)       # read once per version of the file
-        return p.min(0), p.max(0)
-
-
-@dataclass(frozen=True)
-class Fibre:
-    E_fibre: float
-    E_cross: float
-    nu_fibre: float
-    nu_cross: float
-    G_fibre: float
-    direction: tuple[float, ...] | None = None
-    azimuth_deg: float | None = None
-    elevation_deg: float | None = None
-    field: str | None = None
-    seed: int = 0
-
-
-@dataclass(frozen=True)
-class Region:
-    lo: tuple[float, ...]
-    hi: tuple[float, ...]
-    E: float
-    nu: float | None = None
-    density: float | None = None
-
-
-@dataclass(frozen=True)
-class Material:
-    E: float
-    nu: float
-    density: float = 1.0
-    plane: str = "stress"
-    fibre: Fibre | None = None
-    regions: tuple[Region, ...] = ()
-
-
-@dataclass(frozen=True)
-class ReferenceSpec:
-    element: str = "P2"
-    cell: str = "tri"
-    divisions: int | None = None
-    tol: float = 1e-4
-    max_refine: int = 3
-    solver: str = "auto"
-    modes: int = 6
-    method: str = "refine"   # resolved: "graded" or "refine"
-
-
-@dataclass(frozen=True)
-class Case:
-    """A validated case. ``sections`` holds the stage-owned sections (read-only dicts)."""
-    path: Path
-    name: str
-    dim: int
-    body: Body
-    material: Material
-    loads: tuple[LoadCase, ...]
-    reference: ReferenceSpec
-    load_set: str | None = None
-    magnitude: float = 1.0
-    description: str = ""
-    tags: tuple[str, ...] = ()
-    mode: str = "quick"
-    sections: Mapping[str, Mapping] = field(default_factory=dict)
-    digest: str = ""
-    heldout: tuple[str, ...] = ()
-
-    def section(self, name: str) -> Mapping | None:
-        return self.sections.get(name)
-
-    @property
-    def fit_loads(self) -> tuple[str, ...]:
-        """The load cases a fit uses: every one that is not held out."""
-        return tuple(l.name for l in self.loads if l.name not in self.heldout)
-
-    @property
-    def suite(self) -> str:
-        """The folder the case lives in, under cases/ (e.g. 'deussen1995')."""
-        return self.path.parent.name
-
-
 # -- loading --------------------------------------------------------------------------
+
 
 def _merge(base: dict, over: dict) -> dict:
     out = dict(base)
@@ -281,7 +75,7 @@ def load_case(path, mode: str = "quick") -> Case:
     raw = _merge({k: v for k, v in raw.items() if k not in MODES}, raw.get(mode, {}))
     core = {k: v for k, v in raw.items() if k in TOP}
     rest = {k: v for k, v in raw.items() if k not in TOP}
-    errors, sections = [], {}     # the schema's mistakes in every section, one line each
+    errors, sections = [], {}  # the schema's mistakes in every section, one line each
     try:
         d = check(core, TOP, file)
     except CaseError as exc:
@@ -299,27 +93,52 @@ def load_case(path, mode: str = "quick") -> Case:
     loads, load_set = parse_loads(d["loads"], dim, body, file)
     heldout = parse_heldout(d["loads"], loads, file)
     reference = _reference(d["reference"], dim, body, file)
-    return Case(path=path, name=d["name"], dim=dim, body=body, material=material, loads=loads,
-                reference=reference, load_set=load_set, magnitude=d["loads"]["magnitude"],
-                description=d["description"], tags=d["tags"], mode=mode,
-                sections=MappingProxyType(sections), digest=digest, heldout=heldout)
+    return Case(
+        path=path,
+        name=d["name"],
+        dim=dim,
+        body=body,
+        material=material,
+        loads=loads,
+        reference=reference,
+        load_set=load_set,
+        magnitude=d["loads"]["magnitude"],
+        description=d["description"],
+        tags=d["tags"],
+        mode=mode,
+        sections=MappingProxyType(sections),
+        digest=digest,
+        heldout=heldout,
+    )
 
 
 def _section(key: str, value, file: str) -> dict:
     """A stage-owned section checked against its spec ([model]: the spec of its kind)."""
     if key not in case_sections.SECTIONS:
-        raise CaseError("unknown section", file=file, field=key,
-                        fix=did_you_mean(key, set(TOP) | set(case_sections.SECTIONS) | set(MODES)))
+        raise CaseError(
+            "unknown section",
+            file=file,
+            field=key,
+            fix=did_you_mean(key, set(TOP) | set(case_sections.SECTIONS) | set(MODES)),
+        )
     spec = case_sections.SECTIONS[key]
     if spec == "model":
         kinds = case_sections.MODEL_KINDS
         if not isinstance(value, dict):
-            raise CaseError(f"expected a table, got {describe(value)}", file=file, field=key,
-                            fix=f'a [model] table with kind = one of {", ".join(kinds)}')
+            raise CaseError(
+                f"expected a table, got {describe(value)}",
+                file=file,
+                field=key,
+                fix=f"a [model] table with kind = one of {', '.join(kinds)}",
+            )
         kind = value.get("kind")
         if not isinstance(kind, str) or kind not in kinds:
-            raise CaseError(f"unknown or missing model kind {kind!r}", file=file, field="model.kind",
-                            fix=f"one of {', '.join(kinds)}")
+            raise CaseError(
+                f"unknown or missing model kind {kind!r}",
+                file=file,
+                field="model.kind",
+                fix=f"one of {', '.join(kinds)}",
+            )
         spec = {"kind": Field("str"), **kinds[kind]}
     return check(value, spec, file, key + ".")
 
@@ -332,7 +151,11 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
     if shape in ("rectangle", "box"):
         want = 2 if shape == "rectangle" else 3
         if dim != want:
-            fail("shape", f"a {shape} needs dim = {want}", f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}")
+            fail(
+                "shape",
+                f"a {shape} needs dim = {want}",
+                f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}",
+            )
         if b["size"] is None:
             fail("size", "missing required field", f"give {dim} positive extents")
         if len(b["size"]) != dim:
@@ -342,7 +165,11 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
             fail("origin", f"expected {dim} entries, got {len(origin)}")
         problem = coordinate_problem([origin, np.add(origin, b["size"])])
         if problem:  # blame the size if it alone is the problem
-            fail("size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin", problem, COORDINATE_FIX)
+            fail(
+                "size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin",
+                problem,
+                COORDINATE_FIX,
+            )
         body = Body(shape, origin=origin, size=b["size"])
     elif shape == "polygon":
         if dim != 2:
@@ -355,15 +182,24 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         x, y = np.asarray(v, float).T
         area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
         if abs(area) <= 1e-14:
-            fail("vertices", "the polygon has zero area", "list the vertices in order around the body")
+            fail(
+                "vertices",
+                "the polygon has zero area",
+                "list the vertices in order around the body",
+            )
         body = Body(shape, vertices=v)
     else:
         if not b["file"]:
-            fail("file", "missing required field for shape = 'mesh'", "give the mesh path relative to the case file")
+            fail(
+                "file",
+                "missing required field for shape = 'mesh'",
+                "give the mesh path relative to the case file",
+            )
         mpath = (path.parent / b["file"]).resolve()
         try:
             mesh = read_mesh(mpath, b["format"])
             from harness.case.mesh_checks import check_mesh
+
             check_mesh(mesh, str(mpath))
         except SpringbenchError as exc:
             fail("file", exc.message, exc.fix)
@@ -374,51 +210,99 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
     if not isinstance(b["parts"], dict):
         fail("parts", "expected a table of name = {box = [[lo], [hi]]}")
     for name, spec in b["parts"].items():
-        if isinstance(spec, dict) and set(spec) == {"group"}:     # a named group of the mesh file
+        if isinstance(spec, dict) and set(spec) == {"group"}:  # a named group of the mesh file
             if shape != "mesh" or not isinstance(spec["group"], str):
-                fail(f"parts.{name}.group", "expected the name of a group of the body's mesh file",
-                     "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}")
-            require_group(mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError)
+                fail(
+                    f"parts.{name}.group",
+                    "expected the name of a group of the body's mesh file",
+                    "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}",
+                )
+            require_group(
+                mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError
+            )
             parts[name] = GroupPart(spec["group"], body.file, body.format)
             continue
-        if isinstance(spec, dict) and "end" in spec:           # an end face of the mesh along an axis
+        if isinstance(spec, dict) and "end" in spec:  # an end face of the mesh along an axis
             parts[name] = _end_part(spec, name, shape, dim, body, fail)
             continue
         if not isinstance(spec, dict) or set(spec) != {"box"}:
-            fail(f"parts.{name}", "expected {box = [[lo...], [hi...]]}, {group = \"name\"} or {end = \"x1\"}")
+            fail(
+                f"parts.{name}",
+                'expected {box = [[lo...], [hi...]]}, {group = "name"} or {end = "x1"}',
+            )
         box = spec["box"]
-        ok = (isinstance(box, list) and len(box) == 2 and all(
-            isinstance(r, list) and len(r) == dim and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
-            for r in box))
+        ok = (
+            isinstance(box, list)
+            and len(box) == 2
+            and all(
+                isinstance(r, list)
+                and len(r) == dim
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+                for r in box
+            )
+        )
         if not ok:
             fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
-        if np.isnan(np.asarray(box, float)).any():   # every comparison with nan is false: selects nothing
-            fail(f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)")
+        if np.isnan(
+            np.asarray(box, float)
+        ).any():  # every comparison with nan is false: selects nothing
+            fail(
+                f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)"
+            )
         if any(lo > hi for lo, hi in zip(*box)):
             fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
         parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
-    return Body(body.shape, body.origin, body.size, body.vertices, body.file, body.format,
-                MappingProxyType(parts))
+    return Body(
+        body.shape,
+        body.origin,
+        body.size,
+        body.vertices,
+        body.file,
+        body.format,
+        MappingProxyType(parts),
+    )
 
 
 def _end_part(spec: dict, name: str, shape: str, dim: int, body, fail) -> EndPart:
     """``{ end = "x1", band = 0.05, cos = 0.5 }`` of a mesh body (harness.io.end_faces)."""
     where = f"parts.{name}"
-    faces = ("x0", "x1", "y0", "y1", "z0", "z1")[:2 * dim]
+    faces = ("x0", "x1", "y0", "y1", "z0", "z1")[: 2 * dim]
     extra = sorted(set(spec) - {"end", "band", "cos"})
     if extra:
-        fail(f"{where}.{extra[0]}", "unknown key of an end part", "an end part takes end, band and cos")
+        fail(
+            f"{where}.{extra[0]}",
+            "unknown key of an end part",
+            "an end part takes end, band and cos",
+        )
     if shape != "mesh":
-        fail(f"{where}.end", "end faces need shape = 'mesh'", "a box's faces are the parts x0, x1, y0, ... already")
+        fail(
+            f"{where}.end",
+            "end faces need shape = 'mesh'",
+            "a box's faces are the parts x0, x1, y0, ... already",
+        )
     if spec["end"] not in faces:
-        fail(f"{where}.end", f"expected one of {', '.join(faces)}, got {spec['end']!r}",
-             "x0 is the low end of the x axis, x1 its high end")
+        fail(
+            f"{where}.end",
+            f"expected one of {', '.join(faces)}, got {spec['end']!r}",
+            "x0 is the low end of the x axis, x1 its high end",
+        )
     band, cos = spec.get("band", BAND), spec.get("cos", COS)
     for key, v, ok in (("band", band, lambda v: 0 < v <= 1), ("cos", cos, lambda v: -1 <= v < 1)):
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not ok(v):
-            fail(f"{where}.{key}", f"{v!r} is out of range",
-                 "band: a fraction of the body's extent in (0, 1], e.g. 0.05; cos: in [-1, 1), e.g. 0.5")
-    return EndPart("xyz".index(spec["end"][0]), int(spec["end"][1]), body.file, body.format, float(band), float(cos))
+            fail(
+                f"{where}.{key}",
+                f"{v!r} is out of range",
+                "band: a fraction of the body's extent in (0, 1], e.g. 0.05; cos: in [-1, "
+                "1), e.g. 0.5",
+            )
+    return EndPart(
+        "xyz".index(spec["end"][0]),
+        int(spec["end"][1]),
+        body.file,
+        body.format,
+        float(band),
+        float(cos),
+    )
 
 
 def _material(m: dict, dim: int, file: str) -> Material:
@@ -432,7 +316,11 @@ def _material(m: dict, dim: int, file: str) -> Material:
         if len(given) > 1:
             fail("fibre", f"both {given[0]} and {given[1]} given", "give one fibre direction")
         if not given:
-            fail("fibre.direction", "missing", "give direction, azimuth_deg (+ elevation_deg) or field")
+            fail(
+                "fibre.direction",
+                "missing",
+                "give direction, azimuth_deg (+ elevation_deg) or field",
+            )
         if f["direction"] is not None:
             if len(f["direction"]) != dim:
                 fail("fibre.direction", f"expected {dim} entries")
@@ -442,13 +330,28 @@ def _material(m: dict, dim: int, file: str) -> Material:
             fail("fibre.field", "named fields are 3-D", "use direction or azimuth_deg in 2-D")
         nu_f = f["nu_fibre"] if f["nu_fibre"] is not None else m["nu"]
         nu_c = f["nu_cross"] if f["nu_cross"] is not None else m["nu"]
-        G = f["G_fibre"] or f["E_fibre"] * f["E_cross"] / (f["E_fibre"] + f["E_cross"] * (1 + 2 * nu_f))
-        fibre = Fibre(f["E_fibre"], f["E_cross"], nu_f, nu_c, G, f["direction"], f["azimuth_deg"],
-                      f["elevation_deg"], f["field"], f["seed"])
+        G = f["G_fibre"] or f["E_fibre"] * f["E_cross"] / (
+            f["E_fibre"] + f["E_cross"] * (1 + 2 * nu_f)
+        )
+        fibre = Fibre(
+            f["E_fibre"],
+            f["E_cross"],
+            nu_f,
+            nu_c,
+            G,
+            f["direction"],
+            f["azimuth_deg"],
+            f["elevation_deg"],
+            f["field"],
+            f["seed"],
+        )
         S = transversely_isotropic_compliance(fibre.E_fibre, fibre.E_cross, nu_f, nu_c, G)
         if np.linalg.eigvalsh(S).min() <= 0:
-            fail("fibre", "the compliance is not positive definite",
-                 "need 1 - nu_cross - 2 nu_fibre^2 E_cross/E_fibre > 0")
+            fail(
+                "fibre",
+                "the compliance is not positive definite",
+                "need 1 - nu_cross - 2 nu_fibre^2 E_cross/E_fibre > 0",
+            )
     regions = []
     for i, r in enumerate(m["regions"]):
         box = r["box"]
@@ -463,23 +366,47 @@ def _material(m: dict, dim: int, file: str) -> Material:
 def _reference(r: dict, dim: int, body: Body, file: str) -> ReferenceSpec:
     cell = r["cell"] or ("tri" if dim == 2 else "tet")
     if (cell in ("tri", "quad")) != (dim == 2):
-        raise CaseError(f"cell '{cell}' does not fit dim = {dim}", file=file, field="reference.cell",
-                        fix="tri/quad in 2-D, tet/hex in 3-D")
+        raise CaseError(
+            f"cell '{cell}' does not fit dim = {dim}",
+            file=file,
+            field="reference.cell",
+            fix="tri/quad in 2-D, tet/hex in 3-D",
+        )
     if body.shape == "polygon" and cell == "quad":
-        raise CaseError("a polygon is meshed with triangles", file=file, field="reference.cell", fix="use tri")
+        raise CaseError(
+            "a polygon is meshed with triangles", file=file, field="reference.cell", fix="use tri"
+        )
     method = r["method"]
     if method == "auto":
-        method = "graded" if (body.shape == "box" and r["cell"] in (None, "hex") and r["element"] == "P2") else "refine"
+        method = (
+            "graded"
+            if (body.shape == "box" and r["cell"] in (None, "hex") and r["element"] == "P2")
+            else "refine"
+        )
     if method == "graded":
         if body.shape not in ("rectangle", "box"):
-            raise CaseError(f"graded reference meshes need a rectangle or box (the body is a {body.shape})",
-                            file=file, field="reference.method", fix="use method = \"refine\"")
+            raise CaseError(
+                f"graded reference meshes need a rectangle or box (the body is a {body.shape})",
+                file=file,
+                field="reference.method",
+                fix='use method = "refine"',
+            )
         if r["cell"] not in (None, "quad", "hex") or r["element"] != "P2":
-            raise CaseError("graded reference meshes are Q2 quadrilaterals/hexahedra", file=file,
-                            field="reference.method", fix="drop reference.cell and element, or use method = \"refine\"")
+            raise CaseError(
+                "graded reference meshes are Q2 quadrilaterals/hexahedra",
+                file=file,
+                field="reference.method",
+                fix='drop reference.cell and element, or use method = "refine"',
+            )
         cell = "quad" if dim == 2 else "hex"
-    levels = r["max_refine"] if r["max_refine"] is not None else (GRADED_LEVELS if method == "graded" else 3)
-    return ReferenceSpec(r["element"], cell, r["divisions"], r["tol"], levels, r["solver"], r["modes"], method)
+    levels = (
+        r["max_refine"]
+        if r["max_refine"] is not None
+        else (GRADED_LEVELS if method == "graded" else 3)
+    )
+    return ReferenceSpec(
+        r["element"], cell, r["divisions"], r["tol"], levels, r["solver"], r["modes"], method
+    )
 
 
 def find_cases(paths) -> list[Path]:
@@ -488,9 +415,12 @@ def find_cases(paths) -> list[Path]:
     for p in map(Path, paths):
         if p.is_dir():
             found = sorted(q for q in p.rglob("*.toml") if not q.name.startswith("_"))
-            if not found:   # a wrong folder, not a suite with nothing to do
-                raise SpringbenchError("no case files (*.toml) in this folder", file=str(p),
-                                       fix="give case files or a folder of them, e.g. cases/")
+            if not found:  # a wrong folder, not a suite with nothing to do
+                raise SpringbenchError(
+                    "no case files (*.toml) in this folder",
+                    file=str(p),
+                    fix="give case files or a folder of them, e.g. cases/",
+                )
             out.extend(found)
         elif p.exists():
             out.append(p)

@@ -47,30 +47,50 @@ def _is_number(v) -> bool:
 
 
 def describe(v) -> str:
-    return {bool: "a boolean", int: "an integer", float: "a number", str: "a string",
-            list: "a list", dict: "a table"}.get(type(v), type(v).__name__)
+    return {
+        bool: "a boolean",
+        int: "an integer",
+        float: "a number",
+        str: "a string",
+        list: "a list",
+        dict: "a table",
+    }.get(type(v), type(v).__name__)
 
 
 def check(data: Any, spec: dict[str, Field], file: str, path: str = "") -> dict:
     """Validate ``data`` (a TOML table) against ``spec``; return it with defaults."""
+
     def fail(key, msg, fix=None):
         raise CaseError(msg, file=file, field=(path + key) if key else path.rstrip("."), fix=fix)
 
     if not isinstance(data, dict):
         fail("", f"expected a table, got {describe(data)}")
-    errors = []       # every mistake of the table, not just the first
+    errors = []  # every mistake of the table, not just the first
     for key in sorted(set(data) - set(spec)):
-        errors.append(CaseError("unknown key", file=file, field=path + key, fix=did_you_mean(key, spec)))
+        errors.append(
+            CaseError("unknown key", file=file, field=path + key, fix=did_you_mean(key, spec))
+        )
     out = {}
     for key, f in spec.items():
         try:
             if key not in data:
                 if f.default is REQUIRED:
-                    fail(key, f"missing required {f.kind} field",
-                         f.doc or (f"add a [{path}{key}] table" if f.kind == "table" else f"add {key} = ..."))
+                    fail(
+                        key,
+                        f"missing required {f.kind} field",
+                        f.doc
+                        or (
+                            f"add a [{path}{key}] table"
+                            if f.kind == "table"
+                            else f"add {key} = ..."
+                        ),
+                    )
                 # an absent table with a {} default still gets its own defaults
-                out[key] = (check({}, f.spec, file, path + key + ".")
-                            if f.kind == "table" and f.default == {} else f.default)
+                out[key] = (
+                    check({}, f.spec, file, path + key + ".")
+                    if f.kind == "table" and f.default == {}
+                    else f.default
+                )
                 continue
             out[key] = _value(data[key], f, file, path + key)
         except CaseError as exc:
@@ -83,9 +103,12 @@ def did_you_mean(key: str, allowed) -> str:
     """'did you mean ...? allowed here: ...' for an unknown key."""
     allowed = sorted(allowed)
     close = difflib.get_close_matches(key, allowed, n=1, cutoff=0.6)
-    k = str(key).lower()      # or one is the other's start: 'tolerance' for 'tol'
-    close = close or [a for a in allowed if min(len(k), len(a)) >= 3
-                      and (k.startswith(a.lower()) or a.lower().startswith(k))]
+    k = str(key).lower()  # or one is the other's start: 'tolerance' for 'tol'
+    close = close or [
+        a
+        for a in allowed
+        if min(len(k), len(a)) >= 3 and (k.startswith(a.lower()) or a.lower().startswith(k))
+    ]
     hint = f"did you mean '{close[0]}'? " if close else ""
     return f"{hint}allowed here: {', '.join(allowed)}"
 
@@ -143,7 +166,8 @@ def _value(v, f: Field, file: str, where: str):
             _range(x, f, fail)
     elif k == "matrix":
         if not isinstance(v, list) or not all(
-                isinstance(r, list) and all(_is_number(x) for x in r) for r in v):
+            isinstance(r, list) and all(_is_number(x) for x in r) for r in v
+        ):
             fail("expected a list of lists of numbers")
         v = tuple(tuple(float(x) for x in r) for r in v)
         if not all(math.isfinite(x) for r in v for x in r):
@@ -171,8 +195,10 @@ def _value(v, f: Field, file: str, where: str):
 
 def _magnitude(x: float, fail):
     if x != 0 and not SMALLEST <= abs(x) <= LARGEST:
-        fail(f"{x:g} is too {'large' if abs(x) > LARGEST else 'small'} to compute with",
-             f"numbers between {SMALLEST:g} and {LARGEST:g} in size (or 0): change the units")
+        fail(
+            f"{x:g} is too {'large' if abs(x) > LARGEST else 'small'} to compute with",
+            f"numbers between {SMALLEST:g} and {LARGEST:g} in size (or 0): change the units",
+        )
 
 
 def _range(x, f: Field, fail):

@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 
 from harness import registry
+from harness.case import schema
 from harness.case.parts import classify_nodes
-from harness.case.schema import check
 from harness.case.sections import DYNAMICS
 from harness.errors import CaseError, SimulationError
 from harness.mechanics.dynamics import simulate, stiffness
@@ -64,7 +64,7 @@ def run(case, ctx) -> list[dict]:
     model = dict(case.section("model"))
     dyn = dict(case.section("dynamics") or {})
     if not dyn:
-        dyn = check({}, DYNAMICS, str(case.path), "dynamics.")
+        dyn = schema.check({}, DYNAMICS, str(case.path), "dynamics.")
     exp = dyn["experiment"]
     return registry.EXPERIMENTS.load(exp)(case, ctx, model, dyn)
 
