@@ -67,9 +67,9 @@ import math
 import re
 from pathlib import Path
 
+from harness import paths as default_paths
 from harness.errors import SpringbenchError
 from harness.outputs import write_changed
-from harness.paths import DEFAULT_RUNS
 from harness.report import figures as figs
 from harness.report import origin
 from harness.report.figures import make_bench_figures
@@ -441,7 +441,7 @@ def rebuild(paths=(), results_root=None, figures: bool = True, redraw: bool = Fa
                 )
         roots = {s.resolve().parent for s in suites}
     else:
-        root = Path(results_root or DEFAULT_RUNS)
+        root = Path(results_root or default_paths.DEFAULT_RUNS)  # read when called
         suites = suites_under(root)
         if not suites:
             raise SpringbenchError(
