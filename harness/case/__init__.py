@@ -1,2 +1,2 @@
-"""The case: schema, case files, materials, load sets, boundary parts, fibre fields. "
-"Imports no model, stage or report code."""
+"""The case: schema, case files, materials, load sets, boundary parts, fibre fields.
+Imports no model, stage or report code."""

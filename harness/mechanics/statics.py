@@ -268,8 +268,8 @@ MULTIFRONTAL_MIN = 20_000  # free dofs from which a 3-D network is factorised by
 
 
 def _symmetric(K, rtol: float = 1e-12) -> bool:
-    """K equals K^T to rounding (a Cholesky reads one triangle: harness/models/mt.py's K is "
-    "not symmetric)."""
+    """K equals K^T to rounding (a Cholesky reads one triangle: harness/models/mt.py's K is
+    not symmetric)."""
     return abs(K - K.T).max() <= rtol * max(abs(K).max(), 1e-300)
 
 

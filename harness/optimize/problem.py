@@ -261,8 +261,8 @@ class FitProblem:
         return total
 
     def G_ref_norm(self) -> float:
-        """sqrt(sum w |u_ref|^2): the normaliser of the normalised G (docs/design.md, "The "
-        "G criteria")."""
+        """sqrt(sum w |u_ref|^2): the normaliser of the normalised G (docs/design.md,
+        "The G criteria")."""
         return float(np.sqrt(sum(float(b.u_ref @ (b.w * b.u_ref)) + b.const for b in self.blocks)))
 
 

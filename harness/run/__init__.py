@@ -1,2 +1,2 @@
-"""The runner: job identity and hashing, executors (local pool, Dask), storage of results, "
-"the run lock."""
+"""The runner: job identity and hashing, executors (local pool, Dask), storage of results,
+the run lock."""
