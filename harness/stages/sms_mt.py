@@ -62,26 +62,18 @@ def fit_theta(base, case, u_ref, names, fit, weights):
 def optimise(setting, run_, base, first):
     """The fitted row, its network and no trace (``setting``: the class's
     :class:`harness.stages.classes.base.Setting`)."""
-    case, ctx, u_ref, names, fit, weights = (
-        setting.case,
-        setting.ctx,
-        setting.u_ref,
-        setting.names,
-        setting.fit,
-        setting.weights,
-    )
-    label, common, evaluate, write = setting.label, setting.common, setting.evaluate, setting.write
-    ctx.status(f"mt: fitting {', '.join(PARAMS)} ({METHOD})")
+    s = setting
+    s.ctx.status(f"mt: fitting {', '.join(PARAMS)} ({METHOD})")
     t0 = time.perf_counter()
-    theta, g0, g1 = fit_theta(base, case, u_ref, names, fit, weights)
+    theta, g0, g1 = fit_theta(base, s.case, s.u_ref, s.names, s.fit, s.weights)
     seconds = time.perf_counter() - t0
     net = base.with_k(np.concatenate([base.k, theta]), stiffness=f"mt+{METHOD}")
-    res, sc, sh = evaluate(net)
+    res, sc, sh = s.evaluate(net)
     tag = f"mt-{METHOD}"
-    write(net, res, tag)
+    s.write(net, res, tag)
     row = {
-        **common,
-        "model": f"{label}[mt]",
+        **s.common,
+        "model": f"{s.label}[mt]",
         "stiffness": "mt",
         "optimizer": METHOD,
         "grouped": False,
