@@ -97,9 +97,8 @@ class Clock:
             total = max(self.end, now) - self.t0
             self.bar.total = total
             self.bar.n = min(now - self.t0, total)
-            left = tqdm.format_interval(
-                max(self.end - now, 0.0)
-            )  # the bound, not tqdm's rate estimate
+            # the bound, not tqdm's rate estimate
+            left = tqdm.format_interval(max(self.end - now, 0.0))
             self.bar.bar_format = (
                 "{desc} {percentage:3.0f}%|{bar}| {elapsed}, at most " + left + " left{postfix}"
             )

@@ -108,9 +108,8 @@ def describe(p: dict | None) -> str:
         v = p.get(key)
         return NOT_RECORDED if v is None or v != v or v == "" else v  # NaN: a CSV's empty cell
 
-    if (
-        get("format_version") == NOT_RECORDED
-    ):  # every record has it: without it, nothing was recorded
+    # every record has it: without it, nothing was recorded
+    if get("format_version") == NOT_RECORDED:
         return NOT_RECORDED
     commit = get("git_commit")
     dirty = p.get("git_dirty")

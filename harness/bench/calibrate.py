@@ -40,18 +40,20 @@ from harness.progress import steps
 FULL = (1_000, 10_000, 50_000, 200_000)
 QUICK = (1_000, 5_000)
 RADIUS, LENGTH = 0.1, 0.5
-BUDGET = 60.0                 # the optimiser's wall-time budget (calibrate's default)
-RULE = "vangelder"            # the rule-only run beside each calibration: --method rule --rule RULE
+BUDGET = 60.0  # the optimiser's wall-time budget (calibrate's default)
+RULE = "vangelder"  # the rule-only run beside each calibration: --method rule --rule RULE
 
 
 def cylinder(path: Path, n_tets: int) -> int:
     """A gmsh cylinder with about n_tets tetrahedra (one size correction); returns the count."""
     import gmsh
     import meshio
-    h = (8.5 * np.pi * RADIUS ** 2 * LENGTH / n_tets) ** (1 / 3)
+
+    h = (8.5 * np.pi * RADIUS**2 * LENGTH / n_tets) ** (1 / 3)
     for _ in range(2):
         gmsh.initialize(["-noenv"])
-        signal.signal(signal.SIGPIPE, signal.SIG_IGN)   # gmsh's start resets it: a closed pipe would kill us
+        # gmsh's start resets it: a closed pipe would kill us
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)
         try:
             gmsh.option.setNumber("General.Terminal", 0)
             gmsh.option.setNumber("General.NumThreads", 1)
@@ -80,8 +82,22 @@ def cylinder(path: Path, n_tets: int) -> int:
 def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess]:
     """(seconds, process) of one cold ``springbench calibrate``: its own process and an
     empty reference cache."""
-    cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45",
-           "--budget", str(BUDGET), "--out", str(out), *extra]
+    cmd = [
+        sys.executable,
+        "-m",
+        "harness",
+        "calibrate",
+        str(mesh),
+        "--E",
+        "1e5",
+        "--nu",
+        "0.45",
+        "--budget",
+        str(BUDGET),
+        "--out",
+        str(out),
+        *extra,
+    ]
     env = dict(os.environ, SPRINGBENCH_CACHE=str(out.parent / f"cache-{out.stem}"))
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
@@ -93,31 +109,53 @@ def _one(mesh: Path, out: Path) -> dict:
     rule_out = out.with_name(out.stem + "-rule.vtu")
     rule_seconds, rule = _calibrate(mesh, rule_out, "--method", "rule", "--rule", RULE)
     seconds, proc = _calibrate(mesh, out)
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6      # GB: the largest run so far
+    # GB: the largest run so far
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
     failed = next((p for p in (rule, proc) if p.returncode != 0), None)
     if failed is not None:
-        return dict(seconds=seconds, rule_seconds=rule_seconds, peak_gb=peak,
-                    note=(failed.stderr.strip().splitlines() or ["failed"])[-1])
+        return dict(
+            seconds=seconds,
+            rule_seconds=rule_seconds,
+            peak_gb=peak,
+            note=(failed.stderr.strip().splitlines() or ["failed"])[-1],
+        )
     df = pd.read_csv(out.with_suffix(".csv"))
     data = json.loads(out.with_suffix(".json").read_text())
     fit = df[df.exported].iloc[0]
     rules = df[df.optimizer == "none"]
-    best = rules.loc[rules.G_heldout_mean.idxmin()]           # the best rule in hindsight
-    return dict(seconds=seconds, rule_seconds=rule_seconds, peak_gb=peak, n_nodes=int(fit.n_nodes),
-                n_springs=int(fit.n_springs), choice=data.get("choice"),
-                validation_skipped=data.get("validation_skipped"), start_rule=fit.stiffness,
-                G_fit_score=float(fit.G_fit_score), G_heldout_mean=data.get("G_heldout_mean"),
-                best_rule=best.stiffness, G_heldout_mean_best_rule=float(best.G_heldout_mean),
-                reference_error_fitted=data.get("reference_error_fitted"),
-                reference_error_heldout=data.get("reference_error_heldout"),
-                dt_stable=data.get("dt_stable"), note=f"lbfgs {BUDGET:g} s budget; stop {fit.get('opt_stop', '')}")
+    best = rules.loc[rules.G_heldout_mean.idxmin()]  # the best rule in hindsight
+    return dict(
+        seconds=seconds,
+        rule_seconds=rule_seconds,
+        peak_gb=peak,
+        n_nodes=int(fit.n_nodes),
+        n_springs=int(fit.n_springs),
+        choice=data.get("choice"),
+        validation_skipped=data.get("validation_skipped"),
+        start_rule=fit.stiffness,
+        G_fit_score=float(fit.G_fit_score),
+        G_heldout_mean=data.get("G_heldout_mean"),
+        best_rule=best.stiffness,
+        G_heldout_mean_best_rule=float(best.G_heldout_mean),
+        reference_error_fitted=data.get("reference_error_fitted"),
+        reference_error_heldout=data.get("reference_error_heldout"),
+        dt_stable=data.get("dt_stable"),
+        note=f"lbfgs {BUDGET:g} s budget; stop {fit.get('opt_stop', '')}",
+    )
 
 
 def run(quick: bool = False) -> pd.DataFrame:
     try:
         import gmsh  # noqa: F401
     except ImportError:
-        return pd.DataFrame([dict(task="calibrate", note="skipped: gmsh not installed (pip install 'springbench[bench]')")])
+        return pd.DataFrame(
+            [
+                dict(
+                    task="calibrate",
+                    note="skipped: gmsh not installed (pip install 'springbench[bench]')",
+                )
+            ]
+        )
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
         tmp = Path(tmp)

@@ -1,7 +1,8 @@
 """springbench bench engines: how far is each engine's deformable body from linear elasticity?
 
 The engines suite (cases/engines/, harness/stages/engines.py) as one benchmark CSV: four
-gmsh bodies (a box beam 0.5 x 0.1 x 0.1 m, a round bar, the elbow, a 120-degree torus sector, and the
+gmsh bodies (a box beam 0.5 x 0.1 x 0.1 m, a round bar, the elbow, a 120-degree torus sector, and
+the
 tapered bar bolted through its hole) at two resolutions, E = 1e5 Pa, density 1000 kg/m^3,
 nu = 0.3, 0.45 and 0.49; per case ``springbench pack`` and, on its held-out loads (sag,
 tip, tip2, torsion, bridge; peak strain about 1e-3), ``newton-tets`` and ``mujoco-flex``
@@ -42,7 +43,14 @@ def run(quick: bool = False) -> pd.DataFrame:
         spec = dict(case.section("model"), budget=QUICK_BUDGET) if quick else None
         with tempfile.TemporaryDirectory(prefix="springbench-engines-") as tmp:
             frames.append(case_rows(case, Path(tmp), spec))
-    df = pd.concat(frames, ignore_index=True).rename(columns={"engine_status": "status"}).reindex(columns=COLUMNS)
-    print(df[df.load == "mean"][["body", "n_tets", "nu", "engine", "model", "G_norm", "status"]]
-          .to_string(index=False, float_format=lambda v: f"{v:.3g}"))
+    df = (
+        pd.concat(frames, ignore_index=True)
+        .rename(columns={"engine_status": "status"})
+        .reindex(columns=COLUMNS)
+    )
+    print(
+        df[df.load == "mean"][
+            ["body", "n_tets", "nu", "engine", "model", "G_norm", "status"]
+        ].to_string(index=False, float_format=lambda v: f"{v:.3g}")
+    )
     return df

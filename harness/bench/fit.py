@@ -39,12 +39,21 @@ from harness.progress import steps
 
 FULL = [((100, 100), 1e-4, 60.0), ((20, 20, 20), 1e-2, 60.0)]
 QUICK = [((30, 30), 1e-4, 15.0), ((8, 8, 8), 1e-2, 15.0)]
-METHODS = (("gauss-newton", "none"), ("lbfgs", "none"), ("equilibrium-gap", "none"),
-           ("gauss-newton", "equilibrium-gap"), ("lbfgs", "equilibrium-gap"))
-NOISY_METHODS = (("equilibrium-gap", "none"), ("gauss-newton", "equilibrium-gap"), ("lbfgs", "equilibrium-gap"))
+METHODS = (
+    ("gauss-newton", "none"),
+    ("lbfgs", "none"),
+    ("equilibrium-gap", "none"),
+    ("gauss-newton", "equilibrium-gap"),
+    ("lbfgs", "equilibrium-gap"),
+)
+NOISY_METHODS = (
+    ("equilibrium-gap", "none"),
+    ("gauss-newton", "equilibrium-gap"),
+    ("lbfgs", "equilibrium-gap"),
+)
 SIGMA = 0.1
-SEED = 0            # the truth's perturbation (recoverable_problem) and the optimisers' seed
-NOISE = 1e-6        # noisy rows: noise / rms displacement of each load
+SEED = 0  # the truth's perturbation (recoverable_problem) and the optimisers' seed
+NOISE = 1e-6  # noisy rows: noise / rms displacement of each load
 NOISE_SEED = 1
 
 
@@ -59,20 +68,49 @@ def run(quick: bool = False) -> pd.DataFrame:
             p = noisy(prob, noise, NOISE_SEED) if noise else prob
             G_truth = p.G(k_true) if noise else 0.0
             for method, init in methods:
-                opts = {} if method == "equilibrium-gap" else {"max_seconds": budget, "init": init,
-                                                               "target": target if not noise else 0.0}
+                opts = (
+                    {}
+                    if method == "equilibrium-gap"
+                    else {
+                        "max_seconds": budget,
+                        "init": init,
+                        "target": target if not noise else 0.0,
+                    }
+                )
                 res = optimize(p, method, opts, seed=SEED)
                 ratio = res.G_final / res.G_initial
                 met = res.G_final <= G_truth if noise else ratio <= target
-                rows.append(dict(dim=len(shape), n_nodes=int(np.prod(shape)), n_springs=prob.n_springs,
-                                 n_loads=len(prob.blocks), method=method, init=init, sigma=SIGMA, seed=SEED, target=target,
-                                 budget_s=budget, G_ratio=ratio, seconds=round(res.seconds, 2),
-                                 iterations=res.info.get("iterations"), stop=res.info.get("stop"),
-                                 met=bool(met and res.seconds <= budget * 1.1),
-                                 k_rel_err_median=float(np.median(np.abs(res.k / k_true - 1))),
-                                 setup_s=round(setup, 2), eg_seconds=res.info.get("eg_seconds"),
-                                 noise=noise, noise_seed=NOISE_SEED if noise else None,
-                                 G_truth_ratio=res.G_final / G_truth if noise else None))
-                what = f"G/G(k_true) = {res.G_final / G_truth:.3g}" if noise else f"G/G0 = {ratio:.3g}"
-                print(f"  fit bench {shape} noise {noise:g} {method} (init {init}): {what} in {res.seconds:.1f} s", flush=True)
+                rows.append(
+                    dict(
+                        dim=len(shape),
+                        n_nodes=int(np.prod(shape)),
+                        n_springs=prob.n_springs,
+                        n_loads=len(prob.blocks),
+                        method=method,
+                        init=init,
+                        sigma=SIGMA,
+                        seed=SEED,
+                        target=target,
+                        budget_s=budget,
+                        G_ratio=ratio,
+                        seconds=round(res.seconds, 2),
+                        iterations=res.info.get("iterations"),
+                        stop=res.info.get("stop"),
+                        met=bool(met and res.seconds <= budget * 1.1),
+                        k_rel_err_median=float(np.median(np.abs(res.k / k_true - 1))),
+                        setup_s=round(setup, 2),
+                        eg_seconds=res.info.get("eg_seconds"),
+                        noise=noise,
+                        noise_seed=NOISE_SEED if noise else None,
+                        G_truth_ratio=res.G_final / G_truth if noise else None,
+                    )
+                )
+                what = (
+                    f"G/G(k_true) = {res.G_final / G_truth:.3g}" if noise else f"G/G0 = {ratio:.3g}"
+                )
+                print(
+                    f"  fit bench {shape} noise {noise:g} {method} (init {init}): {what} in "
+                    f"{res.seconds:.1f} s",
+                    flush=True,
+                )
     return pd.DataFrame(rows)

@@ -33,9 +33,21 @@ from harness.progress import steps
 # that the acceptance rate matches the baseline's (a long cold run accepts less and
 # looks faster); the 3-D 8000-node baseline needs ~6 s per proposal, so it gets a handful.
 # Last entry: repeats (alternating incremental / baseline runs, medians reported).
-FULL = [((5, 5), 10.0, 10.0, 1), ((20, 20), 10.0, 10.0, 1), ((50, 50), 5000, 20.0, 3), ((100, 100), 3000, 30.0, 3),
-        ((5, 5, 5), 6000, 10.0, 1), ((10, 10, 10), 3000, 20.0, 3), ((20, 20, 20), 1500, 3, 1)]
-QUICK = [((5, 5), 3.0, 3.0, 1), ((20, 20), 3.0, 3.0, 1), ((30, 30), 1500, 3.0, 2), ((5, 5, 5), 3000, 3.0, 1)]
+FULL = [
+    ((5, 5), 10.0, 10.0, 1),
+    ((20, 20), 10.0, 10.0, 1),
+    ((50, 50), 5000, 20.0, 3),
+    ((100, 100), 3000, 30.0, 3),
+    ((5, 5, 5), 6000, 10.0, 1),
+    ((10, 10, 10), 3000, 20.0, 3),
+    ((20, 20, 20), 1500, 3, 1),
+]
+QUICK = [
+    ((5, 5), 3.0, 3.0, 1),
+    ((20, 20), 3.0, 3.0, 1),
+    ((30, 30), 1500, 3.0, 2),
+    ((5, 5, 5), 3000, 3.0, 1),
+]
 
 
 def _budget(b, setup_guess: float) -> dict:
@@ -44,37 +56,63 @@ def _budget(b, setup_guess: float) -> dict:
 
 def run(quick: bool = False) -> pd.DataFrame:
     rows = []
-    for shape, inc_seconds, base_budget, repeats in steps(QUICK if quick else FULL, "bench sa", "network"):
+    for shape, inc_seconds, base_budget, repeats in steps(
+        QUICK if quick else FULL, "bench sa", "network"
+    ):
         t = time.perf_counter()
         prob, _ = recoverable_problem(shape, sigma=0.3, seed=0, diagonals="face")
         build = time.perf_counter() - t
         n_nodes = int(np.prod(shape))
-        common = dict(dim=len(shape), n_nodes=n_nodes, n_springs=prob.n_springs,
-                      n_dofs=sum(b.B.shape[0] for b in prob.blocks) // len(prob.blocks),
-                      n_loads=len(prob.blocks), n_load_sets=len(prob.load_sets()))
+        common = dict(
+            dim=len(shape),
+            n_nodes=n_nodes,
+            n_springs=prob.n_springs,
+            n_dofs=sum(b.B.shape[0] for b in prob.blocks) // len(prob.blocks),
+            n_loads=len(prob.blocks),
+            n_load_sets=len(prob.load_sets()),
+        )
         # max_seconds counts from the start (setup included): add a measured setup time
         t = time.perf_counter()
         prob.G(prob.k0)
         setup_guess = 3 * (time.perf_counter() - t)
         runs: dict = {"incremental": [], "refactor": []}
         for _ in range(repeats):
-            runs["incremental"].append(optimize(prob, "sa", _budget(inc_seconds, setup_guess), seed=0))
-            runs["refactor"].append(optimize(prob, "sa-refactor", _budget(base_budget, setup_guess), seed=0))
+            runs["incremental"].append(
+                optimize(prob, "sa", _budget(inc_seconds, setup_guess), seed=0)
+            )
+            runs["refactor"].append(
+                optimize(prob, "sa-refactor", _budget(base_budget, setup_guess), seed=0)
+            )
         for method in ("refactor", "incremental"):
             rates = [r.info["steps_per_s"] for r in runs[method]]
-            res = runs[method][int(np.argsort(rates)[len(rates) // 2])]    # the median run
-            rows.append(dict(**common, method=method, engine=res.info["engine"], steps=res.n_steps,
-                             seconds=round(res.info["loop_seconds"], 3),
-                             steps_per_s=res.info["steps_per_s"], acceptance=res.info["acceptance"],
-                             repeats=repeats, steps_per_s_min=min(rates), steps_per_s_max=max(rates),
-                             setup_seconds=round(res.info["setup_seconds"], 3),
-                             G_ratio=res.G_final / res.G_initial,
-                             e_squared_hours=res.info["e_squared_hours"], build_seconds=round(build, 2),
-                             e_squared_out_of_reach=bool(res.info["e_squared_hours"] > 24.0),
-                             rebases=res.info["rebases"], refactor_every=res.info["refactor_every"]))
+            res = runs[method][int(np.argsort(rates)[len(rates) // 2])]  # the median run
+            rows.append(
+                dict(
+                    **common,
+                    method=method,
+                    engine=res.info["engine"],
+                    steps=res.n_steps,
+                    seconds=round(res.info["loop_seconds"], 3),
+                    steps_per_s=res.info["steps_per_s"],
+                    acceptance=res.info["acceptance"],
+                    repeats=repeats,
+                    steps_per_s_min=min(rates),
+                    steps_per_s_max=max(rates),
+                    setup_seconds=round(res.info["setup_seconds"], 3),
+                    G_ratio=res.G_final / res.G_initial,
+                    e_squared_hours=res.info["e_squared_hours"],
+                    build_seconds=round(build, 2),
+                    e_squared_out_of_reach=bool(res.info["e_squared_hours"] > 24.0),
+                    rebases=res.info["rebases"],
+                    refactor_every=res.info["refactor_every"],
+                )
+            )
         rows[-1]["speedup"] = rows[-1]["steps_per_s"] / rows[-2]["steps_per_s"]
         rows[-2]["speedup"] = 1.0
-        print(f"  sa bench {shape}: refactor {rows[-2]['steps_per_s']:.3g}/s, incremental "
-              f"{rows[-1]['steps_per_s']:.3g}/s ({rows[-1]['engine']}), x{rows[-1]['speedup']:.1f}", flush=True)
+        print(
+            f"  sa bench {shape}: refactor {rows[-2]['steps_per_s']:.3g}/s, incremental "
+            f"{rows[-1]['steps_per_s']:.3g}/s ({rows[-1]['engine']}), x{rows[-1]['speedup']:.1f}",
+            flush=True,
+        )
     df = pd.DataFrame(rows)
     return df

@@ -130,9 +130,8 @@ def linear_closed_form(load: LoadCase, points, compliance, anchors) -> np.ndarra
     eps0 = _tensor_strain(S @ np.asarray(voigt, float))
     if load.stress_gradient is not None:
         c, L = np.asarray(load.frame.centroid, float), load.frame.size
-        e = _tensor_strain(np.asarray(load.stress_gradient, float) @ S.T / L).transpose(
-            1, 2, 0
-        )  # e[i, j, k]
+        # e[i, j, k]
+        e = _tensor_strain(np.asarray(load.stress_gradient, float) @ S.T / L).transpose(1, 2, 0)
         D = e + e.transpose(0, 2, 1) - e.transpose(2, 0, 1)
     else:
         c, D = np.zeros(dim), np.zeros((dim, dim, dim))

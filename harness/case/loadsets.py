@@ -175,9 +175,8 @@ def anchor_points(points) -> np.ndarray:
     smallest point, so rounding the coordinates cannot change the choice."""
     p = np.asarray(points, float)
     tol = 1e-9 * float(np.ptp(p, axis=0).max())
-    key = (
-        np.round(p / max(tol, 1e-300) / 1e3) if tol > 0 else p
-    )  # lexicographic on rounded coordinates
+    # lexicographic on rounded coordinates
+    key = np.round(p / max(tol, 1e-300) / 1e3) if tol > 0 else p
 
     def pick(score):
         cand = np.flatnonzero(score >= score.max() - tol * 1e3)

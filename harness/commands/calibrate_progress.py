@@ -9,6 +9,7 @@ from __future__ import annotations
 def tracker(clock, budget: float, validated: bool):
     """The stage's ``status(msg)`` callback driving ``clock``."""
     from harness.stages.sms_select import VALIDATION_BUDGET
+
     state = {"phase": "", "fits": 0}
 
     def enter(phase: str, bound: float | None):
@@ -35,4 +36,5 @@ def tracker(clock, budget: float, validated: bool):
             clock.set("fit", msg)
         else:
             clock.set(None, msg)
+
     return status

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-RULE_TIE = 0.02     # two rules' held-out errors closer than this (relative) are a tie, not a ranking
+RULE_TIE = 0.02  # two rules' held-out errors closer than this (relative) are a tie, not a ranking
 
 
 def pct(v) -> str:
@@ -19,23 +19,42 @@ def validation_sentence(row, table) -> str:
     skipped = row.get("val_skipped", math.nan)
     if isinstance(skipped, float) and math.isfinite(skipped):
         from harness.stages.sms_select import VALIDATION_BUDGET
-        return (f"Validation skipped: its fits could not take enough steps on this mesh within "
-                f"{VALIDATION_BUDGET:g}x --budget, so the rule {row['stiffness']} is exported (as --method rule --rule "
-                f"{row['stiffness']}); --budget {math.ceil(skipped)} lets it run.")
-    ratios = {r["model"]: r["ratio"] for r in table if r.get("ratio") is not None and math.isfinite(r["ratio"])}
+
+        return (
+            f"Validation skipped: its fits could not take enough steps on this mesh within "
+            f"{VALIDATION_BUDGET:g}x --budget, so the rule {row['stiffness']} is exported "
+            "(as --method rule --rule "
+            f"{row['stiffness']}); --budget {math.ceil(skipped)} lets it run."
+        )
+    ratios = {
+        r["model"]: r["ratio"]
+        for r in table
+        if r.get("ratio") is not None and math.isfinite(r["ratio"])
+    }
     if row.get("choice") == "rule":
         best = min((m for m in ratios if m != "rule"), key=ratios.get, default=None)
         near = f"; the best fit, {best}, {ratios[best]:.3g}x its errors" if best else ""
-        return (f"Validation (each family of training states left out in turn: {fams}): no fit beat the rule "
-                f"{row['stiffness']} (score {by.get('rule', math.nan):.3g}{near}), so its constants are exported "
-                f"(as --method rule --rule {row['stiffness']}).")
+        return (
+            f"Validation (each family of training states left out in turn: {fams}): no fit "
+            "beat the rule "
+            f"{row['stiffness']} (score {by.get('rule', math.nan):.3g}{near}), so its "
+            "constants are exported "
+            f"(as --method rule --rule {row['stiffness']})."
+        )
     if row["choice"] in ratios:
-        return (f"Validation (each family of training states left out in turn: {fams}) chose {row['choice']}: "
-                f"{ratios[row['choice']]:.3g}x the rule {row['stiffness']}'s errors (the geometric mean over "
-                f"the free-traction families and the clamped states).")
-    return (f"Validation (each family of training states left out in turn: {fams}) chose {row['choice']}: "
-            f"score {by.get(row['choice'], math.nan):.3g} against the rule {row['stiffness']}'s "
-            f"{by.get('rule', math.nan):.3g}.")
+        return (
+            f"Validation (each family of training states left out in turn: {fams}) chose "
+            f"{row['choice']}: "
+            f"{ratios[row['choice']]:.3g}x the rule {row['stiffness']}'s errors (the "
+            "geometric mean over "
+            f"the free-traction families and the clamped states)."
+        )
+    return (
+        f"Validation (each family of training states left out in turn: {fams}) chose "
+        f"{row['choice']}: "
+        f"score {by.get(row['choice'], math.nan):.3g} against the rule {row['stiffness']}'s "
+        f"{by.get('rule', math.nan):.3g}."
+    )
 
 
 def records(rows):
@@ -55,6 +74,7 @@ def verdict(exported: dict, rules: list) -> tuple:
     "fit-worse-than-rule" for a fit; "rule" when a rule's constants are exported; None
     without held-out loads (harness/report/findings.py)."""
     from harness.report.findings import against_rule, best_rule, fitted
+
     if not fitted(exported):
         return ("rule" if best_rule(rules) is not None else None), best_rule(rules)
     v, rule = against_rule(exported, rules)
@@ -65,55 +85,101 @@ def heldout_sentence(exported: dict, rules: list, names) -> str:
     """Held-out against held-out, in one sentence: the exported constants' error on the
     loads no fit saw beside the best rule's on the same loads, and what to do about it."""
     from harness.report.findings import fitted, heldout_error
+
     v, rule = verdict(exported, rules)
     if v is None:
-        return ("No held-out loads (--heldout none): the errors below are on the loads the constants were fitted "
-                "to, which says how well they fit, not how well they predict.")
+        return (
+            "No held-out loads (--heldout none): the errors below are on the loads the "
+            "constants were fitted to, which says how well they fit, not how well they predict."
+        )
     fit, other = heldout_error(exported), heldout_error(rule)
-    head = (f"Held-out loads ({', '.join(names)}; never fitted), mean RMS error of each relative to the FEM: ")
+    head = (
+        f"Held-out loads ({', '.join(names)}; never fitted), mean RMS error of each relative "
+        "to the FEM: "
+    )
     if not fitted(exported):
         mine = exported["stiffness"]
-        tail = ("it is the best of the rules there" if mine == rule["stiffness"] else
-                f"a tie (within {RULE_TIE:.0%})" if abs(fit - other) <= RULE_TIE * other else
-                f"--method rule --rule {rule['stiffness']} exports that one")
-        return f"{head}the exported rule ({mine}) {pct(fit)}, the best rule ({rule['stiffness']}) {pct(other)}: {tail}."
+        tail = (
+            "it is the best of the rules there"
+            if mine == rule["stiffness"]
+            else f"a tie (within {RULE_TIE:.0%})"
+            if abs(fit - other) <= RULE_TIE * other
+            else f"--method rule --rule {rule['stiffness']} exports that one"
+        )
+        best = f"the best rule ({rule['stiffness']}) {pct(other)}"
+        return f"{head}the exported rule ({mine}) {pct(fit)}, {best}: {tail}."
     spread = exported.get("G_heldout_mean_spread")
-    spread = f" (spread over starts {pct(spread)})" if spread is not None and math.isfinite(spread) else ""
-    tail = {"tie": "a tie within the spread over starts: either predicts as well",
-            "better": f"the fit is better, x{fit / other:.2f} the rule's error" if other > 0 else "the fit is better",
-            "fit-worse-than-rule": f"fit worse than the rule on held-out loads: export the rule instead "
-                                   f"(--method rule --rule {rule['stiffness']})"}[v]
-    return f"{head}the fit {pct(fit)}{spread}, the best rule ({rule['stiffness']}) {pct(other)}: {tail}."
+    spread = (
+        f" (spread over starts {pct(spread)})"
+        if spread is not None and math.isfinite(spread)
+        else ""
+    )
+    tail = {
+        "tie": "a tie within the spread over starts: either predicts as well",
+        "better": f"the fit is better, x{fit / other:.2f} the rule's error"
+        if other > 0
+        else "the fit is better",
+        "fit-worse-than-rule": "fit worse than the rule on held-out loads: export the rule "
+        f"instead (--method rule --rule {rule['stiffness']})",
+    }[v]
+    best = f"the best rule ({rule['stiffness']}) {pct(other)}"
+    return f"{head}the fit {pct(fit)}{spread}, {best}: {tail}."
 
 
 def fitted_sentence(exported: dict, best: dict) -> str:
     """The fitted loads' error beside the best rule's there (the rule the fit started from)."""
-    return (f"Fitted loads: RMS displacement error {pct(exported.get('G_norm_final'))} of the FEM "
-            f"(the best stiffness rule there, {best['stiffness']}, {pct(best.get('G_norm_final'))}).")
+    return (
+        f"Fitted loads: RMS displacement error {pct(exported.get('G_norm_final'))} of the FEM "
+        f"(the best stiffness rule there, {best['stiffness']}, {pct(best.get('G_norm_final'))})."
+    )
 
 
 def reference_sentence(exported: dict, meta: dict, heldout: bool, max_refine: int) -> str:
     """The FEM reference's status (ok / ref-coarse), its own error, where it is coarse and
     what that means."""
     from harness.scoring import ref_status
+
     status = meta["status"]
     fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
     if fem is None or not math.isfinite(fem):
-        return (f"Reference status {status}, but FEM error not estimated (--max-refine 0, or no coarser mesh of the "
-                f"body could be made), so the errors above may be partly the FEM's.")
+        return (
+            f"Reference status {status}, but FEM error not estimated (--max-refine 0, or no "
+            "coarser mesh of the body could be made), so the errors above may be partly the FEM's."
+        )
     if heldout and math.isfinite(fem_held) and fem_held < fem:
-        est = f"FEM error <= {pct(fem_held)} on held-out loads, {pct(meta['reference_error_fitted'])} on fitted ones"
+        fitted_error = pct(meta["reference_error_fitted"])
+        est = f"FEM error <= {pct(fem_held)} on held-out loads, {fitted_error} on fitted ones"
     else:
         est = f"FEM error <= {pct(fem)}"
-    coarse = [name for name, g_ref, g, met in (
-        ("fitted", exported.get("G_ref", math.nan), exported.get("G_norm_final", math.nan), exported.get("ref_met_tol")),
-        ("held-out", exported.get("G_ref_heldout", math.nan), exported.get("G_heldout", math.nan), None))
-        if (name == "fitted" or heldout) and ref_status(g_ref, g, met) != "ok"]
+    coarse = [
+        name
+        for name, g_ref, g, met in (
+            (
+                "fitted",
+                exported.get("G_ref", math.nan),
+                exported.get("G_norm_final", math.nan),
+                exported.get("ref_met_tol"),
+            ),
+            (
+                "held-out",
+                exported.get("G_ref_heldout", math.nan),
+                exported.get("G_heldout", math.nan),
+                None,
+            ),
+        )
+        if (name == "fitted" or heldout) and ref_status(g_ref, g, met) != "ok"
+    ]
     where = f" on the {' and '.join(coarse)} loads" if coarse else ""
     if status == "ok":
-        return (f"Reference ok ({est}): the FEM's own error is under a tenth of the model's, so the errors "
-                f"above are the model's.")
-    return (f"Reference ref-coarse ({est}): the FEM's own error{where} is above a tenth of the model's or missed "
-            f"its tolerance, so part of those errors is the FEM's; --max-refine {max_refine + 1} (or a finer mesh) "
-            f"makes it finer.")
-
+        return (
+            f"Reference ok ({est}): the FEM's own error is under a tenth of the model's, so "
+            "the errors "
+            f"above are the model's."
+        )
+    return (
+        f"Reference ref-coarse ({est}): the FEM's own error{where} is above a tenth of the "
+        "model's or missed "
+        "its tolerance, so part of those errors is the FEM's; --max-refine "
+        f"{max_refine + 1} (or a finer mesh) "
+        f"makes it finer."
+    )

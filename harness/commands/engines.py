@@ -11,14 +11,18 @@ from pathlib import Path
 from harness.engines.settle import CHECK, KE_TOL, RES_TOL, RTOL, STALL
 from harness.errors import SpringbenchError
 
-HELP = "run a physics engine (NVIDIA Newton, MuJoCo) to equilibrium on a benchmark pack; list the engines"
-EPILOG = f"""stopping rule (harness/engines/settle.py): every {CHECK} steps, settled when the displacement's
-estimated distance still to go is at most {RTOL:g} of its largest value and the residual force is at
-most {RES_TOL:g} of the external force (or has stopped falling over {STALL} checks while the kinetic
-energy is at most {KE_TOL:g} of the load's work: float32 trembling); velocities are damped each step
-by exp(-2 omega_1 dt) (about critical for the load's lowest mode). The table gives per load the
-status (settled / not-settled / diverged / unsupported), steps, simulated and wall time, final
-kinetic energy and relative residual; --log writes it as CSV."""
+HELP = (
+    "run a physics engine (NVIDIA Newton, MuJoCo) to equilibrium on a benchmark pack; "
+    "list the engines"
+)
+EPILOG = f"""stopping rule (harness/engines/settle.py): every {CHECK} steps, settled when the
+displacement's estimated distance still to go is at most {RTOL:g} of its largest value and
+the residual force is at most {RES_TOL:g} of the external force (or has stopped falling over
+{STALL} checks while the kinetic energy is at most {KE_TOL:g} of the load's work: float32
+trembling); velocities are damped each step by exp(-2 omega_1 dt) (about critical for the
+load's lowest mode). The table gives per load the status (settled / not-settled / diverged /
+unsupported), steps, simulated and wall time, final kinetic energy and relative residual;
+--log writes it as CSV."""
 
 
 def add_arguments(p):
@@ -28,13 +32,24 @@ def add_arguments(p):
     ls.set_defaults(action="list")
     r = sub.add_parser("run", help="run ENGINE on every load of the pack DIR")
     from harness.engines import names
+
     r.add_argument("engine", metavar="ENGINE", help=f"one of {', '.join(names())}")
     r.add_argument("pack", type=Path, metavar="DIR", help="a benchmark pack (springbench pack)")
-    r.add_argument("--model", type=Path, default=None, metavar="MODEL.json",
-                   help="newton-springs: the springbench export to run (springbench calibrate on the pack's mesh)")
+    r.add_argument(
+        "--model",
+        type=Path,
+        default=None,
+        metavar="MODEL.json",
+        help="newton-springs: the springbench export to run (springbench calibrate on the "
+        "pack's mesh)",
+    )
     r.add_argument("--loads", default=None, metavar="A,B", help="run only these loads")
-    r.add_argument("--out", type=Path, required=True, metavar="U.npz", help="the displacements (npz)")
-    r.add_argument("--log", type=Path, default=None, metavar="CSV", help="also write the table as CSV")
+    r.add_argument(
+        "--out", type=Path, required=True, metavar="U.npz", help="the displacements (npz)"
+    )
+    r.add_argument(
+        "--log", type=Path, default=None, metavar="CSV", help="also write the table as CSV"
+    )
 
 
 def main(args) -> int:
@@ -45,19 +60,26 @@ def main(args) -> int:
 
     from harness.engines import ENGINES, adapter
     from harness.outputs import atomic_write, check_out_file
+
     if args.action == "list":
         for name, (package, what) in ENGINES.about.items():
             print(f"{name:18s} {what} (needs {package})")
         return 0
     if args.out.suffix.lower() != ".npz":
-        raise SpringbenchError(f"'{args.out}' does not end in .npz", field="--out", fix="e.g. --out u.npz")
+        raise SpringbenchError(
+            f"'{args.out}' does not end in .npz", field="--out", fix="e.g. --out u.npz"
+        )
     for flag, out in (("--out", args.out), ("--log", args.log)):
         if out is not None:
             check_out_file(out, flag)
     if args.model is not None and args.engine != "newton-springs":
-        raise SpringbenchError(f"{args.engine} runs the pack's own material, not a model", field="--model",
-                               fix="drop --model, or use newton-springs")
+        raise SpringbenchError(
+            f"{args.engine} runs the pack's own material, not a model",
+            field="--model",
+            fix="drop --model, or use newton-springs",
+        )
     from harness.export.pack import Pack, read_pack
+
     pack = read_pack(args.pack)
     run = adapter(args.engine)
     if args.loads is not None:
@@ -65,19 +87,43 @@ def main(args) -> int:
         names = [ld.name for ld in pack.loads]
         bad = [n for n in want if n not in names]
         if bad or not want:
-            raise SpringbenchError(f"the pack has no load '{bad[0] if bad else args.loads}'", field="--loads",
-                                   fix=f"some of {', '.join(names)}")
-        pack = Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density,
-                    tuple(ld for ld in pack.loads if ld.name in want), pack.plane, pack.meta)
+            raise SpringbenchError(
+                f"the pack has no load '{bad[0] if bad else args.loads}'",
+                field="--loads",
+                fix=f"some of {', '.join(names)}",
+            )
+        pack = Pack(
+            pack.points,
+            pack.cells,
+            pack.E,
+            pack.nu,
+            pack.density,
+            tuple(ld for ld in pack.loads if ld.name in want),
+            pack.plane,
+            pack.meta,
+        )
     answers = run(pack, {"model": args.model})
     buf = io.BytesIO()
     np.savez_compressed(buf, **{name: a.u for name, a in answers.items()})
     atomic_write(args.out, buf.getvalue(), "--out")
-    rows = [{"load": name, "status": a.status, "steps": a.steps, "sim_time_s": a.sim_time, "wall_s": a.wall,
-             "kinetic_J": a.kinetic, "residual": a.residual, "note": a.note} for name, a in answers.items()]
+    rows = [
+        {
+            "load": name,
+            "status": a.status,
+            "steps": a.steps,
+            "sim_time_s": a.sim_time,
+            "wall_s": a.wall,
+            "kinetic_J": a.kinetic,
+            "residual": a.residual,
+            "note": a.note,
+        }
+        for name, a in answers.items()
+    ]
     df = pd.DataFrame(rows)
     print(f"{args.engine} on {args.pack} ({pack.n_nodes} nodes, {len(pack.loads)} loads)")
-    print(df.to_string(index=False, float_format=lambda x: f"{x:.3g}" if math.isfinite(x) else "nan"))
+    print(
+        df.to_string(index=False, float_format=lambda x: f"{x:.3g}" if math.isfinite(x) else "nan")
+    )
     if args.log is not None:
         atomic_write(args.log, df.to_csv(index=False).encode(), "--log")
     print(f"-> {args.out}")

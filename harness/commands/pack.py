@@ -15,51 +15,102 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 
-HELP = ("write a benchmark problem for any engine: the mesh, per load the held nodes, nodal forces (N) and the "
-        "FEM displacement with its error estimate at every node, and problem.json (SI units)")
+HELP = (
+    "write a benchmark problem for any engine: the mesh, per load the held nodes, nodal "
+    "forces (N) and the "
+    "FEM displacement with its error estimate at every node, and problem.json (SI units)"
+)
 
 
 def add_arguments(p):
     from harness.case.default_loads import PEAK_STRAIN
-    from harness.commands.calibrate import UNITS
-    p.add_argument("source", type=Path, metavar="CASE|MESH", help="a case file (TOML, mesh body) or a mesh file")
-    p.add_argument("--E", dest="E", type=float, default=None, help="Young's modulus (Pa; meshes only)")
+    from harness.commands.calibrate_case import UNITS
+
+    p.add_argument(
+        "source",
+        type=Path,
+        metavar="CASE|MESH",
+        help="a case file (TOML, mesh body) or a mesh file",
+    )
+    p.add_argument(
+        "--E", dest="E", type=float, default=None, help="Young's modulus (Pa; meshes only)"
+    )
     p.add_argument("--nu", type=float, default=None, help="Poisson ratio (meshes only)")
-    p.add_argument("--density", type=float, default=1000.0, help="density (kg/m^3; meshes only; default 1000)")
-    p.add_argument("--length-unit", dest="length_unit", choices=tuple(UNITS), default="m",
-                   help="unit of the mesh's coordinates (meshes only; the pack is in m)")
-    p.add_argument("--peak-strain", dest="peak_strain", type=float, default=PEAK_STRAIN,
-                   help=f"the held-out loads' size: a peak strain of about this (meshes only; default {PEAK_STRAIN:g})")
-    p.add_argument("--clamp", metavar="GROUP", default=None, help="a mesh group to clamp (meshes only)")
-    p.add_argument("--load-region", dest="load_region", metavar="GROUP", default=None,
-                   help="a mesh group the tip loads and torsion act on (meshes only)")
+    p.add_argument(
+        "--density", type=float, default=1000.0, help="density (kg/m^3; meshes only; default 1000)"
+    )
+    p.add_argument(
+        "--length-unit",
+        dest="length_unit",
+        choices=tuple(UNITS),
+        default="m",
+        help="unit of the mesh's coordinates (meshes only; the pack is in m)",
+    )
+    p.add_argument(
+        "--peak-strain",
+        dest="peak_strain",
+        type=float,
+        default=PEAK_STRAIN,
+        help="the held-out loads' size: a peak strain of about this (meshes only; default "
+        f"{PEAK_STRAIN:g})",
+    )
+    p.add_argument(
+        "--clamp", metavar="GROUP", default=None, help="a mesh group to clamp (meshes only)"
+    )
+    p.add_argument(
+        "--load-region",
+        dest="load_region",
+        metavar="GROUP",
+        default=None,
+        help="a mesh group the tip loads and torsion act on (meshes only)",
+    )
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell")
-    p.add_argument("--max-refine", dest="max_refine", type=int, default=1,
-                   help="reference refinements at most (meshes only; default 1, as calibrate)")
-    p.add_argument("--full", dest="mode", action="store_const", const="full", default="quick",
-                   help="case files: use the case's [full] table")
-    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="the pack's folder (made if missing)")
+    p.add_argument(
+        "--max-refine",
+        dest="max_refine",
+        type=int,
+        default=1,
+        help="reference refinements at most (meshes only; default 1, as calibrate)",
+    )
+    p.add_argument(
+        "--full",
+        dest="mode",
+        action="store_const",
+        const="full",
+        default="quick",
+        help="case files: use the case's [full] table",
+    )
+    p.add_argument(
+        "--out", type=Path, required=True, metavar="DIR", help="the pack's folder (made if missing)"
+    )
 
 
 def _mesh_case(args, tmp: Path):
     """calibrate's in-memory case for the mesh (its loads, no optimiser)."""
     from harness.case.mesh_checks import check_mesh
     from harness.commands import calibrate as cal
+    from harness.commands import calibrate_case
     from harness.commands.calibrate_check import check as check_flags
     from harness.io.meshfile import read_mesh
+
     if args.E is None or args.nu is None:
-        raise SpringbenchError("a mesh needs its material", field="--E" if args.E is None else "--nu",
-                               fix="e.g. --E 1e5 --nu 0.45 (Pa)")
+        raise SpringbenchError(
+            "a mesh needs its material",
+            field="--E" if args.E is None else "--nu",
+            fix="e.g. --E 1e5 --nu 0.45 (Pa)",
+        )
     p = argparse.ArgumentParser(add_help=False)
     cal.add_arguments(p)
-    cargs = p.parse_args([str(args.source), "--E", repr(args.E), "--nu", repr(args.nu), "--out", str(tmp / "x.vtu"),
-                          "--method", "rule", "--density", repr(args.density), "--length-unit", args.length_unit,
-                          "--peak-strain", repr(args.peak_strain), "--max-refine", str(args.max_refine)])
+    cargs = p.parse_args(
+        [str(args.source), "--E", repr(args.E), "--nu", repr(args.nu), "--out", str(tmp / "x.vtu")]
+        + ["--method", "rule", "--density", repr(args.density), "--length-unit", args.length_unit]
+        + ["--peak-strain", repr(args.peak_strain), "--max-refine", str(args.max_refine)]
+    )
     cargs.clamp, cargs.load_region, cargs.format = args.clamp, args.load_region, args.format
-    check_flags(cargs, cal.prior_weight(cargs))
+    check_flags(cargs, calibrate_case.prior_weight(cargs))
     mesh = read_mesh(args.source, args.format)
     check_mesh(mesh, str(args.source))
-    return cal.mesh_case(cargs, mesh, tmp)
+    return calibrate_case.mesh_case(cargs, mesh, tmp)
 
 
 def main(args) -> int:
@@ -67,27 +118,40 @@ def main(args) -> int:
     from harness.export.pack import write_pack
     from harness.export.pack_make import make_pack
     from harness.outputs import check_out_dir
+
     if not args.source.is_file():
-        raise SpringbenchError("no such file", file=str(args.source), fix="a case file (.toml) or a mesh file")
+        raise SpringbenchError(
+            "no such file", file=str(args.source), fix="a case file (.toml) or a mesh file"
+        )
     check_out_dir(args.out, "--out")
     is_case = args.source.suffix.lower() == ".toml"
     if is_case:
-        for flag, v in (("--E", args.E), ("--nu", args.nu), ("--clamp", args.clamp),
-                        ("--load-region", args.load_region)):
+        for flag, v in (
+            ("--E", args.E),
+            ("--nu", args.nu),
+            ("--clamp", args.clamp),
+            ("--load-region", args.load_region),
+        ):
             if v is not None:
-                raise SpringbenchError(f"{flag} is for a mesh; the case file sets it", field=flag,
-                                       fix="drop it, or change the case file")
+                raise SpringbenchError(
+                    f"{flag} is for a mesh; the case file sets it",
+                    field=flag,
+                    fix="drop it, or change the case file",
+                )
     with tempfile.TemporaryDirectory(prefix="springbench-pack-") as tmp:
         tmp = Path(tmp)
         if is_case:
             from harness.case.reader import load_case
+
             case = load_case(args.source, args.mode)
         else:
             try:
                 case = _mesh_case(args, tmp)
-            except SpringbenchError as exc:     # name the user's mesh, never our temporary files
+            except SpringbenchError as exc:  # name the user's mesh, never our temporary files
                 if exc.file is None or str(tmp) in str(exc.file):
-                    raise type(exc)(exc.message, file=str(args.source), field=exc.field, fix=exc.fix) from None
+                    raise type(exc)(
+                        exc.message, file=str(args.source), field=exc.field, fix=exc.fix
+                    ) from None
                 raise
         meta = {"source": str(args.source), "springbench": __version__}
         if not is_case:
@@ -95,12 +159,20 @@ def main(args) -> int:
         pack = make_pack(case, meta=meta)
     path = write_pack(pack, args.out)
     held = sum(ld.role == "heldout" for ld in pack.loads)
-    print(f"{args.source}: {pack.n_nodes} nodes, {sum(len(c) for c in pack.cells.values())} cells, "
-          f"{len(pack.loads)} loads ({held} held out), E {pack.E:g} Pa, nu {pack.nu:g}")
+    print(
+        f"{args.source}: {pack.n_nodes} nodes, {sum(len(c) for c in pack.cells.values())} cells, "
+        f"{len(pack.loads)} loads ({held} held out), E {pack.E:g} Pa, nu {pack.nu:g}"
+    )
     for ld in pack.loads:
         err = ld.u_fem_error
-        print(f"  {ld.name:16s} {ld.role:8s} {ld.kind:16s} held {len(ld.held_nodes):5d} nodes, "
-              f"|u_fem| max {float((ld.u_fem ** 2).sum(axis=1).max()) ** 0.5:.3g} m"
-              + (f", FEM error <= {float(max(err)):.2g} m" if len(err) and all(e == e for e in err) else ""))
+        print(
+            f"  {ld.name:16s} {ld.role:8s} {ld.kind:16s} held {len(ld.held_nodes):5d} nodes, "
+            f"|u_fem| max {float((ld.u_fem**2).sum(axis=1).max()) ** 0.5:.3g} m"
+            + (
+                f", FEM error <= {float(max(err)):.2g} m"
+                if len(err) and all(e == e for e in err)
+                else ""
+            )
+        )
     print(f"-> {path}")
     return 0

@@ -12,7 +12,9 @@ def add_arguments(p):
     p.add_argument("--points", type=Path, required=True, help="CSV with columns x,y[,z]")
     p.add_argument("--out", type=Path, required=True, help="CSV to write: load,x,y[,z],ux,uy[,uz]")
     p.add_argument("--full", action="store_true", help="use the case's [full] settings")
-    p.add_argument("--no-cache", action="store_true", help="recompute even if a cached solution exists")
+    p.add_argument(
+        "--no-cache", action="store_true", help="recompute even if a cached solution exists"
+    )
 
 
 def main(args) -> int:
@@ -23,6 +25,7 @@ def main(args) -> int:
     from harness.case.reader import load_case
     from harness.errors import SpringbenchError
     from harness.outputs import atomic_write, check_out_file
+
     case = load_case(args.case, "full" if args.full else "quick")
     check_out_file(args.out, "--out")
     axes = "xyz"[: case.dim]
@@ -30,6 +33,7 @@ def main(args) -> int:
 
     def bad(msg, fix=header):
         return SpringbenchError(msg, file=str(args.points), field="--points", fix=fix)
+
     try:
         pts = pd.read_csv(args.points)
     except FileNotFoundError:
@@ -56,7 +60,7 @@ def main(args) -> int:
     for load in sol.loads:
         try:
             u = sol.displacement(x, load)
-        except SpringbenchError as exc:   # e.g. points outside the body: this file's
+        except SpringbenchError as exc:  # e.g. points outside the body: this file's
             raise bad(exc.message, exc.fix) from None
         df = pd.DataFrame(x, columns=list(axes))
         df.insert(0, "load", load)

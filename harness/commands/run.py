@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from pathlib import Path
 
-HELP = ("run case files or folders of them (default: every case under cases/) and write tables to runs/ "
-        "(the published results/ are the --full run: --full --results results)")
+HELP = (
+    "run case files or folders of them (default: every case under cases/) and write tables "
+    "to runs/ "
+    "(the published results/ are the --full run: --full --results results)"
+)
 
 
 def _positive_int(text):
     import argparse
+
     try:
         n = int(text)
     except ValueError:
@@ -20,59 +24,123 @@ def _positive_int(text):
 
 
 def add_arguments(p):
-    p.add_argument("paths", nargs="*", metavar="PATH", help="case files or folders (default: cases/)")
+    p.add_argument(
+        "paths", nargs="*", metavar="PATH", help="case files or folders (default: cases/)"
+    )
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--quick", dest="mode", action="store_const", const="quick",
-                      help="the case's quick budget (default)")
-    mode.add_argument("--full", dest="mode", action="store_const", const="full",
-                      help="the case's full budget: reproduces the papers")
+    mode.add_argument(
+        "--quick",
+        dest="mode",
+        action="store_const",
+        const="quick",
+        help="the case's quick budget (default)",
+    )
+    mode.add_argument(
+        "--full",
+        dest="mode",
+        action="store_const",
+        const="full",
+        help="the case's full budget: reproduces the papers",
+    )
     p.set_defaults(mode="quick")
-    p.add_argument("--results", type=Path, default=None,
-                   help="output folder (default: runs/; results/ holds the published --full run and takes "
-                        "only --full)")
-    p.add_argument("--jobs", "-j", type=_positive_int, default=None, metavar="N",
-                   help="parallel cases/seeds (default: the number of cores; 1 runs in this process)")
-    p.add_argument("--executor", choices=("local", "dask"), default="local",
-                   help="local process pool (default) or a Dask cluster")
-    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (with --executor dask; "
-                        "without it a local Dask cluster of --jobs workers is started)")
-    p.add_argument("--force", action="store_true",
-                   help="recompute finished cases even if their inputs are unchanged")
+    p.add_argument(
+        "--results",
+        type=Path,
+        default=None,
+        help="output folder (default: runs/; results/ holds the published --full run and takes "
+        "only --full)",
+    )
+    p.add_argument(
+        "--jobs",
+        "-j",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="parallel cases/seeds (default: the number of cores; 1 runs in this process)",
+    )
+    p.add_argument(
+        "--executor",
+        choices=("local", "dask"),
+        default="local",
+        help="local process pool (default) or a Dask cluster",
+    )
+    p.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (with --executor dask; "
+        "without it a local Dask cluster of --jobs workers is started)",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="recompute finished cases even if their inputs are unchanged",
+    )
     p.add_argument("--no-figures", dest="figures", action="store_false", help="tables only")
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress bar (cases done, ETA; never drawn when stderr is not a terminal, where one line "
-                        "per finished case goes to stdout instead) and no such lines")
+    p.add_argument(
+        "--quiet",
+        action="store_true",
+        help="no progress bar (cases done, ETA; never drawn when stderr is not a terminal, "
+        "where one line "
+        "per finished case goes to stdout instead) and no such lines",
+    )
 
 
 def main(args) -> int:
     from harness.errors import SpringbenchError
     from harness.paths import DEFAULT_RESULTS, DEFAULT_RUNS
     from harness.run.runner import run_suite
+
     results = args.results or DEFAULT_RUNS
     if args.mode != "full" and Path(results).resolve() == Path(DEFAULT_RESULTS).resolve():
-        raise SpringbenchError("results/ holds the published --full run; a quick run would overwrite it",
-                               file=str(results), field="--results",
-                               fix="drop --results (quick runs go to runs/) or add --full to republish")
-    rep = run_suite(args.paths, args.mode, results, jobs=args.jobs, executor=args.executor,
-                    scheduler=args.scheduler, force=args.force, figures=args.figures,
-                    progress=False if getattr(args, "quiet", False) else None)
+        raise SpringbenchError(
+            "results/ holds the published --full run; a quick run would overwrite it",
+            file=str(results),
+            field="--results",
+            fix="drop --results (quick runs go to runs/) or add --full to republish",
+        )
+    rep = run_suite(
+        args.paths,
+        args.mode,
+        results,
+        jobs=args.jobs,
+        executor=args.executor,
+        scheduler=args.scheduler,
+        force=args.force,
+        figures=args.figures,
+        progress=False if getattr(args, "quiet", False) else None,
+    )
     import pandas as pd
 
     from harness.report.findings import case_lines, legend, summary_text
+
     seen = []
     for suite in rep.suites:
         csv = suite / "summary.csv"
         df = pd.read_csv(csv)
         lines = case_lines(df)
         seen += list(lines["findings"])
-        print(f"\n== {suite.name}: {len(df)} rows in {csv} (all columns; tables and figures: summary.md)")
+        print(
+            f"\n== {suite.name}: {len(df)} rows in {csv} (all columns; tables and figures: "
+            "summary.md)"
+        )
         print("\n".join(summary_text(suite.name, lines)))
     if rep.suites:
-        print("\n".join(["\nmodel: each case's best fit on the fitted loads (else its best stiffness rule); held-out: "
-                         "the mean of each held-out load's G where recorded, else the pooled G"] + legend(seen)))
+        print(
+            "\n".join(
+                [
+                    "\nmodel: each case's best fit on the fitted loads (else its best "
+                    "stiffness rule); held-out: "
+                    "the mean of each held-out load's G where recorded, else the pooled G"
+                ]
+                + legend(seen)
+            )
+        )
     n = len(rep.results)
-    print(f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force recomputes), "
-          f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "
-          f"Index: {Path(results) / 'index.html'}")
+    print(
+        f"\n{n} jobs: {len(rep.ran)} ran, {len(rep.skipped)} unchanged (skipped; --force "
+        "recomputes), "
+        f"{len(rep.failed)} failed{' (one line each above)' if rep.failed else ''}. "
+        f"Index: {Path(results) / 'index.html'}"
+    )
     return 2 if rep.failed else 0

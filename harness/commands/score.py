@@ -6,9 +6,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-HELP = ("score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G per load, G_{a:b:c}, "
-        "normalised G, and G_ref (the reference's own error as a normalised G); or, with --displacements, any "
-        "engine's displacements on a benchmark pack (springbench pack), gated for CI")
+HELP = (
+    "score a spring network (VTU: points, line cells, cell data 'stiffness') on a case: G "
+    "per load, G_{a:b:c}, "
+    "normalised G, and G_ref (the reference's own error as a normalised G); or, with "
+    "--displacements, any "
+    "engine's displacements on a benchmark pack (springbench pack), gated for CI"
+)
 EPILOG = """forms:
   springbench score MODEL.vtu CASE [--out G.csv] [--weights A B C] [--full]
   springbench score --displacements U.npz|U.csv|U.vtu DIR [--max-g-norm X] [--max LOAD=X ...]
@@ -21,23 +25,66 @@ data u_<load>; at the pack's nodes, in metres."""
 
 
 def add_arguments(p):
-    p.add_argument("model", metavar="MODEL.vtu|DIR", nargs="?",
-                   help="spring network (e.g. from 'springbench build'); with --displacements: the pack's folder")
-    p.add_argument("case", metavar="CASE", nargs="?", help="case file (body, material, loads, [score] weights)")
-    p.add_argument("--displacements", type=Path, default=None, metavar="U",
-                   help="an engine's displacements per load of a pack (.npz, .csv or .vtu; metres)")
-    p.add_argument("--max-g-norm", dest="max_g_norm", type=float, default=None, metavar="X",
-                   help="pack form: exit 1 when a load's G_norm exceeds X")
-    p.add_argument("--max", dest="max_load", action="append", default=[], metavar="LOAD=X",
-                   help="pack form: this load's own gate (repeatable)")
+    p.add_argument(
+        "model",
+        metavar="MODEL.vtu|DIR",
+        nargs="?",
+        help="spring network (e.g. from 'springbench build'); with --displacements: the "
+        "pack's folder",
+    )
+    p.add_argument(
+        "case", metavar="CASE", nargs="?", help="case file (body, material, loads, [score] weights)"
+    )
+    p.add_argument(
+        "--displacements",
+        type=Path,
+        default=None,
+        metavar="U",
+        help="an engine's displacements per load of a pack (.npz, .csv or .vtu; metres)",
+    )
+    p.add_argument(
+        "--max-g-norm",
+        dest="max_g_norm",
+        type=float,
+        default=None,
+        metavar="X",
+        help="pack form: exit 1 when a load's G_norm exceeds X",
+    )
+    p.add_argument(
+        "--max",
+        dest="max_load",
+        action="append",
+        default=[],
+        metavar="LOAD=X",
+        help="pack form: this load's own gate (repeatable)",
+    )
     p.add_argument("--loads", default=None, metavar="A,B", help="pack form: score only these loads")
-    p.add_argument("--junit", type=Path, default=None, metavar="FILE",
-                   help="pack form: also write a JUnit XML report (one test case per load)")
-    p.add_argument("--out", type=Path, default=None, metavar="CSV", help="also write the table as CSV")
-    p.add_argument("--weights", type=float, nargs=3, default=None, metavar=("A", "B", "C"),
-                   help="G weights inner border corner (default: the case's [score] weights)")
-    p.add_argument("--full", dest="mode", action="store_const", const="full", default="quick",
-                   help="use the case's [full] table")
+    p.add_argument(
+        "--junit",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="pack form: also write a JUnit XML report (one test case per load)",
+    )
+    p.add_argument(
+        "--out", type=Path, default=None, metavar="CSV", help="also write the table as CSV"
+    )
+    p.add_argument(
+        "--weights",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("A", "B", "C"),
+        help="G weights inner border corner (default: the case's [score] weights)",
+    )
+    p.add_argument(
+        "--full",
+        dest="mode",
+        action="store_const",
+        const="full",
+        default="quick",
+        help="use the case's [full] table",
+    )
 
 
 def score_table(net, case, ref, weights=None):
@@ -55,6 +102,7 @@ def score_table(net, case, ref, weights=None):
         reference_displacements,
         reference_error,
     )
+
     w = case_weights(case, weights)
     res = statics.solve(net, case)
     u_ref = reference_displacements(ref, net.points, res.names)
@@ -63,72 +111,126 @@ def score_table(net, case, ref, weights=None):
     e = reference_error(ref, net.points, res.names)
     g_ref, g_ref_load = g_ref_arrays(u_ref, e, net.classes, w)
     label = ":".join(f"{x:g}" for x in w)
-    rows = [{"load": n, "G_s": s1.per_load[n], f"G_{label}": sc.per_load[n], "G_norm": sc.per_load_norm[n],
-             "G_ref": float(g)} for n, g in zip(res.names, g_ref_load)]
-    rows.append({"load": "total", "G_s": sc.G_s, f"G_{label}": sc.G, "G_norm": sc.G_norm, "G_ref": g_ref})
+    rows = [
+        {
+            "load": n,
+            "G_s": s1.per_load[n],
+            f"G_{label}": sc.per_load[n],
+            "G_norm": sc.per_load_norm[n],
+            "G_ref": float(g),
+        }
+        for n, g in zip(res.names, g_ref_load)
+    ]
+    rows.append(
+        {"load": "total", "G_s": sc.G_s, f"G_{label}": sc.G, "G_norm": sc.G_norm, "G_ref": g_ref}
+    )
     return pd.DataFrame(rows), sc, ref_status(g_ref, sc.G_norm, met_tol_here(ref, u_ref, e))
 
 
 def main(args) -> int:
     import math
-    if args.displacements is not None or args.max_g_norm is not None or args.max_load or args.junit is not None \
-            or args.loads is not None:
+
+    if (
+        args.displacements is not None
+        or args.max_g_norm is not None
+        or args.max_load
+        or args.junit is not None
+        or args.loads is not None
+    ):
         from harness.commands.score_pack import main as pack_main
+
         return pack_main(args)
     from harness.errors import SpringbenchError
+
     if args.model is None or args.case is None:
-        raise SpringbenchError("needs MODEL.vtu and CASE (or --displacements U DIR for a pack)",
-                               fix="springbench score MODEL.vtu CASE, or springbench score --displacements U.npz DIR")
+        raise SpringbenchError(
+            "needs MODEL.vtu and CASE (or --displacements U DIR for a pack)",
+            fix="springbench score MODEL.vtu CASE, or springbench score --displacements U.npz DIR",
+        )
 
     import reference
     from harness.case.schema import LARGEST, SMALLEST
     from harness.errors import SpringbenchError
-    if args.weights is not None and not (all(math.isfinite(w) and w >= 0 for w in args.weights)
-                                         and sum(args.weights) > 0):
-        raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
-                               "not all zero", field="--weights", fix="e.g. --weights 1 3 15")
-    if args.weights is not None and not all(w == 0 or SMALLEST <= w <= LARGEST for w in args.weights):
-        raise SpringbenchError(f"{' '.join(f'{w:g}' for w in args.weights)}: a weight is too "
-                               f"{'large' if max(args.weights) > LARGEST else 'small'} to compute with",
-                               field="--weights", fix=f"weights between {SMALLEST:g} and {LARGEST:g} (or 0), e.g. "
-                                                      "--weights 1 3 15")
+
+    if args.weights is not None and not (
+        all(math.isfinite(w) and w >= 0 for w in args.weights) and sum(args.weights) > 0
+    ):
+        raise SpringbenchError(
+            f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
+            "not all zero",
+            field="--weights",
+            fix="e.g. --weights 1 3 15",
+        )
+    if args.weights is not None and not all(
+        w == 0 or SMALLEST <= w <= LARGEST for w in args.weights
+    ):
+        raise SpringbenchError(
+            f"{' '.join(f'{w:g}' for w in args.weights)}: a weight is too "
+            f"{'large' if max(args.weights) > LARGEST else 'small'} to compute with",
+            field="--weights",
+            fix=f"weights between {SMALLEST:g} and {LARGEST:g} (or 0), e.g. --weights 1 3 15",
+        )
     for what, path in (("network", args.model), ("case", args.case)):
         if Path(path).is_dir():
-            raise SpringbenchError(f"cannot read it: a folder, not a {what} file", file=str(path),
-                                   fix="give the file's path")
-    if args.out is not None and any(Path(args.out).resolve() == Path(f).resolve() for f in (args.model, args.case)):
-        raise SpringbenchError(f"{args.out} is an input of the command: the table would overwrite it",
-                               field="--out", fix="give another file name, e.g. --out score.csv")
+            raise SpringbenchError(
+                f"cannot read it: a folder, not a {what} file",
+                file=str(path),
+                fix="give the file's path",
+            )
+    if args.out is not None and any(
+        Path(args.out).resolve() == Path(f).resolve() for f in (args.model, args.case)
+    ):
+        raise SpringbenchError(
+            f"{args.out} is an input of the command: the table would overwrite it",
+            field="--out",
+            fix="give another file name, e.g. --out score.csv",
+        )
 
     from harness.case.reader import load_case
     from harness.errors import ModelError
     from harness.export.vtu import read_vtu
     from harness.geometry import body_geometry
     from harness.models.sms import node_classes
+
     case = load_case(args.case, args.mode)
     if args.out:
         from harness.outputs import check_out_file
+
         check_out_file(args.out, "--out")
     net, _ = read_vtu(args.model)
     if net.dim != case.dim:
-        raise ModelError(f"the network is {net.dim}-D but the case is {case.dim}-D", file=str(args.model),
-                         fix="score it on a case of the same dimension")
+        raise ModelError(
+            f"the network is {net.dim}-D but the case is {case.dim}-D",
+            file=str(args.model),
+            fix="score it on a case of the same dimension",
+        )
     body = body_geometry(case)
     if body.kind != "mesh":  # node classes by the case's body, whoever wrote the file
         import dataclasses
+
         net = dataclasses.replace(net, classes=node_classes(net.points, body))
     ref = reference.solve(case)
     try:
         df, sc, status = score_table(net, case, ref, args.weights)
-    except ModelError as exc:  # the network cannot carry the case's loads: it is the model file's fault
+    except (
+        ModelError
+    ) as exc:  # the network cannot carry the case's loads: it is the model file's fault
         raise ModelError(exc.message, file=str(args.model), fix=exc.fix) from None
-    print(f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights {':'.join(f'{x:g}' for x in sc.weights)}")
+    print(
+        f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights "
+        f"{':'.join(f'{x:g}' for x in sc.weights)}"
+    )
     print(df.to_string(index=False, float_format=lambda x: f"{x:.6g}"))
     if status != "ok":
-        print("ref-coarse: the reference's own error (G_ref, normalised like G_norm) is above 10 % of "
-              "G_norm, or it missed its tol at these nodes; G says as much about the reference as about the model")
+        print(
+            "ref-coarse: the reference's own error (G_ref, normalised like G_norm) is above "
+            "10 % of "
+            "G_norm, or it missed its tol at these nodes; G says as much about the "
+            "reference as about the model"
+        )
     if args.out:
         from harness.outputs import atomic_write
+
         atomic_write(args.out, df.to_csv(index=False).encode(), "--out")
         print(f"-> {args.out}")
     return 0

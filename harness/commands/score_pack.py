@@ -19,10 +19,15 @@ def _gates(args, names) -> dict:
         except ValueError:
             x = math.nan
         if not sep or not name or not (math.isfinite(x) and x >= 0):
-            raise SpringbenchError(f"'{item}' is not LOAD=X with X a number >= 0", field="--max",
-                                   fix="e.g. --max tip=0.05")
+            raise SpringbenchError(
+                f"'{item}' is not LOAD=X with X a number >= 0",
+                field="--max",
+                fix="e.g. --max tip=0.05",
+            )
         if name not in names:
-            raise SpringbenchError(f"the pack has no load '{name}'", field="--max", fix=f"one of {', '.join(names)}")
+            raise SpringbenchError(
+                f"the pack has no load '{name}'", field="--max", fix=f"one of {', '.join(names)}"
+            )
         out[name] = x
     return out
 
@@ -33,22 +38,39 @@ def main(args) -> int:
     from harness.export.pack import read_pack
     from harness.export.pack_score import _units, junit, read_displacements, score_fields
     from harness.outputs import atomic_write, check_out_file
+
     if args.displacements is None:
-        raise SpringbenchError("--max-g-norm, --max, --loads and --junit score a pack's displacements",
-                               field="--displacements", fix="springbench score --displacements U.npz DIR ...")
+        raise SpringbenchError(
+            "--max-g-norm, --max, --loads and --junit score a pack's displacements",
+            field="--displacements",
+            fix="springbench score --displacements U.npz DIR ...",
+        )
     if args.model is None or args.case is not None:
-        raise SpringbenchError("the pack form takes one folder", field="DIR",
-                               fix="springbench score --displacements U.npz DIR")
+        raise SpringbenchError(
+            "the pack form takes one folder",
+            field="DIR",
+            fix="springbench score --displacements U.npz DIR",
+        )
     if args.weights is not None or args.mode != "quick":
-        raise SpringbenchError("--weights and --full are for a network on a case", field="--weights",
-                               fix="drop them with --displacements (every node of a pack weighs alike)")
-    if args.max_g_norm is not None and not (math.isfinite(args.max_g_norm) and args.max_g_norm >= 0):
-        raise SpringbenchError(f"{args.max_g_norm} is not a number >= 0", field="--max-g-norm",
-                               fix="e.g. --max-g-norm 0.1 (a 10 % RMS error)")
+        raise SpringbenchError(
+            "--weights and --full are for a network on a case",
+            field="--weights",
+            fix="drop them with --displacements (every node of a pack weighs alike)",
+        )
+    if args.max_g_norm is not None and not (
+        math.isfinite(args.max_g_norm) and args.max_g_norm >= 0
+    ):
+        raise SpringbenchError(
+            f"{args.max_g_norm} is not a number >= 0",
+            field="--max-g-norm",
+            fix="e.g. --max-g-norm 0.1 (a 10 % RMS error)",
+        )
     for flag, out in (("--out", args.out), ("--junit", args.junit)):
         if out is not None:
             if Path(out).resolve() == Path(args.displacements).resolve():
-                raise SpringbenchError(f"{out} is an input of the command", field=flag, fix="write it elsewhere")
+                raise SpringbenchError(
+                    f"{out} is an input of the command", field=flag, fix="write it elsewhere"
+                )
             check_out_file(out, flag)
     pack = read_pack(args.model)
     names = [ld.name for ld in pack.loads]
@@ -56,38 +78,65 @@ def main(args) -> int:
     fields = read_displacements(args.displacements, pack)
     unknown = [n for n in fields if n not in names]
     if unknown:
-        raise SpringbenchError(f"load {unknown[0]!r} is not in the pack", file=str(args.displacements),
-                               fix=f"the pack's loads: {', '.join(names)}")
-    wanted = names if args.loads is None else [n.strip() for n in args.loads.split(",") if n.strip()]
+        raise SpringbenchError(
+            f"load {unknown[0]!r} is not in the pack",
+            file=str(args.displacements),
+            fix=f"the pack's loads: {', '.join(names)}",
+        )
+    wanted = (
+        names if args.loads is None else [n.strip() for n in args.loads.split(",") if n.strip()]
+    )
     bad = [n for n in wanted if n not in names]
     if bad or not wanted:
-        raise SpringbenchError(f"the pack has no load '{bad[0] if bad else args.loads}'", field="--loads",
-                               fix=f"some of {', '.join(names)}")
+        raise SpringbenchError(
+            f"the pack has no load '{bad[0] if bad else args.loads}'",
+            field="--loads",
+            fix=f"some of {', '.join(names)}",
+        )
     missing = [n for n in wanted if n not in fields]
     if missing:
-        raise SpringbenchError(f"no displacements for load {missing[0]!r} ({len(missing)} of {len(wanted)} missing)",
-                               file=str(args.displacements),
-                               fix="give every load of the pack, or name the ones given with --loads")
+        raise SpringbenchError(
+            f"no displacements for load {missing[0]!r} ({len(missing)} of {len(wanted)} missing)",
+            file=str(args.displacements),
+            fix="give every load of the pack, or name the ones given with --loads",
+        )
     unscored = [n for n in gates if n not in wanted]
     if unscored:
-        raise SpringbenchError(f"--max names '{unscored[0]}', which --loads leaves out", field="--max",
-                               fix="score it, or drop its gate")
+        raise SpringbenchError(
+            f"--max names '{unscored[0]}', which --loads leaves out",
+            field="--max",
+            fix="score it, or drop its gate",
+        )
     _units(args.displacements, pack, {n: fields[n] for n in wanted})
     rows = score_fields(pack, fields, wanted, gates, args.max_g_norm)
     df = pd.DataFrame(rows)
-    print(f"{args.model}: {pack.n_nodes} nodes, {len(wanted)} loads scored against the FEM "
-          f"(E {pack.E:g} Pa, nu {pack.nu:g}); {args.displacements}")
-    print(df.drop(columns=[c for c in ("G_norm_mean",) if c in df]).to_string(
-        index=False, float_format=lambda x: f"{x:.4g}"))
+    print(
+        f"{args.model}: {pack.n_nodes} nodes, {len(wanted)} loads scored against the FEM "
+        f"(E {pack.E:g} Pa, nu {pack.nu:g}); {args.displacements}"
+    )
+    print(
+        df.drop(columns=[c for c in ("G_norm_mean",) if c in df]).to_string(
+            index=False, float_format=lambda x: f"{x:.4g}"
+        )
+    )
     total = rows[-1]
     misses = [r["load"] for r in rows[:-1] if r["status"] == "miss"]
-    print(f"pooled G_norm {total['G_norm']:.4g}, mean over loads {total['G_norm_mean']:.4g}"
-          + (f"; {len(misses)} load(s) over the gate: {', '.join(misses)}" if misses else
-             "; every load meets its gate" if gates or args.max_g_norm is not None else ""))
+    print(
+        f"pooled G_norm {total['G_norm']:.4g}, mean over loads {total['G_norm_mean']:.4g}"
+        + (
+            f"; {len(misses)} load(s) over the gate: {', '.join(misses)}"
+            if misses
+            else "; every load meets its gate"
+            if gates or args.max_g_norm is not None
+            else ""
+        )
+    )
     if args.out is not None:
         atomic_write(args.out, df.to_csv(index=False).encode(), "--out")
         print(f"-> {args.out}")
     if args.junit is not None:
-        atomic_write(args.junit, junit(rows, f"springbench:{Path(args.model).resolve().name}"), "--junit")
+        atomic_write(
+            args.junit, junit(rows, f"springbench:{Path(args.model).resolve().name}"), "--junit"
+        )
         print(f"-> {args.junit}")
     return 1 if misses else 0

@@ -24,7 +24,7 @@ def main(args) -> int:
                 check_case(load_case(f, mode))
         except SpringbenchError as exc:
             bad += 1
-            for line in error_lines(exc):   # one line per mistake
+            for line in error_lines(exc):  # one line per mistake
                 print(f"springbench: error: {line}", file=sys.stderr)
         else:
             print(f"ok  {f}")

@@ -52,9 +52,8 @@ class MujocoSim:
         mj = self.mj
         full = ld.held_nodes[ld.held_components.all(axis=1)]
         previous, self.warnings = mj.get_mju_user_warning(), []
-        mj.set_mju_user_warning(
-            self.warnings.append
-        )  # else MuJoCo writes MUJOCO_LOG.TXT into the cwd
+        # else MuJoCo writes MUJOCO_LOG.TXT into the cwd
+        mj.set_mju_user_warning(self.warnings.append)
         try:
             self.m = mj.MjModel.from_xml_string(
                 _xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu)
@@ -66,9 +65,8 @@ class MujocoSim:
         self.vb = self.m.flex_vertbodyid.copy()
         self.free_nodes = np.flatnonzero(self.vb > 0)
         bodies = self.vb[self.free_nodes]
-        self.dof = (
-            self.m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]
-        )  # (k, 3) each vertex's joints
+        # (k, 3) each vertex's joints
+        self.dof = self.m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]
         self.m.body_mass[bodies] = self.masses[self.free_nodes]
         self.d.xfrc_applied[bodies, :3] = ld.force[self.free_nodes]
         part = ~ld.held_components.all(axis=1)

@@ -51,9 +51,8 @@ class NewtonSim:
     def __init__(self, q, masses, springs=(), tets=(), dt=1e-4, extra=None):
         import warp as wp
 
-        wp.config.log_level = max(
-            wp.config.log_level, wp.LOG_WARNING
-        )  # before Newton initialises Warp: no
+        # before Newton initialises Warp: no
+        wp.config.log_level = max(wp.config.log_level, wp.LOG_WARNING)
         #                                                                   banner or module log
         # on stdout
         import newton
@@ -62,9 +61,8 @@ class NewtonSim:
         self.q0 = np.asarray(q, float)
         self.masses = np.asarray(masses, float)
         self.springs, self.tets, self.dt = springs, tets, dt
-        self.extra = (
-            None if extra is None else extra()
-        )  # forces Newton has no term for: apply(q, f)
+        # forces Newton has no term for: apply(q, f)
+        self.extra = None if extra is None else extra()
 
     def load(self, held_nodes, held_components, force):
         """A fresh model and state at rest for this load's holds and forces."""

@@ -92,9 +92,8 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
             kn_stiffness=vol.kv.tolist(),
             kn_shared=bool(vol.shared),
         )
-    elif isinstance(
-        vol, NodeVolumeTerm
-    ):  # springs + one volume term per node (harness/models/volume.py)
+    # springs + one volume term per node (harness/models/volume.py)
+    elif isinstance(vol, NodeVolumeTerm):
         data["units"].update(
             node_volume_rest="m^3 (2-D: m^2, unit thickness)",
             node_volume_element_rest="m^3 (2-D: m^2, unit thickness)",

@@ -168,9 +168,8 @@ def read_mesh(path, fmt: str | None = None) -> Mesh:
     if fmt is None:
         fmt = "bc2000" if looks_like_bc2000(path) else "meshio"
     try:
-        return (
-            MESH_READERS.load(fmt)(path) if fmt in MESH_READERS else read_meshio(path, fmt)
-        )  # meshio's names
+        # meshio's names
+        return MESH_READERS.load(fmt)(path) if fmt in MESH_READERS else read_meshio(path, fmt)
     except FileNotFoundError:
         raise SpringbenchError("file not found", file=str(path), fix="check the path")
     except Exception as exc:  # any parser failure becomes one line

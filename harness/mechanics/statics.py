@@ -110,9 +110,8 @@ def stress_forces(points: np.ndarray, case, stress) -> np.ndarray:
     for fac, cell_centre in zip(facets, inside):
         x = corners[fac]
         size, n = _facet_measure(x)
-        if (
-            cell_centre is not None
-        ):  # outwards, away from the facet's cell (cells may be numbered either way)
+        # outwards, away from the facet's cell (cells may be numbered either way)
+        if cell_centre is not None:
             n *= np.where(np.einsum("ij,ij->i", n, x.mean(axis=1) - cell_centre) < 0, -1.0, 1.0)[
                 :, None
             ]
@@ -280,9 +279,8 @@ class _Factor:
         if np.any(d <= 0):
             _mechanism(K, free_dofs, points, name)
         self.lu = None
-        if (
-            points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K)
-        ):  # else LU (B&C's MT)
+        # else LU (B&C's MT)
+        if points.shape[1] == 3 and K.shape[0] >= MULTIFRONTAL_MIN and _symmetric(K):
             coords = np.repeat(points, 3, axis=0)[free_dofs]  # each dof at its node
             try:
                 self.chol = MultifrontalCholesky(K, _symbolic(K, coords), name)

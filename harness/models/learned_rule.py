@@ -5,7 +5,7 @@
 (harness/models/stiffness_rules.py ``vangelder``). The features phi_j are cheap, vectorised
 and free of the mesh's units and orientation (so k scales as E L in 3-D, as E in 2-D, like
 van Gelder's), and ``c`` has one short vector per dimension, fitted by ``springbench rules
-fit`` (harness/commands/rules.py) on a corpus of meshes against exact answers and shipped
+fit`` (harness/optimize/rule_fit.py) on a corpus of meshes against exact answers and shipped
 in learned_rule.json beside this module. All c = 0 is van Gelder's rule.
 
 Features of spring e (``FEATURES[dim]``, in this order), t = nu - NU0:

@@ -122,9 +122,8 @@ class MTTerm:
         f = body.element_forces(points[cells])  # the rest shape must be force-free
         scale = np.abs(s[:, :3] * body.L0).max(axis=1)
         bad = np.flatnonzero(np.abs(f).max(axis=(1, 2)) > 1e-9 * scale)
-        if len(
-            bad
-        ):  # a hex face that is no rectangle: the program's bilinear weights miss the axis ends
+        # a hex face that is no rectangle: the program's bilinear weights miss the axis ends
+        if len(bad):
             raise ModelError(
                 f"model class 'mt': elements {bad[:5].tolist()} are not force-free at rest (B&C's "
                 "hexahedron weights its axis ends exactly on rectangular faces only)",

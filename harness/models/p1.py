@@ -83,9 +83,8 @@ class P1Term:
         """C (n*dim, m*nv): sqrt(V_e) B_e^T L_e, element by element."""
         n, dim = points.shape
         B = strain_matrices(np.asarray(points, float), self.elements)
-        c = (
-            np.einsum("mvk,mvw->mkw", B, self.L) * np.sqrt(self.V0)[:, None, None]
-        )  # (m, nn*dim, nv)
+        # (m, nn*dim, nv)
+        c = np.einsum("mvk,mvw->mkw", B, self.L) * np.sqrt(self.V0)[:, None, None]
         m, nd, nv = c.shape
         rows = (self.elements[:, :, None] * dim + np.arange(dim)).reshape(m, nd)
         rows = np.repeat(rows[:, :, None], nv, axis=2)

@@ -62,9 +62,8 @@ from harness.models.springs import spring_directions
 from harness.models.topology import element_pairs
 from harness.registry import STIFFNESS_RULES
 
-RULES = (
-    STIFFNESS_RULES.names()
-)  # each rule(points, springs, cells, material) -> k, registered by name
+# each rule(points, springs, cells, material) -> k, registered by name
+RULES = STIFFNESS_RULES.names()
 
 
 def voigt_dyad(n: np.ndarray) -> np.ndarray:
@@ -211,9 +210,8 @@ def fem_element_stiffness(
         d = p.shape[2]
         T = p[:, 1:] - p[:, :1]  # (m, d, d) rows: edge vectors
         Tinv = np.linalg.inv(T)
-        G = np.concatenate(
-            [-Tinv.sum(axis=2, keepdims=True), Tinv], axis=2
-        )  # (m, d, d+1): grad of N_i
+        # (m, d, d+1): grad of N_i
+        G = np.concatenate([-Tinv.sum(axis=2, keepdims=True), Tinv], axis=2)
         dN = np.transpose(G, (0, 2, 1))
         vol = np.abs(np.linalg.det(T)) / (2 if d == 2 else 6)
         B = _bmatrix(dN)

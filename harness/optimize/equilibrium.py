@@ -79,9 +79,8 @@ def equilibrium_gap_factors(problem: FitProblem, options: dict | None = None):
             field="optimizer.method",
             fix="check the reference displacements or use lbfgs",
         )
-    reg = float(opts["reg"]) * (
-        d + 1e-3 * float(np.mean(d))
-    )  # every column gets some: zero columns -> k0
+    # every column gets some: zero columns -> k0
+    reg = float(opts["reg"]) * (d + 1e-3 * float(np.mean(d)))
     N = (N + sp.diags(reg)).tocsr()
     rhs = A.T @ b + reg  # reg * (x - 1): prior x = 1
     its = [0]

@@ -146,20 +146,17 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         rtol = float(opts["cg_rtol"])  # fixed: a loose Eisenstat-Walker forcing term did worse here
         try:
             p, _ = spla_.cg(A, -g, rtol=rtol, maxiter=int(opts["cg_maxiter"]), callback=cb, M=Minv)
-        except (
-            _Out
-        ):  # out of time: a truncated CG iterate is still a descent direction; try it once
+        # out of time: a truncated CG iterate is still a descent direction; try it once
+        except _Out:
             stop = "max_seconds"
             if last[0] is None:
                 break
             p = last[0]
-        pred = -(g @ p) - 0.5 * (
-            float(np.sum(Jc.matvec(expand(p)) ** 2))
-        )  # model decrease of G^2/2
+        # model decrease of G^2/2
+        pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(expand(p)) ** 2)))
         n_solves += Jc.n_solves
-        for t in (
-            (1.0,) if stop == "max_seconds" else (1.0, 0.25, 1 / 16)
-        ):  # backtrack before giving up
+        # backtrack before giving up
+        for t in (1.0,) if stop == "max_seconds" else (1.0, 0.25, 1 / 16):
             if t < 1 and deadline is not None and time.perf_counter() >= deadline - t_fac:
                 stop = "max_seconds"
                 break

@@ -82,9 +82,8 @@ def sparse_factor(ls, k):
     if ls.coords is None or ls.B.shape[0] <= SPARSE_MIN:
         return ls.factor(k)
     K = ls.stiffness(k)
-    sym = per_matrix(
-        ls.B, "symbolic-sa", lambda: Symbolic(K, ls.coords, leaf=SOLVE_LEAF)
-    )  # every engine's
+    # every engine's
+    sym = per_matrix(ls.B, "symbolic-sa", lambda: Symbolic(K, ls.coords, leaf=SOLVE_LEAF))
     fac = MultifrontalCholesky(K, sym, ls.name)
     if warm_up():  # compiled now, not in the timed loop; inverted diagonal blocks: every
         fac._flat(drop=True)  # solve with this factor takes the compiled path

@@ -312,9 +312,8 @@ class LoadSet:
                 if self.coords is not None and self.coords.shape[1] == 3
                 else "superlu"
             )
-        if (
-            kind == "multifrontal" and self.coords is not None
-        ):  # above DENSE_FACTOR_MAX: 1,680 dofs, 24
+        # above DENSE_FACTOR_MAX: 1,680 dofs, 24
+        if kind == "multifrontal" and self.coords is not None:
             # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
             K = self.stiffness(k)
             return MultifrontalCholesky(
@@ -352,9 +351,8 @@ def _stiffness_map(B: sp.csc_matrix):
     pattern = (abs(B) @ abs(B).T).tocsc()
     pattern.sort_indices()
     pattern.data[:] = 0.0
-    keys = (
-        np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
-    )  # col*n + row
+    # col*n + row
+    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
     cnt = np.diff(B.indptr)
     rows, cols, vals = [], [], []
     for a in range(cnt.max(initial=0)):

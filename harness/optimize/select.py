@@ -378,9 +378,8 @@ def select(
     for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
         status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
         r = fit_result(cp, cand, dict(final or options), x0, features)
-        fits.append(
-            (r["info"]["phi"], r["k"], str(r["info"].get("stop")))
-        )  # the training objective, prior included
+        # the training objective, prior included
+        fits.append((r["info"]["phi"], r["k"], str(r["info"].get("stop"))))
     fits.sort(key=lambda t: t[0])
     return Selection(
         cand.name,

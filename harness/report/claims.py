@@ -248,9 +248,8 @@ def headline_findings(suites) -> list[str]:
             ValueError,
         ):  # a foreign or partial summary: no sentence, never a crash
             continue
-        k, m = (
-            coarse(df) if suite.name != "verification" else (0, 0)
-        )  # there: the estimate against tol
+        # there: the estimate against tol
+        k, m = coarse(df) if suite.name != "verification" else (0, 0)
         if k:
             counts.append(f"{k} of {m} in {NAMES.get(suite.name, suite.name)}")
     if counts:

@@ -165,9 +165,8 @@ def case_lines(df):
             else g.iloc[:0]
         )
         rows = _averaged(scored) if len(scored) else []
-        fits = [
-            r for r in rows if fitted(r) and str(r.get("objective", "G")) in ("G", "nan")
-        ]  # not G+freq
+        # not G+freq
+        fits = [r for r in rows if fitted(r) and str(r.get("objective", "G")) in ("G", "nan")]
         rules = [r for r in rows if is_rule(r)]
         pool = fits or rules or rows
         if pool:

@@ -482,9 +482,8 @@ def generic_tables(df) -> list:
     ]
 
 
-FINDINGS_ONLY = (
-    "nu_sweep",
-)  # sections that show their figures and findings (harness/report/claims.py), no table
+# sections that show their figures and findings (harness/report/claims.py), no table
+FINDINGS_ONLY = "nu_sweep"
 
 
 def headline_tables(suite: str, df) -> list:

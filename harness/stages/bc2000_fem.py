@@ -42,9 +42,8 @@ def fem(case, ctx, model, dyn):
     P = mesh.points
     ctx.status("FEM reference")
     ref = reference_solve(case)
-    loads = linear.case_loads(
-        P, case, lumped_masses(P, _cells(mesh), case.material.density)
-    )  # gravity: rho V
+    # gravity: rho V
+    loads = linear.case_loads(P, case, lumped_masses(P, _cells(mesh), case.material.density))
     classes = classify_nodes(P, case.body.bbox())
     weights = case_weights(case)
     u_ref = reference_displacements(ref, P, loads.names)
@@ -52,9 +51,8 @@ def fem(case, ctx, model, dyn):
     fit = [loads.names.index(n) for n in case.fit_loads]  # held-out loads: scored, never fitted
     held = [loads.names.index(n) for n in case.heldout]
     fitted = linear.Loads([loads.names[i] for i in fit], loads.free[fit], loads.forces[fit])
-    refcols = ref_columns(
-        ref, P, fitted.names, u_ref[fit], classes, weights
-    )  # same nodes, loads, weights as G
+    # same nodes, loads, weights as G
+    refcols = ref_columns(ref, P, fitted.names, u_ref[fit], classes, weights)
     if held:
         hc = ref_columns(ref, P, [loads.names[i] for i in held], u_ref[held], classes, weights)
         refcols.update(G_ref_heldout=hc["G_ref"], ref_error_heldout=hc["ref_error_max"])
@@ -179,9 +177,8 @@ def fem(case, ctx, model, dyn):
         # (2): uniaxial stress along directions in the x-y plane (harness.mechanics.anisotropy)
         K1 = sum(t * K for t, K in zip(theta1, Ks))
         row.update(_direction_columns(name, K1, P, bbox, pull_loads, fem_dir, aniso, ""))
-        if (
-            name != "MS" and case.material.fibre is None
-        ):  # frame turned with the pull: the mesh's share
+        # frame turned with the pull: the mesh's share
+        if name != "MS" and case.material.fibre is None:
             Kr = [
                 sum(
                     t * K

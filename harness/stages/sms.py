@@ -299,9 +299,8 @@ def _run(case, ctx, spec, cls) -> list[dict]:
             "optimiser not available" if optimize is None else ""
         )
 
-    if (
-        u_ref is not None
-    ):  # every net shares base's nodes, loads and weights: one G_ref for all rows
+    # every net shares base's nodes, loads and weights: one G_ref for all rows
+    if u_ref is not None:
         refcols = scoring.ref_columns(
             ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights
         )
@@ -337,9 +336,8 @@ def _run(case, ctx, spec, cls) -> list[dict]:
             row["freq_error_initial"] = (
                 measures.freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
             )
-            fitted = int(
-                row.get("freq_modes", 0) or 0
-            )  # modes the fit saw; the others are held out
+            # modes the fit saw; the others are held out
+            fitted = int(row.get("freq_modes", 0) or 0)
             if len(freqs["fem"]) > fitted:
                 row["freq_error_heldout"] = measures.freq_error(
                     freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted

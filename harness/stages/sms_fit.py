@@ -87,9 +87,8 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
             modal_free=modal_free,
         )
     k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
-    if (
-        getattr(base, "volume", None) is not None
-    ):  # springs + volume / kn: [k, kv], columns beside B
+    # springs + volume / kn: [k, kv], columns beside B
+    if getattr(base, "volume", None) is not None:
         k0, groups, extra = (
             base.params(),
             base.param_groups(spec["grouped"]),
@@ -121,9 +120,8 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
         field = exc.field or "optimizer"
         if field.startswith("optimizer.options"):
             field = run_["where"] + field[len("optimizer.options") :]
-        elif (
-            field == "optimizer.method" and run_["where"] != "optimizer.options"
-        ):  # the method came from there
+        # the method came from there
+        elif field == "optimizer.method" and run_["where"] != "optimizer.options":
             field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
         raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
     seconds = time.perf_counter() - t0
@@ -166,9 +164,8 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
         row["opt_init"] = str(info["init"]) + (
             " (rejected: worse than k0)" if info.get("init_rejected") else ""
         )
-    if (
-        "prior" in info
-    ):  # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
+    # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
+    if "prior" in info:
         row["opt_prior"] = float(info["prior"])
     row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:

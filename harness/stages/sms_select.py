@@ -136,9 +136,8 @@ def optimise(setting, run_, base, first, first_res=None):
     scored = []
     for k in s.starts:
         net = network(k)
-        same = (
-            first_res is not None and s.choice == "rule"
-        )  # the rule's own constants: solved already
+        # the rule's own constants: solved already
+        same = first_res is not None and s.choice == "rule"
         scored.append((net, *evaluate(net, first_res if same else None)))
     net, res, sc, sh = scored[0]
     stiff = base.info["stiffness"]

@@ -195,9 +195,8 @@ def _axis_weights(g: np.ndarray, x: np.ndarray, amap, origin: float, average: np
     tau, wt = window()
     t = amap.t(x - origin)
     mean = lambda t: (origin + amap.x(t[:, None] + tau[None, :])) @ wt  # noqa: E731
-    for _ in range(
-        20
-    ):  # centre the window so that its samples' mean is x: a linear field stays exact
+    # centre the window so that its samples' mean is x: a linear field stays exact
+    for _ in range(20):
         slope = np.maximum((mean(t + 1e-4) - mean(t - 1e-4)) / 2e-4, 1e-300)
         step = np.where(average, (mean(t) - x) / slope, 0.0)
         t = t - step

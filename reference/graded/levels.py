@@ -237,9 +237,8 @@ def solve_graded(case, status=lambda msg: None, records: list | None = None):
     est = {n: float("nan") for n in names}
     mirrors = {l.name: mirror_of(case, l) for l in case.loads}
     history = []
-    first = (
-        -(-spec.divisions // 2) if spec.divisions else FIRST
-    )  # divisions: cells along the shortest side
+    # divisions: cells along the shortest side
+    first = -(-spec.divisions // 2) if spec.divisions else FIRST
     cap = (TENSOR_MAX_DOFS if spec.solver in ("auto", "tensor") else MAX_DOFS)[case.dim]
 
     def largest(n: int) -> int:
@@ -275,9 +274,8 @@ def solve_graded(case, status=lambda msg: None, records: list | None = None):
                 active.remove(name)  # represented exactly: no further level helps;
                 lev.orders.pop(name, None)  # the coarser of the two (less rounding) goes last
                 lev.fields[name] = lev.fields[name][-1:] + lev.fields[name][-2:-1]
-            elif (
-                len(vals) >= 3
-            ):  # a higher observed order is the next terms at work, not the leading one
+            # a higher observed order is the next terms at work, not the leading one
+            elif len(vals) >= 3:
                 lev.orders[name] = min(FORMAL_ORDER, observed_order(vals[-3:], h[-3:]))
             _, e = extrapolate(vals, h, lev.orders.get(name, float("nan")))
             est[name] = float(e.max()) / scale

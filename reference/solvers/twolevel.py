@@ -47,16 +47,14 @@ def prolongation(d) -> sp.csr_matrix | None:
     fine = skfem.CellBasis(d.mesh, d.elem, mapping=d.mapping, intorder=1)
     coarse = skfem.CellBasis(d.mesh, low, mapping=d.mapping, intorder=1)
     X = np.asarray(d.elem.doflocs, float).T  # dim, nloc fine (reference cell)
-    local = np.stack(
-        [low.lbasis(X, j)[0] for j in range(low.doflocs.shape[0])], axis=1
-    )  # nloc fine, nloc coarse
+    # nloc fine, nloc coarse
+    local = np.stack([low.lbasis(X, j)[0] for j in range(low.doflocs.shape[0])], axis=1)
     i, j = np.nonzero(np.abs(local) > 1e-14)
     rows = fine.element_dofs[i].ravel()
     cols = coarse.element_dofs[j].ravel()
     vals = np.repeat(local[i, j], fine.element_dofs.shape[1])
-    key, first = np.unique(
-        rows.astype(np.int64) * coarse.N + cols, return_index=True
-    )  # shared dofs once
+    # shared dofs once
+    key, first = np.unique(rows.astype(np.int64) * coarse.N + cols, return_index=True)
     Ps = sp.csr_matrix((vals[first], (key // coarse.N, key % coarse.N)), shape=(fine.N, coarse.N))
     return sp.csr_matrix(sp.kron(Ps, sp.identity(d.dim), format="csr"))
 
@@ -77,9 +75,8 @@ class TwoLevel:
         near_null: np.ndarray | None = None,
     ):
         P = sp.csr_matrix(P)
-        used = np.flatnonzero(
-            np.asarray(abs(P).sum(axis=0)).ravel() > 0
-        )  # coarse dofs on free dofs
+        # coarse dofs on free dofs
+        used = np.flatnonzero(np.asarray(abs(P).sum(axis=0)).ravel() > 0)
         P = sp.csr_matrix(P[:, used])
         self.As = As
         self.Ps = sp.csr_matrix(P.multiply((1.0 / s)[:, None]))
@@ -92,9 +89,8 @@ class TwoLevel:
         self.sc = 1.0 / np.sqrt(dc)
         Acs = sp.csr_matrix(Ac.multiply(self.sc[:, None]).multiply(self.sc[None, :]))
         weight = np.asarray(abs(P).sum(axis=0)).ravel()
-        cc = (
-            np.asarray(abs(P).T @ coords) / weight[:, None]
-        )  # each coarse dof at its support's centre
+        # each coarse dof at its support's centre
+        cc = np.asarray(abs(P).T @ coords) / weight[:, None]
         sym = Symbolic(Acs, cc)
         est = sym.estimate()
         self.info = {"coarse_dofs": int(Acs.shape[0]), "coarse_gflop": est["gflop"]}

@@ -11,18 +11,20 @@ import pytest
 
 from harness import cli
 from harness.bench import heldout as H
+from harness.bench import heldout_bodies as B
+from harness.bench import heldout_judge as J
 from harness.registry import BENCHES
 
 pytest.importorskip("gmsh")
 L, A = 0.5, 0.1                     # the test bar: [0, L] x [0, A] x [0, A]
-BAR = H.Body("bar", lambda occ: occ.addBox(0, 0, 0, L, A, A), H._near(0, A / 2, A / 2), H._near(L, A / 2, A / 2),
+BAR = B.Body("bar", lambda occ: occ.addBox(0, 0, 0, L, A, A), B._near(0, A / 2, A / 2), B._near(L, A / 2, A / 2),
              ((0, -1, 0), (0, 0, 1)), (0, 0, -1))
 
 
 @pytest.fixture(scope="module")
 def bar(tmp_path_factory):
     path = tmp_path_factory.mktemp("bar") / "bar.msh"
-    H.make_body(BAR, path, 400)
+    B.make_body(BAR, path, 400)
     return path
 
 
@@ -30,22 +32,22 @@ def bar(tmp_path_factory):
 def test_truth_meets_closed_forms(bar, refine):
     """nu = 0, x = 0 clamped: a pull s e_x on x = L gives u = (s x / E, 0, 0); the bar
     hanging under rho g e_x gives u_x = rho g (L x - x^2 / 2) / E (both exact in P2)."""
-    points, tets, groups = H.read_body(bar)
-    loads = [H.Load("pull", ("clamp",), H.constant((1.0, 0, 0))), H.Load("hang", ("clamp",), gravity=(1.0, 0, 0))]
-    fem = H.truth(points, tets, groups, loads, nu=0.0, refine=refine)
+    points, tets, groups = B.read_body(bar)
+    loads = [J.Load("pull", ("clamp",), J.constant((1.0, 0, 0))), J.Load("hang", ("clamp",), gravity=(1.0, 0, 0))]
+    fem = J.truth(points, tets, groups, loads, nu=0.0, refine=refine)
     x, zero = points[:, 0], np.zeros(len(points))
-    exact = {"pull": np.c_[x / H.E, zero, zero], "hang": np.c_[H.RHO * (L * x - x ** 2 / 2) / H.E, zero, zero]}
+    exact = {"pull": np.c_[x / J.E, zero, zero], "hang": np.c_[J.RHO * (L * x - x ** 2 / 2) / J.E, zero, zero]}
     for name, u in exact.items():
         assert np.abs(fem[name][0] - u).max() <= 1e-10 * np.abs(u).max(), name
-    assert fem["pull"][1] == pytest.approx(1 / H.E, rel=1e-8)          # the strain peak: s / E everywhere
+    assert fem["pull"][1] == pytest.approx(1 / J.E, rel=1e-8)          # the strain peak: s / E everywhere
 
 
 def test_bodies_groups_are_what_calibrate_reads(tmp_path):
     from harness.io.meshfile import read_mesh
-    for body in H.BODIES:
+    for body in B.BODIES:
         path = tmp_path / f"{body.name}.msh"
-        n = H.make_body(body, path, 800)
-        points, tets, groups = H.read_body(path)
+        n = B.make_body(body, path, 800)
+        points, tets, groups = B.read_body(path)
         m = read_mesh(path)
         assert len(tets) == n and np.array_equal(m.points, points) and np.array_equal(m.cells["tetra"], tets)
         for g in ("clamp", "load"):
@@ -109,12 +111,12 @@ def test_network_statics_equals_springbench(bar, tmp_path, model):
     assert cli.main(["calibrate", str(bar), "--E", "1e5", "--nu", "0.3", "--method", "rule", "--rule", "lloyd",
                      "--model", model, "--max-refine", "0", "--heldout", "none", "--out", str(out)]) == 0
     data = json.loads(out.with_suffix(".json").read_text())
-    points, tets, groups = H.read_body(bar)
-    c, n, _ = H.face_frame(points, groups["load"])
-    loads = [H.Load("shear", ("clamp",), H.constant((0, -1.0, 0))), H.Load("twist", ("clamp",), H.twisting(n, c)),
-             H.Load("gravity", ("clamp",), gravity=(0, 0, -1.0)),
-             H.Load("gravity_2", ("clamp", "load"), gravity=(0, 0, -1.0))]
-    mine = H.model_answers(data, points, groups, loads, {ld.name: 1.0 for ld in loads})
+    points, tets, groups = B.read_body(bar)
+    c, n, _ = J.face_frame(points, groups["load"])
+    loads = [J.Load("shear", ("clamp",), J.constant((0, -1.0, 0))), J.Load("twist", ("clamp",), J.twisting(n, c)),
+             J.Load("gravity", ("clamp",), gravity=(0, 0, -1.0)),
+             J.Load("gravity_2", ("clamp", "load"), gravity=(0, 0, -1.0))]
+    mine = J.model_answers(data, points, groups, loads, {ld.name: 1.0 for ld in loads})
     net, _ = read_vtu(out)
     if model == "springs+volume":          # the term as harness.models.volume saves it, from the JSON
         from harness.models import volume
@@ -142,9 +144,9 @@ def test_small_study_end_to_end(tmp_path):
     """One small body, one nu, calibrate (5 s budget) and two rules: every row finite, the
     best rule's ratio 1, the summary and the verdict well formed."""
     import pandas as pd
-    body = H.BODIES[0]
+    body = B.BODIES[0]
     mesh = tmp_path / "bracket.msh"
-    H.make_body(body, mesh, 600)
+    B.make_body(body, mesh, 600)
     df = H.summarise(pd.DataFrame(H.study_one(body, mesh, 0.3, tmp_path, rules=("lloyd", "deussen"), budget=5)))
     per = df[df.load != "geomean"]
     assert len(per) == 3 * 5 and np.isfinite(per.err).all() and (per.err > 0).all() and (per.err < 2).all()

@@ -42,13 +42,14 @@ def calibrate_case(tmp_path, mesh, groups=False):
     """The case calibrate builds for a mesh (its default end loads, or the groups 'clamp'
     and 'tip'), with the reference on the user's mesh itself (P2, no refinement)."""
     from harness.commands import calibrate as cal
+    from harness.commands.calibrate_case import case_text
     m = read_mesh(mesh)
     p = argparse.ArgumentParser()
     cal.add_arguments(p)
     args = p.parse_args([str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO), "--method", "rule",
                          "--max-refine", "0", "--out", str(tmp_path / "m.vtu")])
     ends = end_loads(m.points, m.cells, *(("clamp", "tip", m.groups) if groups else ()))
-    (tmp_path / "c.toml").write_text(cal.case_text(args, m.dim, m.cells, ends=ends))
+    (tmp_path / "c.toml").write_text(case_text(args, m.dim, m.cells, ends=ends))
     return load_case(tmp_path / "c.toml"), m, ends
 
 

@@ -191,7 +191,7 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     in the FEM and the spring model."""
     import reference
     from harness.case.default_loads import end_loads
-    from harness.commands import calibrate as cal
+    from harness.commands.calibrate_case import case_text
     from harness.mechanics import statics
     from harness.models.sms import build_network
     mesh = cyls[0.05]
@@ -204,7 +204,7 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     assert data["loads_heldout"] == ["sag", "tip", "tip2", "torsion", "bridge"] and np.isfinite(data["G_norm_heldout"])
     m = read_mesh(mesh)
     args = cal_args(mesh, out)
-    text = cal.case_text(args, 3, m.cells, ends=end_loads(m.points, m.cells, "clamp", "tip", m.groups))
+    text = case_text(args, 3, m.cells, ends=end_loads(m.points, m.cells, "clamp", "tip", m.groups))
     (tmp_path / "c.toml").write_text(text)
     c = load_case(tmp_path / "c.toml")
     c = dataclasses.replace(c, loads=tuple(l for l in c.loads if l.name == "torsion"))

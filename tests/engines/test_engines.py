@@ -116,9 +116,9 @@ def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_pat
     """An export with one volume term per node (calibrate --model springs+node-volume) at nu
     = 0.45: Newton has no such term, the adapter adds its forces by Warp kernels; its
     equilibrium is the export's linear statics (K from the JSON's keys as written in
-    harness/bench/heldout.py) to <= 1e-3, and the term matters (the springs alone differ)."""
+    harness/bench/heldout_judge.py) to <= 1e-3, and the term matters (the springs alone differ)."""
     pytest.importorskip("newton")
-    from harness.bench.heldout import network_stiffness
+    from harness.bench.heldout_judge import network_stiffness
     from harness.engines import adapter
     from harness.export.pack import Pack
     _, by_size = packs

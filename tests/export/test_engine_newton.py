@@ -14,7 +14,7 @@ import pytest
 from harness import cli
 from harness.case.default_loads import end_loads
 from harness.case.reader import load_case
-from harness.commands import calibrate as cal
+from harness.commands import calibrate_case
 from harness.export.vtu import read_vtu
 from harness.io.meshfile import read_mesh
 from harness.mechanics import statics
@@ -36,7 +36,7 @@ def calibrated(tmp_path, mesh, *argv):
     args = argparse.Namespace(mesh=mesh, format=None, E=E, nu=NU, density=RHO, plane="stress", magnitude=S, peak_strain=1e-3,
                               rule="lloyd", method="rule", init="none", budget=1.0, loads="homogeneous",
                               masses="lumped", tol=1e-3, max_refine=0, solver="auto")
-    (tmp_path / "c.toml").write_text(cal.case_text(args, m.dim, m.cells, ends=end_loads(m.points, m.cells)))
+    (tmp_path / "c.toml").write_text(calibrate_case.case_text(args, m.dim, m.cells, ends=end_loads(m.points, m.cells)))
     net, _ = read_vtu(out)
     return json.loads(out.with_suffix(".json").read_text()), load_case(tmp_path / "c.toml"), net
 

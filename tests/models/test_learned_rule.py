@@ -1,5 +1,5 @@
 """The learned stiffness rule (harness/models/learned_rule.py) and its fit
-(``springbench rules fit``, harness/commands/rules.py)."""
+(``springbench rules fit``, harness/optimize/rule_fit.py)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ import scipy.sparse.linalg as spla
 
 from harness import cli
 from harness.case.reader import Material
-from harness.commands import rules
 from harness.models import learned_rule as lr
 from harness.models.stiffness_rules import spring_constants, vangelder
+from harness.optimize import rule_fit as rules
 from tests import meshes
 
 CORPUS = Path(__file__).resolve().parents[2] / "cases" / "rules_corpus"

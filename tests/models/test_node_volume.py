@@ -3,7 +3,7 @@ differences of its energy, no energy under rigid motions, the rank-one-per-node 
 against the force Jacobian and a hand-assembled sum, the nodal dilatation of a homogeneous
 strain (tr eps at every node, boundary ones too: the term adds kv to lambda), no locking
 where one term per element locks, the save/load round trip and the exported JSON's
-stiffness (written independently in harness/bench/heldout.py) against the model's."""
+stiffness (written independently in harness/bench/heldout_judge.py) against the model's."""
 
 import json
 
@@ -121,7 +121,7 @@ def test_one_term_per_element_locks_one_per_node_does_not():
 
 
 def test_save_load_and_the_exported_stiffness(tmp_path):
-    from harness.bench.heldout import network_stiffness
+    from harness.bench.heldout_judge import network_stiffness
     from harness.export.model_json import export
     from harness.mechanics.statics import _stiffness
     from harness.models.sms import SpringNetwork

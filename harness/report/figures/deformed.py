@@ -70,16 +70,14 @@ def _one(src: Path, folder: Path) -> Path | None:
         for l in loads
     }
     umax = max(float(np.nanmax(np.abs(np.concatenate(u)))) for u in us.values())
-    frac = (
-        0.2 if dim == 3 else 0.1
-    )  # default magnification: the largest displacement at this part of the size
+    # default magnification: the largest displacement at this part of the size
+    frac = 0.2 if dim == 3 else 0.1
     scale = float(data["scale"]) if "scale" in data else (frac * size / umax if umax > 0 else 1.0)
     cols = min(len(loads), 3 if len(loads) > 4 else 2 if len(loads) > 1 else 1)
     rows = math.ceil(len(loads) / cols)
     fig = pyplot().figure(figsize=(3.6 * cols, (3.9 if dim == 3 else 3.5) * rows))
-    kw = (
-        {"projection": "3d", "computed_zorder": False} if dim == 3 else {}
-    )  # 3-D: drawn in call order
+    # 3-D: drawn in call order
+    kw = {"projection": "3d", "computed_zorder": False} if dim == 3 else {}
     for i, load in enumerate(loads):
         ax = fig.add_subplot(rows, cols, i + 1, **kw)
         u_ref, u = us[load]
@@ -118,9 +116,8 @@ def _one(src: Path, folder: Path) -> Path | None:
 
 def _lines(ax, p, springs, dim, colors, linewidths):
     seg = p[springs]
-    if (
-        dim == 3
-    ):  # one polyline, the springs separated by NaN gaps (plain matplotlib, no mpl_toolkits)
+    # one polyline, the springs separated by NaN gaps (plain matplotlib, no mpl_toolkits)
+    if dim == 3:
         gaps = np.concatenate([seg, np.full((len(seg), 1, 3), np.nan)], axis=1).reshape(-1, 3)
         ax.plot(gaps[:, 0], gaps[:, 1], gaps[:, 2], color=colors, linewidth=linewidths)
     else:

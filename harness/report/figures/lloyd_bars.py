@@ -59,9 +59,8 @@ def make(folder: Path) -> list[Path]:
             capsize=2,
         )
     if log_if_decades(ax, np.concatenate([v["mean"].to_numpy(float) for v in bars.values()])):
-        ax.set_ylim(
-            bottom=0.5 * min(float(v["mean"].min()) for v in bars.values())
-        )  # bars start below the data
+        # bars start below the data
+        ax.set_ylim(bottom=0.5 * min(float(v["mean"].min()) for v in bars.values()))
     ax.set_title("ours: G before / after optimisation (mean, std over seeds)", fontsize=9)
     ax.set_ylabel(f"G ({LENGTH_UNIT})")
     series = {f"ours{label[m]}": bars[f"G_final{label[m]}"]["mean"].to_numpy() for m in methods}

@@ -1,0 +1,244 @@
+"""The held-out study's judge, independent of springbench's FEM and statics: the study's
+loads, the truth (P2 on the body's mesh with scikit-fem) and the exported JSON's linear
+statics assembled here (springs, volume terms, kn terms)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from harness.bench.heldout_bodies import Body
+
+E, RHO = 1e5, 1000.0
+
+
+@dataclass(frozen=True)
+class Load:
+    """traction(x) (3, ...) -> (3, ...) on the load group, or a gravity vector; held: the
+    groups whose nodes are held."""
+
+    name: str
+    held: tuple
+    traction: object = None
+    gravity: tuple | None = None
+
+
+def face_frame(points, tris):
+    """(area-weighted centroid (3,), unit normal (3,), area) of a planar group."""
+    x = points[tris]
+    a = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]) / 2
+    area = np.linalg.norm(a, axis=1)
+    c = (x.mean(axis=1) * area[:, None]).sum(0) / area.sum()
+    n = a.sum(0)
+    return c, n / np.linalg.norm(n), area.sum()
+
+
+def constant(d):
+    """The traction field t(x) = d (x: (3, ...) -> (3, ...))."""
+    d = np.asarray(d, float)
+    return lambda x: np.broadcast_to(d.reshape((3,) + (1,) * (x.ndim - 1)), x.shape)
+
+
+def twisting(axis, centre):
+    """The traction field t(x) = axis x (x - centre)."""
+    a, c = np.asarray(axis, float), np.asarray(centre, float)
+    return lambda x: np.cross(a, x - c.reshape((3,) + (1,) * (x.ndim - 1)), axis=0)
+
+
+def study_loads(body: Body, points, groups) -> list[Load]:
+    """The study's loads of a body (unit magnitudes; scaled by the truth later)."""
+    c, n, _ = face_frame(points, groups["load"])
+    return [
+        Load("shear_a", ("clamp",), constant(body.across[0])),
+        Load("shear_b", ("clamp",), constant(body.across[1])),
+        Load("twist", ("clamp",), twisting(n, c)),
+        Load("gravity", ("clamp",), gravity=body.gravity),
+        Load("gravity_2", ("clamp", "load"), gravity=body.gravity),
+    ]
+
+
+# -- truth: P2, scikit-fem -----------------------------------------------------------------
+
+
+def _key(tri: np.ndarray, n: int) -> np.ndarray:
+    s = np.sort(np.asarray(tri, np.int64), axis=1)
+    return (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+
+
+def truth(points, tets, groups, loads, nu, rho=RHO, refine=False):
+    """{load: (u at the vertices (n, 3), strain peak)} of the P2 solution, each load at unit
+    magnitude; the P2 mesh is ``tets`` refined once (refine) or itself."""
+    from skfem import Basis, ElementTetP2, ElementVector, FacetBasis, LinearForm, MeshTet, asm
+    from skfem.helpers import dot, sym_grad
+    from skfem.models.elasticity import lame_parameters, linear_elasticity
+
+    n = len(points)
+    coarse = MeshTet(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
+    mesh = coarse.refined() if refine else coarse
+    parents = np.repeat(np.arange(n)[:, None], 2, axis=1)
+    if refine:  # vertex n + j is the midpoint of coarse edge j
+        assert np.allclose(mesh.p[:, n:], coarse.p[:, coarse.edges].mean(axis=1))
+        parents = np.vstack([parents, coarse.edges.T])
+    bf = mesh.boundary_facets()
+    fv = parents[mesh.facets[:, bf].T].reshape(len(bf), -1)  # each boundary facet's parents
+    fv = np.sort(fv, axis=1)
+    distinct = np.c_[fv[:, :1], np.where(np.diff(fv, axis=1) > 0, fv[:, 1:], -1)]
+    tri = np.sort(distinct, axis=1)[:, -3:]  # its parent triangle's vertices
+    keys = _key(tri, n)
+
+    def facets(group):
+        return bf[np.isin(keys, _key(groups[group], n))]
+
+    lam, mu = lame_parameters(E, nu)
+    e = ElementVector(ElementTetP2())
+    basis = Basis(mesh, e, intorder=4)
+    K = asm(linear_elasticity(lam, mu), basis).tocsc()
+    out, lus = {}, {}
+    for load in loads:
+        if load.held not in lus:
+            held = np.unique(
+                np.concatenate([basis.get_dofs(facets=facets(g)).all() for g in load.held])
+            )
+            free = np.setdiff1d(np.arange(basis.N), held)
+            lus[load.held] = (free, spla.splu(K[free][:, free], permc_spec="MMD_AT_PLUS_A"))
+        free, lu = lus[load.held]
+        if load.traction is not None:
+            fb = FacetBasis(mesh, e, facets=facets("load"), intorder=4)
+            b = asm(LinearForm(lambda v, w: dot(load.traction(w.x), v)), fb)
+        else:
+            g = rho * np.asarray(load.gravity, float)
+            b = asm(LinearForm(lambda v, w: g[0] * v[0] + g[1] * v[1] + g[2] * v[2]), basis)
+        u = np.zeros(basis.N)
+        u[free] = lu.solve(b[free])
+        eps = sym_grad(basis.interpolate(u))
+        peak = np.percentile(np.sqrt(np.einsum("ij...,ij...->...", eps, eps)), 99)
+        out[load.name] = (u[basis.nodal_dofs[:, :n]].T.copy(), float(peak))
+    return out
+
+
+# -- the exported network's statics --------------------------------------------------------
+
+
+def network_stiffness(data: dict) -> sp.csr_matrix:
+    """K (3n, 3n) of an exported model at rest: springs, volume terms (per element or per node),
+    kn terms."""
+    x = np.asarray(data["particle_q"], float)
+    n = len(x)
+    s = np.asarray(data["spring_indices"], int)
+    d = x[s[:, 1]] - x[s[:, 0]]
+    L = np.linalg.norm(d, axis=1)
+    b = d / L[:, None]
+    G = _rows(np.c_[-b, b], s, n)  # (springs, 3n): dl/du
+    K = G.T @ sp.diags(np.asarray(data["spring_stiffness"], float)) @ G
+    if "volume_indices" in data:  # kv/2 (V - V0)^2 / V0 per element
+        kv = np.asarray(data["volume_stiffness"], float) / np.asarray(data["volume_rest"], float)
+        Gv = _volume_rows(x, np.asarray(data["volume_indices"], int))
+        K = K + Gv.T @ sp.diags(kv) @ Gv
+    if "node_volume_elements" in data:  # kv_a/2 dV_a^2 / V0_a per node
+        t = np.asarray(data["node_volume_elements"], int)
+        a = np.asarray(data["node_volume_nodes"], int)
+        where = np.full(n, -1)
+        where[a] = np.arange(len(a))
+        share = sp.csr_matrix(
+            (np.full(t.size, 0.25), (where[t.ravel()], np.repeat(np.arange(len(t)), 4))),
+            shape=(len(a), len(t)),
+        )
+        Gn = share @ _volume_rows(x, t)  # dV_a/du
+        kv = np.asarray(data["node_volume_stiffness"], float) / np.asarray(
+            data["node_volume_rest"], float
+        )
+        K = K + Gn.T @ sp.diags(kv) @ Gn
+    if "kn_nodes" in data:  # kn_a/2 V_a d^2 s_a^2 per node
+        a = np.asarray(data["kn_nodes"], int)
+        where = np.full(n, -1)
+        where[a] = np.arange(len(a))
+        ends, spring = s.T.ravel(), np.tile(np.arange(len(s)), 2)
+        on = where[ends] >= 0
+        S = sp.csr_matrix(
+            (np.ones(on.sum()), (where[ends[on]], spring[on])), shape=(len(a), len(s))
+        )
+        H = (
+            sp.diags(1 / np.asarray(data["kn_spring_count"], float)) @ S @ sp.diags(1 / L) @ G
+        )  # ds_a/du
+        c = (
+            np.asarray(data["kn_stiffness"], float)
+            * np.asarray(data["kn_node_volume"], float)
+            * 9.0
+        )
+        K = K + H.T @ sp.diags(c) @ H
+    return sp.csr_matrix(K)
+
+
+def _volume_rows(x: np.ndarray, t: np.ndarray) -> sp.csr_matrix:
+    """(m, 3n): dV_e/du of the tetrahedra t at positions x."""
+    e = x[t[:, 1:]] - x[t[:, :1]]
+    g = (
+        np.stack(
+            [np.cross(e[:, 1], e[:, 2]), np.cross(e[:, 2], e[:, 0]), np.cross(e[:, 0], e[:, 1])], 1
+        )
+        / 6
+    )
+    return _rows(np.c_[-g.sum(1), g.reshape(len(t), 9)], t, len(x))
+
+
+def _rows(blocks: np.ndarray, nodes: np.ndarray, n: int) -> sp.csr_matrix:
+    """(m, 3n) sparse rows: row r holds blocks[r, 3j:3j+3] at the dofs of node nodes[r, j]."""
+    m, k = nodes.shape
+    cols = (3 * nodes[:, :, None] + np.arange(3)).reshape(m, 3 * k)
+    return sp.csr_matrix(
+        (blocks.ravel(), (np.repeat(np.arange(m), 3 * k), cols.ravel())), shape=(m, 3 * n)
+    )
+
+
+def traction_forces(points, tris, traction) -> np.ndarray:
+    """(n, 3) P1-consistent nodal forces of a traction linear over each triangle:
+    f_i = A/3 (t_c + (t_i - t_c)/4), t_i its value at vertex i, t_c their mean."""
+    x = points[tris]
+    area = np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1) / 2
+    t = np.moveaxis(traction(np.moveaxis(x, 2, 0)), 0, 2)  # (m, 3 vertices, 3)
+    tc = t.mean(axis=1, keepdims=True)
+    f = np.zeros(points.shape)
+    np.add.at(f, tris.ravel(), ((area / 3)[:, None, None] * (tc + (t - tc) / 4)).reshape(-1, 3))
+    return f
+
+
+def model_solve(K, held: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """u (n, 3) of K u = f with the nodes ``held`` (indices) fixed."""
+    n = len(f)
+    fixed = np.zeros((n, 3), bool)
+    fixed[held] = True
+    free = np.flatnonzero(~fixed.ravel())
+    u = np.zeros(3 * n)
+    u[free] = spla.spsolve(sp.csc_matrix(K[free][:, free]), f.ravel()[free])
+    return u.reshape(n, 3)
+
+
+def model_answers(data: dict, points, groups, loads, scale: dict) -> dict:
+    """{load: u (n, 3) at the mesh's vertices} of an exported model under the study's
+    loads (each times scale[load]); its particles are matched to the vertices."""
+    from scipy.spatial import cKDTree
+
+    q = np.asarray(data["particle_q"], float)
+    dist, order = cKDTree(q).query(points)
+    if (
+        len(q) != len(points)
+        or len(np.unique(order)) != len(q)
+        or np.max(dist) > 1e-9 * np.ptp(points, 0).max()
+    ):
+        raise ValueError("the model's particles are not the mesh's vertices")
+    K = network_stiffness(data)
+    m = np.asarray(data["particle_mass"], float)
+    out = {}
+    for load in loads:
+        if load.traction is not None:
+            f = traction_forces(points, groups["load"], load.traction)
+        else:
+            f = m[order][:, None] * np.asarray(load.gravity, float)[None]
+        held = order[np.unique(np.concatenate([groups[g].ravel() for g in load.held]))]
+        f_model = np.zeros_like(f)
+        f_model[order] = f
+        out[load.name] = scale[load.name] * model_solve(K, held, f_model)[order]
+    return out

@@ -1,0 +1,109 @@
+"""One calibration: the stage run on the calibrate case, the exported row chosen, its network
+read back (with its volume or kn term), and the optional cap on the constants' spread."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import reference
+from harness.commands.calibrate_case import mesh_case, selects
+from harness.commands.calibrate_progress import tracker
+from harness.export.engine import spring_damping, stable_step
+from harness.export.vtu import read_vtu
+from harness.mechanics import statics
+from harness.models.kn import load as load_kn
+from harness.models.volume import load as load_volume
+from harness.progress import Clock
+from harness.scoring import case_weights, fit_and_heldout, ref_status, reference_displacements
+from harness.stages import StageContext
+from harness.stages import sms as stage
+from harness.stages.sms_measures import rank
+
+
+def run(args, mesh, tmp: Path):
+    """(rows, the exported network, the case) of one calibration in the folder tmp."""
+    case = mesh_case(args, mesh, tmp)
+    clock = Clock("calibrate")  # on a terminal only (and not with --quiet)
+    try:
+        ctx = StageContext(
+            out_dir=tmp / "out", seed=args.seed, status=tracker(clock, args.budget, selects(args))
+        )
+        rows = stage.run(case, ctx)
+    finally:
+        clock.close()
+    if args.method == "rule":
+        exported = min(rows, key=rank) if args.rule == "best" else rows[0]
+    else:
+        exported = rows[-1]
+    tag = (
+        exported["stiffness"]
+        if exported.get("optimizer", "none") == "none"
+        else f"{exported['stiffness']}-select"
+        if "choice" in exported
+        else f"{exported['stiffness']}-{exported['optimizer']}"
+    )
+    net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
+    if (ctx.out_dir / f"volume-{tag}.npz").exists():  # springs + volume: the term beside the VTU
+        net = load_volume(ctx.out_dir / f"volume-{tag}.npz", net)
+    if (ctx.out_dir / f"kn-{tag}.npz").exists():  # springs + kn (harness/models/kn.py)
+        net = load_kn(ctx.out_dir / f"kn-{tag}.npz", net)
+    if args.k_ratio is not None:
+        capped = capped_row(net, case, exported, args.k_ratio, args.damping_ratio)
+        rows.append(capped)
+        net, exported = capped.pop("_net"), capped
+    for r in rows:
+        r["exported"] = r is exported
+    validation = ctx.out_dir / "validation.csv"
+    if validation.exists():  # the validated fit's table (harness/stages/sms_select.py)
+        exported["_validation"] = pd.read_csv(validation).to_dict("records")
+    return rows, net, case
+
+
+# the columns a capped row keeps from the row it caps
+KEPT = ("model", "stiffness", "n_nodes", "n_springs", "seed", "G_ref", "G_ref_heldout")
+KEPT += ("ref_error_max", "ref_error_heldout")
+
+
+def capped_row(net, case, row, ratio: float, zeta: float) -> dict:
+    """The exported constants capped at ratio x their median, scored like the stage does
+    (fitted and held-out loads), with the stable step of both (what the cap gains)."""
+
+    k = np.asarray(net.k, float)
+    capped = net.with_k(np.minimum(k, ratio * np.median(k)))
+    ref = reference.solve(case)  # cached by the stage's solve
+    res = statics.solve(capped, case)
+    u_ref = reference_displacements(ref, capped.points, res.names)
+    sc, sh = fit_and_heldout(
+        u_ref, res.u, capped.classes, case_weights(case), res.names, case.fit_loads, case.heldout
+    )
+    out = {c: v for c, v in row.items() if c in KEPT}
+    out.update(
+        optimizer=f"{row.get('optimizer', 'none')}+k-ratio {ratio:g}",
+        G_norm_initial=row.get("G_norm_final"),
+        G_norm_final=sc.G_norm,
+        G_heldout=sh.G_norm if sh else math.nan,
+        k_ratio=float(capped.k.max() / np.median(capped.k)),
+        _net=capped,
+    )
+    if sh is not None:
+        per = {f"G_heldout_{name}": float(v) for name, v in sh.per_load_norm.items()}
+        out.update(G_heldout_mean=float(np.mean(list(per.values()))), **per)
+    if "status" in row:  # the reference's error against the capped constants' (ref_status)
+        out["status"] = ref_status(row.get("G_ref", math.nan), sc.G_norm, row.get("ref_met_tol"))
+        held = (
+            None if sh is None else ref_status(row.get("G_ref_heldout", math.nan), sh.G_norm, None)
+        )
+        if held not in (None, "ok"):
+            out["status"] = "ref-coarse"
+    if np.all(net.masses > 0):
+        for r, n in ((row, net), (out, capped)):
+            kd = spring_damping(n.springs, n.k, n.masses, zeta)
+            r["dt_stable"] = stable_step(
+                n.points, n.springs, n.k, n.masses, kd, volume=getattr(n, "volume", None)
+            )["dt_stable"]
+    row["k_ratio"] = float(k.max() / np.median(k))
+    return out

@@ -1,0 +1,132 @@
+"""What ``springbench calibrate`` writes and prints: MODEL.vtu, MODEL.json and MODEL.csv
+together, the table, and the verdict's sentences."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from harness.commands import calibrate_verdict as cv
+from harness.commands.calibrate_case import prior_weight
+from harness.export.engine_loads import load_records, settle_recipe
+from harness.export.model_json import export
+from harness.outputs import staged
+from harness.report.findings import heldout_error
+from harness.stages.sms_measures import rank
+
+
+def _choice(args, row) -> str:
+    """The JSON's ``choice``: 'rule' (the rule's constants exported: --method rule, or no
+    candidate beat the rule on validation), the validated candidate's name, or 'fit'
+    (a fit whose capacity the user fixed)."""
+    if row.get("optimizer", "none") == "none":
+        return "rule"
+    return str(row.get("choice", "fit"))
+
+
+def _worst(*values) -> float:
+    """The largest value, NaN if any is NaN (a load without an estimate: none overall)."""
+    return math.nan if any(math.isnan(v) for v in values) else max(values)
+
+
+def positive(net) -> bool:
+    """Whether every mass is positive (an explicit engine can run the network)."""
+    return bool(np.all(np.asarray(net.masses) > 0))
+
+
+# JSON key: the exported row's column
+FROM_ROW = dict(
+    G_norm="G_norm_final",
+    G_norm_heldout="G_heldout",
+    G_heldout_mean="G_heldout_mean",
+    reference_error_fitted="ref_error_max",
+    reference_error_heldout="ref_error_heldout",
+    validation_skipped="val_skipped",
+    G_heldout_mean_spread="G_heldout_mean_spread",
+    mass_residual="mass_residual",
+)
+# MODEL.csv's columns, in order (those no row has are left out, dt_safe always written)
+COLUMNS = (
+    "model stiffness optimizer exported n_nodes n_springs G_initial G_final G_norm_initial "
+    "G_norm_final G_fit_score G_fit_score_bound G_heldout G_heldout_mean G_heldout_mean_spread "
+    "choice ref_error_max ref_error_heldout status k_ratio dt_stable dt_safe seconds seed "
+    "opt_stop opt_stops opt_prior note"
+).split()
+
+
+def metadata(args, rows, exported, net, case) -> dict:
+    """The JSON's keys beyond the network's own: material, loads, errors, choice, verdict,
+    the optimiser's stops and the engines' load records."""
+    if "choice" in exported:
+        weight = exported.get("opt_prior", math.nan)
+    else:
+        weight = prior_weight(args) if args.method == "lbfgs" else math.nan
+    meta = dict(
+        E=args.E,
+        nu=args.nu,
+        density=args.density,
+        damping_ratio=args.damping_ratio,
+        loads_fitted=list(case.fit_loads),
+        loads_heldout=list(case.heldout),
+        **{key: exported.get(col, math.nan) for key, col in FROM_ROW.items()},
+        G_heldout_loads={n: cv.finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
+        reference_error=_worst(
+            exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)
+        ),
+        choice=_choice(args, exported),
+        validation=cv.records(exported.pop("_validation", None)),
+        masses=args.masses,
+        prior_weight=weight,
+    )
+    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)
+    best = None
+    if rule is not None:
+        best = {"rule": rule["stiffness"], "G_heldout_mean": cv.finite(heldout_error(rule))}
+    stop, stops = exported.get("opt_stop"), exported.get("opt_stops") or exported.get("opt_stop")
+    meta.update(
+        status=str(exported.get("status", "ok")),
+        verdict=said,
+        best_rule_heldout=best,
+        opt_stop=stop if isinstance(stop, str) else None,
+        opt_stops=stops.split(" | ") if isinstance(stops, str) else [],
+    )
+    meta.update(
+        load_records(net, case), settle_damping=settle_recipe(net, case) if positive(net) else None
+    )
+    return meta
+
+
+def write(args, rows, net, case):
+    """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
+    exported = next(r for r in rows if r["exported"])
+    meta = metadata(args, rows, exported, net, case)
+    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    cols = [c for c in COLUMNS if any(c in r for r in rows) or c == "dt_safe"]
+    out = args.out  # the three files appear together or not at all (disk full: none)
+    with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
+        data = export(net, vtu, meta)  # the VTU and its .json beside it
+        # one step in the table, the JSON's
+        exported.update(dt_stable=data["dt_stable"], dt_safe=data.get("dt_safe"))
+        df = pd.DataFrame(rows).reindex(columns=cols)
+        df.to_csv(csv, index=False)
+    print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
+    print(cv.heldout_sentence(exported, rules, case.heldout))
+    print(cv.fitted_sentence(exported, min(rules, key=rank)))
+    print(cv.reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
+    if "choice" in exported:
+        print(cv.validation_sentence(exported, meta["validation"] or []))
+    if data["dt_stable"] is not None:
+        step = (
+            f"dt_stable {data['dt_stable']:.3g} s (float32 {data['dt_stable_float32']:.3g} s, "
+            f"safe {data['dt_safe']:.3g} s)"
+        )
+    else:
+        step = data.get("warning", "")
+    k = data["spring_stiffness"]
+    print(
+        f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
+        f"masses {args.masses}, k {min(k):.3g}..{max(k):.3g} N/m, {step}"
+    )
