@@ -30,8 +30,9 @@ from harness.report.docs_gen import (  # noqa: E402
 
 if __name__ == "__main__":
     for path, content, markers in (
-            (ROOT / "README.md", heldout_table(ROOT / "results"), (BEGIN, END)),
-            (ROOT / "docs" / "commands.md", commands_reference(build_parser()), (CMD_BEGIN, CMD_END)),
-            (ROOT / "docs" / "columns.md", columns_reference(), (COL_BEGIN, COL_END))):
+        (ROOT / "README.md", heldout_table(ROOT / "results"), (BEGIN, END)),
+        (ROOT / "docs" / "commands.md", commands_reference(build_parser()), (CMD_BEGIN, CMD_END)),
+        (ROOT / "docs" / "columns.md", columns_reference(), (COL_BEGIN, COL_END)),
+    ):
         changed = update(path, content, *markers)
         print(f"{path.relative_to(ROOT)}: " + ("rewritten" if changed else "unchanged"))

@@ -16,13 +16,14 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-LENGTH, WIDTH, THICK = 0.08, 0.03, 0.01      # m: bar length to the bore's centre, width, thickness
-BORE = 0.006                                 # m: bore radius
-SIZE = 0.0045                                # m: target element size
+LENGTH, WIDTH, THICK = 0.08, 0.03, 0.01  # m: bar length to the bore's centre, width, thickness
+BORE = 0.006  # m: bore radius
+SIZE = 0.0045  # m: target element size
 
 
 def main(out: Path = Path(__file__).with_name("lug.msh")) -> Path:
     import gmsh
+
     gmsh.initialize(["-noenv"])
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -42,9 +43,9 @@ def main(out: Path = Path(__file__).with_name("lug.msh")) -> Path:
         for t in faces:
             x, y, _ = occ.getCenterOfMass(2, t)
             if abs(x) < 1e-9:
-                base.append(t)                             # the flat end x = 0
+                base.append(t)  # the flat end x = 0
             elif abs(x - LENGTH) < 1e-6 and abs(y) < 1e-6:
-                bore.append(t)                             # the bore's wall (centred on the bore's axis)
+                bore.append(t)  # the bore's wall (centred on the bore's axis)
         assert base and bore, (base, bore)
         gmsh.model.addPhysicalGroup(3, [vol], name="body")
         gmsh.model.addPhysicalGroup(2, base, name="base")

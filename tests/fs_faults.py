@@ -1,7 +1,8 @@
 """File-system faults for the bad-output tests (no tests here), real where the machine allows:
 
 - ``read_only(folder)``: the folder bind-mounted read-only on itself, its files still
-  there (root with mount rights); else ``chmod 0o555`` (a user that is not root cannot write there); else (root without
+  there (root with mount rights); else ``chmod 0o555`` (a user that is not root cannot write
+  there); else (root without
   mount rights: chmod does not stop root) a simulation: opening for writing, creating,
   replacing and mkdir under the folder raise EROFS, and statvfs/access report read-only.
 - ``disk_full(folder)``: a 1 MiB tmpfs mounted on the folder; ``.fill(free_pages)`` fills
@@ -40,15 +41,18 @@ def _under(path, folder: Path) -> bool:
     try:
         return Path(os.path.abspath(os.fsdecode(path))).is_relative_to(folder)
     except (TypeError, ValueError):
-        return False            # a file descriptor, not a path
+        return False  # a file descriptor, not a path
 
 
 def _mount(*argv) -> bool:
     if os.geteuid() != 0:
         return False
     try:
-        return subprocess.run(["mount", *map(str, argv)], capture_output=True, timeout=60).returncode == 0
-    except (OSError, subprocess.TimeoutExpired):     # no mount(8) here
+        return (
+            subprocess.run(["mount", *map(str, argv)], capture_output=True, timeout=60).returncode
+            == 0
+        )
+    except (OSError, subprocess.TimeoutExpired):  # no mount(8) here
         return False
 
 
@@ -79,8 +83,14 @@ def read_only(folder: Path, simulate: bool = False):
         finally:
             folder.chmod(0o755)
         return
-    real = {"open": builtins.open, "os_open": os.open, "mkdir": os.mkdir, "replace": os.replace,
-            "access": os.access, "statvfs": os.statvfs}
+    real = {
+        "open": builtins.open,
+        "os_open": os.open,
+        "mkdir": os.mkdir,
+        "replace": os.replace,
+        "access": os.access,
+        "statvfs": os.statvfs,
+    }
 
     def refuse(path):
         raise OSError(errno.EROFS, "Read-only file system", os.fsdecode(path))
@@ -106,17 +116,26 @@ def read_only(folder: Path, simulate: bool = False):
         return real["replace"](src, dst, *a, **kw)
 
     def fake_access(path, how, *a, **kw):
-        return False if how & os.W_OK and _under(path, folder) else real["access"](path, how, *a, **kw)
+        return (
+            False if how & os.W_OK and _under(path, folder) else real["access"](path, how, *a, **kw)
+        )
 
     def fake_statvfs(path):
         st = real["statvfs"](path)
         if _under(path, folder):
             st = os.statvfs_result(tuple(st[:8]) + (st.f_flag | os.ST_RDONLY, st.f_namemax))
         return st
+
     with pytest.MonkeyPatch.context() as mp:
-        for mod, name, fn in ((builtins, "open", fake_open), (io, "open", fake_open), (os, "open", fake_os_open),
-                              (os, "mkdir", fake_mkdir), (os, "replace", fake_replace), (os, "access", fake_access),
-                              (os, "statvfs", fake_statvfs)):
+        for mod, name, fn in (
+            (builtins, "open", fake_open),
+            (io, "open", fake_open),
+            (os, "open", fake_os_open),
+            (os, "mkdir", fake_mkdir),
+            (os, "replace", fake_replace),
+            (os, "access", fake_access),
+            (os, "statvfs", fake_statvfs),
+        ):
             mp.setattr(mod, name, fn)
         yield Handle("simulated")
 
@@ -160,7 +179,9 @@ class _FullFile(_Sized):
         ok = self._budget.spend(self.held, self.size, len(raw))
         if ok < len(raw):
             if ok:
-                self._fh.write(raw[:ok].decode(errors="ignore") if isinstance(data, str) else raw[:ok])
+                self._fh.write(
+                    raw[:ok].decode(errors="ignore") if isinstance(data, str) else raw[:ok]
+                )
                 self._fh.flush()
             self._grow(ok)
             raise OSError(errno.ENOSPC, "No space left on device")
@@ -196,6 +217,7 @@ def disk_full(folder: Path, simulate: bool = False):
             st = os.statvfs(folder)
             with open(filler, "ab") as fh:
                 fh.write(b"\0" * ((st.f_bavail - free_pages) * st.f_frsize))
+
         try:
             yield Handle("tmpfs", fill, lambda: filler.unlink())
         finally:
@@ -235,8 +257,14 @@ def disk_full(folder: Path, simulate: bool = False):
 
     def free_up():
         budget.pages = None
+
     with pytest.MonkeyPatch.context() as mp:
-        for mod, name, fn in ((builtins, "open", fake_open), (io, "open", fake_open), (os, "open", fake_os_open),
-                              (os, "write", fake_write), (os, "close", fake_close)):
+        for mod, name, fn in (
+            (builtins, "open", fake_open),
+            (io, "open", fake_open),
+            (os, "open", fake_os_open),
+            (os, "write", fake_write),
+            (os, "close", fake_close),
+        ):
             mp.setattr(mod, name, fn)
         yield Handle("simulated", fill, free_up)

@@ -20,6 +20,7 @@ def gmsh_start(gmsh) -> None:
 
 def _mesh(path: Path, build, size: float, dim: int, scale: float = 1.0) -> Path:
     import gmsh
+
     gmsh_start(gmsh)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
@@ -32,29 +33,40 @@ def _mesh(path: Path, build, size: float, dim: int, scale: float = 1.0) -> Path:
         gmsh.option.setNumber("Mesh.MeshSizeMin", size / 3)
         gmsh.model.mesh.generate(dim)
         tags, coords, _ = gmsh.model.mesh.getNodes()
-        kind = 4 if dim == 3 else 2          # gmsh element types: 4 tetrahedron, 2 triangle
+        kind = 4 if dim == 3 else 2  # gmsh element types: 4 tetrahedron, 2 triangle
         _, nodes = gmsh.model.mesh.getElementsByType(kind)
     finally:
         gmsh.finalize()
     index = np.zeros(int(tags.max()) + 1, int)
     index[tags.astype(int)] = np.arange(len(tags))
-    pts = coords.reshape(-1, 3) * scale       # VTU stores 3 coordinates; a 2-D mesh has z = 0
+    pts = coords.reshape(-1, 3) * scale  # VTU stores 3 coordinates; a 2-D mesh has z = 0
     cells = index[nodes.astype(int)].reshape(-1, dim + 1)
-    used = np.unique(cells)                  # drop nodes of the geometry that no cell uses
+    used = np.unique(cells)  # drop nodes of the geometry that no cell uses
     remap = np.full(len(pts), -1)
     remap[used] = np.arange(len(used))
-    meshio.write(path, meshio.Mesh(pts[used], [("tetra" if dim == 3 else "triangle", remap[cells])]))
+    meshio.write(
+        path, meshio.Mesh(pts[used], [("tetra" if dim == 3 else "triangle", remap[cells])])
+    )
     return path
 
 
-def cylinder(folder: Path, radius=0.1, length=0.5, size=0.06, scale=1.0, name="cylinder.vtu") -> Path:
-    return _mesh(Path(folder) / name, lambda occ: occ.addCylinder(0, 0, 0, length, 0, 0, radius), size, 3, scale)
+def cylinder(
+    folder: Path, radius=0.1, length=0.5, size=0.06, scale=1.0, name="cylinder.vtu"
+) -> Path:
+    return _mesh(
+        Path(folder) / name,
+        lambda occ: occ.addCylinder(0, 0, 0, length, 0, 0, radius),
+        size,
+        3,
+        scale,
+    )
 
 
 def ellipsoid(folder: Path, axes=(0.3, 0.2, 0.15), size=0.07) -> Path:
     def build(occ):
         s = occ.addSphere(0, 0, 0, 1.0)
         occ.dilate([(3, s)], 0, 0, 0, *axes)
+
     return _mesh(Path(folder) / "ellipsoid.vtu", build, size, 3)
 
 
@@ -63,6 +75,7 @@ def holed_block(folder: Path, size=0.07) -> Path:
         b = occ.addBox(0, 0, 0, 0.6, 0.3, 0.2)
         c = occ.addCylinder(0.3, 0.15, -0.1, 0, 0, 0.4, 0.07)
         occ.cut([(3, b)], [(3, c)])
+
     return _mesh(Path(folder) / "holed_block.vtu", build, size, 3)
 
 
@@ -76,14 +89,15 @@ def holed_plate(folder: Path, size=0.06) -> Path:
         r = occ.addRectangle(0, 0, 0, 0.8, 0.4)
         d = occ.addDisk(0.4, 0.2, 0, 0.1, 0.1)
         occ.cut([(2, r)], [(2, d)])
-    return _mesh(Path(folder) / "holed_plate.vtu", build, size, 2)
 
+    return _mesh(Path(folder) / "holed_plate.vtu", build, size, 2)
 
 
 def wedge(folder: Path, length=1.0, half_width=0.3, h=0.1) -> Path:
     """A triangle (2-D) with its apex at x = 0: an end that is a single point (scipy's
     Delaunay of points in rows across x)."""
     from scipy.spatial import Delaunay
+
     pts = [(0.0, 0.0)]
     for x in np.arange(h, length + h / 2, h):
         w = half_width * x / length
@@ -100,6 +114,7 @@ def cylinder_groups(folder: Path, radius=0.1, length=0.5, size=0.05, name="cylin
     """A cylinder along x as gmsh .msh 4.1 with named physical groups: surfaces ``clamp``
     (x = 0), ``tip`` (x = length) and ``side``, the volume ``body``."""
     import gmsh
+
     path = Path(folder) / name
     gmsh_start(gmsh)
     try:
@@ -132,6 +147,7 @@ def grid_bar(folder: Path, name: str = "bar.vtu"):
     from harness.geometry import grid_points
     from harness.models.cells import hex_to_tets
     from harness.models.topology import grid_structure
+
     shape = (4, 3, 3)
     pts = grid_points(np.zeros(3), np.array([3.0, 1.0, 1.0]), shape)
     tets = hex_to_tets(grid_structure(shape, "edges").cells["hexahedron"])

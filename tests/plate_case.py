@@ -22,7 +22,9 @@ def plate_case(name: str, tables: str = "", *, top: str = "", loads: str = "") -
     """TOML text of the plate case ``name``: ``top`` (top-level keys such as description
     and tags), ``loads`` (more [loads] keys, e.g. heldout), then ``tables`` (the
     [reference], [model], ... tables); each block may be indented (it is dedented)."""
+
     def block(text: str) -> str:
         text = textwrap.dedent(text).strip("\n")
         return text + "\n" if text else ""
+
     return HEAD.format(name=name, top=block(top)) + block(loads) + block(tables)

@@ -22,7 +22,9 @@ def imported_modules() -> set[str]:
                     mods |= {a.name.split(".")[0] for a in n.names}
                 elif isinstance(n, ast.ImportFrom) and n.level == 0 and n.module:
                     mods.add(n.module.split(".")[0])
-    return {m for m in mods if m not in sys.stdlib_module_names and m not in ("harness", "reference")}
+    return {
+        m for m in mods if m not in sys.stdlib_module_names and m not in ("harness", "reference")
+    }
 
 
 def declared() -> tuple[set[str], dict[str, str]]:
@@ -44,7 +46,7 @@ def test_every_imported_module_is_declared():
 
 def test_the_import_name_map_matches_the_installed_distributions():
     names, module_of = declared()
-    assert set(module_of) <= names                        # the map names declared distributions only
+    assert set(module_of) <= names  # the map names declared distributions only
     installed = importlib.metadata.packages_distributions()
     for dist, module in module_of.items():
         if module in installed:

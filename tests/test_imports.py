@@ -116,8 +116,10 @@ def test_the_checker_finds_a_circle():
 def test_the_checker_reads_function_level_and_relative_imports(tmp_path):
     known = {"harness.x": None, "harness.y": None, "harness.z": None, "harness": None}
     src = tmp_path / "x.py"
-    src.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from harness import q\n"
-                   "def f():\n    from harness.y import thing\n    from . import z\n")
+    src.write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from harness import q\n"
+        "def f():\n    from harness.y import thing\n    from . import z\n"
+    )
     assert imported("harness.x", src, known) == {"harness.y", "harness.z"}
 
 
@@ -126,19 +128,39 @@ def test_no_import_circles():
 
 
 # The pipeline, first to last: a module may import its own layer and the layers before it.
-# The base (the registry of names, errors, paths, atomic outputs, sparse linear algebra, provenance, progress bars) is
+# The base (the registry of names, errors, paths, atomic outputs, sparse linear algebra,
+# provenance, progress bars) is
 # below everything; the report reads stored results and never imports the runner, which calls it.
-LAYERS = ("harness harness.registry harness.sources harness.errors harness.paths harness.outputs harness.linalg harness.provenance harness.progress",
-          "harness.io", "harness.case", "reference", "harness.geometry", "harness.models",
-          "harness.mechanics", "harness.optimize", "harness.scoring", "harness.export", "harness.engines",
-          "harness.stages", "harness.report", "harness.run", "harness.bench", "harness.commands",
-          "harness.cli harness.__main__")
+LAYERS = (
+    "harness harness.registry harness.sources harness.errors harness.paths harness.outputs "
+    "harness.linalg harness.provenance harness.progress",
+    "harness.io",
+    "harness.case",
+    "reference",
+    "harness.geometry",
+    "harness.models",
+    "harness.mechanics",
+    "harness.optimize",
+    "harness.scoring",
+    "harness.export",
+    "harness.engines",
+    "harness.stages",
+    "harness.report",
+    "harness.run",
+    "harness.bench",
+    "harness.commands",
+    "harness.cli harness.__main__",
+)
 
 
 def layer_of(module: str, layers=LAYERS) -> tuple[int, str] | None:
     """(rank, prefix) of the longest layer prefix naming ``module`` (None if none)."""
-    hits = [(len(p), i, p) for i, ps in enumerate(layers) for p in ps.split()
-            if module == p or module.startswith(p + ".")]
+    hits = [
+        (len(p), i, p)
+        for i, ps in enumerate(layers)
+        for p in ps.split()
+        if module == p or module.startswith(p + ".")
+    ]
     return (max(hits)[1], max(hits)[2]) if hits else None
 
 
@@ -174,9 +196,14 @@ MAX_LINES = 500
 
 
 def test_no_hand_written_module_over_500_lines():
-    long = {name: n for name, path in modules().items()
-            if (n := len(path.read_text().splitlines())) > MAX_LINES
-            and not path.read_text().lstrip('"').startswith("GENERATED")}
+    """Source and test modules alike (generated ones say so on their first line)."""
+    paths = [*modules().values(), *(ROOT / "tests").rglob("*.py")]
+    long = {
+        str(path.relative_to(ROOT)): n
+        for path in paths
+        if (n := len(path.read_text().splitlines())) > MAX_LINES
+        and not path.read_text().lstrip('"').startswith("GENERATED")
+    }
     assert long == {}
 
 
@@ -186,13 +213,30 @@ def test_no_hand_written_module_over_500_lines():
 # 100 ms beyond numpy and scipy (``python -X importtime``; scikit-fem behind the reference
 # modules 0.3-0.5 s, numba behind the element kernels 0.2-0.25 s, pandas behind the stage
 # helpers 0.15-0.3 s); hoisting them made ``springbench validate cases/`` 15-25 % slower.
-LAZY = frozenset({
-    "harness.engines.newton_volume", "harness.geometry", "harness.geometry.bodies",
-    "harness.models.bc2000.kernels", "harness.models.bc2000.parallel", "harness.models.masses",
-    "harness.optimize.gradient", "harness.optimize.gauss_newton", "harness.stages.bc2000_linear", "harness.stages.sms_fit",
-    "harness.stages.sms_measures", "harness.stages.sms_select", "reference", "reference.analytic",
-    "reference.graded.meshes", "reference.graded.symmetry", "reference.mesh", "reference.problem",
-    "reference.solvers.sparse", "reference.solvers.twolevel"})
+LAZY = frozenset(
+    {
+        "harness.engines.newton_volume",
+        "harness.geometry",
+        "harness.geometry.bodies",
+        "harness.models.bc2000.kernels",
+        "harness.models.bc2000.parallel",
+        "harness.models.masses",
+        "harness.optimize.gradient",
+        "harness.optimize.gauss_newton",
+        "harness.stages.bc2000_linear",
+        "harness.stages.sms_fit",
+        "harness.stages.sms_measures",
+        "harness.stages.sms_select",
+        "reference",
+        "reference.analytic",
+        "reference.graded.meshes",
+        "reference.graded.symmetry",
+        "reference.mesh",
+        "reference.problem",
+        "reference.solvers.sparse",
+        "reference.solvers.twolevel",
+    }
+)
 EAGER_EXEMPT = ("harness/commands/", "harness/cli.py", "harness/__main__.py")
 
 
@@ -202,26 +246,49 @@ def lazy_project_imports(path: Path, known) -> list[tuple[int, str]]:
 
     def walk(node, in_func, in_try):
         for c in ast.iter_child_nodes(node):
-            if in_func and not in_try and isinstance(c, (ast.Import, ast.ImportFrom)) and not getattr(c, "level", 0):
-                names = ([f"{c.module}.{a.name}" if f"{c.module}.{a.name}" in known else c.module for a in c.names]
-                         if isinstance(c, ast.ImportFrom) else [a.name for a in c.names])
+            if (
+                in_func
+                and not in_try
+                and isinstance(c, (ast.Import, ast.ImportFrom))
+                and not getattr(c, "level", 0)
+            ):
+                names = (
+                    [
+                        f"{c.module}.{a.name}" if f"{c.module}.{a.name}" in known else c.module
+                        for a in c.names
+                    ]
+                    if isinstance(c, ast.ImportFrom)
+                    else [a.name for a in c.names]
+                )
                 out.extend((c.lineno, n) for n in names if n and n.split(".")[0] in PACKAGES)
-            walk(c, in_func or isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef)), in_try or isinstance(c, ast.Try))
+            walk(
+                c,
+                in_func or isinstance(c, (ast.FunctionDef, ast.AsyncFunctionDef)),
+                in_try or isinstance(c, ast.Try),
+            )
+
     walk(ast.parse(path.read_text(), str(path)), False, False)
     return out
 
 
 def test_the_lazy_import_checker_reads_functions_and_skips_try(tmp_path):
     src = tmp_path / "m.py"
-    src.write_text("import harness.errors\ndef f():\n    from harness.stages import sms_fit\n    import reference\n"
-                   "    try:\n        from harness import scoring\n    except ImportError:\n        pass\n")
+    src.write_text(
+        "import harness.errors\ndef f():\n    from harness.stages import sms_fit\n    "
+        "import reference\n"
+        "    try:\n        from harness import scoring\n    except ImportError:\n        pass\n"
+    )
     known = {"harness.stages.sms_fit", "harness.stages", "reference", "harness.scoring"}
     assert lazy_project_imports(src, known) == [(3, "harness.stages.sms_fit"), (4, "reference")]
 
 
 def test_imports_are_at_module_top_unless_slow():
     known = modules()
-    eager = [f"{path.relative_to(ROOT)}:{line} {mod}" for name, path in known.items()
-             if not path.relative_to(ROOT).as_posix().startswith(EAGER_EXEMPT)
-             for line, mod in lazy_project_imports(path, known) if mod not in LAZY]
+    eager = [
+        f"{path.relative_to(ROOT)}:{line} {mod}"
+        for name, path in known.items()
+        if not path.relative_to(ROOT).as_posix().startswith(EAGER_EXEMPT)
+        for line, mod in lazy_project_imports(path, known)
+        if mod not in LAZY
+    ]
     assert eager == [], "import these at the module's top (or measure and add the module to LAZY)"

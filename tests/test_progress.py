@@ -36,18 +36,18 @@ def test_bars_only_on_a_terminal_and_never_quiet(monkeypatch):
     assert progress.shown()
     done = []
     for i in progress.steps(range(3), "bench demo", "size"):
-        time.sleep(0.15)             # tqdm redraws at most every 0.1 s
+        time.sleep(0.15)  # tqdm redraws at most every 0.1 s
         done.append(i)
     text = tty.getvalue()
     assert done == [0, 1, 2] and "bench demo" in text and "2/3" in text
-    assert re.search(r"2/3 \[\d\d:\d\d<\d\d:\d\d", text)          # elapsed < ETA
+    assert re.search(r"2/3 \[\d\d:\d\d<\d\d:\d\d", text)  # elapsed < ETA
     progress.configure(True)
     assert not progress.shown()
     tty.seek(0)
     tty.truncate()
     assert list(progress.steps(range(2), "quiet", "size")) == [0, 1] and tty.getvalue() == ""
     progress.configure(False)
-    monkeypatch.setattr(sys, "stderr", io.StringIO())      # a log file or a pipe
+    monkeypatch.setattr(sys, "stderr", io.StringIO())  # a log file or a pipe
     assert not progress.shown()
 
 
@@ -61,7 +61,8 @@ def test_clock_shows_the_phase_and_then_an_eta(monkeypatch):
     clock.close()
     last = [line for line in tty.getvalue().split("\r") if "calibrate:" in line][-1]
     assert "calibrate: fit" in last and "lbfgs it 3" in last
-    assert re.search(r"at most 0(1:5\d|2:00) left", last), last      # the 120 s bound, not a rate estimate
+    # the 120 s bound, not a rate estimate
+    assert re.search(r"at most 0(1:5\d|2:00) left", last), last
 
 
 def test_calibrate_phases_drive_the_clock():
@@ -77,28 +78,57 @@ def test_calibrate_phases_drive_the_clock():
 
         def bound(self, seconds):
             self.calls.append(("bound", seconds))
+
     rec = Record()
     status = tracker(rec, 60.0, True)
-    for msg in ("building the spring/mass system", "reference solve", "FEM adaptive level 1 (100 dofs)",
-                "validation: scale without constant", "validation: scale without bending", "lbfgs it 4 G=0.1",
-                "fitting springs-prior1 on every training state (start 1 of 3)",
-                "fitting springs-prior1 on every training state (start 2 of 3)"):
+    for msg in (
+        "building the spring/mass system",
+        "reference solve",
+        "FEM adaptive level 1 (100 dofs)",
+        "validation: scale without constant",
+        "validation: scale without bending",
+        "lbfgs it 4 G=0.1",
+        "fitting springs-prior1 on every training state (start 1 of 3)",
+        "fitting springs-prior1 on every training state (start 2 of 3)",
+    ):
         status(msg)
     bounds = [c[1] for c in rec.calls if c[0] == "bound"]
-    assert bounds == [None, None, (VALIDATION_BUDGET + 1) * 60.0, 60.0]     # once per phase
+    assert bounds == [None, None, (VALIDATION_BUDGET + 1) * 60.0, 60.0]  # once per phase
     phases = [c[1] for c in rec.calls if c[0] == "set" and c[1]]
-    assert phases == ["building the network", "FEM reference", "FEM reference", "validation fit 1",
-                      "validation fit 2", "final fit", "final fit"]
+    assert phases == [
+        "building the network",
+        "FEM reference",
+        "FEM reference",
+        "validation fit 1",
+        "validation fit 2",
+        "final fit",
+        "final fit",
+    ]
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("quiet", [False, True])
 def test_calibrate_on_a_terminal(monkeypatch, tmp_path, quiet):
     from tests import meshes
+
     pytest.importorskip("gmsh")
     mesh = meshes.cylinder(tmp_path)
-    argv = ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3", "--prior-weight", "1", "--budget", "2",
-            "--max-refine", "0", "--out", str(tmp_path / "m.vtu")] + (["--quiet"] if quiet else [])
+    argv = [
+        "calibrate",
+        str(mesh),
+        "--E",
+        "1e5",
+        "--nu",
+        "0.3",
+        "--prior-weight",
+        "1",
+        "--budget",
+        "2",
+        "--max-refine",
+        "0",
+        "--out",
+        str(tmp_path / "m.vtu"),
+    ] + (["--quiet"] if quiet else [])
     tty = terminal(monkeypatch)
     assert cli.main(argv) == 0
     text = tty.getvalue()
@@ -113,8 +143,22 @@ def test_run_quiet_prints_no_case_lines(tmp_path, fake, capsys):
     write_case(suite, "a", "rows=1")
     res = tmp_path / "res"
     assert cli.main(["run", str(suite), "--results", str(res), "--jobs", "1", "--no-figures"]) == 0
-    assert "[1/1] a: ok" in capsys.readouterr().out            # not a terminal: one line per case
-    assert cli.main(["run", str(suite), "--results", str(res), "--jobs", "1", "--no-figures", "--force",
-                     "--quiet"]) == 0
+    assert "[1/1] a: ok" in capsys.readouterr().out  # not a terminal: one line per case
+    assert (
+        cli.main(
+            [
+                "run",
+                str(suite),
+                "--results",
+                str(res),
+                "--jobs",
+                "1",
+                "--no-figures",
+                "--force",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr()
     assert "[1/1]" not in out.out and "suite" not in out.err

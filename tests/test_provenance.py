@@ -21,7 +21,9 @@ from tests.report.test_report_clean import fake_bench
 
 
 def git(root, *args):
-    return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, check=True).stdout.strip()
+    return subprocess.run(
+        ["git", "-C", str(root), *args], capture_output=True, text=True, check=True
+    ).stdout.strip()
 
 
 @pytest.fixture
@@ -39,14 +41,14 @@ def test_commit_and_dirty_flag_follow_git(repo, tmp_path):
     head = git(repo, "rev-parse", "HEAD")
     assert provenance.git_state(repo) == (head, False)
     (repo / "results").mkdir()
-    (repo / "results" / "x.csv").write_text("a\n1\n")     # outputs of runs do not make the code dirty
+    (repo / "results" / "x.csv").write_text("a\n1\n")  # outputs of runs do not make the code dirty
     (repo / "runs").mkdir()
     (repo / "runs" / "y.csv").write_text("b\n")
     assert provenance.git_state(repo) == (head, False)
-    (repo / "harness" / "a.py").write_text("x = 2\n")      # changed code does
+    (repo / "harness" / "a.py").write_text("x = 2\n")  # changed code does
     assert provenance.git_state(repo) == (head, True)
     (repo / "harness" / "a.py").write_text("x = 1\n")
-    (repo / "harness" / "new.py").write_text("y = 1\n")    # so does code not yet committed
+    (repo / "harness" / "new.py").write_text("y = 1\n")  # so does code not yet committed
     assert provenance.git_state(repo) == (head, True)
     outside = tmp_path / "plain"
     outside.mkdir()
@@ -63,13 +65,22 @@ def test_collect_records_every_field(repo):
     assert p["cpu_cores"] == os.cpu_count() and p["cpu_model"]
     assert p["load_average"] is None or p["load_average"] >= 0
     line = provenance.describe(p)
-    assert p["git_commit"][:12] in line and "(clean tree)" in line and f"scipy {p['scipy_version']}" in line
-    assert provenance.describe(None) == provenance.NOT_RECORDED == provenance.describe({"git_commit": float("nan")})
+    assert (
+        p["git_commit"][:12] in line
+        and "(clean tree)" in line
+        and f"scipy {p['scipy_version']}" in line
+    )
+    assert (
+        provenance.describe(None)
+        == provenance.NOT_RECORDED
+        == provenance.describe({"git_commit": float("nan")})
+    )
 
 
 def test_a_run_records_it_and_the_report_shows_it(tmp_path, fake, capsys):
     from harness.report.origin import lines
     from harness.run.runner import run_suite
+
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a", "rows=2")
     write_case(suite, "b", "rows=1")
@@ -90,15 +101,21 @@ def test_a_run_records_it_and_the_report_shows_it(tmp_path, fake, capsys):
     page = (res / "index.html").read_text()
     readme = (res / "README.md").read_text()
     for text in (page, readme):
-        assert "Code and machine" in text and "not recorded (stored before provenance was recorded)" in text
-    assert lines(tmp_path) == ["not recorded."]      # a folder without the file
+        assert (
+            "Code and machine" in text
+            and "not recorded (stored before provenance was recorded)" in text
+        )
+    assert lines(tmp_path) == ["not recorded."]  # a folder without the file
 
 
 def test_bench_rows_carry_it(tmp_path, monkeypatch):
     from harness.commands import bench
+
     fake_bench(tmp_path, monkeypatch, "pandas.DataFrame({'n': [1, 2], 'seconds': [0.1, 0.2]})")
     args = cli.build_parser().parse_args(["bench", "reference", "--quick", "--out", str(tmp_path)])
     assert bench.main(args) == 0
     df = pd.read_csv(tmp_path / "reference.csv")
     assert list(df.columns) == ["n", "seconds", *provenance.FIELDS]
-    assert (df["format_version"] == provenance.FORMAT_VERSION).all() and (df["cpu_cores"] == os.cpu_count()).all()
+    assert (df["format_version"] == provenance.FORMAT_VERSION).all() and (
+        df["cpu_cores"] == os.cpu_count()
+    ).all()

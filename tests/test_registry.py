@@ -32,29 +32,43 @@ def test_every_entry_loads(reg):
 
 def test_each_kind_has_its_interface():
     for name, mod in registry.COMMANDS.items():
-        assert isinstance(mod.HELP, str) and callable(mod.add_arguments) and callable(mod.main), name
+        assert isinstance(mod.HELP, str) and callable(mod.add_arguments) and callable(mod.main), (
+            name
+        )
     for name, mod in registry.STAGES.items():
         assert mod.NAME == name and callable(mod.applies) and callable(mod.run)
         # the runner asks hasattr(stage, "check"): an imported function of that name is not one
         for attr in ("applies", "run", "check"):
-            assert getattr(getattr(mod, attr, None), "__module__", mod.__name__) == mod.__name__, (name, attr)
+            assert getattr(getattr(mod, attr, None), "__module__", mod.__name__) == mod.__name__, (
+                name,
+                attr,
+            )
     for name, mod in registry.BENCHES.items():
         assert list(inspect.signature(mod.run).parameters) == ["quick"], name
-    for reg in (registry.OPTIMIZERS, registry.STIFFNESS_RULES, registry.LOAD_SETS, registry.EXPERIMENTS):
+    for reg in (
+        registry.OPTIMIZERS,
+        registry.STIFFNESS_RULES,
+        registry.LOAD_SETS,
+        registry.EXPERIMENTS,
+    ):
         for name, fn in reg.items():
             assert callable(fn), name
     for name, fn in registry.OPTIMIZERS.items():
-        assert list(inspect.signature(fn).parameters) == ["problem", "options", "seed", "status"], name
+        assert list(inspect.signature(fn).parameters) == ["problem", "options", "seed", "status"], (
+            name
+        )
     from harness.stages.classes.base import ModelClass
+
     for name, cls in registry.MODEL_CLASSES.items():
         assert isinstance(cls, ModelClass) and cls.name == name
 
 
 def test_load_sets_are_of_the_dimension_they_declare():
     from harness.case.loadsets import Frame
+
     for name, make in registry.LOAD_SETS.items():
         dim = registry.LOAD_SETS.about[name]
-        anchors = np.eye(dim)       # the body's anchor points (unused by the box sets)
+        anchors = np.eye(dim)  # the body's anchor points (unused by the box sets)
         loads = make(1.0, None if name.startswith("basic") else anchors, Frame((0.5,) * dim, 1.0))
         assert loads, name
         for ld in loads:
@@ -69,18 +83,21 @@ def test_the_case_schema_reads_its_vocabularies_from_the_registries():
     assert sections.ENGINE_NAMES == registry.ENGINES.names()
     assert sections.DYNAMICS["experiment"].choices == registry.EXPERIMENTS.names()
     from harness.case.fields import LOADS
+
     assert LOADS["set"].choices == registry.LOAD_SETS.names()
 
 
 def test_unknown_names_and_broken_modules_are_errors(tmp_path, monkeypatch):
-    reg = Registry("widget", {"good": "json:dumps", "broken": "no_such_module_here:f", "mod": "json"})
+    reg = Registry(
+        "widget", {"good": "json:dumps", "broken": "no_such_module_here:f", "mod": "json"}
+    )
     assert reg.load("good")([1]) == "[1]" and reg.load("mod").__name__ == "json"
     with pytest.raises(KeyError, match="unknown widget 'bad' .one of good, broken, mod."):
         reg.load("bad")
     with pytest.raises(ModuleNotFoundError):
         reg.load("broken")
     with pytest.raises(ModuleNotFoundError):
-        reg.items()                    # nothing is skipped silently
+        reg.items()  # nothing is skipped silently
     (tmp_path / "raises_on_import.py").write_text("raise RuntimeError('boom')\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     with pytest.raises(RuntimeError, match="boom"):
@@ -90,6 +107,7 @@ def test_unknown_names_and_broken_modules_are_errors(tmp_path, monkeypatch):
 
 def test_a_stage_module_that_fails_to_import_stops_the_run(tmp_path, monkeypatch):
     from harness.stages import load_stages
+
     (tmp_path / "stage_raises.py").write_text("raise ImportError('a missing dependency')\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"x": "stage_raises"}))

@@ -19,7 +19,7 @@ def test_the_digest_follows_bytes_and_paths_in_sub_folders(tmp_path, monkeypatch
     assert list(shas) == ["a/b/y.py", "a/x.py"]
     before = sources.digest(shas)
     deep.write_text("y = 2\n")
-    os.utime(deep, ns=(1, 1))          # a new mtime: the sha cache is keyed by size and mtime
+    os.utime(deep, ns=(1, 1))  # a new mtime: the sha cache is keyed by size and mtime
     assert sources.digest(sources.tree_shas(["a"])) != before
     deep.write_text("y = 1\n")
     os.utime(deep, ns=(2, 2))
@@ -30,6 +30,11 @@ def test_the_digest_follows_bytes_and_paths_in_sub_folders(tmp_path, monkeypatch
 
 def test_the_reference_cache_hashes_the_reference_rooms():
     shas = sources.tree_shas(cache.CODE)
-    assert {"reference/graded/levels.py", "reference/solvers/plan.py", "reference/adaptive/adapt.py",
-            "reference/solution.py", "harness/case/reader.py"} <= set(shas)
+    assert {
+        "reference/graded/levels.py",
+        "reference/solvers/plan.py",
+        "reference/adaptive/adapt.py",
+        "reference/solution.py",
+        "harness/case/reader.py",
+    } <= set(shas)
     assert cache.code_version() == sources.digest(shas)

@@ -47,6 +47,7 @@ def mesh(name: str, build, size: float, dim: int, grade=None) -> Path:
     """Mesh the OCC geometry ``build(occ)`` with element size ``size`` (or the graded size
     field ``grade`` = (point, fine, coarse, reach)) and write ``name`` as VTU."""
     import gmsh
+
     gmsh.initialize(["-noenv"])
     signal.signal(signal.SIGPIPE, signal.SIG_IGN)
     try:
@@ -70,11 +71,14 @@ def mesh(name: str, build, size: float, dim: int, grade=None) -> Path:
     index[tags.astype(int)] = np.arange(len(tags))
     pts = coords.reshape(-1, 3)
     cells = index[nodes.astype(int)].reshape(-1, dim + 1)
-    used = np.unique(cells)                   # drop geometry nodes no cell uses
+    used = np.unique(cells)  # drop geometry nodes no cell uses
     remap = np.full(len(pts), -1)
     remap[used] = np.arange(len(used))
     path = HERE / f"{name}.vtu"
-    meshio.write(path, meshio.Mesh(np.round(pts[used], 12), [("tetra" if dim == 3 else "triangle", remap[cells])]))
+    meshio.write(
+        path,
+        meshio.Mesh(np.round(pts[used], 12), [("tetra" if dim == 3 else "triangle", remap[cells])]),
+    )
     return path
 
 
@@ -96,7 +100,11 @@ def l_block(occ):
 
 
 def blob(occ):
-    s = [occ.addSphere(0, 0, 0, 0.25), occ.addSphere(0.25, 0.05, 0, 0.18), occ.addSphere(0.05, 0.2, 0.12, 0.14)]
+    s = [
+        occ.addSphere(0, 0, 0, 0.25),
+        occ.addSphere(0.25, 0.05, 0, 0.18),
+        occ.addSphere(0.05, 0.2, 0.12, 0.14),
+    ]
     occ.fuse([(3, s[0])], [(3, t) for t in s[1:]])
 
 
@@ -183,8 +191,11 @@ def main(names=None) -> None:
             continue
         path = mesh(name, build, size, dim, grade)
         m = meshio.read(path)
-        print(f"{path.name}: {len(m.points)} nodes, {sum(len(c.data) for c in m.cells)} {m.cells[0].type}, "
-              f"{path.stat().st_size / 1e3:.0f} kB")
+        print(
+            f"{path.name}: {len(m.points)} nodes, {sum(len(c.data) for c in m.cells)} "
+            f"{m.cells[0].type}, "
+            f"{path.stat().st_size / 1e3:.0f} kB"
+        )
 
 
 if __name__ == "__main__":

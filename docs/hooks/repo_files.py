@@ -16,7 +16,8 @@ from pathlib import Path
 from mkdocs.structure.files import File, Files
 
 ROOTS = ("results/README.md", "examples/lug.msh", "examples/make_lug.py")
-UP = re.compile(r"\]\(\.\./((?:results|examples)/[^)\s]*)\)")     # ](../results/...) in a page of docs/
+# ](../results/...) in a page of docs/
+UP = re.compile(r"\]\(\.\./((?:results|examples)/[^)\s]*)\)")
 LINK = re.compile(r"""\]\(([^)\s]+)\)|(?:src|href)=["']([^"']+)["']""")
 
 
@@ -48,8 +49,8 @@ def on_files(files: Files, config) -> Files:
             if files.get_file_from_path(rel) is not None:
                 continue
             f = File.generated(config, rel, abs_src_path=str(repo / rel))
-            if Path(rel).name == "README.md":     # a README page would be its folder's index.html
-                stem = rel[:-len(".md")]
+            if Path(rel).name == "README.md":  # a README page would be its folder's index.html
+                stem = rel[: -len(".md")]
                 f.dest_uri = f"{stem}/index.html" if config.use_directory_urls else f"{stem}.html"
             files.append(f)
     return files

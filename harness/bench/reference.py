@@ -3,7 +3,7 @@ direct vs pyamg smoothed aggregation on the same system), and point evaluation w
 KD-tree locator for 1e6 points against scikit-fem's own ``Basis.probes`` on a smaller
 count (its points x elements matrix limits it), as a per-point time ratio; and the
 accuracy of the reference's methods on the Deussen sec6 cube's shear (task "accuracy")
-against the independent truth of tests/independent_elasticity.py (loaded by path)."""
+against the independent truth of tests/independent/ (loaded by path)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Accuracy of the FEM reference's methods (``springbench bench reference``, task
 "accuracy"): the Deussen sec6 cube's shear and nine loads on two shapes, against the
-independent truth of tests/independent_elasticity.py (loaded by path)."""
+independent truth of tests/independent/ (loaded by path)."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 from harness.case.reader import load_case
 
 ROOT = Path(__file__).resolve().parents[2]
-INDEPENDENT = ROOT / "tests" / "independent_elasticity.py"
+INDEPENDENT = ROOT / "tests" / "independent"
 SEC6 = ROOT / "cases" / "deussen1995" / "sec6_box3d.toml"
 LOAD = "shear-xz"
 # the truth: the independent quarter solve (beta 2.5, knot 3/4: the grid points are nodes of
@@ -28,16 +28,19 @@ TRUTH_BETA, TRUTH_KNOT = 2.5, 0.75
 
 
 def _independent():
-    """The module tests/independent_elasticity.py, or None (with a message) if absent."""
-    if not INDEPENDENT.is_file():
+    """The package tests/independent/, or None (with a message) if absent."""
+    if not (INDEPENDENT / "__init__.py").is_file():
         print(
             f"bench reference: {INDEPENDENT} not found: the accuracy rows are skipped "
             "(they need the independent truth from the repository's tests/)",
             file=sys.stderr,
         )
         return None
-    spec = importlib.util.spec_from_file_location("independent_elasticity", INDEPENDENT)
+    spec = importlib.util.spec_from_file_location(
+        "independent_elasticity", INDEPENDENT / "__init__.py", submodule_search_locations=[]
+    )
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # its modules import each other relatively
     spec.loader.exec_module(mod)
     return mod
 

@@ -18,7 +18,7 @@ import numpy as np
 import skfem
 
 GRADE_EXPONENT = 3.0  # beta, and ZONE: the end zones' width / the shortest side. Measured on the
-ZONE = 0.5  # sec6 cube's shear against an independent solve (tests/independent_elasticity.py)
+ZONE = 0.5  # sec6 cube's shear against an independent solve (tests/independent/)
 MESHES = {2: skfem.MeshQuad, 3: skfem.MeshHex}
 
 

@@ -16,9 +16,15 @@ from harness.bench import heldout_judge as J
 from harness.registry import BENCHES
 
 pytest.importorskip("gmsh")
-L, A = 0.5, 0.1                     # the test bar: [0, L] x [0, A] x [0, A]
-BAR = B.Body("bar", lambda occ: occ.addBox(0, 0, 0, L, A, A), B._near(0, A / 2, A / 2), B._near(L, A / 2, A / 2),
-             ((0, -1, 0), (0, 0, 1)), (0, 0, -1))
+L, A = 0.5, 0.1  # the test bar: [0, L] x [0, A] x [0, A]
+BAR = B.Body(
+    "bar",
+    lambda occ: occ.addBox(0, 0, 0, L, A, A),
+    B._near(0, A / 2, A / 2),
+    B._near(L, A / 2, A / 2),
+    ((0, -1, 0), (0, 0, 1)),
+    (0, 0, -1),
+)
 
 
 @pytest.fixture(scope="module")
@@ -33,23 +39,34 @@ def test_truth_meets_closed_forms(bar, refine):
     """nu = 0, x = 0 clamped: a pull s e_x on x = L gives u = (s x / E, 0, 0); the bar
     hanging under rho g e_x gives u_x = rho g (L x - x^2 / 2) / E (both exact in P2)."""
     points, tets, groups = B.read_body(bar)
-    loads = [J.Load("pull", ("clamp",), J.constant((1.0, 0, 0))), J.Load("hang", ("clamp",), gravity=(1.0, 0, 0))]
+    loads = [
+        J.Load("pull", ("clamp",), J.constant((1.0, 0, 0))),
+        J.Load("hang", ("clamp",), gravity=(1.0, 0, 0)),
+    ]
     fem = J.truth(points, tets, groups, loads, nu=0.0, refine=refine)
     x, zero = points[:, 0], np.zeros(len(points))
-    exact = {"pull": np.c_[x / J.E, zero, zero], "hang": np.c_[J.RHO * (L * x - x ** 2 / 2) / J.E, zero, zero]}
+    exact = {
+        "pull": np.c_[x / J.E, zero, zero],
+        "hang": np.c_[J.RHO * (L * x - x**2 / 2) / J.E, zero, zero],
+    }
     for name, u in exact.items():
         assert np.abs(fem[name][0] - u).max() <= 1e-10 * np.abs(u).max(), name
-    assert fem["pull"][1] == pytest.approx(1 / J.E, rel=1e-8)          # the strain peak: s / E everywhere
+    assert fem["pull"][1] == pytest.approx(1 / J.E, rel=1e-8)  # the strain peak: s / E everywhere
 
 
 def test_bodies_groups_are_what_calibrate_reads(tmp_path):
     from harness.io.meshfile import read_mesh
+
     for body in B.BODIES:
         path = tmp_path / f"{body.name}.msh"
         n = B.make_body(body, path, 800)
         points, tets, groups = B.read_body(path)
         m = read_mesh(path)
-        assert len(tets) == n and np.array_equal(m.points, points) and np.array_equal(m.cells["tetra"], tets)
+        assert (
+            len(tets) == n
+            and np.array_equal(m.points, points)
+            and np.array_equal(m.cells["tetra"], tets)
+        )
         for g in ("clamp", "load"):
             assert np.array_equal(m.groups[g].cells["triangle"], groups[g]), (body.name, g)
             assert len(groups[g]) > 10
@@ -58,7 +75,8 @@ def test_bodies_groups_are_what_calibrate_reads(tmp_path):
 def _case(folder, mesh, normal):
     p = folder / "statics.toml"
     hold = '[[loads.case.constraint]]\npart = "{}"\ncomponents = "all"\n'
-    p.write_text(textwrap.dedent(f"""
+    p.write_text(
+        textwrap.dedent(f"""
         name = "heldout-statics"
         dim = 3
         [body]
@@ -76,27 +94,37 @@ def _case(folder, mesh, normal):
         [[loads.case.traction]]
         part = "load"
         vector = [0.0, -1.0, 0.0]
-        """) + hold.format("clamp") + textwrap.dedent(f"""
+        """)
+        + hold.format("clamp")
+        + textwrap.dedent(f"""
         [[loads.case]]
         name = "twist"
         [[loads.case.traction]]
         part = "load"
         twist = {list(map(float, normal))}
-        """) + hold.format("clamp") + textwrap.dedent("""
+        """)
+        + hold.format("clamp")
+        + textwrap.dedent("""
         [[loads.case]]
         name = "gravity"
         gravity = [0.0, 0.0, -1.0]
-        """) + hold.format("clamp") + textwrap.dedent("""
+        """)
+        + hold.format("clamp")
+        + textwrap.dedent("""
         [[loads.case]]
         name = "gravity_2"
         gravity = [0.0, 0.0, -1.0]
-        """) + hold.format("clamp") + hold.format("load") + textwrap.dedent("""
+        """)
+        + hold.format("clamp")
+        + hold.format("load")
+        + textwrap.dedent("""
         [reference]
         max_refine = 0
         [model]
         kind = "sms"
         placement = "mesh"
-        """))
+        """)
+    )
     return p
 
 
@@ -107,26 +135,65 @@ def test_network_statics_equals_springbench(bar, tmp_path, model):
     from harness.case.reader import load_case
     from harness.export.vtu import read_vtu
     from harness.mechanics import statics
+
     out = tmp_path / "model.vtu"
-    assert cli.main(["calibrate", str(bar), "--E", "1e5", "--nu", "0.3", "--method", "rule", "--rule", "lloyd",
-                     "--model", model, "--max-refine", "0", "--heldout", "none", "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(bar),
+                "--E",
+                "1e5",
+                "--nu",
+                "0.3",
+                "--method",
+                "rule",
+                "--rule",
+                "lloyd",
+                "--model",
+                model,
+                "--max-refine",
+                "0",
+                "--heldout",
+                "none",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     data = json.loads(out.with_suffix(".json").read_text())
     points, tets, groups = B.read_body(bar)
     c, n, _ = J.face_frame(points, groups["load"])
-    loads = [J.Load("shear", ("clamp",), J.constant((0, -1.0, 0))), J.Load("twist", ("clamp",), J.twisting(n, c)),
-             J.Load("gravity", ("clamp",), gravity=(0, 0, -1.0)),
-             J.Load("gravity_2", ("clamp", "load"), gravity=(0, 0, -1.0))]
+    loads = [
+        J.Load("shear", ("clamp",), J.constant((0, -1.0, 0))),
+        J.Load("twist", ("clamp",), J.twisting(n, c)),
+        J.Load("gravity", ("clamp",), gravity=(0, 0, -1.0)),
+        J.Load("gravity_2", ("clamp", "load"), gravity=(0, 0, -1.0)),
+    ]
     mine = J.model_answers(data, points, groups, loads, {ld.name: 1.0 for ld in loads})
     net, _ = read_vtu(out)
-    if model == "springs+volume":          # the term as harness.models.volume saves it, from the JSON
+    if model == "springs+volume":  # the term as harness.models.volume saves it, from the JSON
         from harness.models import volume
-        np.savez(tmp_path / "v.npz", elements=data["volume_indices"], kv=data["volume_stiffness"],
-                 shared=data["volume_shared"])
+
+        np.savez(
+            tmp_path / "v.npz",
+            elements=data["volume_indices"],
+            kv=data["volume_stiffness"],
+            shared=data["volume_shared"],
+        )
         net = volume.load(tmp_path / "v.npz", net)
     if model == "springs+kn":
         from harness.models import kn
-        np.savez(tmp_path / "kn.npz", nodes=data["kn_nodes"], V=data["kn_node_volume"], springs=data["spring_indices"],
-                 kv=data["kn_stiffness"], shared=data["kn_shared"])
+
+        np.savez(
+            tmp_path / "kn.npz",
+            nodes=data["kn_nodes"],
+            V=data["kn_node_volume"],
+            springs=data["spring_indices"],
+            kv=data["kn_stiffness"],
+            shared=data["kn_shared"],
+        )
         net = kn.load(tmp_path / "kn.npz", net)
     res = statics.solve(net, load_case(_case(tmp_path, bar, n)))
     order = cKDTree(net.points).query(points)[1]
@@ -144,15 +211,25 @@ def test_small_study_end_to_end(tmp_path):
     """One small body, one nu, calibrate (5 s budget) and two rules: every row finite, the
     best rule's ratio 1, the summary and the verdict well formed."""
     import pandas as pd
+
     body = B.BODIES[0]
     mesh = tmp_path / "bracket.msh"
     B.make_body(body, mesh, 600)
-    df = H.summarise(pd.DataFrame(H.study_one(body, mesh, 0.3, tmp_path, rules=("lloyd", "deussen"), budget=5)))
+    df = H.summarise(
+        pd.DataFrame(H.study_one(body, mesh, 0.3, tmp_path, rules=("lloyd", "deussen"), budget=5))
+    )
     per = df[df.load != "geomean"]
-    assert len(per) == 3 * 5 and np.isfinite(per.err).all() and (per.err > 0).all() and (per.err < 2).all()
+    assert (
+        len(per) == 3 * 5
+        and np.isfinite(per.err).all()
+        and (per.err > 0).all()
+        and (per.err < 2).all()
+    )
     summary = df[(df.load == "geomean") & (df.body == body.name)].set_index("model")
     best = summary.best_rule.iloc[0]
     assert best in ("lloyd", "deussen") and summary.ratio_to_best_rule[best] == pytest.approx(1.0)
-    assert df[df.body == "all"].ratio_to_best_rule.iloc[0] == pytest.approx(summary.ratio_to_best_rule["calibrate"])
+    assert df[df.body == "all"].ratio_to_best_rule.iloc[0] == pytest.approx(
+        summary.ratio_to_best_rule["calibrate"]
+    )
     assert summary.rule["lloyd"] == "lloyd" and summary.seconds["calibrate"] > 0
     assert H.verdict(df).startswith(("PASS", "FAIL")) and len(H.summary_table(df)) == 1

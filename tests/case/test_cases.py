@@ -112,30 +112,47 @@ BAD = [
     (_replace(GOOD_2D, 'set = "basic2d"', 'set = "stretchy"'), "loads.set"),
     (_replace(GOOD_2D, "magnitude = 1e6", "magnitude = [1]"), "loads.magnitude"),
     (GOOD_2D + '[[loads.case]]\nname = "g"\ngravity = [0, -9.8]\n', "loads.case[0].constraint"),
-    (GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "left"\n',
-     "loads.case[0].constraint[0].part"),
-    (GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "z0"\n',
-     "loads.case[0].constraint[0].part"),
-    (GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "x0"\n'
-     'components = ["z"]\n', "loads.case[0].constraint[0].components"),
-    (GOOD_2D + '[[loads.case]]\nname = "stretch-x"\n[[loads.case.constraint]]\npart = "x0"\n',
-     "loads.case[0].name"),
-    (GOOD_2D + '[[loads.case]]\nname = "t"\n[[loads.case.constraint]]\npart = "x0"\n'
-     '[[loads.case.traction]]\npart = "x1"\nvector = [1, 0, 0]\n', "loads.case[0].traction[0].vector"),
-    (GOOD_2D + "[reference]\ncell = \"tet\"\n", "reference.cell"),
-    (GOOD_2D + "[reference]\nelement = \"P3\"\n", "reference.element"),
+    (
+        GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "left"\n',
+        "loads.case[0].constraint[0].part",
+    ),
+    (
+        GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "z0"\n',
+        "loads.case[0].constraint[0].part",
+    ),
+    (
+        GOOD_2D + '[[loads.case]]\nname = "p"\n[[loads.case.constraint]]\npart = "x0"\n'
+        'components = ["z"]\n',
+        "loads.case[0].constraint[0].components",
+    ),
+    (
+        GOOD_2D + '[[loads.case]]\nname = "stretch-x"\n[[loads.case.constraint]]\npart = "x0"\n',
+        "loads.case[0].name",
+    ),
+    (
+        GOOD_2D + '[[loads.case]]\nname = "t"\n[[loads.case.constraint]]\npart = "x0"\n'
+        '[[loads.case.traction]]\npart = "x1"\nvector = [1, 0, 0]\n',
+        "loads.case[0].traction[0].vector",
+    ),
+    (GOOD_2D + '[reference]\ncell = "tet"\n', "reference.cell"),
+    (GOOD_2D + '[reference]\nelement = "P3"\n', "reference.element"),
     (GOOD_2D + "[reference]\ntol = 0\n", "reference.tol"),
     (GOOD_2D + "[solver]\nx = 1\n", "solver"),
     (GOOD_2D + "[score]\nweights = [1, 3]\n", "score.weights"),
-    (GOOD_2D + "[model]\nkind = \"magic\"\n", "model.kind"),
+    (GOOD_2D + '[model]\nkind = "magic"\n', "model.kind"),
     ("quick = 3\n" + GOOD_2D, "quick"),
     (_replace(GOOD_2D, 'shape = "rectangle"', 'shape = "mesh"\nfile = "nope.msh"'), "body.file"),
     (GOOD_2D.replace("[loads]", "[loads\n"), None),  # TOML syntax error
     (_replace(GOOD_3D, "E_cross = 1.0", "E_cross = 0.0"), "material.fibre.E_cross"),
     (_replace(GOOD_3D, "nu_cross = 0.4", "nu_cross = 0.99"), "material.fibre"),
-    (_replace(GOOD_3D, "azimuth_deg = 30", "direction = [1, 0, 0]\nazimuth_deg = 30"), "material.fibre"),
-    (_replace(GOOD_3D, "box = [[0, 0, 2.9], [1, 2, 3]]", "box = [[0, 0, 3.1], [1, 2, 3]]"),
-     "body.parts.top.box"),
+    (
+        _replace(GOOD_3D, "azimuth_deg = 30", "direction = [1, 0, 0]\nazimuth_deg = 30"),
+        "material.fibre",
+    ),
+    (
+        _replace(GOOD_3D, "box = [[0, 0, 2.9], [1, 2, 3]]", "box = [[0, 0, 3.1], [1, 2, 3]]"),
+        "body.parts.top.box",
+    ),
 ]
 
 
@@ -162,5 +179,6 @@ def test_bad_mesh_file_is_named(tmp_path):
 
 def test_validate_accepts_shipped_cases(capsys):
     from pathlib import Path
+
     cases = Path(__file__).resolve().parents[2] / "cases"
     assert cli(["validate", str(cases)]) in (0,)

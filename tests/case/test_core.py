@@ -41,8 +41,11 @@ def test_stretch_constraints_remove_rigid_motions(dim):
     lo, hi = np.zeros(dim), np.array([2.0, 1.0, 3.0][:dim])
     pts = box_points(lo, hi)
     if dim == 2:
-        modes = [np.tile([1, 0], (len(pts), 1)), np.tile([0, 1], (len(pts), 1)),
-                 np.stack([-pts[:, 1], pts[:, 0]], 1)]
+        modes = [
+            np.tile([1, 0], (len(pts), 1)),
+            np.tile([0, 1], (len(pts), 1)),
+            np.stack([-pts[:, 1], pts[:, 0]], 1),
+        ]
         loads = basic2d(1.0)
     else:
         modes = [np.tile(np.eye(3)[i], (len(pts), 1)) for i in range(3)]
@@ -60,8 +63,17 @@ def test_stretch_constraints_remove_rigid_motions(dim):
 
 def test_basic3d_names_follow_design():
     names = [l.name for l in basic3d(1.0)]
-    assert names == ["stretch-x", "stretch-y", "stretch-z", "shear-xy", "shear-yx",
-                     "shear-xz", "shear-zx", "shear-yz", "shear-zy"]
+    assert names == [
+        "stretch-x",
+        "stretch-y",
+        "stretch-z",
+        "shear-xy",
+        "shear-yx",
+        "shear-xz",
+        "shear-zx",
+        "shear-yz",
+        "shear-zy",
+    ]
     shear_xz = basic3d(1.0)[5]
     assert shear_xz.constraints[0].part == "z0" and shear_xz.tractions[0].part == "z1"
     assert shear_xz.tractions[0].vector == (1.0, 0.0, 0.0)
@@ -78,10 +90,16 @@ def test_isotropic_matrices():
     E, nu = 3.0, 0.27
     C = np.linalg.inv(isotropic_compliance(E, nu))
     lam, mu = lame(E, nu)
-    assert np.isclose(C[0, 0], lam + 2 * mu) and np.isclose(C[0, 1], lam) and np.isclose(C[5, 5], mu)
+    assert (
+        np.isclose(C[0, 0], lam + 2 * mu) and np.isclose(C[0, 1], lam) and np.isclose(C[5, 5], mu)
+    )
     Cs = plane(C, "stress")
-    assert np.allclose(Cs, E / (1 - nu**2) * np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]]))
-    assert np.allclose(plane(C, "strain"), [[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]])
+    assert np.allclose(
+        Cs, E / (1 - nu**2) * np.array([[1, nu, 0], [nu, 1, 0], [0, 0, (1 - nu) / 2]])
+    )
+    assert np.allclose(
+        plane(C, "strain"), [[lam + 2 * mu, lam, 0], [lam, lam + 2 * mu, 0], [0, 0, mu]]
+    )
 
 
 def test_transverse_isotropy_rotation():
@@ -93,7 +111,13 @@ def test_transverse_isotropy_rotation():
     sigma = 2.0 * np.outer(d, d)
     voigt = np.array([sigma[0, 0], sigma[1, 1], sigma[2, 2], sigma[1, 2], sigma[0, 2], sigma[0, 1]])
     eps = np.linalg.solve(Cg, voigt)
-    E3 = np.array([[eps[0], eps[5] / 2, eps[4] / 2], [eps[5] / 2, eps[1], eps[3] / 2], [eps[4] / 2, eps[3] / 2, eps[2]]])
+    E3 = np.array(
+        [
+            [eps[0], eps[5] / 2, eps[4] / 2],
+            [eps[5] / 2, eps[1], eps[3] / 2],
+            [eps[4] / 2, eps[3] / 2, eps[2]],
+        ]
+    )
     assert np.isclose(d @ E3 @ d, 2.0 / 10.0)
     t = np.cross(d, [0, 0, 1.0])
     t /= np.linalg.norm(t)

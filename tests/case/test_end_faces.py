@@ -19,23 +19,29 @@ from tests import meshes
 gmsh = pytest.importorskip("gmsh")
 
 E, NU, RHO = 1e5, 0.3, 1000.0
-RO, RI, LEN = 0.1, 0.05, 0.5          # the tube: outer and bore radius, length (along x)
+RO, RI, LEN = 0.1, 0.05, 0.5  # the tube: outer and bore radius, length (along x)
 
 
 def tube(folder, size=0.035):
     """A hollow cylinder along x (a part with a hole through its ends)."""
+
     def build(occ):
         a = occ.addCylinder(0, 0, 0, LEN, 0, 0, RO)
         b = occ.addCylinder(-0.1, 0, 0, LEN + 0.2, 0, 0, RI)
         occ.cut([(3, a)], [(3, b)])
+
     return meshes._mesh(folder / "tube.vtu", build, size, 3)
 
 
 @pytest.fixture(scope="module")
 def bodies(tmp_path_factory):
     d = tmp_path_factory.mktemp("ends")
-    return {"tube": tube(d), "ellipsoid": meshes.ellipsoid(d), "holed_plate": meshes.holed_plate(d),
-            "groups": meshes.cylinder_groups(d)}
+    return {
+        "tube": tube(d),
+        "ellipsoid": meshes.ellipsoid(d),
+        "holed_plate": meshes.holed_plate(d),
+        "groups": meshes.cylinder_groups(d),
+    }
 
 
 def calibrate_case(tmp_path, mesh, groups=False):
@@ -43,11 +49,27 @@ def calibrate_case(tmp_path, mesh, groups=False):
     and 'tip'), with the reference on the user's mesh itself (P2, no refinement)."""
     from harness.commands import calibrate as cal
     from harness.commands.calibrate_case import case_text
+
     m = read_mesh(mesh)
     p = argparse.ArgumentParser()
     cal.add_arguments(p)
-    args = p.parse_args([str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO), "--method", "rule",
-                         "--max-refine", "0", "--out", str(tmp_path / "m.vtu")])
+    args = p.parse_args(
+        [
+            str(mesh),
+            "--E",
+            str(E),
+            "--nu",
+            str(NU),
+            "--density",
+            str(RHO),
+            "--method",
+            "rule",
+            "--max-refine",
+            "0",
+            "--out",
+            str(tmp_path / "m.vtu"),
+        ]
+    )
     ends = end_loads(m.points, m.cells, *(("clamp", "tip", m.groups) if groups else ()))
     (tmp_path / "c.toml").write_text(case_text(args, m.dim, m.cells, ends=ends))
     return load_case(tmp_path / "c.toml"), m, ends
@@ -59,6 +81,7 @@ def fem_load(case, load):
     from reference.fem import Discretisation
     from reference.mesh import file_mesh
     from reference.problem import body_bbox, load_vector
+
     sk = file_mesh(case.body, case.reference.cell)
     d = Discretisation(sk, case.reference.cell, "P2")
     F = load_vector(d, case, load, body_bbox(case, sk), densities(case.material, d.centroids()))
@@ -70,11 +93,14 @@ def test_an_end_face_is_the_flat_end_without_the_bore_or_the_walls(bodies):
     facets, inside = boundary_facets(m.cells, m.points)
     for side, x0 in ((0, 0.0), (1, LEN)):
         got = end_facets(m.points, facets, inside, 0, side)
-        flat = [f[np.all(np.abs(m.points[f, 0] - x0) < 1e-9, axis=1)] for f in facets]    # by coordinates
-        assert sorted(map(tuple, np.sort(got[0], axis=1))) == sorted(map(tuple, np.sort(flat[0], axis=1)))
+        # by coordinates
+        flat = [f[np.all(np.abs(m.points[f, 0] - x0) < 1e-9, axis=1)] for f in facets]
+        assert sorted(map(tuple, np.sort(got[0], axis=1))) == sorted(
+            map(tuple, np.sort(flat[0], axis=1))
+        )
         x = m.points[got[0]]
         area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1).sum()
-        assert area == pytest.approx(np.pi * (RO ** 2 - RI ** 2), rel=0.02)     # the annulus, not the disc
+        assert area == pytest.approx(np.pi * (RO**2 - RI**2), rel=0.02)  # the annulus, not the disc
         r = np.linalg.norm(x[..., 1:], axis=2)
         assert r.min() == pytest.approx(RI, rel=1e-6) and r.max() == pytest.approx(RO, rel=1e-6)
 
@@ -88,7 +114,7 @@ def test_a_rounded_end_gives_a_cap_of_outward_facing_facets(bodies):
     for side in (0, 1):
         got = end_facets(m.points, facets, inside, 0, side, band=0.1)
         c = m.points[got[0]].mean(axis=1)
-        n = c / a ** 2
+        n = c / a**2
         n /= np.linalg.norm(n, axis=1)[:, None]
         sign = 1 if side else -1
         assert len(got[0]) >= 5 and np.all(sign * n[:, 0] > 0.4)
@@ -103,6 +129,7 @@ def test_the_springs_forces_are_the_fems_consistent_load(tmp_path, bodies, body)
     1e-12, with the same moment; both equal traction x the tip's area."""
     case, m, ends = calibrate_case(tmp_path, bodies[body], groups=body == "groups")
     from harness.models.sms import build_network
+
     net = build_network(case)
     for load in case.loads:
         if not load.tractions:
@@ -111,14 +138,19 @@ def test_the_springs_forces_are_the_fems_consistent_load(tmp_path, bodies, body)
         F, x, _ = fem_load(case, load)
         scale = np.abs(F).sum(axis=0).max()
         assert np.abs(f.sum(axis=0) - F.sum(axis=0)).max() <= 1e-12 * scale, load.name
-        if m.dim == 3:         # sum_a x_a F_a = int x t dA for both: x lies in the P1 and the P2 space
+        if m.dim == 3:  # sum_a x_a F_a = int x t dA for both: x lies in the P1 and the P2 space
             c = net.points.mean(axis=0)
-            assert np.abs(np.cross(net.points - c, f).sum(axis=0) - np.cross(x - c, F).sum(axis=0)).max() \
-                <= 1e-12 * scale * LEN, load.name
+            assert (
+                np.abs(
+                    np.cross(net.points - c, f).sum(axis=0) - np.cross(x - c, F).sum(axis=0)
+                ).max()
+                <= 1e-12 * scale * LEN
+            ), load.name
         t = load.tractions[0]
         if t.twist is None and t.part == "tip":
-            assert np.linalg.norm(f.sum(axis=0)) == pytest.approx(np.linalg.norm(t.vector) * ends.section.tip_area,
-                                                                  rel=1e-12)
+            assert np.linalg.norm(f.sum(axis=0)) == pytest.approx(
+                np.linalg.norm(t.vector) * ends.section.tip_area, rel=1e-12
+            )
 
 
 def test_side_states_clamp_and_shear_the_faces_across_the_axis(tmp_path, bodies):
@@ -131,6 +163,7 @@ def test_side_states_clamp_and_shear_the_faces_across_the_axis(tmp_path, bodies)
     sides = ("train-y-x", "train-y-z", "train-z-x", "train-z-y")
     assert ends.training[-4:] == sides and set(sides) <= set(case.fit_loads)
     from harness.models.sms import build_network
+
     net = build_network(case)
     facets, inside = boundary_facets(m.cells, m.points)
     by = {l.name: l for l in case.loads}
@@ -161,6 +194,7 @@ def test_the_clamp_holds_the_same_nodes_in_both(tmp_path, bodies):
     from reference.fem import Discretisation
     from reference.mesh import file_mesh
     from reference.problem import body_bbox, fixed_dofs
+
     net = build_network(case)
     load = next(l for l in case.loads if l.name == "tip")
     held = np.flatnonzero(statics.fixed_mask(net.points, case, load).any(axis=1))
@@ -172,22 +206,25 @@ def test_the_clamp_holds_the_same_nodes_in_both(tmp_path, bodies):
     fixed = np.unique(fixed_dofs(d, case, load, body_bbox(case, sk)) // 3)
     assert np.all(np.abs(d.doflocs[0, fixed]) < 1e-9)
     vertex = fixed[fixed < sk.p.shape[1]]
-    assert np.allclose(sk.p[:, vertex].T[np.lexsort(sk.p[:, vertex])],
-                       net.points[held][np.lexsort(net.points[held].T)])
-    assert len(fixed) > len(vertex)                    # and the mid-edge dofs of the face
+    assert np.allclose(
+        sk.p[:, vertex].T[np.lexsort(sk.p[:, vertex])],
+        net.points[held][np.lexsort(net.points[held].T)],
+    )
+    assert len(fixed) > len(vertex)  # and the mid-edge dofs of the face
 
 
 def test_default_magnitudes_give_a_peak_strain_near_the_target(tmp_path, bodies):
     """The FEM's largest principal strain along the body (away from the clamp's edge,
     where a clamped face is singular) is within a factor 3 of the 1e-3 aimed at."""
     import reference
+
     case, m, _ = calibrate_case(tmp_path, bodies["tube"])
     sol = reference.solve(case, cache=False)
     vb = sol.vector_basis
     x = np.asarray(vb.global_coordinates())[0]
     keep = np.all((x > 0.15 * LEN) & (x < 0.85 * LEN), axis=1)
     for name in case.heldout:
-        g = np.asarray(vb.interpolate(sol._U[name]).grad)        # (3, 3, ne, nq)
+        g = np.asarray(vb.interpolate(sol._U[name]).grad)  # (3, 3, ne, nq)
         eps = 0.5 * (g + g.transpose(1, 0, 2, 3))
         lam = np.linalg.eigvalsh(eps.transpose(2, 3, 0, 1)[keep])
         peak = np.abs(lam).max()
@@ -218,10 +255,17 @@ vector = [100.0, 0.0, 0.0]
     ok = base.replace("{}", 'a = { end = "x0" }\nb = { end = "x1", band = 0.1, cos = 0.9 }')
     (tmp_path / "ok.toml").write_text(ok)
     c = load_case(tmp_path / "ok.toml")
-    assert c.body.parts["b"].band == 0.1 and c.body.parts["b"].cos == 0.9 and c.body.parts["a"].side == 0
-    for bad, field in (('a = { end = "x2" }', "body.parts.a.end"), ('a = { end = "x0", band = 0 }', "body.parts.a.band"),
-                       ('a = { end = "x0", cos = 1.5 }', "body.parts.a.cos"),
-                       ('a = { end = "x0", normal = 1 }', "body.parts.a.normal")):
+    assert (
+        c.body.parts["b"].band == 0.1
+        and c.body.parts["b"].cos == 0.9
+        and c.body.parts["a"].side == 0
+    )
+    for bad, field in (
+        ('a = { end = "x2" }', "body.parts.a.end"),
+        ('a = { end = "x0", band = 0 }', "body.parts.a.band"),
+        ('a = { end = "x0", cos = 1.5 }', "body.parts.a.cos"),
+        ('a = { end = "x0", normal = 1 }', "body.parts.a.normal"),
+    ):
         (tmp_path / "bad.toml").write_text(base.replace("{}", bad + '\nb = { end = "x1" }'))
         with pytest.raises(CaseError) as exc:
             load_case(tmp_path / "bad.toml")

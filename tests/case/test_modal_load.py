@@ -25,12 +25,17 @@ def case(tmp_path, loads: str):
 
 def test_a_clamp_held_out_comes_first(tmp_path):
     c = case(tmp_path, '[loads]\nset = "basic3d"\n')
-    assert c.loads[0].name == "stretch-x"                       # held at corners: not it
+    assert c.loads[0].name == "stretch-x"  # held at corners: not it
     first = modal_load(c)
-    assert first.name != "stretch-x" and any(k.part in ("x0", "y0", "z0") for k in first.constraints)
-    c = case(tmp_path, """[[loads.case]]
+    assert first.name != "stretch-x" and any(
+        k.part in ("x0", "y0", "z0") for k in first.constraints
+    )
+    c = case(
+        tmp_path,
+        """[[loads.case]]
 name = "pull"
-constraint = [{ part = "x0y0z0", components = ["all"] }, { part = "x0y1z0", components = ["x", "z"] },
+constraint = [{ part = "x0y0z0", components = ["all"] },
+              { part = "x0y1z0", components = ["x", "z"] },
               { part = "x0y0z1", components = ["x"] }]
 traction = [{ part = "x1", vector = [1.0, 0.0, 0.0] }]
 [[loads.case]]
@@ -47,11 +52,15 @@ constraint = [{ part = "x0", components = ["all"] }]
 traction = [{ part = "x1", vector = [0.0, 0.0, -1.0] }]
 [loads]
 heldout = ["tip"]
-""")
-    assert modal_load(c).name == "tip"                          # held out and clamped
-    c = case(tmp_path, """[[loads.case]]
+""",
+    )
+    assert modal_load(c).name == "tip"  # held out and clamped
+    c = case(
+        tmp_path,
+        """[[loads.case]]
 name = "pull"
-constraint = [{ part = "x0y0z0", components = ["all"] }, { part = "x0y1z0", components = ["x", "z"] },
+constraint = [{ part = "x0y0z0", components = ["all"] },
+              { part = "x0y1z0", components = ["x", "z"] },
               { part = "x0y0z1", components = ["x"] }]
 traction = [{ part = "x1", vector = [1.0, 0.0, 0.0] }]
 [[loads.case]]
@@ -59,8 +68,9 @@ name = "slide"
 constraint = [{ part = "x0", components = ["x"] }, { part = "x0y0z0", components = ["all"] },
               { part = "x0y1z0", components = ["all"] }]
 traction = [{ part = "x1", vector = [1.0, 0.0, 0.0] }]
-""")
-    assert modal_load(c).name == "pull"                        # no clamp at all: the first load
+""",
+    )
+    assert modal_load(c).name == "pull"  # no clamp at all: the first load
 
 
 def test_homogeneous_states_fall_back_to_the_first_load(tmp_path):

@@ -28,7 +28,11 @@ def test_case_files_are_the_generators_output_and_valid():
             p = FOLDER / f"{body}_nu{nu:.2f}.toml"
             assert p.read_text() == gen.case_text(body, nu), p.name
             case = load_case(p)
-            assert case.material.nu == nu and case.heldout and set(case.fit_loads).isdisjoint(case.heldout)
+            assert (
+                case.material.nu == nu
+                and case.heldout
+                and set(case.fit_loads).isdisjoint(case.heldout)
+            )
             assert list(case.section("model")["classes"]) == json.loads(gen.CLASSES)
     assert json.loads(gen.CLASSES) == ["springs", "springs+volume", "springs+kn", "mt", "p1"]
 
@@ -39,21 +43,29 @@ def test_protocol_fits_linear_and_clamped_states_and_holds_out_the_end_loads(bod
     dim = case.dim
     held = ("sag", "tip", "tip2", "torsion", "bridge") if dim == 3 else ("sag", "tip", "bridge")
     train = ("train-tip", "train-tip2", "train-torsion") if dim == 3 else ("train-tip",)
-    sides = tuple(f"train-{b}-{c}" for b in "yz"[:dim - 1] for c in "xyz"[:dim] if c != b)    # calibrate's
+    # calibrate's
+    sides = tuple(f"train-{b}-{c}" for b in "yz"[: dim - 1] for c in "xyz"[:dim] if c != b)
     assert case.heldout == held
     families = {l.name: l.family for l in case.loads}
     linear = [n for n in case.fit_loads if families[n] is not None]
-    assert len(linear) == (24 if dim == 3 else 9) and set(case.fit_loads) - set(linear) == set(train + sides)
+    assert len(linear) == (24 if dim == 3 else 9) and set(case.fit_loads) - set(linear) == set(
+        train + sides
+    )
     assert set(families[n] for n in linear) >= {"constant", "bending", "gravity", "shear-gradient"}
     by = {l.name: l for l in case.loads}
-    for name in held + train:    # the held-out loads hold x0 (bridge: both ends), the training ones x1
+    # the held-out loads hold x0 (bridge: both ends), the training ones x1
+    for name in held + train:
         parts = {c.part for c in by[name].constraints}
         assert len(parts) == (2 if name == "bridge" else 1), name
     assert {c.part for c in by["sag"].constraints} != {c.part for c in by["train-tip"].constraints}
-    for name in sides:          # the face b0 held, b1 sheared along c
+    for name in sides:  # the face b0 held, b1 sheared along c
         b = name.split("-")[1]
-        assert [c.part for c in by[name].constraints] == [f"{b}0" if body != "cylinder" else f"side-{b}0"]
-        assert [t.part for t in by[name].tractions] == [f"{b}1" if body != "cylinder" else f"side-{b}1"]
+        assert [c.part for c in by[name].constraints] == [
+            f"{b}0" if body != "cylinder" else f"side-{b}0"
+        ]
+        assert [t.part for t in by[name].tractions] == [
+            f"{b}1" if body != "cylinder" else f"side-{b}1"
+        ]
     model = case.section("model")
     assert set(model["stiffness"]) == set(STIFFNESS_RULES)
     assert case.section("optimizer")["start"] == "best"
@@ -70,9 +82,17 @@ def test_heldout_magnitudes_give_a_peak_strain_of_1e3_by_beam_theory():
     M = eps * E * (1 / 12) / 0.5
     G = E / (2 * (1 + nu))
     text = gen.case_text("box", nu)
-    for want, key in ((2 * M / 4, "gravity = [0.0, -"), (M / 2, "vector = [0.0, -"), (12 * M / 4, "gravity = [0.0, -"),
-                      (2 * eps * G / math.sqrt(0.5), "twist = [")):
-        found = [float(line[len(key):].split(",")[0]) for line in text.splitlines() if line.startswith(key)]
+    for want, key in (
+        (2 * M / 4, "gravity = [0.0, -"),
+        (M / 2, "vector = [0.0, -"),
+        (12 * M / 4, "gravity = [0.0, -"),
+        (2 * eps * G / math.sqrt(0.5), "twist = ["),
+    ):
+        found = [
+            float(line[len(key) :].split(",")[0])
+            for line in text.splitlines()
+            if line.startswith(key)
+        ]
         assert any(v == pytest.approx(want, rel=1e-3) for v in found), (want, found)
     # the cylinder: I = pi r^4 / 4 of a polygonal section, within 3 % of the circle's
     c = gen.case_text("cylinder", nu)
@@ -80,17 +100,24 @@ def test_heldout_magnitudes_give_a_peak_strain_of_1e3_by_beam_theory():
     assert twist == pytest.approx(2 * eps * 1e5 / (2 * (1 + nu)) / 0.1, rel=0.01)
     tip = float(c.split('part = "tip"\nvector = [0.0, -')[1].split(",")[0])
     r, L = 0.1, 0.5
-    assert tip == pytest.approx(eps * 1e5 * (math.pi * r ** 4 / 4) / r / (math.pi * r ** 2 * L), rel=0.03)
+    assert tip == pytest.approx(
+        eps * 1e5 * (math.pi * r**4 / 4) / r / (math.pi * r**2 * L), rel=0.03
+    )
 
 
 def test_cylinder_mesh_resolves_the_diameter():
     """cylinder.vtu: about 5,000 tets, at least 6 mean edge lengths across the diameter."""
     from harness.io.meshfile import read_mesh
+
     mesh = read_mesh(FOLDER / "cylinder.vtu")
     tets = mesh.cells["tetra"]
     assert 4000 <= len(tets) <= 6000
-    edges = np.unique(np.sort(np.concatenate([tets[:, [i, j]] for i in range(4) for j in range(i + 1, 4)]), axis=1),
-                      axis=0)
+    edges = np.unique(
+        np.sort(
+            np.concatenate([tets[:, [i, j]] for i in range(4) for j in range(i + 1, 4)]), axis=1
+        ),
+        axis=0,
+    )
     h = np.linalg.norm(mesh.points[edges[:, 0]] - mesh.points[edges[:, 1]], axis=1).mean()
     assert np.ptp(mesh.points[:, 1]) / h >= 6
     assert (FOLDER / "cylinder.vtu").stat().st_size < 200_000

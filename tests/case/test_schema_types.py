@@ -15,13 +15,30 @@ from tests.run.test_robustness import names_a_fix
 
 # TOML source of each wrong value. The list holds a boolean and a string, so it is wrong for
 # every list-valued key too (strings, numbers, tables, seeds, grid sizes).
-WRONG = {"list": '[true, "x"]', "table": "{ a = 1 }", "string": '"x"', "bool": "true", "float": "1.5"}
+WRONG = {
+    "list": '[true, "x"]',
+    "table": "{ a = 1 }",
+    "string": '"x"',
+    "bool": "true",
+    "float": "1.5",
+}
 # the wrong values that are the key's own type (a string is also a one-item list of strings)
-RIGHT = {"float": {"float"}, "str": {"string"}, "strs": {"string"}, "bool": {"bool"}, "table": {"table"},
-         "tables": {"table"}}
+RIGHT = {
+    "float": {"float"},
+    "str": {"string"},
+    "strs": {"string"},
+    "bool": {"bool"},
+    "table": {"table"},
+    "tables": {"table"},
+}
 # "any" keys: the type their owner expects (the schema's check says it)
-ANY_RIGHT = {"optimizer.options": {"table"}, "optimizer.compare_options": {"table"},
-             "optimizer.frequency.options": {"table"}, "expect.values": {"table"}, "body.parts": {"table"}}
+ANY_RIGHT = {
+    "optimizer.options": {"table"},
+    "optimizer.compare_options": {"table"},
+    "optimizer.frequency.options": {"table"},
+    "expect.values": {"table"},
+    "body.parts": {"table"},
+}
 
 SMS_2D = {
     "": {"name": '"s"', "dim": "2"},
@@ -29,7 +46,12 @@ SMS_2D = {
     "material": {"E": "1000.0", "nu": "0.3"},
     "loads": {"set": '"basic2d"'},
     "reference": {"cell": '"tri"', "divisions": "2"},
-    "model": {"kind": '"sms"', "placement": '"grid"', "grid": "[3, 3]", "structure": '"edges+diagonal"'},
+    "model": {
+        "kind": '"sms"',
+        "placement": '"grid"',
+        "grid": "[3, 3]",
+        "structure": '"edges+diagonal"',
+    },
     "optimizer": {"method": '"none"'},
 }
 BC2000_3D = {
@@ -44,7 +66,8 @@ BC2000_3D = {
 PARENTS = {
     "material.fibre": "{ E_fibre = 2.0, E_cross = 1.0, direction = [1.0, 0.0] }",
     "material.regions": "[{ box = [[0.0, 0.0], [1.0, 1.0]], E = 5.0 }]",
-    "loads.case": '[{ name = "t", constraint = [{ part = "x0" }], traction = [{ part = "x1", vector = [1.0, 0.0] }] }]',
+    "loads.case": '[{ name = "t", constraint = [{ part = "x0" }], '
+    'traction = [{ part = "x1", vector = [1.0, 0.0] }] }]',
     "optimizer.select": "{}",
     "optimizer.frequency": "{}",
 }
@@ -92,11 +115,13 @@ def render(base: dict, key: str, value: str) -> str:
         d[""][key] = value
     elif len(parts) == 1:
         d.pop(top, None)
-        d[""][top] = value                         # the section itself, as a key of the top table
+        d[""][top] = value  # the section itself, as a key of the top table
     elif len(parts) == 2:
         d.setdefault(top, {})[parts[1]] = value
-    else:                                          # a key of a nested table: inside its valid parent
-        d.setdefault(top, {})[parts[1]] = _inline_set(PARENTS[".".join(parts[:2])], parts[2:], value)
+    else:  # a key of a nested table: inside its valid parent
+        d.setdefault(top, {})[parts[1]] = _inline_set(
+            PARENTS[".".join(parts[:2])], parts[2:], value
+        )
     lines = [f"{k} = {v}" for k, v in d.pop("").items()]
     for sec, kv in d.items():
         lines += [f"[{sec}]"] + [f"{k} = {v}" for k, v in kv.items()]
@@ -107,6 +132,7 @@ def _inline_set(parent: str, path: list[str], value: str) -> str:
     """The inline table (or array of tables) ``parent`` with path set to the TOML value;
     each array of tables along the path is entered at its first item."""
     import tomllib
+
     data = tomllib.loads(f"v = {parent}")["v"]
     item = data
     for name in path[:-1]:
@@ -142,8 +168,11 @@ def validate_lines(path, capsys):
     return code, [ln for ln in err.splitlines() if ln.startswith("springbench")]
 
 
-@pytest.mark.parametrize("base, parent", [(SMS_2D, None), (BC2000_3D, None)]
-                         + [(SMS_2D, p) for p in PARENTS], ids=["sms", "bc2000", *PARENTS])
+@pytest.mark.parametrize(
+    "base, parent",
+    [(SMS_2D, None), (BC2000_3D, None)] + [(SMS_2D, p) for p in PARENTS],
+    ids=["sms", "bc2000", *PARENTS],
+)
 def test_the_bases_are_valid(base, parent, tmp_path, capsys):
     """The controls: each wrong value below is the only mistake of its file."""
     f = tmp_path / "base.toml"
@@ -158,8 +187,11 @@ def test_the_bases_are_valid(base, parent, tmp_path, capsys):
     assert validate_lines(f, capsys) == (0, []), text
 
 
-@pytest.mark.parametrize("base, key, kind", PARAMS,
-                         ids=[f"{'bc2000-' if b is BC2000_3D else ''}{k}-{t}" for b, k, t in PARAMS])
+@pytest.mark.parametrize(
+    "base, key, kind",
+    PARAMS,
+    ids=[f"{'bc2000-' if b is BC2000_3D else ''}{k}-{t}" for b, k, t in PARAMS],
+)
 def test_wrong_type_is_one_line(base, key, kind, tmp_path, capsys):
     f = tmp_path / "c.toml"
     text = render(base, key, WRONG[kind])
@@ -167,17 +199,35 @@ def test_wrong_type_is_one_line(base, key, kind, tmp_path, capsys):
     code, lines = validate_lines(f, capsys)
     assert code == 2 and len(lines) == 1, (text, lines)
     line = lines[0]
-    field = key.replace("loads.case.", "loads.case[0].").replace("material.regions.", "material.regions[0].")
+    field = key.replace("loads.case.", "loads.case[0].").replace(
+        "material.regions.", "material.regions[0]."
+    )
     field = field.replace("constraint.", "constraint[0].").replace("traction.", "traction[0].")
-    assert line.startswith(f"springbench: error: {f}: ") and field in line and names_a_fix(line), (text, line)
+    assert line.startswith(f"springbench: error: {f}: ") and field in line and names_a_fix(line), (
+        text,
+        line,
+    )
 
 
 def test_every_section_and_kind_is_walked():
-    """The walk reaches the nested keys and both model kinds (a test that walked nothing would pass)."""
+    """The walk reaches the nested keys and both model kinds (a test that walked nothing would
+    pass)."""
     walked = {k for _, k, _ in PARAMS}
-    for key in ("material.fibre.E_fibre", "loads.case.constraint.components", "loads.case.traction.twist",
-                "material.regions.box", "model.grid", "model.ks", "optimizer.select.maxiter",
-                "optimizer.frequency.options", "dynamics.snapshots", "expect.values", "run.seeds", "body.parts",
-                "quick", "model.kind"):
+    for key in (
+        "material.fibre.E_fibre",
+        "loads.case.constraint.components",
+        "loads.case.traction.twist",
+        "material.regions.box",
+        "model.grid",
+        "model.ks",
+        "optimizer.select.maxiter",
+        "optimizer.frequency.options",
+        "dynamics.snapshots",
+        "expect.values",
+        "run.seeds",
+        "body.parts",
+        "quick",
+        "model.kind",
+    ):
         assert key in walked, key
     assert len(PARAMS) > 400

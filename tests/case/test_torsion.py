@@ -18,12 +18,13 @@ from tests import meshes
 pytest.importorskip("gmsh")
 R, L, E, NU = 0.1, 0.5, 1e5, 0.3
 G = E / (2 * (1 + NU))
-TAU = 1000.0            # Pa per m: the peak traction on the exact circle is TAU R = 100 Pa
+TAU = 1000.0  # Pa per m: the peak traction on the exact circle is TAU R = 100 Pa
 
 
 def case(folder, mesh, twist=(TAU, 0.0, 0.0), refine=0):
     p = folder / "t.toml"
-    p.write_text(textwrap.dedent(f"""
+    p.write_text(
+        textwrap.dedent(f"""
         name = "torsion"
         dim = 3
         [body]
@@ -48,7 +49,8 @@ def case(folder, mesh, twist=(TAU, 0.0, 0.0), refine=0):
         [model]
         kind = "sms"
         placement = "mesh"
-        """))
+        """)
+    )
     return load_case(p)
 
 
@@ -72,7 +74,10 @@ def rotation(P, u, x0):
 @pytest.fixture(scope="module")
 def cyls(tmp_path_factory):
     d = tmp_path_factory.mktemp("torsion")
-    return {h: meshes.cylinder_groups(d, radius=R, length=L, size=h, name=f"c{h}.msh") for h in (0.05, 0.035)}
+    return {
+        h: meshes.cylinder_groups(d, radius=R, length=L, size=h, name=f"c{h}.msh")
+        for h in (0.05, 0.035)
+    }
 
 
 def test_twist_is_a_pure_torque_in_model_and_fem(tmp_path, cyls):
@@ -83,20 +88,25 @@ def test_twist_is_a_pure_torque_in_model_and_fem(tmp_path, cyls):
     from reference.fem import Discretisation
     from reference.mesh import base_mesh
     from reference.problem import body_bbox, load_vector
+
     c = case(tmp_path, cyls[0.05])
     m = read_mesh(cyls[0.05])
     J_h, centre = polar_moment(m)
     net = build_network(c)
     f = statics.force_vector(net, c, c.loads[0])
     torque = np.cross(net.points - centre, f).sum(axis=0)
-    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * TAU * R ** 3)
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * TAU * R**3)
     np.testing.assert_allclose(torque, [TAU * J_h, 0.0, 0.0], rtol=1e-12, atol=1e-12 * TAU * J_h)
     mesh = base_mesh(c)
     d = Discretisation(mesh, c.reference.cell, c.reference.element)
     F = load_vector(d, c, c.loads[0], body_bbox(c, mesh), np.ones(d.nelems)).reshape(-1, 3)
-    np.testing.assert_allclose(F.sum(axis=0), 0.0, atol=1e-12 * TAU * R ** 3)
-    np.testing.assert_allclose(np.cross(d.doflocs.T - centre, F).sum(axis=0), [TAU * J_h, 0.0, 0.0],
-                               rtol=1e-10, atol=1e-10 * TAU * J_h)
+    np.testing.assert_allclose(F.sum(axis=0), 0.0, atol=1e-12 * TAU * R**3)
+    np.testing.assert_allclose(
+        np.cross(d.doflocs.T - centre, F).sum(axis=0),
+        [TAU * J_h, 0.0, 0.0],
+        rtol=1e-10,
+        atol=1e-10 * TAU * J_h,
+    )
 
 
 def test_twist_on_a_box_face(tmp_path):
@@ -108,9 +118,11 @@ def test_twist_on_a_box_face(tmp_path):
     from reference.fem import Discretisation
     from reference.mesh import box_mesh
     from reference.problem import load_vector
+
     b, h = 0.2, 0.3
     p = tmp_path / "box.toml"
-    p.write_text(textwrap.dedent(f"""
+    p.write_text(
+        textwrap.dedent(f"""
         name = "box"
         dim = 3
         [body]
@@ -129,19 +141,28 @@ def test_twist_on_a_box_face(tmp_path):
         [model]
         kind = "sms"
         grid = [6, 3, 4]
-        """))
+        """)
+    )
     c = load_case(p)
-    J = b * h * (b ** 2 + h ** 2) / 12
+    J = b * h * (b**2 + h**2) / 12
     centre = np.array([1.0, b / 2, h / 2])
     net = build_network(c)
     f = statics.force_vector(net, c, c.loads[0])
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-12 * TAU * J)
-    np.testing.assert_allclose(np.cross(net.points - centre, f).sum(axis=0), [TAU * J, 0, 0], rtol=1e-12,
-                               atol=1e-12 * TAU * J)
+    np.testing.assert_allclose(
+        np.cross(net.points - centre, f).sum(axis=0),
+        [TAU * J, 0, 0],
+        rtol=1e-12,
+        atol=1e-12 * TAU * J,
+    )
     d = Discretisation(box_mesh((0, 0, 0), (1.0, b, h), "hex", 2), "hex", "P2")
     F = load_vector(d, c, c.loads[0], c.body.bbox(), np.ones(d.nelems)).reshape(-1, 3)
-    np.testing.assert_allclose(np.cross(d.doflocs.T - centre, F).sum(axis=0), [TAU * J, 0, 0], rtol=1e-10,
-                               atol=1e-10 * TAU * J)
+    np.testing.assert_allclose(
+        np.cross(d.doflocs.T - centre, F).sum(axis=0),
+        [TAU * J, 0, 0],
+        rtol=1e-10,
+        atol=1e-10 * TAU * J,
+    )
 
 
 def test_fem_torsion_angle_is_saint_venants(tmp_path, cyls):
@@ -151,7 +172,8 @@ def test_fem_torsion_angle_is_saint_venants(tmp_path, cyls):
     measured 2.0 % at h = 0.05 and 1.2 % at h = 0.035 (0.5 % at 0.025), P2 unrefined; so
     within 2 % at h = 0.035, and smaller than at h = 0.05."""
     import reference
-    J = np.pi * R ** 4 / 2
+
+    J = np.pi * R**4 / 2
     T = TAU * J
     exact = T * L / (G * J)
     err = {}
@@ -168,9 +190,12 @@ def test_default_end_loads_twist_the_tip_about_the_long_axis(tmp_path, cyls):
     at the tip's radius r; R: its rim nodes lie on the circle); with groups named, the
     parts are those groups."""
     from harness.case.default_loads import end_loads
+
     m = read_mesh(cyls[0.05])
     e = end_loads(m.points, m.cells)
-    assert e.names == ("sag", "tip", "tip2", "torsion", "bridge") and e.radius == pytest.approx(R, rel=1e-3)
+    assert e.names == ("sag", "tip", "tip2", "torsion", "bridge") and e.radius == pytest.approx(
+        R, rel=1e-3
+    )
     mags = e.magnitudes(E, NU, 1000.0, 1e-3)
     assert mags["torsion"] == pytest.approx(2 * 1e-3 * E / (2 * (1 + NU)) / e.radius)
     parts, cases = e.toml(mags)
@@ -178,11 +203,18 @@ def test_default_end_loads_twist_the_tip_about_the_long_axis(tmp_path, cyls):
     assert parts.startswith('clamp = { end = "x0", band = 0.05, cos = 0.5 }\ntip = { end = "x1"')
     g = end_loads(m.points, m.cells, "clamp", "tip", m.groups)
     parts, _ = g.toml(mags)
-    assert parts.startswith('clamp = { group = "clamp" }\ntip = { group = "tip" }\nside-y0 = { end = "y0"')
-    assert [line.split(" =")[0] for line in parts.splitlines()[2:]] == ["side-y0", "side-y1", "side-z0", "side-z1"]
+    assert parts.startswith(
+        'clamp = { group = "clamp" }\ntip = { group = "tip" }\nside-y0 = { end = "y0"'
+    )
+    assert [line.split(" =")[0] for line in parts.splitlines()[2:]] == [
+        "side-y0",
+        "side-y1",
+        "side-z0",
+        "side-z1",
+    ]
     assert "group 'tip'" in g.describe() and "group 'clamp' clamped" in g.describe()
     flat = read_mesh(meshes.holed_plate(tmp_path))
-    assert end_loads(flat.points, flat.cells).names == ("sag", "tip", "bridge")        # no torsion in 2-D
+    assert end_loads(flat.points, flat.cells).names == ("sag", "tip", "bridge")  # no torsion in 2-D
 
 
 def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
@@ -194,14 +226,35 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     from harness.commands.calibrate_case import case_text
     from harness.mechanics import statics
     from harness.models.sms import build_network
+
     mesh = cyls[0.05]
     out = tmp_path / "m.vtu"
-    code = cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--method", "rule", "--max-refine", "0",
-                     "--clamp", "clamp", "--load-region", "tip", "--out", str(out)])
+    code = cli.main(
+        [
+            "calibrate",
+            str(mesh),
+            "--E",
+            str(E),
+            "--nu",
+            str(NU),
+            "--method",
+            "rule",
+            "--max-refine",
+            "0",
+            "--clamp",
+            "clamp",
+            "--load-region",
+            "tip",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
-    assert "group 'clamp' clamped" in capsys.readouterr().out      # the clamp is said on stdout
+    assert "group 'clamp' clamped" in capsys.readouterr().out  # the clamp is said on stdout
     data = json.loads(out.with_suffix(".json").read_text())
-    assert data["loads_heldout"] == ["sag", "tip", "tip2", "torsion", "bridge"] and np.isfinite(data["G_norm_heldout"])
+    assert data["loads_heldout"] == ["sag", "tip", "tip2", "torsion", "bridge"] and np.isfinite(
+        data["G_norm_heldout"]
+    )
     m = read_mesh(mesh)
     args = cal_args(mesh, out)
     text = case_text(args, 3, m.cells, ends=end_loads(m.points, m.cells, "clamp", "tip", m.groups))
@@ -215,14 +268,32 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     on = np.abs(net.points[:, 0]) < 1e-12
     assert np.abs(u[clamp]).max() <= 1e-12 * np.abs(u).max() and np.abs(um[on]).max() == 0.0
     theta = rotation(m.points, u, L)
-    assert theta > 0 and rotation(net.points, um, L) > 0                 # twisted the same way
+    assert theta > 0 and rotation(net.points, um, L) > 0  # twisted the same way
 
 
 def cal_args(mesh, out):
     import argparse
 
     from harness.commands import calibrate as cal
+
     p = argparse.ArgumentParser()
     cal.add_arguments(p)
-    return p.parse_args([str(mesh), "--E", str(E), "--nu", str(NU), "--method", "rule", "--max-refine", "0",
-                         "--clamp", "clamp", "--load-region", "tip", "--out", str(out)])
+    return p.parse_args(
+        [
+            str(mesh),
+            "--E",
+            str(E),
+            "--nu",
+            str(NU),
+            "--method",
+            "rule",
+            "--max-refine",
+            "0",
+            "--clamp",
+            "clamp",
+            "--load-region",
+            "tip",
+            "--out",
+            str(out),
+        ]
+    )

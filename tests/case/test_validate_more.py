@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def case3d(tmp_path, model="grid = [5, 3]", reference=""):
     p = tmp_path / "c.toml"
-    p.write_text(textwrap.dedent(f"""
+    p.write_text(
+        textwrap.dedent(f"""
         name = "c"
         dim = 3
         [body]
@@ -31,15 +32,19 @@ def case3d(tmp_path, model="grid = [5, 3]", reference=""):
         kind = "sms"
         placement = "grid"
         {model}
-        """))
+        """)
+    )
     return p
 
 
-@pytest.mark.parametrize("model,reference,field", [
-    ("grid = [5, 3]", "", "model.grid"),
-    ("grid = [5, 3, 1]", "", "model.grid"),
-    ("grid = [3, 3, 3]", "divisions = 9223372036854775807", "reference.divisions"),
-])
+@pytest.mark.parametrize(
+    "model,reference,field",
+    [
+        ("grid = [5, 3]", "", "model.grid"),
+        ("grid = [5, 3, 1]", "", "model.grid"),
+        ("grid = [3, 3, 3]", "divisions = 9223372036854775807", "reference.divisions"),
+    ],
+)
 def test_validate_names_the_field(tmp_path, capsys, model, reference, field):
     code = cli.main(["validate", str(case3d(tmp_path, model, reference))])
     err = (capsys.readouterr().err + "").strip().splitlines()

@@ -5,7 +5,9 @@ import numpy as np
 
 from tests.plate_case import plate_case
 
-CASE = plate_case("tiny", """
+CASE = plate_case(
+    "tiny",
+    """
     [reference]
     cell = "tri"
     divisions = 2
@@ -17,15 +19,17 @@ CASE = plate_case("tiny", """
     placement = "grid"
     grid = [3, 3]
     structure = "edges+diagonal"
-    """)
+    """,
+)
 
 
 def cube_tets(n: int = 2):
     """A unit cube split into 6 n^3 positively oriented tetrahedra (Kuhn)."""
     import itertools
+
     g = np.linspace(0.0, 1.0, n + 1)
     pts = np.array([[x, y, z] for z in g for y in g for x in g])
-    idx = lambda i, j, k: i + (n + 1) * (j + (n + 1) * k)   # noqa: E731
+    idx = lambda i, j, k: i + (n + 1) * (j + (n + 1) * k)  # noqa: E731
     tets = []
     for i, j, k in itertools.product(range(n), repeat=3):
         v = [idx(i + a, j + b, k + c) for c in (0, 1) for b in (0, 1) for a in (0, 1)]

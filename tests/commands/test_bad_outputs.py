@@ -19,18 +19,39 @@ from harness import cli
 from tests.fakestage import write_case
 from tests.fs_faults import disk_full, read_only
 
-pytestmark = pytest.mark.usefixtures("cache")   # the reference cache of the ``made`` inputs
+pytestmark = pytest.mark.usefixtures("cache")  # the reference cache of the ``made`` inputs
 
 FILE_OUT = {"build": "net.vtu", "score": "g.csv", "reference": "u.csv", "calibrate": "m.vtu"}
 
 
 def argv(cmd: str, made: Path, out: Path) -> list[str]:
-    return {"build": ["build", made / "tiny.toml", "--out", out],
-            "score": ["score", made / "net.vtu", made / "tiny.toml", "--out", out],
-            "reference": ["reference", made / "tiny.toml", "--points", made / "points.csv", "--out", out],
-            "calibrate": ["calibrate", made / "cube.vtu", "--E", "1e5", "--nu", "0.3", "--method", "rule",
-                          "--heldout", "none", "--out", out],
-            "bench": ["bench", "reference", "--quick", "--out", out]}[cmd]
+    return {
+        "build": ["build", made / "tiny.toml", "--out", out],
+        "score": ["score", made / "net.vtu", made / "tiny.toml", "--out", out],
+        "reference": [
+            "reference",
+            made / "tiny.toml",
+            "--points",
+            made / "points.csv",
+            "--out",
+            out,
+        ],
+        "calibrate": [
+            "calibrate",
+            made / "cube.vtu",
+            "--E",
+            "1e5",
+            "--nu",
+            "0.3",
+            "--method",
+            "rule",
+            "--heldout",
+            "none",
+            "--out",
+            out,
+        ],
+        "bench": ["bench", "reference", "--quick", "--out", out],
+    }[cmd]
 
 
 def one_error(code, capsys, *must) -> str:
@@ -38,13 +59,15 @@ def one_error(code, capsys, *must) -> str:
     lines = [ln for ln in err.splitlines() if ln.startswith("springbench")]
     assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
     line = lines[0]
-    assert ".part" not in line and "springbench-" not in line, line   # never a temporary file
+    assert ".part" not in line and "springbench-" not in line, line  # never a temporary file
     assert all(m in line for m in must), (must, line)
     return line
 
 
 def leftovers(folder: Path) -> list[str]:
-    return sorted(p.name for p in Path(folder).rglob("*") if ".part" in p.name or p.name.endswith(".tmp"))
+    return sorted(
+        p.name for p in Path(folder).rglob("*") if ".part" in p.name or p.name.endswith(".tmp")
+    )
 
 
 def run(argv_):
@@ -70,9 +93,13 @@ def test_read_only_folder(cmd, simulate, made, tmp_path, capsys, fake):
         assert run(["run", suite, "--results", ro, "--jobs", 1, "--no-figures"]) == 0
         target = ro / "demo" / "summary.csv"
         before = target.read_bytes()
-        args = (["run", suite, "--results", ro, "--jobs", 1, "--no-figures", "--force"] if cmd == "run"
-                else ["report", ro / "demo", "--no-figures"])
-        if cmd == "report":      # a stale table: report has something to write (it leaves current files alone)
+        args = (
+            ["run", suite, "--results", ro, "--jobs", 1, "--no-figures", "--force"]
+            if cmd == "run"
+            else ["report", ro / "demo", "--no-figures"]
+        )
+        # a stale table: report has something to write (it leaves current files alone)
+        if cmd == "report":
             (ro / "demo" / "summary.md").write_text("stale\n")
     else:
         ro.mkdir()
@@ -88,6 +115,7 @@ def test_read_only_folder(cmd, simulate, made, tmp_path, capsys, fake):
 
 
 # -- a folder in the way, a file where a folder goes ----------------------------------------
+
 
 @pytest.mark.parametrize("cmd", ["build", "score", "reference", "calibrate"])
 def test_out_is_an_existing_folder(cmd, made, tmp_path, capsys):
@@ -122,6 +150,7 @@ def test_out_into_a_missing_folder_creates_it(cmd, made, tmp_path, capsys):
 
 # -- disk full ------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("simulate", [False, True], ids=["real", "simulated"])
 @pytest.mark.parametrize("cmd", ["build", "score", "reference", "calibrate"])
 def test_disk_full_keeps_the_old_file(cmd, simulate, made, tmp_path, capsys):
@@ -129,7 +158,9 @@ def test_disk_full_keeps_the_old_file(cmd, simulate, made, tmp_path, capsys):
     'disk full'; the file from before is untouched, no part of the new one is left."""
     folder = tmp_path / "disk"
     out = folder / FILE_OUT[cmd]
-    siblings = [out] + ([out.with_suffix(".json"), out.with_suffix(".csv")] if cmd == "calibrate" else [])
+    siblings = [out] + (
+        [out.with_suffix(".json"), out.with_suffix(".csv")] if cmd == "calibrate" else []
+    )
     with disk_full(folder, simulate) as disk:
         for f in siblings:
             f.write_text("old")
@@ -146,6 +177,7 @@ def test_disk_full_during_a_run_loses_no_finished_case(simulate, tmp_path, capsy
     edited case's old result included) and nothing half-written is left; once there is
     space again the run recomputes only the edited case."""
     import json
+
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a", "rows=1")
     write_case(suite, "b", "rows=2 files=1")
@@ -153,7 +185,11 @@ def test_disk_full_during_a_run_loses_no_finished_case(simulate, tmp_path, capsy
     args = ["run", suite, "--results", res, "--jobs", 1, "--no-figures"]
     with disk_full(res, simulate) as disk:
         assert run(args) == 0
-        stored = {p: p.read_bytes() for p in res.rglob("*") if p.is_file() and not p.name.startswith(".filler")}
+        stored = {
+            p: p.read_bytes()
+            for p in res.rglob("*")
+            if p.is_file() and not p.name.startswith(".filler")
+        }
         write_case(suite, "b", "rows=3 files=1")
         capsys.readouterr()
         disk.fill(1)
@@ -178,12 +214,18 @@ def test_disk_full_in_report_keeps_the_tables(simulate, tmp_path, capsys, fake):
         assert run(["run", suite, "--results", res, "--jobs", 1, "--no-figures"]) == 0
         before = (res / "demo" / "summary.csv").read_bytes()
         capsys.readouterr()
-        (res / "demo" / "summary.md").write_text("stale\n")     # something to write (current files are left alone)
+        # something to write (current files are left alone)
+        (res / "demo" / "summary.md").write_text("stale\n")
         disk.fill(0)
         one_error(run(["report", res / "demo", "--no-figures"]), capsys, "summary", "disk full")
         assert (res / "demo" / "summary.csv").read_bytes() == before and leftovers(res) == []
 
 
-OUTPUT_CASES = ([f"read-only {c}" for c in READ_ONLY] + [f"folder {c}" for c in FILE_OUT] + ["bench onto a file"]
-                + [f"under a file {c}" for c in [*FILE_OUT, "bench"]] + [f"disk full {c}" for c in FILE_OUT]
-                + ["disk full run", "disk full report"])
+OUTPUT_CASES = (
+    [f"read-only {c}" for c in READ_ONLY]
+    + [f"folder {c}" for c in FILE_OUT]
+    + ["bench onto a file"]
+    + [f"under a file {c}" for c in [*FILE_OUT, "bench"]]
+    + [f"disk full {c}" for c in FILE_OUT]
+    + ["disk full run", "disk full report"]
+)

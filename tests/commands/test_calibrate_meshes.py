@@ -21,20 +21,38 @@ RHO = 1000.0
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
     d = tmp_path_factory.mktemp("meshes")
-    return {"cylinder": meshes.cylinder(d), "ellipsoid": meshes.ellipsoid(d), "holed_block": meshes.holed_block(d),
-            "holed_plate": meshes.holed_plate(d),
-            "cylinder_mm": meshes.cylinder(d, scale=1000.0, name="cylinder_mm.vtu")}
+    return {
+        "cylinder": meshes.cylinder(d),
+        "ellipsoid": meshes.ellipsoid(d),
+        "holed_block": meshes.holed_block(d),
+        "holed_plate": meshes.holed_plate(d),
+        "cylinder_mm": meshes.cylinder(d, scale=1000.0, name="cylinder_mm.vtu"),
+    }
 
 
 def calibrate(mesh, out, *argv, refine="0"):
-    code = cli.main(["calibrate", str(mesh), "--E", "1e5", "--density", str(RHO), "--out", str(out),
-                     "--max-refine", refine, *argv])
+    code = cli.main(
+        [
+            "calibrate",
+            str(mesh),
+            "--E",
+            "1e5",
+            "--density",
+            str(RHO),
+            "--out",
+            str(out),
+            "--max-refine",
+            refine,
+            *argv,
+        ]
+    )
     assert code == 0
     return json.loads(out.with_suffix(".json").read_text()), pd.read_csv(out.with_suffix(".csv"))
 
 
 def volume(q, springs, dim, mesh):
     import meshio
+
     m = meshio.read(mesh)
     cells = m.cells_dict["tetra" if dim == 3 else "triangle"]
     p = m.points[:, :dim][cells]
@@ -54,50 +72,83 @@ def dense_step(data):
         blk = np.outer(d, d)
         for A, c in ((K, k), (C, kd)):
             for a, b, sign in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
-                A[a * dim:(a + 1) * dim, b * dim:(b + 1) * dim] += sign * c * blk
+                A[a * dim : (a + 1) * dim, b * dim : (b + 1) * dim] += sign * c * blk
     m = np.repeat(data["particle_mass"], dim)
     w = 1 / np.sqrt(m)
     lam, vec = np.linalg.eigh(K * w[:, None] * w[None, :])
     omega, v = np.sqrt(lam[-1]), vec[:, -1]
     zeta = v @ (C * w[:, None] * w[None, :]) @ v / (2 * omega)
-    return 2 / omega * (np.sqrt(1 + zeta ** 2) - zeta)
+    return 2 / omega * (np.sqrt(1 + zeta**2) - zeta)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name,nu,method", [("cylinder", 0.45, "lbfgs"), ("ellipsoid", 0.49, "rule"),
-                                            ("holed_block", 0.3, "rule"), ("holed_plate", 0.45, "rule")])
+@pytest.mark.parametrize(
+    "name,nu,method",
+    [
+        ("cylinder", 0.45, "lbfgs"),
+        ("ellipsoid", 0.49, "rule"),
+        ("holed_block", 0.3, "rule"),
+        ("holed_plate", 0.45, "rule"),
+    ],
+)
 def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, method):
-    data, df = calibrate(made[name], tmp_path / "m.vtu", "--nu", str(nu), "--method", method, "--budget", "3",
-                         refine="1" if method == "lbfgs" else "0")
+    data, df = calibrate(
+        made[name],
+        tmp_path / "m.vtu",
+        "--nu",
+        str(nu),
+        "--method",
+        method,
+        "--budget",
+        "3",
+        refine="1" if method == "lbfgs" else "0",
+    )
     printed = capsys.readouterr().out
     dim = data["dim"]
     mass = np.asarray(data["particle_mass"])
     assert mass.min() > 0
-    assert mass.sum() == pytest.approx(RHO * volume(data["particle_q"], data["spring_indices"], dim, made[name]),
-                                       rel=1e-10)
-    assert data["loads_heldout"] == (["sag", "tip", "tip2", "torsion", "bridge"] if dim == 3 else
-                                     ["sag", "tip", "bridge"])
-    fitted = data["loads_fitted"]       # the linear states (linear3d / 2d), then the clamped training states
+    assert mass.sum() == pytest.approx(
+        RHO * volume(data["particle_q"], data["spring_indices"], dim, made[name]), rel=1e-10
+    )
+    assert data["loads_heldout"] == (
+        ["sag", "tip", "tip2", "torsion", "bridge"] if dim == 3 else ["sag", "tip", "bridge"]
+    )
+    # the linear states (linear3d / 2d), then the clamped training states
+    fitted = data["loads_fitted"]
     clamped = ["train-tip", "train-tip2", "train-torsion"] if dim == 3 else ["train-tip"]
-    clamped += [f"train-{b}-{c}" for b in "xyz"[:dim] for c in "xyz"[:dim] if b != c and f"train-{b}-{c}" in fitted]
-    assert len(clamped) == (7 if dim == 3 else 2)      # the end states, then the sides
+    clamped += [
+        f"train-{b}-{c}"
+        for b in "xyz"[:dim]
+        for c in "xyz"[:dim]
+        if b != c and f"train-{b}-{c}" in fitted
+    ]
+    assert len(clamped) == (7 if dim == 3 else 2)  # the end states, then the sides
     assert len(fitted) == len(VOIGT[dim]) + len(gradient_states(dim)) + len(clamped)
-    assert fitted[-len(clamped):] == clamped
+    assert fitted[-len(clamped) :] == clamped
     per = data["G_heldout_loads"]
-    assert list(per) == data["loads_heldout"] and data["G_heldout_mean"] == pytest.approx(np.mean(list(per.values())))
-    assert min(per.values()) <= data["G_norm_heldout"] <= max(per.values())     # pooled: a weighted mean of them
+    assert list(per) == data["loads_heldout"] and data["G_heldout_mean"] == pytest.approx(
+        np.mean(list(per.values()))
+    )
+    # pooled: a weighted mean of them
+    assert min(per.values()) <= data["G_norm_heldout"] <= max(per.values())
     assert np.isfinite(data["G_norm_heldout"]) and np.isfinite(data["G_norm"])
-    if method == "lbfgs":       # one refinement: the FEM's estimate of its own error (none without)
+    if method == "lbfgs":  # one refinement: the FEM's estimate of its own error (none without)
         assert 0 < data["reference_error_heldout"] < 0.1 and 0 < data["reference_error_fitted"] < 1
-        assert data["reference_error"] == max(data["reference_error_heldout"], data["reference_error_fitted"])
-        assert f"FEM error <= {100 * data['reference_error_heldout']:.3g} % on held-out loads" in printed \
+        assert data["reference_error"] == max(
+            data["reference_error_heldout"], data["reference_error_fitted"]
+        )
+        assert (
+            f"FEM error <= {100 * data['reference_error_heldout']:.3g} % on held-out loads"
+            in printed
             or data["reference_error_heldout"] >= data["reference_error_fitted"]
+        )
     assert data["E"] == 1e5 and data["nu"] == nu and data["density"] == RHO
     # damping: 2 zeta sqrt(k mu) per spring; the stable step from a dense eigen-solve
     s = np.asarray(data["spring_indices"])
     mu = mass[s[:, 0]] * mass[s[:, 1]] / (mass[s[:, 0]] + mass[s[:, 1]])
-    np.testing.assert_allclose(data["spring_damping"], 0.1 * np.sqrt(np.asarray(data["spring_stiffness"]) * mu),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        data["spring_damping"], 0.1 * np.sqrt(np.asarray(data["spring_stiffness"]) * mu), rtol=1e-12
+    )
     assert data["dt_stable"] == pytest.approx(dense_step(data), rel=1e-6)
     assert data["dt_stable_float32"] < data["dt_stable"]
     exported = df[df.exported].iloc[0]
@@ -111,13 +162,18 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
 def test_rule_prints_and_exports_the_same_constants(tmp_path, made, capsys):
     """--method rule: the exported row is the rule asked for (not the last one tried), and
     the printed verdict quotes its G."""
-    data, df = calibrate(made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "deussen")
+    data, df = calibrate(
+        made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "deussen"
+    )
     printed = capsys.readouterr().out
     row = df[df.exported].iloc[0]
-    assert row.stiffness == "deussen" and row.G_norm_final == pytest.approx(data["G_norm"], rel=1e-12)
+    assert row.stiffness == "deussen" and row.G_norm_final == pytest.approx(
+        data["G_norm"], rel=1e-12
+    )
     assert f"RMS displacement error {100 * data['G_norm']:.3g} %" in printed
     L = np.asarray(data["spring_rest_length"])
-    np.testing.assert_allclose(data["spring_stiffness"], 1e5 * L / 4, rtol=1e-12)   # Deussen: k = E s0 / 4
+    # Deussen: k = E s0 / 4
+    np.testing.assert_allclose(data["spring_stiffness"], 1e5 * L / 4, rtol=1e-12)
 
 
 def test_every_rule_of_the_harness_is_a_row_and_can_be_exported(tmp_path, made):
@@ -126,7 +182,10 @@ def test_every_rule_of_the_harness_is_a_row_and_can_be_exported(tmp_path, made):
     from harness.case.reader import Material
     from harness.io.meshfile import read_mesh
     from harness.models.stiffness_rules import RULES, spring_constants
-    data, df = calibrate(made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "cauchy")
+
+    data, df = calibrate(
+        made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule", "--rule", "cauchy"
+    )
     assert set(df.stiffness) == set(RULES) and df[df.exported].iloc[0].stiffness == "cauchy"
     m = read_mesh(made["cylinder"])
     springs = np.asarray(data["spring_indices"])
@@ -136,7 +195,16 @@ def test_every_rule_of_the_harness_is_a_row_and_can_be_exported(tmp_path, made):
 
 def test_a_mesh_in_millimetres_gives_the_same_model(tmp_path, made):
     a, _ = calibrate(made["cylinder"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule")
-    b, _ = calibrate(made["cylinder_mm"], tmp_path / "mm.vtu", "--nu", "0.3", "--method", "rule", "--length-unit", "mm")
+    b, _ = calibrate(
+        made["cylinder_mm"],
+        tmp_path / "mm.vtu",
+        "--nu",
+        "0.3",
+        "--method",
+        "rule",
+        "--length-unit",
+        "mm",
+    )
     for key in ("particle_q", "particle_mass", "spring_stiffness", "spring_damping"):
         np.testing.assert_allclose(b[key], a[key], rtol=1e-9, atol=1e-12 * np.abs(a[key]).max())
     assert b["G_norm"] == pytest.approx(a["G_norm"], rel=1e-6)
@@ -144,33 +212,68 @@ def test_a_mesh_in_millimetres_gives_the_same_model(tmp_path, made):
 
 
 def test_moment_masses_are_flagged_not_silently_exported(tmp_path, made):
-    data, _ = calibrate(made["holed_block"], tmp_path / "m.vtu", "--nu", "0.3", "--method", "rule",
-                        "--masses", "moments")
+    data, _ = calibrate(
+        made["holed_block"],
+        tmp_path / "m.vtu",
+        "--nu",
+        "0.3",
+        "--method",
+        "rule",
+        "--masses",
+        "moments",
+    )
     assert min(data["particle_mass"]) < 0 and "warning" in data and data["dt_stable"] is None
 
 
 def test_a_body_in_two_pieces_is_one_line_naming_the_mesh(tmp_path, made, capsys):
     import meshio
+
     m = meshio.read(made["cylinder"])
     p, c = m.points, m.cells_dict["tetra"]
     two = tmp_path / "two.vtu"
-    meshio.write(two, meshio.Mesh(np.vstack([p, p + [2.0, 0, 0]]), [("tetra", np.vstack([c, c + len(p)]))]))
-    code = cli.main(["calibrate", str(two), "--E", "1e5", "--nu", "0.3", "--out", str(tmp_path / "o.vtu")])
+    meshio.write(
+        two, meshio.Mesh(np.vstack([p, p + [2.0, 0, 0]]), [("tetra", np.vstack([c, c + len(p)]))])
+    )
+    code = cli.main(
+        ["calibrate", str(two), "--E", "1e5", "--nu", "0.3", "--out", str(tmp_path / "o.vtu")]
+    )
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and "two.vtu" in err[-1] and "disconnected" in err[-1] and "springbench-calibrate" not in err[-1]
+    assert (
+        code == 2
+        and "two.vtu" in err[-1]
+        and "disconnected" in err[-1]
+        and "springbench-calibrate" not in err[-1]
+    )
 
 
 def test_k_ratio_caps_the_spread_and_shows_its_price(tmp_path, made):
     free, _ = calibrate(made["holed_block"], tmp_path / "a.vtu", "--nu", "0.3", "--method", "rule")
-    data, df = calibrate(made["holed_block"], tmp_path / "b.vtu", "--nu", "0.3", "--method", "rule", "--k-ratio", "1.5")
+    data, df = calibrate(
+        made["holed_block"],
+        tmp_path / "b.vtu",
+        "--nu",
+        "0.3",
+        "--method",
+        "rule",
+        "--k-ratio",
+        "1.5",
+    )
     k = np.asarray(data["spring_stiffness"])
     assert k.max() / np.median(k) == pytest.approx(1.5, rel=1e-12)
     k0 = np.asarray(free["spring_stiffness"])
     np.testing.assert_array_equal(k, np.minimum(k0, 1.5 * np.median(k0)))
     assert data["dt_stable"] > free["dt_stable"]
-    capped, plain = df[df.exported].iloc[0], df[(df.optimizer == "none") & df.dt_stable.notna()].iloc[0]
-    assert capped.optimizer == "none+k-ratio 1.5" and capped.G_norm_final == pytest.approx(data["G_norm"], rel=1e-12)
-    assert capped.dt_stable == pytest.approx(data["dt_stable"], rel=1e-9) and plain.dt_stable < capped.dt_stable
+    capped, plain = (
+        df[df.exported].iloc[0],
+        df[(df.optimizer == "none") & df.dt_stable.notna()].iloc[0],
+    )
+    assert capped.optimizer == "none+k-ratio 1.5" and capped.G_norm_final == pytest.approx(
+        data["G_norm"], rel=1e-12
+    )
+    assert (
+        capped.dt_stable == pytest.approx(data["dt_stable"], rel=1e-9)
+        and plain.dt_stable < capped.dt_stable
+    )
 
 
 def test_help_names_every_output(tmp_path, made, capsys):
@@ -184,14 +287,18 @@ def test_help_names_every_output(tmp_path, made, capsys):
 
 
 @pytest.mark.slow
-def test_a_validation_too_slow_to_run_is_skipped_from_the_rules_own_statics(tmp_path, made, monkeypatch):
+def test_a_validation_too_slow_to_run_is_skipped_from_the_rules_own_statics(
+    tmp_path, made, monkeypatch
+):
     """When the validation cannot take enough steps within its budget, the stage skips it
     from the start rule's statics alone (no solve of its own: the 200k-tet body's costs a
     minute) and the rule's scores in the validation table are the ones a validation that
     runs computes itself."""
     from harness.optimize import select as sel
     from harness.stages import sms_select
-    one = tuple(c for c in sel.CANDIDATES if c.name == "springs-prior1")      # the rule's row is the point
+
+    # the rule's row is the point
+    one = tuple(c for c in sel.CANDIDATES if c.name == "springs-prior1")
     monkeypatch.setattr(sel, "CANDIDATES", one)
     ran, _ = calibrate(made["cylinder"], tmp_path / "a.vtu", "--nu", "0.3")
     assert ran["validation_skipped"] is None and len(ran["validation"]) == 2
@@ -205,4 +312,6 @@ def test_a_validation_too_slow_to_run_is_skipped_from_the_rules_own_statics(tmp_
     folds = [k for k in ran["validation"][0] if k != "model"]
     assert len(folds) >= 6
     for fold in folds:
-        assert skipped["validation"][0][fold] == pytest.approx(ran["validation"][0][fold], rel=1e-9), fold
+        assert skipped["validation"][0][fold] == pytest.approx(
+            ran["validation"][0][fold], rel=1e-9
+        ), fold

@@ -22,15 +22,33 @@ pytest.importorskip("gmsh")
 
 @pytest.fixture(scope="module")
 def cylinder(tmp_path_factory):
-    return meshes.cylinder(tmp_path_factory.mktemp("cyl"))     # r 0.1, length 0.5 along x: 477 tets
+    return meshes.cylinder(tmp_path_factory.mktemp("cyl"))  # r 0.1, length 0.5 along x: 477 tets
 
 
 def run(mesh, out, capsys, *argv):
-    code = cli.main(["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3", "--budget", "3", "--out", str(out), *argv])
+    code = cli.main(
+        [
+            "calibrate",
+            str(mesh),
+            "--E",
+            "1e5",
+            "--nu",
+            "0.3",
+            "--budget",
+            "3",
+            "--out",
+            str(out),
+            *argv,
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    return (captured.out, captured.err, json.loads(out.with_suffix(".json").read_text()),
-            pd.read_csv(out.with_suffix(".csv")))
+    return (
+        captured.out,
+        captured.err,
+        json.loads(out.with_suffix(".json").read_text()),
+        pd.read_csv(out.with_suffix(".csv")),
+    )
 
 
 def expected_verdict(df: pd.DataFrame):
@@ -44,7 +62,17 @@ def expected_verdict(df: pd.DataFrame):
     spread = row.get("G_heldout_mean_spread", math.nan)
     spread = 0.0 if not np.isfinite(spread) else spread
     fit, other = row.G_heldout_mean, best.G_heldout_mean
-    return ("tie" if abs(fit - other) <= spread else "better" if fit < other else "fit-worse-than-rule"), best, row
+    return (
+        (
+            "tie"
+            if abs(fit - other) <= spread
+            else "better"
+            if fit < other
+            else "fit-worse-than-rule"
+        ),
+        best,
+        row,
+    )
 
 
 @pytest.mark.slow
@@ -57,12 +85,17 @@ def test_verdict_matches_the_table(cylinder, tmp_path, capsys, method):
     assert lines[0].startswith("held-out loads:") and "held-out loads:" not in err
     pts = meshio.read(cylinder).points
     on_face = int(np.sum(np.abs(pts[:, 0] - pts[:, 0].min()) < 1e-9))
-    assert f"normal (-1, 0, 0), {on_face} nodes" in lines[0] and "centroid (0, " in lines[0], lines[0]
+    assert f"normal (-1, 0, 0), {on_face} nodes" in lines[0] and "centroid (0, " in lines[0], lines[
+        0
+    ]
     assert "--clamp GROUP" in lines[0]
     # the verdict, worked out from the CSV
     want, best, row = expected_verdict(df)
     assert data["verdict"] == want
-    assert data["best_rule_heldout"] == {"rule": best.stiffness, "G_heldout_mean": pytest.approx(best.G_heldout_mean)}
+    assert data["best_rule_heldout"] == {
+        "rule": best.stiffness,
+        "G_heldout_mean": pytest.approx(best.G_heldout_mean),
+    }
     assert data["status"] == row.status and data["status"] in ("ok", "ref-coarse")
     held = next(ln for ln in lines if ln.startswith("Held-out loads ("))
     assert f"the best rule ({best.stiffness}) {100 * best.G_heldout_mean:.3g} %" in held
@@ -71,7 +104,7 @@ def test_verdict_matches_the_table(cylinder, tmp_path, capsys, method):
         assert f"export the rule instead (--method rule --rule {best.stiffness})" in held
     ref = next(ln for ln in lines if ln.startswith("Reference "))
     assert ref.startswith(f"Reference {row.status} (")
-    if method == "lbfgs":      # the optimiser's whole message, never cut at its status
+    if method == "lbfgs":  # the optimiser's whole message, never cut at its status
         assert data["opt_stop"] == row.opt_stop and not data["opt_stop"].rstrip().endswith(":")
         assert data["opt_stops"] == [data["opt_stop"]]
     else:
@@ -79,7 +112,16 @@ def test_verdict_matches_the_table(cylinder, tmp_path, capsys, method):
 
 
 def test_no_heldout_loads_say_what_the_numbers_are(cylinder, tmp_path, capsys):
-    out, _, data, _ = run(cylinder, tmp_path / "m.vtu", capsys, "--method", "rule", "--heldout", "none",
-                          "--max-refine", "0")
+    out, _, data, _ = run(
+        cylinder,
+        tmp_path / "m.vtu",
+        capsys,
+        "--method",
+        "rule",
+        "--heldout",
+        "none",
+        "--max-refine",
+        "0",
+    )
     assert data["verdict"] is None and data["best_rule_heldout"] is None
     assert "No held-out loads (--heldout none)" in out and "clamp" not in out.splitlines()[0]

@@ -22,6 +22,7 @@ def schema_tables() -> dict[tuple[str, str | None], dict[str, Field]]:
         for key, f in spec.items():
             if f.kind in ("table", "tables") and f.spec is not None:
                 walk(f"{path}.{key}" if path else key, f.spec, kind)
+
     walk("", reader.TOP)
     for key, spec in sections.SECTIONS.items():
         if spec == "model":
@@ -64,11 +65,15 @@ def test_every_schema_key_is_documented_and_every_documented_key_exists():
     docs = documented_tables(PAGE.read_text(encoding="utf-8"))
     missing_tables = sorted(str(t) for t in schema if t not in docs)
     assert missing_tables == [], f"tables with no key table in docs/case-files.md: {missing_tables}"
-    assert sorted(str(t) for t in docs if t not in schema) == [], "documented tables the schema does not have"
+    assert sorted(str(t) for t in docs if t not in schema) == [], (
+        "documented tables the schema does not have"
+    )
     for table, spec in schema.items():
         where = f"[{table[0] or 'top level'}]" + (f' kind = "{table[1]}"' if table[1] else "")
         assert sorted(set(spec) - set(docs[table])) == [], f"{where}: undocumented keys"
-        assert sorted(set(docs[table]) - set(spec)) == [], f"{where}: documented keys the schema does not accept"
+        assert sorted(set(docs[table]) - set(spec)) == [], (
+            f"{where}: documented keys the schema does not accept"
+        )
 
 
 def test_every_choice_is_named_in_its_row():
@@ -84,9 +89,11 @@ def test_every_choice_is_named_in_its_row():
 
 def test_the_check_sees_a_missing_and_an_extra_key():
     """The parser on a page with one key too few and one too many fails both ways."""
-    page = ("## `[score]`\n\n| key | default | meaning |\n| --- | --- | --- |\n"
-            "| `weight` | 1 | typo |\n\n## `[run]`\n\n| key | meaning |\n| --- | --- |\n"
-            "| `seeds`, `stages` | x |\n")
+    page = (
+        "## `[score]`\n\n| key | default | meaning |\n| --- | --- | --- |\n"
+        "| `weight` | 1 | typo |\n\n## `[run]`\n\n| key | meaning |\n| --- | --- |\n"
+        "| `seeds`, `stages` | x |\n"
+    )
     docs = documented_tables(page)
     assert docs[("score", None)].keys() == {"weight"}
     assert docs[("run", None)].keys() == {"seeds", "stages"}

@@ -16,10 +16,24 @@ README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 
 # phrases that tell how things used to be (history belongs in CHANGELOG.md)
-HISTORY = [r"\bused to\b", r"\bpreviously\b", r"\bformerly\b", r"\bwas ~", r"\bwere ~", r"\bthe old ",
-           r"\bbefore this session\b", r"\bthis session\b", r"\bearlier runs\b", r"\bno longer\b",
-           r"\bnow\b", r"\bany ?more\b", r"\bhad been\b", r"\bused to be\b", r"\bthe new default\b",
-           r"\bbefore the\b (?:change|fix|rewrite|solver|caching)"]
+HISTORY = [
+    r"\bused to\b",
+    r"\bpreviously\b",
+    r"\bformerly\b",
+    r"\bwas ~",
+    r"\bwere ~",
+    r"\bthe old ",
+    r"\bbefore this session\b",
+    r"\bthis session\b",
+    r"\bearlier runs\b",
+    r"\bno longer\b",
+    r"\bnow\b",
+    r"\bany ?more\b",
+    r"\bhad been\b",
+    r"\bused to be\b",
+    r"\bthe new default\b",
+    r"\bbefore the\b (?:change|fix|rewrite|solver|caching)",
+]
 
 
 def _markdown_pages() -> list[Path]:
@@ -37,27 +51,49 @@ def _nav_files(nav) -> list[str]:
 def _mkdocs_config() -> dict:
     yaml = pytest.importorskip("yaml", reason="PyYAML (a dependency of mkdocs) is not installed")
 
-    class Loader(yaml.SafeLoader):       # mkdocs.yml may hold !!python tags; none are needed here
+    class Loader(yaml.SafeLoader):  # mkdocs.yml may hold !!python tags; none are needed here
         pass
+
     Loader.add_multi_constructor("tag:yaml.org,2002:python/", lambda loader, suffix, node: None)
     return yaml.load((ROOT / "mkdocs.yml").read_text(encoding="utf-8"), Loader=Loader)
 
 
 # -- the docs site -----------------------------------------------------------------------------
 
+
 @pytest.mark.slow
 def test_mkdocs_build_strict(tmp_path):
     """mkdocs build --strict: every link between pages, to an anchor, to the results (added by
     docs/hooks/repo_files.py) resolves, or the build fails."""
-    pytest.importorskip("mkdocs", reason="mkdocs is not installed: pip install -e '.[test]' installs mkdocs-material")
-    pytest.importorskip("material", reason="the material theme is not installed: pip install mkdocs-material")
+    pytest.importorskip(
+        "mkdocs",
+        reason="mkdocs is not installed: pip install -e '.[test]' installs mkdocs-material",
+    )
+    pytest.importorskip(
+        "material", reason="the material theme is not installed: pip install mkdocs-material"
+    )
     site = tmp_path / "site"
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
-    res = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-f", str(ROOT / "mkdocs.yml"),
-                          "-d", str(site)], cwd=ROOT, capture_output=True, text=True, env=env)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "-f",
+            str(ROOT / "mkdocs.yml"),
+            "-d",
+            str(site),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        env=env,
+    )
     assert res.returncode == 0, res.stdout + res.stderr
     for page in _nav_files(_mkdocs_config()["nav"]):
-        html = site / (page[:-len(".md")] if page != "index.md" else "") / "index.html"
+        html = site / (page[: -len(".md")] if page != "index.md" else "") / "index.html"
         assert html.is_file(), f"{page} was not built ({html})"
     # the results page and what it shows came along
     assert (site / "results" / "README" / "index.html").is_file()
@@ -73,8 +109,11 @@ def test_every_page_is_in_the_nav():
     assert missing == set(), "nav entries with no page"
 
 
-@pytest.mark.parametrize("path", [README, ROOT / "cases" / "README.md", *sorted(DOCS.glob("*.md"))],
-                         ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.parametrize(
+    "path",
+    [README, ROOT / "cases" / "README.md", *sorted(DOCS.glob("*.md"))],
+    ids=lambda p: p.relative_to(ROOT).as_posix(),
+)
 def test_links_resolve_in_the_repository_too(path):
     """Read on GitHub, every relative link of README, cases/README.md and the docs pages names
     a file of the repository (the site reads ../results/ and ../examples/ through the hook)."""
@@ -94,8 +133,10 @@ def test_the_hook_follows_links_from_the_results_page(tmp_path):
     finally:
         sys.path.remove(str(DOCS / "hooks"))
     (tmp_path / "r" / "a").mkdir(parents=True)
-    (tmp_path / "r" / "README.md").write_text("[t](a/t.md) ![f](a/f.png) [p](index.html#x) [w](https://x.org/y.png) "
-                                              "[up](../outside.md) [gone](a/gone.csv)")
+    (tmp_path / "r" / "README.md").write_text(
+        "[t](a/t.md) ![f](a/f.png) [p](index.html#x) [w](https://x.org/y.png) "
+        "[up](../outside.md) [gone](a/gone.csv)"
+    )
     (tmp_path / "r" / "a" / "t.md").write_text("[back](../README.md) [c](c.csv)")
     (tmp_path / "r" / "a" / "f.png").write_bytes(b"png")
     (tmp_path / "r" / "a" / "c.csv").write_text("x\n")
@@ -109,45 +150,64 @@ def test_the_hook_follows_links_from_the_results_page(tmp_path):
 
 # -- README ------------------------------------------------------------------------------------
 
+
 def test_readme_is_short_and_opens_with_the_two_commands_ci_runs():
     lines = README.read_text(encoding="utf-8").splitlines()
     assert len(lines) <= 150, f"README.md has {len(lines)} lines (at most 150)"
     assert lines[0] == "# springbench"
-    first_block = lines[lines.index("```bash") + 1:lines.index("```bash") + 3]
+    first_block = lines[lines.index("```bash") + 1 : lines.index("```bash") + 3]
     assert first_block[0] == "pip install -q -e . && springbench run"
     ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8")
     ci_command = [line.strip() for line in ci.splitlines() if "python -m pytest" in line]
-    assert ci_command == [first_block[1]], "README's second command must be exactly what .ci/run runs"
+    assert ci_command == [first_block[1]], (
+        "README's second command must be exactly what .ci/run runs"
+    )
     assert lines.index("```bash") < 5, "the commands come first"
 
 
-@pytest.mark.parametrize("path", [README, *sorted((ROOT / "docs").glob("*.md")), ROOT / "cases" / "README.md",
-                                  ROOT / "examples" / "make_lug.py"], ids=lambda p: p.relative_to(ROOT).as_posix())
+@pytest.mark.parametrize(
+    "path",
+    [
+        README,
+        *sorted((ROOT / "docs").glob("*.md")),
+        ROOT / "cases" / "README.md",
+        ROOT / "examples" / "make_lug.py",
+    ],
+    ids=lambda p: p.relative_to(ROOT).as_posix(),
+)
 def test_no_history_outside_the_changelog(path):
     """README and the docs say what is; how it used to be belongs in CHANGELOG.md."""
     text = path.read_text(encoding="utf-8")
-    text = re.sub(r"```.*?```", "", text, flags=re.S)       # pasted program output is not prose
-    hits = [(m.group(0), text[max(0, m.start() - 40):m.end() + 40].replace("\n", " "))
-            for pattern in HISTORY for m in re.finditer(pattern, text, flags=re.I)]
+    text = re.sub(r"```.*?```", "", text, flags=re.S)  # pasted program output is not prose
+    hits = [
+        (m.group(0), text[max(0, m.start() - 40) : m.end() + 40].replace("\n", " "))
+        for pattern in HISTORY
+        for m in re.finditer(pattern, text, flags=re.I)
+    ]
     assert hits == [], f"history phrases in {path.name}: {hits}"
 
 
 def test_the_history_check_can_fail():
-    text = "The solver was ~8 min before this session; now it takes 90 s. It used to refine uniformly."
+    text = (
+        "The solver was ~8 min before this session; now it takes 90 s. It used to refine uniformly."
+    )
     hits = [p for p in HISTORY if re.search(p, text, flags=re.I)]
     assert len(hits) >= 4, hits
 
 
 def test_readme_results_table_is_what_the_results_give():
     from harness.report.docs_gen import BEGIN, END, block, heldout_table
-    assert block(README.read_text(encoding="utf-8"), BEGIN, END) == heldout_table(ROOT / "results"), \
-        "README's results table differs from results/bench/heldout.csv: run python docs/generate.py"
+
+    assert block(README.read_text(encoding="utf-8"), BEGIN, END) == heldout_table(
+        ROOT / "results"
+    ), "README's results table differs from results/bench/heldout.csv: run python docs/generate.py"
 
 
 def test_the_results_table_reads_the_bench_csv(tmp_path):
     """The generator on a hand-made heldout.csv: rows per body and nu, the best rule's own error
     looked up, the overall ratio from the 'all' row."""
     from harness.report.docs_gen import heldout_table
+
     (tmp_path / "bench").mkdir()
     (tmp_path / "bench" / "heldout.csv").write_text(
         "body,n_tets,nu,model,choice,rule,load,err,best_rule,ratio_to_best_rule\n"
@@ -157,9 +217,12 @@ def test_the_results_table_reads_the_bench_csv(tmp_path):
         "part,1234,0.3,vangelder,rule,vangelder,geomean,0.05,lloyd,1.25\n"
         "part,1234,0.45,calibrate,rule,cauchy,geomean,0.07,cauchy,1.0\n"
         "part,1234,0.45,cauchy,rule,cauchy,geomean,0.07,cauchy,1.0\n"
-        "all,,,calibrate,,,geomean,,,0.7071\n")
+        "all,,,calibrate,,,geomean,,,0.7071\n"
+    )
     rows = heldout_table(tmp_path).splitlines()
-    assert rows[2] == "| part (1,234) | 0.3 | springs-prior1 fitted from vangelder | 0.02 | lloyd | 0.04 | 0.500 |"
+    row = "| part (1,234) | 0.3 | springs-prior1 fitted from vangelder | 0.02 | lloyd | 0.04 "
+    row += "| 0.500 |"
+    assert rows[2] == row
     assert rows[3] == "| part (1,234) | 0.45 | the rule cauchy | 0.07 | cauchy | 0.07 | 1.000 |"
     assert rows[4] == "| all (geometric mean) | | | | | | **0.707** |"
     assert len(rows) == 5
@@ -168,9 +231,11 @@ def test_the_results_table_reads_the_bench_csv(tmp_path):
 def test_commands_page_is_what_the_command_line_gives():
     from harness.cli import build_parser
     from harness.report.docs_gen import CMD_BEGIN, CMD_END, block, commands_reference
+
     text = (DOCS / "commands.md").read_text(encoding="utf-8")
-    assert block(text, CMD_BEGIN, CMD_END) == commands_reference(build_parser()), \
+    assert block(text, CMD_BEGIN, CMD_END) == commands_reference(build_parser()), (
         "docs/commands.md differs from the command line's help: run python docs/generate.py"
+    )
 
 
 def test_commands_reference_lists_every_command_and_flag():
@@ -180,6 +245,7 @@ def test_commands_reference_lists_every_command_and_flag():
 
     from harness.cli import build_parser
     from harness.report.docs_gen import commands_reference
+
     page = commands_reference(build_parser())
 
     def walk(parser, name):
@@ -191,6 +257,7 @@ def test_commands_reference_lists_every_command_and_flag():
             for opt in a.option_strings:
                 if opt not in ("-h", "--help"):
                     assert f"`{opt}`" in page, f"{name} {opt}"
+
     (sub,) = [a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction)]
     for name, parser in sub.choices.items():
         walk(parser, f"springbench {name}")
@@ -198,8 +265,12 @@ def test_commands_reference_lists_every_command_and_flag():
 
 # -- citations of the docs in the code ---------------------------------------------------------
 
+
 def _headings(page: Path) -> set[str]:
-    return {m.group(1).strip() for m in re.finditer(r"^#{1,6} (.+)$", page.read_text(encoding="utf-8"), flags=re.M)}
+    return {
+        m.group(1).strip()
+        for m in re.finditer(r"^#{1,6} (.+)$", page.read_text(encoding="utf-8"), flags=re.M)
+    }
 
 
 def test_the_code_cites_sections_that_exist():
@@ -211,11 +282,15 @@ def test_the_code_cites_sections_that_exist():
             if path == Path(__file__).resolve():
                 continue
             text = path.read_text(encoding="utf-8")
-            assert "DESIGN.md" not in text, f"{path}: cites DESIGN.md (its content is docs/design.md)"
+            assert "DESIGN.md" not in text, (
+                f"{path}: cites DESIGN.md (its content is docs/design.md)"
+            )
             for m in re.finditer(r"docs/([\w-]+)\.md(?:,\s*|\s*\()\s*\"([^\"]+)\"", text):
                 page, section = DOCS / f"{m.group(1)}.md", " ".join(m.group(2).split())
                 assert page.is_file(), f"{path}: cites {page.name}, which does not exist"
-                assert section in _headings(page), f"{path}: cites '{section}', not a heading of {page.name}"
+                assert section in _headings(page), (
+                    f"{path}: cites '{section}', not a heading of {page.name}"
+                )
                 cited += 1
             for m in re.finditer(r"docs/([\w-]+)\.md", text):
                 assert (DOCS / f"{m.group(1)}.md").is_file(), f"{path}: cites docs/{m.group(1)}.md"
@@ -224,8 +299,10 @@ def test_the_code_cites_sections_that_exist():
 
 # -- LICENSE and CITATION.cff ------------------------------------------------------------------
 
+
 def _pyproject() -> dict:
     import tomllib
+
     return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
 
 
@@ -234,14 +311,14 @@ def test_license_is_the_one_pyproject_names():
     text = (ROOT / "LICENSE").read_text(encoding="utf-8")
     assert text.startswith("MIT License\n")
     assert re.search(r"^Copyright \(c\) \d{4} springbench developers$", text, flags=re.M)
-    assert "THE SOFTWARE IS PROVIDED \"AS IS\"" in text
+    assert 'THE SOFTWARE IS PROVIDED "AS IS"' in text
 
 
 def test_citation_file_is_cff_1_2_0_and_cites_the_software_and_both_papers():
     yaml = pytest.importorskip("yaml")
     cff = yaml.safe_load((ROOT / "CITATION.cff").read_text(encoding="utf-8"))
     assert cff["cff-version"] == "1.2.0"
-    for key in ("message", "title", "authors"):         # required by CFF 1.2.0
+    for key in ("message", "title", "authors"):  # required by CFF 1.2.0
         assert cff.get(key), key
     assert cff["type"] == "software"
     assert cff["version"] == _pyproject()["project"]["version"]

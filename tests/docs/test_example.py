@@ -16,20 +16,24 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 MESH = ROOT / "examples" / "lug.msh"
 README = ROOT / "README.md"
-CAL_BEGIN, CAL_END = "<!-- calibrate output: pasted from the command above -->", "<!-- end of the calibrate output -->"
+CAL_BEGIN, CAL_END = (
+    "<!-- calibrate output: pasted from the command above -->",
+    "<!-- end of the calibrate output -->",
+)
 
 
 def test_example_mesh_is_small_valid_and_has_its_groups():
     from harness.case.mesh_checks import check_mesh
     from harness.io.meshfile import read_mesh
+
     assert MESH.stat().st_size < 300_000
     mesh = read_mesh(MESH)
-    check_mesh(mesh, str(MESH))                   # raises on anything calibrate would refuse
+    check_mesh(mesh, str(MESH))  # raises on anything calibrate would refuse
     assert set(mesh.cells) == {"tetra"}
     assert 1000 <= len(mesh.cells["tetra"]) <= 3000
     assert {"body", "base", "bore"} <= set(mesh.groups)
     lo, hi = mesh.points.min(0), mesh.points.max(0)
-    np.testing.assert_allclose(lo, [0, -0.015, 0], atol=1e-12)        # the lug of make_lug.py, in metres
+    np.testing.assert_allclose(lo, [0, -0.015, 0], atol=1e-12)  # the lug of make_lug.py, in metres
     np.testing.assert_allclose(hi, [0.095, 0.015, 0.01], atol=1e-12)
 
 
@@ -41,6 +45,7 @@ def test_the_script_makes_the_example(tmp_path):
     finally:
         sys.path.remove(str(ROOT / "examples"))
     from harness.io.meshfile import read_mesh
+
     made, shipped = read_mesh(make_lug.main(tmp_path / "lug.msh")), read_mesh(MESH)
     assert set(made.groups) == set(shipped.groups)
     np.testing.assert_allclose(made.points.min(0), shipped.points.min(0), atol=1e-12)
@@ -50,15 +55,18 @@ def test_the_script_makes_the_example(tmp_path):
 
 
 def _readme_command() -> list[str]:
-    (line,) = [ln for ln in README.read_text(encoding="utf-8").splitlines()
-               if ln.startswith("springbench calibrate examples/")]
+    (line,) = [
+        ln
+        for ln in README.read_text(encoding="utf-8").splitlines()
+        if ln.startswith("springbench calibrate examples/")
+    ]
     return shlex.split(line)
 
 
 def _pasted() -> list[str]:
     text = README.read_text(encoding="utf-8")
-    block = text[text.index(CAL_BEGIN) + len(CAL_BEGIN):text.index(CAL_END)]
-    return block.strip().splitlines()[1:-1]            # inside the ``` fence
+    block = text[text.index(CAL_BEGIN) + len(CAL_BEGIN) : text.index(CAL_END)]
+    return block.strip().splitlines()[1:-1]  # inside the ``` fence
 
 
 def _numbers_masked(line: str) -> str:
@@ -67,8 +75,12 @@ def _numbers_masked(line: str) -> str:
 
 def _documented_json_keys() -> set[str]:
     text = (ROOT / "docs" / "calibrate.md").read_text(encoding="utf-8")
-    section = text[text.index("## What it writes"):text.index("## In an engine")]
-    return {k for row in re.findall(r"^\| (.+?) \|", section, flags=re.M) for k in re.findall(r"`([^`]+)`", row)}
+    section = text[text.index("## What it writes") : text.index("## In an engine")]
+    return {
+        k
+        for row in re.findall(r"^\| (.+?) \|", section, flags=re.M)
+        for k in re.findall(r"`([^`]+)`", row)
+    }
 
 
 @pytest.mark.slow
@@ -78,19 +90,26 @@ def test_readme_calibrate_example_runs_and_prints_what_readme_shows(tmp_path):
     assert cmd[:3] == ["springbench", "calibrate", "examples/lug.msh"]
     out = tmp_path / "model.vtu"
     readme_out, cmd[cmd.index("--out") + 1] = cmd[cmd.index("--out") + 1], str(out)
-    res = subprocess.run([sys.executable, "-m", "harness", *cmd[1:]], cwd=ROOT, capture_output=True, text=True)
+    res = subprocess.run(
+        [sys.executable, "-m", "harness", *cmd[1:]], cwd=ROOT, capture_output=True, text=True
+    )
     assert res.returncode == 0, res.stderr[-3000:]
-    got, want = res.stdout.strip().splitlines(), [line.replace(readme_out, str(out)) for line in _pasted()]
+    got, want = (
+        res.stdout.strip().splitlines(),
+        [line.replace(readme_out, str(out)) for line in _pasted()],
+    )
     assert len(got) == len(want), "README's pasted output has a different number of lines"
-    assert _numbers_masked(got[0]) == _numbers_masked(want[0])           # where it clamps and loads
-    assert got[1].split() == want[1].split()                             # the table's columns
+    assert _numbers_masked(got[0]) == _numbers_masked(want[0])  # where it clamps and loads
+    assert got[1].split() == want[1].split()  # the table's columns
     rows = [i for i, line in enumerate(want) if line.lstrip().startswith("sms-")]
-    for i in rows:                                                       # model, rule, optimiser per row
+    for i in rows:  # model, rule, optimiser per row
         assert got[i].split()[:3] == want[i].split()[:3]
-    for i in range(rows[-1] + 1, len(want)):                             # the sentences, by what they say
+    for i in range(rows[-1] + 1, len(want)):  # the sentences, by what they say
         assert got[i].split()[:2] == want[i].split()[:2]
     data = json.loads(out.with_suffix(".json").read_text())
     documented = _documented_json_keys()
     assert sorted(set(data) - documented) == [], "MODEL.json keys missing from docs/calibrate.md"
     optional = {k for k in documented if k.startswith(("volume_", "kn_"))}
-    assert sorted(documented - optional - set(data)) == [], "docs/calibrate.md documents keys MODEL.json lacks"
+    assert sorted(documented - optional - set(data)) == [], (
+        "docs/calibrate.md documents keys MODEL.json lacks"
+    )

@@ -25,7 +25,23 @@ LOADS = ("tip", "sag", "torsion", "bend-xy")
 def pack_of(folder, size):
     mesh = meshes.cylinder(folder, size=size, name=f"cyl{size}.vtu")
     out = folder / f"pack{size}"
-    assert cli.main(["pack", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO), "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "pack",
+                str(mesh),
+                "--E",
+                str(E),
+                "--nu",
+                str(NU),
+                "--density",
+                str(RHO),
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     return mesh, out, read_pack(out)
 
 
@@ -39,8 +55,12 @@ def p1_answer(pack, load):
     """The linear P1 FEM of the pack's mesh under the pack's load (scikit-fem, here)."""
     import skfem
     from skfem.models.elasticity import lame_parameters, linear_elasticity
+
     tets = pack.cells["tetra"]
-    basis = skfem.Basis(skfem.MeshTet(pack.points.T.copy(), tets.T.copy()), skfem.ElementVector(skfem.ElementTetP1()))
+    basis = skfem.Basis(
+        skfem.MeshTet(pack.points.T.copy(), tets.T.copy()),
+        skfem.ElementVector(skfem.ElementTetP1()),
+    )
     K = skfem.asm(linear_elasticity(*lame_parameters(pack.E, pack.nu)), basis).tocsr()
     return held_solve(K, load, pack.points.shape)
 
@@ -56,11 +76,20 @@ def test_continuum_engines_are_p1_fem_and_converge_to_the_fem(packs, engine):
     from harness.engines import adapter
     from harness.engines.settle import float32_resolution
     from harness.export.pack import Pack
+
     folder, by_size = packs
     errors = {}
     for size, (_, _, pack) in by_size.items():
-        sub = Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density,
-                   tuple(pack.load(n) for n in LOADS), pack.plane, pack.meta)
+        sub = Pack(
+            pack.points,
+            pack.cells,
+            pack.E,
+            pack.nu,
+            pack.density,
+            tuple(pack.load(n) for n in LOADS),
+            pack.plane,
+            pack.meta,
+        )
         answers = adapter(engine)(sub)
         # a nonlinear material departs from its linearisation by O(strain); float32 positions
         # (Newton) resolve a displacement to their spacing, and the stopping rule allows 4 of it
@@ -69,10 +98,12 @@ def test_continuum_engines_are_p1_fem_and_converge_to_the_fem(packs, engine):
             a = answers[name]
             assert a.status == "settled", (size, name, a)
             u = p1_answer(pack, pack.load(name))
-            tol = 6.0 * pack.meta["peak_strain"] + 4.0 * res / np.sqrt(np.mean(np.sum(u * u, axis=1)))
-            assert rel(a.u, u) <= tol, (size, name)        # the engine is a P1 FEM, linearised
+            tol = 6.0 * pack.meta["peak_strain"] + 4.0 * res / np.sqrt(
+                np.mean(np.sum(u * u, axis=1))
+            )
+            assert rel(a.u, u) <= tol, (size, name)  # the engine is a P1 FEM, linearised
         errors[size] = np.mean([rel(answers[n].u, pack.load(n).u_fem) for n in LOADS])
-    assert errors[0.04] < 0.8 * errors[0.06], errors                         # and converges towards the FEM
+    assert errors[0.04] < 0.8 * errors[0.06], errors  # and converges towards the FEM
 
 
 @pytest.mark.slow
@@ -81,34 +112,80 @@ def test_newton_runs_a_springbench_export_to_its_linear_statics(packs, tmp_path)
     from harness.engines import adapter
     from harness.export.pack import Pack, PackLoad
     from harness.export.vtu import read_vtu
+
     folder, by_size = packs
     mesh, out, pack = by_size[0.06]
-    assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
-                     "--method", "rule", "--out", str(tmp_path / "m.vtu")]) == 0
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(mesh),
+                "--E",
+                str(E),
+                "--nu",
+                str(NU),
+                "--density",
+                str(RHO),
+                "--method",
+                "rule",
+                "--out",
+                str(tmp_path / "m.vtu"),
+            ]
+        )
+        == 0
+    )
     data = json.loads((tmp_path / "m.json").read_text())
-    assert 0 < data["dt_safe"] < data["dt_stable"] and 0 < data["settle_damping"]["velocity_factor"] < 1
+    assert (
+        0 < data["dt_safe"] < data["dt_stable"]
+        and 0 < data["settle_damping"]["velocity_factor"] < 1
+    )
     net, _ = read_vtu(tmp_path / "m.vtu")
     from harness.models.springs import incidence, stiffness_matrix
+
     K = stiffness_matrix(incidence(net.points, net.springs), net.k).tocsr()
-    sub = Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, tuple(pack.load(n) for n in LOADS),
-               pack.plane, pack.meta)
+    sub = Pack(
+        pack.points,
+        pack.cells,
+        pack.E,
+        pack.nu,
+        pack.density,
+        tuple(pack.load(n) for n in LOADS),
+        pack.plane,
+        pack.meta,
+    )
     answers = adapter("newton-springs")(sub, {"model": tmp_path / "m.json"})
     twist = pack.load("torsion")
-    half = PackLoad("torsion", twist.role, twist.held_nodes, twist.held_components, 0.5 * twist.force,
-                    0.5 * twist.u_fem, twist.u_fem_error, twist.gravity, twist.kind)
-    halved = adapter("newton-springs")(Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, (half,),
-                                            pack.plane, pack.meta), {"model": tmp_path / "m.json"})["torsion"]
+    half = PackLoad(
+        "torsion",
+        twist.role,
+        twist.held_nodes,
+        twist.held_components,
+        0.5 * twist.force,
+        0.5 * twist.u_fem,
+        twist.u_fem_error,
+        twist.gravity,
+        twist.kind,
+    )
+    halved = adapter("newton-springs")(
+        Pack(
+            pack.points, pack.cells, pack.E, pack.nu, pack.density, (half,), pack.plane, pack.meta
+        ),
+        {"model": tmp_path / "m.json"},
+    )["torsion"]
     errors = {}
     for ld in [pack.load(n) for n in LOADS] + [half]:
         u = held_solve(K, ld, pack.points.shape)
         a = halved if ld is half else answers[ld.name]
         assert a.status == "settled", (ld.name, a)
-        assert a.steps <= 20_000                                            # seconds, not hours
+        assert a.steps <= 20_000  # seconds, not hours
         errors[ld.name if ld is not half else "half"] = rel(a.u, u)
     # Newton's springs are the geometrically exact ones: the twist turns the free end by ~5e-3
     # rad, and the linear statics misses O(rotation); halving the twist halves the difference
     assert all(errors[n] <= 1e-3 for n in LOADS if n != "torsion"), errors
-    assert 0.4 <= errors["half"] / errors["torsion"] <= 0.6 and errors["torsion"] <= 6 * pack.meta["peak_strain"], errors
+    assert (
+        0.4 <= errors["half"] / errors["torsion"] <= 0.6
+        and errors["torsion"] <= 6 * pack.meta["peak_strain"]
+    ), errors
 
 
 @pytest.mark.slow
@@ -121,22 +198,57 @@ def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_pat
     from harness.bench.heldout_judge import network_stiffness
     from harness.engines import adapter
     from harness.export.pack import Pack
+
     _, by_size = packs
     mesh, _, pack = by_size[0.06]
-    assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", "0.45", "--density", str(RHO), "--method", "rule",
-                     "--model", "springs+node-volume", "--quiet", "--out", str(tmp_path / "m.vtu")]) == 0
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(mesh),
+                "--E",
+                str(E),
+                "--nu",
+                "0.45",
+                "--density",
+                str(RHO),
+                "--method",
+                "rule",
+                "--model",
+                "springs+node-volume",
+                "--quiet",
+                "--out",
+                str(tmp_path / "m.vtu"),
+            ]
+        )
+        == 0
+    )
     data = json.loads((tmp_path / "m.json").read_text())
-    assert len(data["node_volume_nodes"]) == len(pack.points) and min(data["node_volume_stiffness"]) > 0
+    assert (
+        len(data["node_volume_nodes"]) == len(pack.points)
+        and min(data["node_volume_stiffness"]) > 0
+    )
     K = network_stiffness(data).tocsr()
-    springs = network_stiffness({k: v for k, v in data.items() if not k.startswith("node_volume")}).tocsr()
+    springs = network_stiffness(
+        {k: v for k, v in data.items() if not k.startswith("node_volume")}
+    ).tocsr()
     names = ("tip", "sag", "bend-xy")
-    sub = Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, tuple(pack.load(n) for n in names),
-               pack.plane, pack.meta)
+    sub = Pack(
+        pack.points,
+        pack.cells,
+        pack.E,
+        pack.nu,
+        pack.density,
+        tuple(pack.load(n) for n in names),
+        pack.plane,
+        pack.meta,
+    )
     answers = adapter("newton-springs")(sub, {"model": tmp_path / "m.json"})
     for name in names:
         u = held_solve(K, pack.load(name), pack.points.shape)
         assert answers[name].status == "settled", (name, answers[name])
-        assert rel(held_solve(springs, pack.load(name), pack.points.shape), u) > 0.05, name    # the term matters
+        # the term matters
+        assert rel(held_solve(springs, pack.load(name), pack.points.shape), u) > 0.05, name
         assert rel(answers[name].u, u) <= 1e-3, name
 
 
@@ -147,21 +259,70 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
     scores it; the gate exits 0 above the engine's error and 1 below it; the JUnit file
     parses and holds one test case per load."""
     from xml.etree import ElementTree
+
     pytest.importorskip("mujoco" if engine == "mujoco-flex" else "newton")
     folder, by_size = packs
     mesh, out, _ = by_size[0.06]
     extra = []
     if engine == "newton-springs":
-        assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
-                         "--method", "rule", "--max-refine", "0", "--out", str(tmp_path / "m.vtu")]) == 0
+        assert (
+            cli.main(
+                [
+                    "calibrate",
+                    str(mesh),
+                    "--E",
+                    str(E),
+                    "--nu",
+                    str(NU),
+                    "--density",
+                    str(RHO),
+                    "--method",
+                    "rule",
+                    "--max-refine",
+                    "0",
+                    "--out",
+                    str(tmp_path / "m.vtu"),
+                ]
+            )
+            == 0
+        )
         extra = ["--model", str(tmp_path / "m.json")]
     u, table, report = tmp_path / "u.npz", tmp_path / "g.csv", tmp_path / "junit.xml"
-    assert cli.main(["engines", "run", engine, str(out), "--loads", "tip,sag", "--out", str(u), *extra]) == 0
-    assert cli.main(["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--out", str(table)]) == 0
+    assert (
+        cli.main(
+            ["engines", "run", engine, str(out), "--loads", "tip,sag", "--out", str(u), *extra]
+        )
+        == 0
+    )
+    assert (
+        cli.main(
+            [
+                "score",
+                "--displacements",
+                str(u),
+                str(out),
+                "--loads",
+                "tip,sag",
+                "--out",
+                str(table),
+            ]
+        )
+        == 0
+    )
     import pandas as pd
+
     g = pd.read_csv(table).set_index("load").G_norm
     worst = float(g.drop("total").max())
-    gate = ["score", "--displacements", str(u), str(out), "--loads", "tip,sag", "--junit", str(report)]
+    gate = [
+        "score",
+        "--displacements",
+        str(u),
+        str(out),
+        "--loads",
+        "tip,sag",
+        "--junit",
+        str(report),
+    ]
     assert cli.main([*gate, "--max-g-norm", str(1.5 * worst)]) == 0
     assert cli.main([*gate, "--max-g-norm", str(0.5 * worst)]) == 1
     cases = ElementTree.parse(report).getroot().iter("testcase")
@@ -170,13 +331,16 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
 
 def test_a_missing_engine_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):
     import importlib.util
+
     real = importlib.util.find_spec
 
     def no_mujoco(name, *a, **k):
         return None if name == "mujoco" else real(name, *a, **k)
+
     monkeypatch.setattr(importlib.util, "find_spec", no_mujoco)
     from harness.engines import adapter
     from harness.errors import SpringbenchError
+
     with pytest.raises(SpringbenchError) as exc:
         adapter("mujoco-flex")
     assert "mujoco" in exc.value.message and "[engines]" in exc.value.fix
@@ -202,25 +366,32 @@ class Oscillator:
         for _ in range(n):
             self.v = self.damp * (self.v + self.dt * (self.F - self.k * self.u) / self.m)
             self.u = self.u + self.dt * self.v
-        self.floor *= self.fade ** n
+        self.floor *= self.fade**n
 
     def measure(self):
         return self.u.copy(), self.v.copy(), self.F - self.k * self.u + self.floor * self.F
 
 
-@pytest.mark.parametrize("floor, fade, status", [(0.0, 1.0, "settled"), (0.3, 1.0, "settled"),
-                                                 (0.3, 1.0 - 1e-4, "not-settled")])
+@pytest.mark.parametrize(
+    "floor, fade, status",
+    [(0.0, 1.0, "settled"), (0.3, 1.0, "settled"), (0.3, 1.0 - 1e-4, "not-settled")],
+)
 def test_settle_stops_at_equilibrium_or_at_a_stalled_residual_of_a_still_body(floor, fade, status):
     from types import SimpleNamespace
 
     from harness.engines.settle import rayleigh_omega, settle
+
     k, m, F = 4.0e3, 0.5, np.array([[0.0, -2.0, 1.0]])
-    load = SimpleNamespace(force=F, u_fem=F / k, held_nodes=np.zeros(0, int), held_components=np.zeros((0, 3), bool))
+    load = SimpleNamespace(
+        force=F, u_fem=F / k, held_nodes=np.zeros(0, int), held_components=np.zeros((0, 3), bool)
+    )
     omega = rayleigh_omega(load, np.array([m]))
-    assert omega == pytest.approx(np.sqrt(k / m))         # the exact mode of one mass on one spring
+    assert omega == pytest.approx(np.sqrt(k / m))  # the exact mode of one mass on one spring
     dt = 0.2 * 2.0 / omega
-    a = settle(Oscillator(k, m, F, dt, floor, fade), load, np.array([m]), dt, omega, max_steps=20_000)
-    assert a.status == status                             # a residual still falling 2 % per check is no floor
+    a = settle(
+        Oscillator(k, m, F, dt, floor, fade), load, np.array([m]), dt, omega, max_steps=20_000
+    )
+    assert a.status == status  # a residual still falling 2 % per check is no floor
     if status == "settled":
         assert np.abs(a.u - F / k).max() <= 1e-4 * np.abs(F / k).max()
         assert a.residual == pytest.approx(floor, abs=1e-2)

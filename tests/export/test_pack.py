@@ -24,8 +24,23 @@ E, NU, RHO = 1e5, 0.3, 1000.0
 def packed(tmp_path_factory):
     d = tmp_path_factory.mktemp("pack")
     mesh = meshes.holed_block(d, size=0.09)
-    assert cli.main(["pack", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
-                     "--out", str(d / "p")]) == 0
+    assert (
+        cli.main(
+            [
+                "pack",
+                str(mesh),
+                "--E",
+                str(E),
+                "--nu",
+                str(NU),
+                "--density",
+                str(RHO),
+                "--out",
+                str(d / "p"),
+            ]
+        )
+        == 0
+    )
     return d, mesh, read_pack(d / "p")
 
 
@@ -37,12 +52,18 @@ def test_pack_loads_carry_the_right_totals(packed):
     volume = float(np.abs(np.linalg.det(e)).sum() / 6)
     man = json.loads((d / "p" / "problem.json").read_text())
     assert man["format"] == "springbench-pack" and man["n_nodes"] == len(m.points) == pack.n_nodes
-    assert {ld["name"] for ld in man["loads"] if ld["role"] == "heldout"} == {"sag", "tip", "tip2", "torsion", "bridge"}
+    assert {ld["name"] for ld in man["loads"] if ld["role"] == "heldout"} == {
+        "sag",
+        "tip",
+        "tip2",
+        "torsion",
+        "bridge",
+    }
     for ld in pack.loads:
         total = ld.force.sum(axis=0)
-        if ld.gravity is not None and ld.kind == "gravity":            # sag, bridge: m g summed
+        if ld.gravity is not None and ld.kind == "gravity":  # sag, bridge: m g summed
             assert total == pytest.approx(RHO * volume * ld.gravity, rel=1e-9, abs=1e-12)
-        elif ld.kind in ("stress", "linear-stress"):                     # self-equilibrated: no net force or moment
+        elif ld.kind in ("stress", "linear-stress"):  # self-equilibrated: no net force or moment
             scale = np.abs(ld.force).sum()
             assert np.abs(total).max() <= 1e-9 * scale
             c = pack.points.mean(axis=0)
@@ -50,7 +71,8 @@ def test_pack_loads_carry_the_right_totals(packed):
             assert np.abs(moment).max() <= 1e-9 * scale * np.ptp(pack.points)
         held = np.zeros(pack.points.shape, bool)
         held[ld.held_nodes] = ld.held_components
-        assert np.abs(ld.u_fem[held]).max() <= 1e-12 * np.abs(ld.u_fem).max()   # the FEM holds what the pack says
+        # the FEM holds what the pack says
+        assert np.abs(ld.u_fem[held]).max() <= 1e-12 * np.abs(ld.u_fem).max()
     assert pack.load("sag").u_fem_error.max() > 0
 
 
@@ -61,48 +83,109 @@ def test_pack_round_trip_is_exact(packed, tmp_path):
     assert np.array_equal(back.points, pack.points) and back.E == pack.E and back.nu == pack.nu
     for a, b in zip(pack.loads, back.loads):
         for key in ("held_nodes", "held_components", "force", "u_fem", "u_fem_error"):
-            assert np.array_equal(getattr(a, key), getattr(b, key), equal_nan=key == "u_fem_error"), (a.name, key)
+            assert np.array_equal(
+                getattr(a, key), getattr(b, key), equal_nan=key == "u_fem_error"
+            ), (a.name, key)
 
 
 def test_score_gate_junit_and_g_against_numpy(packed, tmp_path, capsys):
     d, _, pack = packed
     rng = np.random.default_rng(0)
-    fields = {ld.name: ld.u_fem * (1 + 0.05 * rng.standard_normal(ld.u_fem.shape)) for ld in pack.loads}
+    fields = {
+        ld.name: ld.u_fem * (1 + 0.05 * rng.standard_normal(ld.u_fem.shape)) for ld in pack.loads
+    }
     np.savez(tmp_path / "u.npz", **fields)
-    code = cli.main(["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p"), "--max-g-norm", "0.5",
-                     "--max", "tip=0.001", "--out", str(tmp_path / "g.csv"), "--junit", str(tmp_path / "j.xml")])
-    assert code == 1                                                   # tip misses its own gate
+    code = cli.main(
+        [
+            "score",
+            "--displacements",
+            str(tmp_path / "u.npz"),
+            str(d / "p"),
+            "--max-g-norm",
+            "0.5",
+            "--max",
+            "tip=0.001",
+            "--out",
+            str(tmp_path / "g.csv"),
+            "--junit",
+            str(tmp_path / "j.xml"),
+        ]
+    )
+    assert code == 1  # tip misses its own gate
     import pandas as pd
+
     table = pd.read_csv(tmp_path / "g.csv").set_index("load")
     for ld in pack.loads:
         want = np.linalg.norm(fields[ld.name] - ld.u_fem) / np.linalg.norm(ld.u_fem)
         assert table.loc[ld.name, "G_norm"] == pytest.approx(want, rel=1e-12)
-    assert table.loc["tip", "status"] == "miss" and (table.drop(index=["tip", "total"]).status != "miss").all()
+    assert (
+        table.loc["tip", "status"] == "miss"
+        and (table.drop(index=["tip", "total"]).status != "miss").all()
+    )
     root = ET.parse(tmp_path / "j.xml").getroot()
     cases = root.findall(".//testcase")
     assert [c.get("name") for c in cases] == [ld.name for ld in pack.loads]
     assert [c.get("name") for c in cases if c.find("failure") is not None] == ["tip"]
-    assert cli.main(["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p"), "--max-g-norm", "0.5"]) == 0
+    assert (
+        cli.main(
+            [
+                "score",
+                "--displacements",
+                str(tmp_path / "u.npz"),
+                str(d / "p"),
+                "--max-g-norm",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     np.savez(tmp_path / "fem.npz", **{ld.name: ld.u_fem for ld in pack.loads})
-    assert cli.main(["score", "--displacements", str(tmp_path / "fem.npz"), str(d / "p"), "--max-g-norm", "0"]) == 0
+    assert (
+        cli.main(
+            [
+                "score",
+                "--displacements",
+                str(tmp_path / "fem.npz"),
+                str(d / "p"),
+                "--max-g-norm",
+                "0",
+            ]
+        )
+        == 0
+    )
 
 
-@pytest.mark.parametrize("make, flags, says", [
-    (lambda p: {ld.name: ld.u_fem[:-1] for ld in p.loads}, [], "shape"),
-    (lambda p: {ld.name: np.where(np.arange(len(ld.u_fem))[:, None] == 3, np.nan, ld.u_fem) for ld in p.loads}, [],
-     "NaN"),
-    (lambda p: {ld.name: ld.u_fem for ld in p.loads[1:]}, [], "no displacements for load"),
-    (lambda p: {**{ld.name: ld.u_fem for ld in p.loads}, "nope": p.loads[0].u_fem}, [], "not in the pack"),
-    (lambda p: {ld.name: 1000 * ld.u_fem for ld in p.loads}, [], "in mm"),
-    (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--max", "tip"], "--max"),
-    (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--max-g-norm", "-1"], "--max-g-norm"),
-    (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--loads", "sag,nope"], "--loads"),
-])
+@pytest.mark.parametrize(
+    "make, flags, says",
+    [
+        (lambda p: {ld.name: ld.u_fem[:-1] for ld in p.loads}, [], "shape"),
+        (
+            lambda p: {
+                ld.name: np.where(np.arange(len(ld.u_fem))[:, None] == 3, np.nan, ld.u_fem)
+                for ld in p.loads
+            },
+            [],
+            "NaN",
+        ),
+        (lambda p: {ld.name: ld.u_fem for ld in p.loads[1:]}, [], "no displacements for load"),
+        (
+            lambda p: {**{ld.name: ld.u_fem for ld in p.loads}, "nope": p.loads[0].u_fem},
+            [],
+            "not in the pack",
+        ),
+        (lambda p: {ld.name: 1000 * ld.u_fem for ld in p.loads}, [], "in mm"),
+        (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--max", "tip"], "--max"),
+        (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--max-g-norm", "-1"], "--max-g-norm"),
+        (lambda p: {ld.name: ld.u_fem for ld in p.loads}, ["--loads", "sag,nope"], "--loads"),
+    ],
+)
 def test_bad_displacements_are_one_line(packed, tmp_path, capsys, make, flags, says):
     d, _, pack = packed
     np.savez(tmp_path / "u.npz", **make(pack))
     capsys.readouterr()
-    assert cli.main(["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p"), *flags]) == 2
+    assert (
+        cli.main(["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p"), *flags]) == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0], err
 
@@ -119,10 +202,29 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     pack's score of that export's linear statics computed here (K assembled spring by
     spring, the pack's holds and forces)."""
     import scipy.sparse as sp
+
     d, mesh, pack = packed
-    assert cli.main(["calibrate", str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO),
-                     "--method", "rule", "--rule", "vangelder", "--out",
-                     str(tmp_path / "m.vtu")]) == 0
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(mesh),
+                "--E",
+                str(E),
+                "--nu",
+                str(NU),
+                "--density",
+                str(RHO),
+                "--method",
+                "rule",
+                "--rule",
+                "vangelder",
+                "--out",
+                str(tmp_path / "m.vtu"),
+            ]
+        )
+        == 0
+    )
     data = json.loads((tmp_path / "m.json").read_text())
     q = np.asarray(data["particle_q"])
     n = len(q)
@@ -140,6 +242,7 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     for ld in pack.loads:
         fields[ld.name] = held_solve(K, ld, (n, 3))
     from harness.export.pack_score import score_fields
+
     got = {r["load"]: r["G_norm"] for r in score_fields(pack, fields)}
     for name, want in data["G_heldout_loads"].items():
         assert got[name] == pytest.approx(want, rel=1e-6), name
@@ -152,6 +255,7 @@ def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, cap
     from pathlib import Path
 
     from harness.case.reader import load_case
+
     root = Path(__file__).resolve().parents[2]
     case_file = root / "cases" / "bourguignon2000" / "fem_cube333_tetra.toml"
     case = load_case(case_file)
@@ -163,6 +267,16 @@ def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, cap
     assert {ld.name for ld in pack.loads if ld.role == "heldout"} == set(case.heldout)
     assert (pack.E, pack.nu) == (case.material.E, case.material.nu)
     capsys.readouterr()
-    assert cli.main(["pack", str(root / "cases" / "deussen1995" / "sec6_box3d.toml"), "--out", str(tmp_path / "q")]) == 2
+    assert (
+        cli.main(
+            [
+                "pack",
+                str(root / "cases" / "deussen1995" / "sec6_box3d.toml"),
+                "--out",
+                str(tmp_path / "q"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mesh" in err[0] and not (tmp_path / "q").exists()

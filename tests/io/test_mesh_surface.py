@@ -48,7 +48,7 @@ def test_packed_keys_and_row_unique_agree():
     rows = rng.integers(0, 6, (400, 3))
     _, first, count = np.unique(rows, axis=0, return_index=True, return_counts=True)
     np.testing.assert_array_equal(meshfile._once(rows), np.sort(first[count == 1]))
-    big = rows.astype(np.int64) * (2 ** 40)           # too large to pack: the row path
+    big = rows.astype(np.int64) * (2**40)  # too large to pack: the row path
     np.testing.assert_array_equal(meshfile._once(big), np.sort(first[count == 1]))
 
 
@@ -66,7 +66,8 @@ def test_mesh_surface_is_cached_read_only_and_renewed(tmp_path):
     p2, t2 = _cloud(200, seed=1)
     meshio.write(path, meshio.Mesh(p2, [("tetra", t2)]))
     st = path.stat()
-    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))    # a new version even within one tick
+    # a new version even within one tick
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
     b = meshfile.mesh_surface(path)
     assert b is not a and {tuple(f) for f in b[1][0]} == _by_dict(t2)
 
@@ -80,12 +81,13 @@ def test_mesh_points_cached_and_renewed(tmp_path):
     np.testing.assert_allclose(a, p)
     meshio.write(path, meshio.Mesh(2 * p, [("tetra", t)]))
     st = path.stat()
-    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
     np.testing.assert_allclose(meshfile.mesh_points(path), 2 * p)
 
 
 def test_missing_file_is_the_readers_one_line_error(tmp_path):
     from harness.errors import SpringbenchError
+
     for f in (meshfile.mesh_points, meshfile.mesh_surface):
         with pytest.raises(SpringbenchError, match="no such mesh file"):
             f(tmp_path / "nope.vtu")

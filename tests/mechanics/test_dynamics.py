@@ -21,7 +21,9 @@ def spring_chain(n_masses=1, k=4.0, c=0.0, L0=1.0):
     pts = np.zeros((n_masses + 1, 3))
     pts[:, 1] = -L0 * np.arange(n_masses + 1)
     springs = np.stack([np.arange(n_masses), np.arange(1, n_masses + 1)], axis=1)
-    return MassSpring(pts, springs, np.full(n_masses, L0), np.full(n_masses, k), np.full(n_masses, c))
+    return MassSpring(
+        pts, springs, np.full(n_masses, L0), np.full(n_masses, k), np.full(n_masses, c)
+    )
 
 
 def chain_loading(n, m=0.5, g=0.0):
@@ -35,13 +37,14 @@ def test_stable_step_of_one_spring():
     assert stable_step(model, ld) == pytest.approx(2.0 * np.sqrt(0.25 / 4.0), rel=1e-10)
 
 
-@pytest.mark.parametrize("engine,integrator", [("numba", "verlet"), ("numpy", "verlet"),
-                                               ("numpy", "symplectic-euler")])
+@pytest.mark.parametrize(
+    "engine,integrator", [("numba", "verlet"), ("numpy", "verlet"), ("numpy", "symplectic-euler")]
+)
 def test_harmonic_oscillator_period(engine, integrator):
     k, m, A = 4.0, 0.25, 0.01
     model, ld = spring_chain(k=k), chain_loading(2, m=m)
     x0 = model.points.copy()
-    x0[1, 1] -= A                       # stretched along the spring: exactly linear
+    x0[1, 1] -= A  # stretched along the spring: exactly linear
     w = np.sqrt(k / m)
     dt = 0.01
     steps = 1000
@@ -53,7 +56,9 @@ def test_harmonic_oscillator_period(engine, integrator):
     a = -A
     b = (a * (1 - (w * dt) ** 2) - a * np.cos(wd * dt)) / np.sin(wd * dt)
     np.testing.assert_allclose(u, a * np.cos(wd * tr.t) + b * np.sin(wd * tr.t), atol=1e-12)
-    np.testing.assert_allclose(u, -A * np.cos(w * tr.t), atol=A * w * dt * (1 + w * tr.t[-1] * w * dt))
+    np.testing.assert_allclose(
+        u, -A * np.cos(w * tr.t), atol=A * w * dt * (1 + w * tr.t[-1] * w * dt)
+    )
 
 
 def test_damped_oscillator_decay_rate():
@@ -64,7 +69,7 @@ def test_damped_oscillator_decay_rate():
     dt = 0.001
     tr = simulate(model, ld, dt, 20000, x0=x0, observe=[1])
     u = tr.observed[:, 0, 1] - model.points[1, 1]
-    peaks = np.flatnonzero((u[1:-1] < u[:-2]) & (u[1:-1] <= u[2:])) + 1     # minima (u < 0 side)
+    peaks = np.flatnonzero((u[1:-1] < u[:-2]) & (u[1:-1] <= u[2:])) + 1  # minima (u < 0 side)
     rate = -np.polyfit(tr.t[peaks], np.log(-u[peaks]), 1)[0]
     assert rate == pytest.approx(c / (2 * m), rel=0.01)
 
@@ -79,8 +84,9 @@ def test_blow_up_is_an_error_naming_the_step_and_the_estimate(engine):
         simulate(model, ld, 1.5 * h, 2000, x0=x0, engine=engine)
     msg = str(exc.value)
     assert "blew up at step" in msg and f"{h:.3g}" in msg
-    tr = simulate(model, ld, 0.9 * h, 2000, x0=x0, engine=engine)   # just below: bounded
-    assert np.all(np.isfinite(tr.x)) and np.abs(tr.x - model.points).max() < 0.05   # bounded (A / sqrt(1 - 0.81))
+    tr = simulate(model, ld, 0.9 * h, 2000, x0=x0, engine=engine)  # just below: bounded
+    # bounded (A / sqrt(1 - 0.81))
+    assert np.all(np.isfinite(tr.x)) and np.abs(tr.x - model.points).max() < 0.05
 
 
 def test_unknown_engine_is_an_error():
@@ -101,7 +107,7 @@ def test_statics_of_a_hanging_chain_closed_form():
     n, k, m, g = 5, 3.0, 0.2, 9.8
     model, ld = spring_chain(n, k=k), chain_loading(n + 1, m=m, g=g)
     x = solve_static(model, ld, load_steps=3)
-    below = m * np.arange(n, 0, -1)               # mass hanging below spring i
+    below = m * np.arange(n, 0, -1)  # mass hanging below spring i
     ext = below * g / k
     np.testing.assert_allclose(np.diff(-x[:, 1]), 1.0 + ext, atol=1e-10)
     np.testing.assert_allclose(x[:, [0, 2]], 0, atol=1e-12)
@@ -118,9 +124,13 @@ def test_jacobian_of_springs_equals_the_analytic_stiffness():
 
 
 def test_jacobian_of_the_element_model_vs_central_differences():
-    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1.2], [1.1, -0.2, 1.0]], float)
+    pts = np.array(
+        [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1.2], [1.1, -0.2, 1.0]], float
+    )
     cells = np.array([[0, 1, 2, 3], [1, 2, 3, 4], [1, 3, 4, 5]])
-    model = build_anisotropic(pts, cells, azimuth=0.4, elevation=0.9, ks=[3, 2, 1, 2, 1, 0.5], kd=0.2, kvs=3.0)
+    model = build_anisotropic(
+        pts, cells, azimuth=0.4, elevation=0.9, ks=[3, 2, 1, 2, 1, 0.5], kd=0.2, kvs=3.0
+    )
     rng = np.random.default_rng(1)
     x = pts + 0.05 * rng.standard_normal(pts.shape)
     v = rng.standard_normal(pts.shape)
@@ -147,21 +157,38 @@ def test_symplectic_euler_energy_stays_bounded():
     ld = Loading(np.full(5, 0.1), np.zeros(5, bool), np.zeros(3), np.zeros((5, 3)), 0.0)
     rng = np.random.default_rng(2)
     x0 = pts + 0.05 * rng.standard_normal(pts.shape)
-    h = 0.01 * stable_step(model, ld, x0)     # h omega_max = 0.02: O(h omega) shadow-energy wobble
-    tr = simulate(model, ld, h, 3000, x0=x0, snapshots=range(0, 3001, 100), energy=True,
-                  integrator="symplectic-euler", engine="numpy")
+    h = 0.01 * stable_step(model, ld, x0)  # h omega_max = 0.02: O(h omega) shadow-energy wobble
+    tr = simulate(
+        model,
+        ld,
+        h,
+        3000,
+        x0=x0,
+        snapshots=range(0, 3001, 100),
+        energy=True,
+        integrator="symplectic-euler",
+        engine="numpy",
+    )
     e = tr.energy
     assert e[0] > 0
     assert np.abs(e - e[0]).max() < 0.02 * e[0]
-    assert abs(e[:15].mean() - e[15:].mean()) < 0.002 * e[0]        # no drift
+    assert abs(e[:15].mean() - e[15:].mean()) < 0.002 * e[0]  # no drift
 
 
 @pytest.mark.skipif(not REF.exists(), reason="shared reference data not present")
 def test_statics_equals_the_end_of_a_damped_run():
     from harness.io.meshfile import read_mesh
+
     mesh = read_mesh(REF / "meshes/tetra/cube_222/cube.mesh")
-    model = build_anisotropic(mesh.points, mesh.cells["tetra"], azimuth=np.pi / 2, elevation=np.pi / 2,
-                              ks=20.0, kd=0.5, kvs=10.0)
+    model = build_anisotropic(
+        mesh.points,
+        mesh.cells["tetra"],
+        azimuth=np.pi / 2,
+        elevation=np.pi / 2,
+        ks=20.0,
+        kd=0.5,
+        kvs=10.0,
+    )
     ld = Loading.from_flags(mesh.flags, gravity=(0, -9.8, 0), drag=0.05)
     dt = 0.5 * stable_step(model, ld)
     xs = solve_static(model, ld, load_steps=2)
@@ -174,6 +201,7 @@ def test_statics_equals_the_end_of_a_damped_run():
 
 def test_generated_kernels_are_up_to_date():
     from harness.models.bc2000 import codegen
+
     path = Path(codegen.__file__).with_name("kernels.py")
     assert path.read_text() == codegen.source(), "run python -m harness.models.bc2000.codegen"
 
@@ -181,6 +209,7 @@ def test_generated_kernels_are_up_to_date():
 def test_parallel_spring_kernel_matches_numpy():
     from harness.bench.dynamics import lattice
     from harness.models.bc2000.parallel import node_index, spring_forces_parallel
+
     pts, sp = lattice(5)
     rng = np.random.default_rng(4)
     L0 = np.linalg.norm(pts[sp[:, 0]] - pts[sp[:, 1]], axis=1)
@@ -189,8 +218,20 @@ def test_parallel_spring_kernel_matches_numpy():
     v = rng.standard_normal(pts.shape)
     ptr, idx, sign = node_index(sp[:, 0], sp[:, 1], len(pts))
     f = np.empty_like(pts)
-    spring_forces_parallel(x, v, sp[:, 0].copy(), sp[:, 1].copy(), m.ks, m.kd, m.L0, np.empty((len(sp), 3)),
-                           ptr, idx, sign, f)
+    spring_forces_parallel(
+        x,
+        v,
+        sp[:, 0].copy(),
+        sp[:, 1].copy(),
+        m.ks,
+        m.kd,
+        m.L0,
+        np.empty((len(sp), 3)),
+        ptr,
+        idx,
+        sign,
+        f,
+    )
     np.testing.assert_allclose(f, m.forces(x, v), atol=1e-12)
     assert np.abs(f).max() > 0.1
 
@@ -198,9 +239,17 @@ def test_parallel_spring_kernel_matches_numpy():
 @pytest.mark.skipif(not REF.exists(), reason="shared reference data not present")
 def test_two_thread_tetra_kernel_gives_the_same_bits():
     from harness.io.meshfile import read_mesh
+
     mesh = read_mesh(REF / "meshes/tetra/cube_343/cube.mesh")
-    m = build_anisotropic(mesh.points, mesh.cells["tetra"], azimuth=np.pi / 2, elevation=np.pi / 2,
-                          ks=2.5, kd=0.1, kvs=5.0)
+    m = build_anisotropic(
+        mesh.points,
+        mesh.cells["tetra"],
+        azimuth=np.pi / 2,
+        elevation=np.pi / 2,
+        ks=2.5,
+        kd=0.1,
+        kvs=5.0,
+    )
     ld = Loading.from_flags(mesh.flags, drag=5e-5)
     a = simulate(m, ld, 0.01, 200)
     b = simulate(m, ld, 0.01, 200, threads=2)

@@ -27,8 +27,15 @@ S = 1e-3  # traction
 def _case(lo, hi, E=1.0, nu=0.3):
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     dim = len(lo)
-    return Case(path=None, name="t", dim=dim, body=Body("rectangle" if dim == 2 else "box", tuple(lo), tuple(hi - lo)),
-                material=Material(E, nu), loads=basic2d(S) if dim == 2 else basic3d(S), reference=None)
+    return Case(
+        path=None,
+        name="t",
+        dim=dim,
+        body=Body("rectangle" if dim == 2 else "box", tuple(lo), tuple(hi - lo)),
+        material=Material(E, nu),
+        loads=basic2d(S) if dim == 2 else basic3d(S),
+        reference=None,
+    )
 
 
 def _measured(net, case):
@@ -47,7 +54,9 @@ def test_square_lattice_closed_form_isotropic_nu_one_third():
     """Structure 1 with k_edge = 2 k_diag: per cell C11 = k_e + k_d, C12 = C66 = k_d, so
     k_e = 2 k_d is isotropic with nu = C12/C11 = 1/3 and E = (C11^2 - C12^2)/C11 = 8 k_d/3."""
     kd = 0.7
-    C = lattice_stiffness(np.array([[1, 0], [0, 1], [1, 1], [-1, 1]], float), [2 * kd, 2 * kd, kd, kd], 1.0)
+    C = lattice_stiffness(
+        np.array([[1, 0], [0, 1], [1, 1], [-1, 1]], float), [2 * kd, 2 * kd, kd, kd], 1.0
+    )
     assert np.allclose(C, [[3 * kd, kd, 0], [kd, 3 * kd, 0], [0, 0, kd]])
     n = 21
     p = grid_points([0, 0], [n - 1, n - 1], (n, n))
@@ -65,7 +74,11 @@ def test_square_lattice_closed_form_isotropic_nu_one_third():
 
 def _triangle_lattice(nx, ny, h=1.0):
     r = h * np.sqrt(3) / 2
-    pts = [(x, j * r) for j in range(ny) for x in (np.arange(nx) * h if j % 2 == 0 else (np.arange(nx - 1) + 0.5) * h)]
+    pts = [
+        (x, j * r)
+        for j in range(ny)
+        for x in (np.arange(nx) * h if j % 2 == 0 else (np.arange(nx - 1) + 0.5) * h)
+    ]
     return np.array(pts)
 
 
@@ -87,7 +100,8 @@ def test_equilateral_triangle_lattice_closed_form():
     net = make_network(p, springs, count * k / 2)
     case = _case(p.min(0), p.max(0))
     u = statics.solve(net, case, ["stretch-x"]).u[0]
-    mid = np.all(np.abs(p - p.mean(0)) < 0.25 * np.ptp(p, axis=0), axis=1)   # away from the zig-zag sides
+    # away from the zig-zag sides
+    mid = np.all(np.abs(p - p.mean(0)) < 0.25 * np.ptp(p, axis=0), axis=1)
     X = np.hstack([p[mid], np.ones((mid.sum(), 1))])
     grad = np.linalg.lstsq(X, u[mid], rcond=None)[0]
     E, nu = S / grad[0, 0], -grad[1, 1] / grad[0, 0]
@@ -121,7 +135,8 @@ def test_cauchy_report_flags_unreachable_nu_2d(nu, reachable):
     assert r["reachable"] is reachable
     assert r["cauchy_nu"] == pytest.approx(1 / 3)
     if reachable:
-        assert np.allclose(r["k_groups"], [0.75, 0.75, 0.375])   # k_e = 3E/4, k_d = 3E/8 (E = 8 k_d / 3)
+        # k_e = 3E/4, k_d = 3E/8 (E = 8 k_d / 3)
+        assert np.allclose(r["k_groups"], [0.75, 0.75, 0.375])
         assert r["fit"]["nu_xy"] == pytest.approx(1 / 3)
     else:
         assert r["misfit"] > 1e-3
@@ -130,7 +145,9 @@ def test_cauchy_report_flags_unreachable_nu_2d(nu, reachable):
 def test_cauchy_report_3d_and_case():
     C3 = np.linalg.inv(isotropic_compliance(1.0, 0.25))
     assert cauchy_report("edges+face", [1, 1, 1], C3)["reachable"]
-    assert not cauchy_report("edges+face", [1, 1, 1], np.linalg.inv(isotropic_compliance(1.0, 0.3)))["reachable"]
+    assert not cauchy_report(
+        "edges+face", [1, 1, 1], np.linalg.inv(isotropic_compliance(1.0, 0.3))
+    )["reachable"]
     case = _case([0, 0], [4, 4], nu=0.3)
     rep = case_report(case, {"placement": "grid", "grid": [5, 5], "structure": "structure1"})
     assert not rep["reachable"] and rep["cauchy_nu"] == pytest.approx(1 / 3)

@@ -25,7 +25,7 @@ def test_symbolic_is_shared_by_networks_of_one_pattern(monkeypatch):
         built.append(1)
         return real(*a, **k)
 
-    monkeypatch.setattr(statics, "Symbolic", counting)      # where statics looks it up
+    monkeypatch.setattr(statics, "Symbolic", counting)  # where statics looks it up
     shape = (5, 5, 8)
     pts = grid_points(np.zeros(3), np.array([1.0, 1.0, 2.0]), shape)
     top = grid_structure(shape, "edges+face+body")
@@ -34,7 +34,7 @@ def test_symbolic_is_shared_by_networks_of_one_pattern(monkeypatch):
     for clamp, expected in ((shape[0] * shape[1], 1), (2 * shape[0] * shape[1], 2)):
         free = np.ones(pts.size, bool)
         free[: 3 * clamp] = False
-        for _ in range(3):                                  # three rules' constants
+        for _ in range(3):  # three rules' constants
             k = np.exp(rng.normal(0, 0.5, len(top.springs)))
             u = statics.solve_arrays(pts, top.springs, k, free, f)
             K = stiffness_matrix(incidence(pts, top.springs), k).tocsc()

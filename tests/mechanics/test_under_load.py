@@ -18,7 +18,7 @@ _WORK = """
 import sys, hashlib
 import numpy as np
 sys.path.insert(0, {root!r})
-from tests.models.test_bc2000 import engines_models
+from tests.models.bc2000cases import engines_models
 from tests.mechanics.test_determinism import _lattice
 from harness.mechanics.dynamics import simulate
 from harness.mechanics.modal import frequencies_arrays
@@ -29,7 +29,8 @@ for m in models:
         print("kernel", threads, hashlib.sha1(x.tobytes()).hexdigest())
 xy, springs, k, masses, free = _lattice()
 for _ in range(3):
-    print("freq", 0, hashlib.sha1(frequencies_arrays(xy, springs, k, masses, free, 6).tobytes()).hexdigest())
+    f = frequencies_arrays(xy, springs, k, masses, free, 6)
+    print("freq", 0, hashlib.sha1(f.tobytes()).hexdigest())
 """
 
 
@@ -41,14 +42,25 @@ def _spin(stop):
 
 @pytest.mark.slow
 def test_same_bits_while_every_core_is_busy():
-    kind = "hexa"                                  # the model that once failed under load
+    kind = "hexa"  # the model that once failed under load
     stop = mp.Event()
-    spinners = [mp.Process(target=_spin, args=(stop,), daemon=True) for _ in range(os.cpu_count() or 2)]
+    spinners = [
+        mp.Process(target=_spin, args=(stop,), daemon=True) for _ in range(os.cpu_count() or 2)
+    ]
     for p in spinners:
         p.start()
     try:
-        out = subprocess.run([sys.executable, "-c", _WORK.format(root=str(Path(__file__).resolve().parents[2])), kind],
-                             capture_output=True, text=True, timeout=1800)
+        out = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                _WORK.format(root=str(Path(__file__).resolve().parents[2])),
+                kind,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=1800,
+        )
     finally:
         stop.set()
         for p in spinners:
@@ -58,7 +70,7 @@ def test_same_bits_while_every_core_is_busy():
     kernel = [r[2] for r in rows if r[0] == "kernel"]
     freq = {r[2] for r in rows if r[0] == "freq"}
     assert len(kernel) == 15 and len(freq) == 1
-    for model in range(3):                         # five runs of each model: one hash
-        assert len(set(kernel[5 * model: 5 * model + 5])) == 1, (kind, model)
-    assert len(set(kernel)) == 3                   # and the three models differ (the test can fail)
+    for model in range(3):  # five runs of each model: one hash
+        assert len(set(kernel[5 * model : 5 * model + 5])) == 1, (kind, model)
+    assert len(set(kernel)) == 3  # and the three models differ (the test can fail)
     assert hashlib.sha1(b"").hexdigest() not in kernel

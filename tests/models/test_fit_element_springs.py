@@ -21,9 +21,9 @@ def _loop(Ke, points, c, pairs, nonneg):
             v = points[c[e, j]] - points[c[e, i]]
             v = v / np.linalg.norm(v)
             b = np.zeros(Ke.shape[1])
-            b[3 * j:3 * j + 3], b[3 * i:3 * i + 3] = v, -v
+            b[3 * j : 3 * j + 3], b[3 * i : 3 * i + 3] = v, -v
             bs.append(b)
-        A = np.stack([np.outer(b, b).ravel() for b in bs], 1)     # the Frobenius problem itself
+        A = np.stack([np.outer(b, b).ravel() for b in bs], 1)  # the Frobenius problem itself
         k = np.linalg.lstsq(A, Ke[e].ravel(), rcond=None)[0]
         if nonneg and k.min() < 0:
             k = nnls(A, Ke[e].ravel())[0]
@@ -45,8 +45,9 @@ def test_batched_fit_matches_a_loop_of_lstsq(n_pairs, nonneg):
     np.testing.assert_allclose(k, want, rtol=0, atol=1e-9 * np.abs(want).max())
     B = _b(p, t, pairs)
     model = np.einsum("ms,msi,msj->mij", want, B, B)
-    np.testing.assert_allclose(mis, np.linalg.norm(Ke - model, axis=(1, 2)) / np.linalg.norm(Ke, axis=(1, 2)),
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        mis, np.linalg.norm(Ke - model, axis=(1, 2)) / np.linalg.norm(Ke, axis=(1, 2)), rtol=1e-9
+    )
 
 
 def _b(p, t, pairs):
@@ -54,5 +55,5 @@ def _b(p, t, pairs):
     for s, (i, j) in enumerate(pairs):
         v = p[t[:, j]] - p[t[:, i]]
         v /= np.linalg.norm(v, axis=1, keepdims=True)
-        out[:, s, 3 * j:3 * j + 3], out[:, s, 3 * i:3 * i + 3] = v, -v
+        out[:, s, 3 * j : 3 * j + 3], out[:, s, 3 * i : 3 * i + 3] = v, -v
     return out

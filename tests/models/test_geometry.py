@@ -16,7 +16,7 @@ L_SHAPE = [[0, 0], [2, 0], [2, 1], [1, 1], [1, 2], [0, 2]]
 def test_grid_points_order_and_rectangular_cells():
     p = grid_points([0, 0], [2, 1], (5, 3))
     assert p.shape == (15, 2)
-    assert np.allclose(p[1] - p[0], [0.5, 0])      # x fastest
+    assert np.allclose(p[1] - p[0], [0.5, 0])  # x fastest
     assert np.allclose(p[5] - p[0], [0, 0.5])
     with pytest.raises(ModelError):
         grid_points([0, 0], [1, 1], (1, 3))
@@ -49,7 +49,7 @@ def test_voronoi_cells_exact_area_and_first_moments_nonconvex():
     body = polygon(L_SHAPE)
     p = random_points(body, 30, seed=0)
     areas, cents = voronoi_cells_2d(p, body)
-    m = polygon_moments(body.vertices)       # independent: Green's theorem on the polygon
+    m = polygon_moments(body.vertices)  # independent: Green's theorem on the polygon
     assert np.isclose(areas.sum(), m[0], rtol=1e-12)
     assert np.allclose((areas[:, None] * cents).sum(0), m[1:3], rtol=1e-12)
     assert (areas > 0).all()
@@ -110,7 +110,7 @@ def test_delaunay_nonconvex_filter_and_slivers():
     p = random_points(body, 50, seed=1)
     t = delaunay(p, body)
     mid = (p[t.springs[:, 0]] + p[t.springs[:, 1]]) / 2
-    assert body.contains(mid).all()          # no spring across the notch
+    assert body.contains(mid).all()  # no spring across the notch
     assert len(np.unique(t.springs)) == len(p)
     # a cubic grid is cospherical: flat tetrahedra are dropped
     g = grid_points([0, 0, 0], [1, 1, 1], (3, 3, 3))

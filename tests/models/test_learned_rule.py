@@ -26,13 +26,18 @@ CORPUS = Path(__file__).resolve().parents[2] / "cases" / "rules_corpus"
 @pytest.fixture(scope="module")
 def made(tmp_path_factory):
     folder = tmp_path_factory.mktemp("learned")
-    return {"cylinder": meshes.cylinder(folder), "ellipsoid": meshes.ellipsoid(folder),
-            "holed_block": meshes.holed_block(folder), "ellipse": meshes.ellipse(folder, size=0.1)}
+    return {
+        "cylinder": meshes.cylinder(folder),
+        "ellipsoid": meshes.ellipsoid(folder),
+        "holed_block": meshes.holed_block(folder),
+        "ellipse": meshes.ellipse(folder, size=0.1),
+    }
 
 
 def _network(path):
     from harness.io.meshfile import read_mesh
     from harness.models.topology import element_pairs
+
     m = read_mesh(path)
     ctype = lr.SIMPLEX[m.dim]
     c = m.cells[ctype]
@@ -56,15 +61,15 @@ def test_features_are_free_of_units_orientation_and_node_order(made):
     g = lr.geometry(pts, springs, cells)
     q, _ = np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))
     perm = np.random.default_rng(2).permutation(len(pts))
-    inv = np.argsort(perm)                       # new index of old node i
-    moved = (0.001 * pts @ q.T + 5.0)[perm]      # mm, rotated, shifted, renumbered
+    inv = np.argsort(perm)  # new index of old node i
+    moved = (0.001 * pts @ q.T + 5.0)[perm]  # mm, rotated, shifted, renumbered
     cells2 = {k: inv[v][:, ::-1] for k, v in cells.items()}
     np.testing.assert_allclose(lr.geometry(moved, inv[springs][:, ::-1], cells2), g, atol=1e-10)
     # hand-checked values: a regular tetrahedron's edges, all on the surface, one cell each
     tet = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float)
     e = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)])
     G = lr.geometry(tet, e, {"tetra": np.array([[0, 1, 2, 3]])})
-    col = dict(zip(lr.FEATURES[3][len(lr.SCALE):], range(G.shape[1])))
+    col = dict(zip(lr.FEATURES[3][len(lr.SCALE) :], range(G.shape[1])))
     np.testing.assert_allclose(G[:, col["log_length"]], 0, atol=1e-15)
     np.testing.assert_allclose(G[:, col["boundary"]], 1)
     np.testing.assert_allclose(G[:, col["log_cells"]], np.log(1 / lr.N_REG))
@@ -78,8 +83,14 @@ def test_the_adjoint_gradient_is_the_derivative(made):
     for objective in rules.OBJECTIVES:
         J, g = rules.objective([s], c, objective)
         h = 1e-6
-        fd = [(rules.objective([s], c + h * d, objective)[0] - rules.objective([s], c - h * d, objective)[0]) / (2 * h)
-              for d in np.eye(len(c))]
+        fd = [
+            (
+                rules.objective([s], c + h * d, objective)[0]
+                - rules.objective([s], c - h * d, objective)[0]
+            )
+            / (2 * h)
+            for d in np.eye(len(c))
+        ]
         np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-9)
 
 
@@ -89,7 +100,9 @@ def _planted(s, c):
     groups = []
     for g in s.groups:
         U = spla.spsolve((g.B @ sp.diags(k) @ g.B.T).tocsc(), g.f.T).reshape(len(g.f.T), -1).T
-        groups.append(dataclasses.replace(g, u=U, fixed2=np.zeros(len(U)), norm=np.linalg.norm(U, axis=1)))
+        groups.append(
+            dataclasses.replace(g, u=U, fixed2=np.zeros(len(U)), norm=np.linalg.norm(U, axis=1))
+        )
     return dataclasses.replace(s, groups=tuple(groups))
 
 
@@ -99,7 +112,8 @@ def test_fit_recovers_planted_coefficients(made):
     s = rules.sample(made["ellipse"], lr.NU0)
     truth = np.array([0.2, 0.0, 0.0, -0.5, 0.3, -0.6, 0.4])
     planted = _planted(s, truth)
-    assert rules.objective([planted], np.zeros(len(truth)))[0] > 0.05       # van Gelder is not the answer
+    # van Gelder is not the answer
+    assert rules.objective([planted], np.zeros(len(truth)))[0] > 0.05
     res = rules.fit([planted], maxiter=300)
     assert res.after < 1e-5 * res.before
     np.testing.assert_allclose(res.coefficients, truth, atol=1e-3)
@@ -113,7 +127,10 @@ def test_shipped_coefficients_record_the_committed_corpus():
         assert c["sha256"] == hashlib.sha256(files[c["file"]].read_bytes()).hexdigest(), c["file"]
     for dim in (2, 3):
         d = data["dims"][str(dim)]
-        assert tuple(d["features"]) == lr.FEATURES[dim] and d["objective_after"] < d["objective_before"]
+        assert (
+            tuple(d["features"]) == lr.FEATURES[dim]
+            and d["objective_after"] < d["objective_before"]
+        )
 
 
 @pytest.mark.slow
@@ -130,12 +147,33 @@ def test_the_shipped_rule_beats_van_gelder_on_tet_meshes_outside_its_corpus(made
 
 def test_rules_fit_command_writes_a_rule_calibrate_can_read(tmp_path, made, capsys):
     out = tmp_path / "rule.json"
-    assert cli.main(["rules", "fit", str(made["ellipse"]), "--nu", "0.3", "0.45", "--maxiter", "5",
-                     "--out", str(out)]) == 0
+    assert (
+        cli.main(
+            [
+                "rules",
+                "fit",
+                str(made["ellipse"]),
+                "--nu",
+                "0.3",
+                "0.45",
+                "--maxiter",
+                "5",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     data = json.loads(out.read_text())
     c = lr.coefficients(2, out)
-    assert len(c) == len(lr.FEATURES[2]) and data["dims"]["2"]["objective_after"] <= data["dims"]["2"]["objective_before"]
+    assert (
+        len(c) == len(lr.FEATURES[2])
+        and data["dims"]["2"]["objective_after"] <= data["dims"]["2"]["objective_before"]
+    )
     assert data["corpus"][0]["sha256"] == hashlib.sha256(made["ellipse"].read_bytes()).hexdigest()
     assert "van Gelder" in capsys.readouterr().out
-    assert cli.main(["rules", "fit", str(made["ellipse"]), "--nu", "0.3", "0.3", "--out", str(out)]) == 2
+    assert (
+        cli.main(["rules", "fit", str(made["ellipse"]), "--nu", "0.3", "0.3", "--out", str(out)])
+        == 2
+    )
     assert "--nu" in capsys.readouterr().err

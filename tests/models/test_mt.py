@@ -35,7 +35,10 @@ def _mt(case):
 def _case(tmp_path, body, classes='["mt"]', **replace):
     """A nu-sweep case file with other classes (and other lines), quick mode."""
     text = (SWEEP / f"{body}_nu0.45.toml").read_text()
-    lines = [f"classes = {classes}" if line.startswith("classes = ") else line for line in text.splitlines()]
+    lines = [
+        f"classes = {classes}" if line.startswith("classes = ") else line
+        for line in text.splitlines()
+    ]
     text = "\n".join(lines) + "\n"
     for a, b in replace.items():
         text = text.replace(a, b)
@@ -51,7 +54,12 @@ def _kernel_forces(model, x):
     _, tet, hexa = kernel_arrays(model, 1.0)
     f = np.zeros(x.size)
     run = kernels.tet_forces if not model.is_hex else kernels.hex_forces
-    run(np.ascontiguousarray(x, float).ravel(), np.zeros(x.size), f, *(tet if not model.is_hex else hexa))
+    run(
+        np.ascontiguousarray(x, float).ravel(),
+        np.zeros(x.size),
+        f,
+        *(tet if not model.is_hex else hexa),
+    )
     return f.reshape(x.shape)
 
 
@@ -59,14 +67,15 @@ def _kernel_forces(model, x):
 def test_class_stiffness_is_the_central_difference_of_the_compiled_kernels(tmp_path, body):
     case = _case(tmp_path, body)
     net = _mt(case)
-    theta = {"box": [700.0, 300.0, 900.0], "cylinder": [7e4, 3e4, 9e4]}[body]     # any theta
+    theta = {"box": [700.0, 300.0, 900.0], "cylinder": [7e4, 3e4, 9e4]}[body]  # any theta
     net = net.with_k(np.concatenate([net.k, theta]))
     K = net.stiffness_matrix().toarray()
     model = net.volume.model()
     x0 = net.points
     size = np.ptp(x0, axis=0).max()
     h = 1e-6 * size
-    assert np.abs(_kernel_forces(model, x0)).max() <= 1e-12 * np.abs(K).max() * size   # rest is force-free
+    # rest is force-free
+    assert np.abs(_kernel_forces(model, x0)).max() <= 1e-12 * np.abs(K).max() * size
     rng = np.random.default_rng(0)
     cols = rng.choice(x0.size, size=min(60, x0.size), replace=False)
     for j in cols:
@@ -84,9 +93,23 @@ def _element(kind, seed):
     bilinear end weights are exact on rectangular faces only), positive orientation."""
     rng = np.random.default_rng(seed)
     if kind == "tet":
-        P = np.array([[0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]) + 0.04 * rng.standard_normal((4, 3))
+        P = np.array(
+            [[0, 0, 0], [1.0, 0, 0], [0, 1.0, 0], [0, 0, 1.0]]
+        ) + 0.04 * rng.standard_normal((4, 3))
     else:
-        P = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
+        P = np.array(
+            [
+                [0, 0, 0],
+                [1, 0, 0],
+                [1, 1, 0],
+                [0, 1, 0],
+                [0, 0, 1],
+                [1, 0, 1],
+                [1, 1, 1],
+                [0, 1, 1],
+            ],
+            float,
+        )
         P = P * [0.7, 1.0, 1.3] + rng.standard_normal(3)
     return P, np.arange(len(P))[None, :]
 
@@ -100,12 +123,16 @@ def test_theta_are_moduli_of_one_element_by_hand(kind):
     term = MTTerm.build(P, cells, [1.0, 1.0, 1.0])
     g = P.mean(axis=0)
     from scipy.spatial import ConvexHull
-    V = ConvexHull(P).volume                   # both elements are convex: an independent volume
+
+    V = ConvexHull(P).volume  # both elements are convex: an independent volume
     assert size_factors(term.body)[0, 0] * term.body.L0[0, 0] ** 2 == pytest.approx(V, rel=1e-12)
     eps, gam = 1e-3, 2e-3
-    strains = {0: np.diag([eps, 0, 0]), 1: np.array([[0, gam / 2, 0], [gam / 2, 0, 0], [0, 0, 0]]),
-               2: eps * np.eye(3)}
-    expect = {0: eps ** 2 * V, 1: gam ** 2 * V, 2: 9 * eps ** 2 * V}
+    strains = {
+        0: np.diag([eps, 0, 0]),
+        1: np.array([[0, gam / 2, 0], [gam / 2, 0, 0], [0, 0, 0]]),
+        2: eps * np.eye(3),
+    }
+    expect = {0: eps**2 * V, 1: gam**2 * V, 2: 9 * eps**2 * V}
     for j, S in strains.items():
         u = ((P - g) @ S.T).ravel()
         assert u @ (term.units[j] @ u) == pytest.approx(expect[j], rel=1e-9), PARAMS[j]
@@ -120,12 +147,19 @@ def test_stage_rows_on_the_nu_sweep_box(tmp_path):
     case = _case(tmp_path, "box")
     out = tmp_path / "out"
     rows = stage.run(case, StageContext(out_dir=out))
-    assert [(r["model_class"], r["optimizer"]) for r in rows] == [("mt", "none"), ("mt", "least-squares")]
+    assert [(r["model_class"], r["optimizer"]) for r in rows] == [
+        ("mt", "none"),
+        ("mt", "least-squares"),
+    ]
     start, fitted = rows
     for r in rows:
         assert np.isfinite(r["G_norm_final"]) and np.isfinite(r["G_heldout"]) and r["n_nodes"] == 45
-        assert r["n_elements"] == 16                              # the 4 x 2 x 2 grid's hexahedra
-        assert np.isfinite(r["freq_error_final"]) and np.isfinite(r["dt_stable"]) and np.isnan(r["k_spread"])
+        assert r["n_elements"] == 16  # the 4 x 2 x 2 grid's hexahedra
+        assert (
+            np.isfinite(r["freq_error_final"])
+            and np.isfinite(r["dt_stable"])
+            and np.isnan(r["k_spread"])
+        )
         assert "cauchy_misfit" not in r
     assert fitted["G_final"] <= start["G_final"] * (1 + 1e-9) and fitted["n_params"] == 3
     # the stored theta, re-scored: a dense solve of the element model's K (complex step of
@@ -142,7 +176,9 @@ def test_stage_rows_on_the_nu_sweep_box(tmp_path):
         free, f = statics.load_arrays(net, case, load)
         u = np.zeros(f.size)
         u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
-        assert np.allclose(deformed[f"u_{load.name}"].ravel(), u, rtol=0, atol=1e-9 * np.abs(u).max())
+        assert np.allclose(
+            deformed[f"u_{load.name}"].ravel(), u, rtol=0, atol=1e-9 * np.abs(u).max()
+        )
     # dt_stable: 2 / omega_max of M^-1/2 K_sym M^-1/2 (the free body), dense here
     s = 1 / np.sqrt(np.repeat(net.masses, 3))
     lam = np.linalg.eigvalsh(s[:, None] * (0.5 * (K + K.T)) * s[None, :]).max()
@@ -167,7 +203,7 @@ def test_fit_recovers_its_own_constants(tmp_path):
     start = base.with_k(np.concatenate([base.k, true * [3.0, 0.5, 2.0]]))
     fit = [names.index(n) for n in case.fit_loads]
     theta, g0, g1 = fit_theta(start, case, u_true, names, fit, (1.0, 1.0, 1.0))
-    assert g0 > 1e-4 and g1 < 1e-5 * g0            # (the fit's Jacobian is a finite difference)
+    assert g0 > 1e-4 and g1 < 1e-5 * g0  # (the fit's Jacobian is a finite difference)
     np.testing.assert_allclose(theta, true, rtol=1e-5)
 
 
@@ -175,8 +211,9 @@ def test_hexahedra_without_rectangular_faces_are_a_one_line_error():
     """The program's hexahedron weights its axis ends exactly on rectangular faces only;
     elsewhere its rest shape carries forces, so the class refuses it (one line, the fix)."""
     from harness.errors import ModelError
+
     P, cells = _element("hex", 2)
-    MTTerm.build(P, cells, 1.0)                                 # a box: fine
+    MTTerm.build(P, cells, 1.0)  # a box: fine
     sheared = P @ np.array([[1.0, 0.3, 0.0], [0.0, 1.0, 0.0], [0.1, 0.0, 1.0]]).T
     with pytest.raises(ModelError) as exc:
         MTTerm.build(sheared, cells, 1.0)
@@ -195,4 +232,6 @@ def test_statics_of_the_class_never_take_the_cholesky_path(tmp_path, monkeypatch
         free, f = statics.load_arrays(net, case, load)
         u = np.zeros(f.size)
         u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
-        assert np.allclose(res.displacement(load.name).ravel(), u, rtol=0, atol=1e-9 * np.abs(u).max())
+        assert np.allclose(
+            res.displacement(load.name).ravel(), u, rtol=0, atol=1e-9 * np.abs(u).max()
+        )

@@ -41,7 +41,9 @@ def test_rigid_motions_carry_no_energy(dim):
     pts, vol = term(dim, seed=4)
     scale_E = vol.energy(pts * 1.01)
     assert scale_E > 0
-    R = Rotation.from_euler("zyx", [70, -40, 25] if dim == 3 else [70, 0, 0], degrees=True).as_matrix()[:dim, :dim]
+    R = Rotation.from_euler(
+        "zyx", [70, -40, 25] if dim == 3 else [70, 0, 0], degrees=True
+    ).as_matrix()[:dim, :dim]
     x = pts @ R.T + np.random.default_rng(5).standard_normal(dim)
     assert vol.energy(x) <= 1e-20 * scale_E + 1e-28
     assert np.abs(vol.forces(x)).max() <= 1e-10 * np.abs(vol.forces(pts * 1.01)).max()
@@ -61,7 +63,7 @@ def test_linearised_stiffness_is_the_force_jacobian_and_a_sum_over_nodes(dim):
         for e, nodes in enumerate(vol.elements):
             if node in nodes:
                 for i, j in enumerate(nodes):
-                    c[j * dim:(j + 1) * dim] += g[e, i] / (dim + 1)
+                    c[j * dim : (j + 1) * dim] += g[e, i] / (dim + 1)
         dense += vol.kv[a] / vol.Vn[a] * np.outer(c, c)
     assert np.allclose(K, dense, rtol=1e-12, atol=1e-14 * np.abs(K).max())
 
@@ -73,12 +75,13 @@ def test_a_homogeneous_strain_gives_its_trace_at_every_node(dim):
     eps = 0.5 * (eps + eps.T)
     u = (pts - pts.mean(0)) @ eps.T
     C = vol.columns(pts)
-    dV = np.sqrt(vol.Vn) * (C.T @ u.ravel())                 # the linearised dV_a
+    dV = np.sqrt(vol.Vn) * (C.T @ u.ravel())  # the linearised dV_a
     assert np.allclose(dV / vol.Vn, np.trace(eps), rtol=1e-10)
     # the energy is then kv/2 tr(eps)^2 times the body's volume: kv joins lambda
     K = NodeVolumeTerm.build(pts, vol.elements, 3.0).stiffness_matrix(pts)
     assert 0.5 * u.ravel() @ (K @ u.ravel()) == pytest.approx(
-        0.5 * 3.0 * np.trace(eps) ** 2 * volumes(pts, vol.elements).sum(), rel=1e-10)
+        0.5 * 3.0 * np.trace(eps) ** 2 * volumes(pts, vol.elements).sum(), rel=1e-10
+    )
     assert np.all(vol.Vn > 0) and vol.Vn.sum() == pytest.approx(vol.V0.sum(), rel=1e-12)
 
 
@@ -89,7 +92,10 @@ def beam(shape=(9, 3, 3)):
     pts = np.zeros((ids.size, 3))
     pts[ids.ravel()] = grid.reshape(-1, 3)
     el = grid_simplices(shape)
-    edges = np.unique(np.sort(np.concatenate([el[:, [a, b]] for a in range(4) for b in range(a + 1, 4)]), 1), axis=0)
+    edges = np.unique(
+        np.sort(np.concatenate([el[:, [a, b]] for a in range(4) for b in range(a + 1, 4)]), 1),
+        axis=0,
+    )
     return pts, el, edges
 
 
@@ -113,7 +119,7 @@ def test_one_term_per_element_locks_one_per_node_does_not():
     pts, el, edges = beam()
     Ks = stiffness_matrix(incidence(pts, edges), np.ones(len(edges)))
     d0 = tip_deflection(pts, Ks)
-    kv = 1e3                                                 # the springs' modulus ~ 1 (k / h)
+    kv = 1e3  # the springs' modulus ~ 1 (k / h)
     element = tip_deflection(pts, Ks + VolumeTerm.build(pts, el, kv).stiffness_matrix(pts)) / d0
     node = tip_deflection(pts, Ks + NodeVolumeTerm.build(pts, el, kv).stiffness_matrix(pts)) / d0
     assert element < 0.25
@@ -126,20 +132,32 @@ def test_save_load_and_the_exported_stiffness(tmp_path):
     from harness.mechanics.statics import _stiffness
     from harness.models.sms import SpringNetwork
     from harness.models.volume import load, save, with_volume
+
     pts, el, edges = beam((4, 2, 2))
     pts = pts * 0.1
     rng = np.random.default_rng(2)
-    net = SpringNetwork(points=pts, springs=edges, k=rng.uniform(1, 2, len(edges)), masses=np.full(len(pts), 0.01),
-                        classes=np.zeros(len(pts), int), groups=np.zeros(len(edges), int), cells={"tetra": el},
-                        info={"stiffness": "test"})
+    net = SpringNetwork(
+        points=pts,
+        springs=edges,
+        k=rng.uniform(1, 2, len(edges)),
+        masses=np.full(len(pts), 0.01),
+        classes=np.zeros(len(pts), int),
+        groups=np.zeros(len(edges), int),
+        cells={"tetra": el},
+        info={"stiffness": "test"},
+    )
     vnet = with_volume(net, "node", rng.uniform(1e3, 2e3, len(pts)))
     assert isinstance(vnet.volume, NodeVolumeTerm)
     save(tmp_path / "v.npz", vnet)
     back = load(tmp_path / "v.npz", net)
-    assert isinstance(back.volume, NodeVolumeTerm) and np.array_equal(back.volume.kv, vnet.volume.kv)
+    assert isinstance(back.volume, NodeVolumeTerm) and np.array_equal(
+        back.volume.kv, vnet.volume.kv
+    )
     K = _stiffness(vnet).toarray()
     assert np.allclose(_stiffness(back).toarray(), K, rtol=1e-14, atol=0)
     data = export(vnet, tmp_path / "m.vtu")
     assert "volume_indices" not in data and len(data["node_volume_nodes"]) == len(pts)
     assert json.loads((tmp_path / "m.json").read_text())["node_volume_shared"] is False
-    assert np.allclose(network_stiffness(data).toarray(), K, rtol=1e-10, atol=1e-12 * np.abs(K).max())
+    assert np.allclose(
+        network_stiffness(data).toarray(), K, rtol=1e-10, atol=1e-12 * np.abs(K).max()
+    )

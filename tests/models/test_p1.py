@@ -39,9 +39,15 @@ def test_p1_stiffness_matches_scikit_fem(kind):
     K = term.stiffness_matrix(m.p.T).toarray()
     assert np.abs(K - K_ref).max() <= 1e-12 * np.abs(K_ref).max()
     # the same element with its nodes listed the other way round (negative volume): same K
-    flipped = P1Term.build(m.p.T, m.t.T[:, [1, 0] + list(range(2, m.t.shape[0]))],
-                           np.broadcast_to(D, (m.t.shape[1],) + D.shape))
-    assert np.abs(flipped.stiffness_matrix(m.p.T).toarray() - K_ref).max() <= 1e-12 * np.abs(K_ref).max()
+    flipped = P1Term.build(
+        m.p.T,
+        m.t.T[:, [1, 0] + list(range(2, m.t.shape[0]))],
+        np.broadcast_to(D, (m.t.shape[1],) + D.shape),
+    )
+    assert (
+        np.abs(flipped.stiffness_matrix(m.p.T).toarray() - K_ref).max()
+        <= 1e-12 * np.abs(K_ref).max()
+    )
 
 
 CASE = """name = "p1bar"
@@ -79,15 +85,24 @@ method = "lbfgs"
 
 def test_stage_p1_row_is_exact_on_homogeneous_loads_and_matches_an_independent_p1_solve(tmp_path):
     import meshio
+
     rng = np.random.default_rng(3)
     m = skfem.MeshTet.init_tensor(np.linspace(0, 2, 5), np.linspace(0, 1, 3), np.linspace(0, 1, 3))
     p = m.p.copy()
-    inner = (p[0] > 1e-9) & (p[0] < 2 - 1e-9) & (p[1] > 1e-9) & (p[1] < 1 - 1e-9) & (p[2] > 1e-9) & (p[2] < 1 - 1e-9)
-    p[:, inner] += 0.05 * rng.standard_normal((3, inner.sum()))     # inner nodes only: the faces stay flat
+    inner = (
+        (p[0] > 1e-9)
+        & (p[0] < 2 - 1e-9)
+        & (p[1] > 1e-9)
+        & (p[1] < 1 - 1e-9)
+        & (p[2] > 1e-9)
+        & (p[2] < 1 - 1e-9)
+    )
+    # inner nodes only: the faces stay flat
+    p[:, inner] += 0.05 * rng.standard_normal((3, inner.sum()))
     t = m.t.T.copy()
     a = p.T[t[:, 1:]] - p.T[t[:, :1]]
     neg = np.einsum("ij,ij->i", a[:, 0], np.cross(a[:, 1], a[:, 2])) < 0
-    t[neg, 0], t[neg, 1] = t[neg, 1], t[neg, 0].copy()      # every cell positive, as mesh files must be
+    t[neg, 0], t[neg, 1] = t[neg, 1], t[neg, 0].copy()  # every cell positive, as mesh files must be
     m = skfem.MeshTet(p, t.T)
     meshio.write(tmp_path / "bar.vtu", meshio.Mesh(m.p.T, [("tetra", m.t.T)]))
     f = tmp_path / "p1.toml"
@@ -107,10 +122,11 @@ def test_stage_p1_row_is_exact_on_homogeneous_loads_and_matches_an_independent_p
     @skfem.LinearForm
     def gravity(v, w):
         return 2.0 * -9.0 * v[1]
+
     b = skfem.asm(gravity, basis)
     clamped = basis.get_dofs(lambda x: np.isclose(x[0], 0.0)).all()
     u = skfem.solve(*skfem.condense(K, b, D=clamped))
-    u_model = d["u_sag"].ravel()          # node-major (x, y, z) like scikit-fem's vector basis
+    u_model = d["u_sag"].ravel()  # node-major (x, y, z) like scikit-fem's vector basis
     assert np.abs(u_model - u).max() <= 1e-9 * np.abs(u).max()
     # and the row's G_heldout is that displacement against the reference's (not zero)
     assert rows[0]["G_heldout"] > 1e-3

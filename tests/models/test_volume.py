@@ -40,8 +40,19 @@ def grid_simplices(shape):
         q = np.stack([a.ravel(), b.ravel(), c.ravel(), d.ravel()], 1)
         return np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
     s = (slice(None, -1), slice(1, None))
-    h = [ids[s[i]][:, s[j]][:, :, s[l]].ravel()
-         for (i, j, l) in [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]]
+    h = [
+        ids[s[i]][:, s[j]][:, :, s[l]].ravel()
+        for (i, j, l) in [
+            (0, 0, 0),
+            (1, 0, 0),
+            (1, 1, 0),
+            (0, 1, 0),
+            (0, 0, 1),
+            (1, 0, 1),
+            (1, 1, 1),
+            (0, 1, 1),
+        ]
+    ]
     return hex_to_tets(np.stack(h, 1))
 
 
@@ -51,7 +62,7 @@ def test_volumes_match_determinants_and_hand_cases(dim):
     a = pts[el[:, 1:]] - pts[el[:, :1]]
     fact = 2.0 if dim == 2 else 6.0
     assert np.allclose(volumes(pts, el), np.linalg.det(a) / fact, rtol=1e-12, atol=1e-15)
-    unit = np.vstack([np.zeros(dim), np.eye(dim)])          # the unit right simplex: 1/2, 1/6
+    unit = np.vstack([np.zeros(dim), np.eye(dim)])  # the unit right simplex: 1/2, 1/6
     assert volumes(unit, np.arange(dim + 1)[None])[0] == pytest.approx(1 / fact)
     # its gradient by hand: dV/dx_i = unit normal of the opposite face times its size / dim
     g = volume_gradients(unit, np.arange(dim + 1)[None])[0]
@@ -59,6 +70,7 @@ def test_volumes_match_determinants_and_hand_cases(dim):
     assert np.allclose(g[0], -np.ones(dim) / fact)
     # the Delaunay hull is tiled: the volumes (made positive) sum to the hull's
     from scipy.spatial import ConvexHull
+
     assert np.abs(volumes(pts, el)).sum() == pytest.approx(ConvexHull(pts).volume, rel=1e-12)
 
 
@@ -71,7 +83,7 @@ def term(dim, seed=0):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_force_is_minus_the_energy_gradient(dim):
     pts, vol = term(dim)
-    assert np.all(vol.V0 > 0)                                  # build() orients every element
+    assert np.all(vol.V0 > 0)  # build() orients every element
     x = pts + 0.05 * np.random.default_rng(3).standard_normal(pts.shape)
     f = vol.forces(x)
     fd = energy_forces(vol.energy, x)
@@ -82,14 +94,16 @@ def test_force_is_minus_the_energy_gradient(dim):
 @pytest.mark.parametrize("dim", [2, 3])
 def test_rigid_motions_carry_no_energy(dim):
     pts, vol = term(dim, seed=4)
-    stretch = pts * 1.01                                      # the scale of a real deformation
+    stretch = pts * 1.01  # the scale of a real deformation
     scale_E, scale_f = vol.energy(stretch), np.abs(vol.forces(stretch)).max()
     assert scale_E > 0
     rng = np.random.default_rng(5)
-    large = [70, -40, 25] if dim == 3 else [0, 0, 70]          # degrees (2-D: about z)
+    large = [70, -40, 25] if dim == 3 else [0, 0, 70]  # degrees (2-D: about z)
     small = [0, 1e-3, 0] if dim == 3 else [0, 0, 1e-3]
     for angles in (large, small):
-        R = Rotation.from_euler("zyx", angles[::-1] if dim == 2 else angles, degrees=True).as_matrix()[:dim, :dim]
+        R = Rotation.from_euler(
+            "zyx", angles[::-1] if dim == 2 else angles, degrees=True
+        ).as_matrix()[:dim, :dim]
         x = pts @ R.T + rng.standard_normal(dim)
         assert vol.energy(x) <= 1e-20 * scale_E + 1e-28
         assert np.abs(vol.forces(x)).max() <= 1e-10 * scale_f
@@ -101,7 +115,7 @@ def test_rigid_motions_carry_no_energy(dim):
         assert np.abs(K @ u.ravel()).max() <= 1e-12 * np.abs(K).max() * np.abs(u).max()
     # a dilation u = x - c is not: each element's dV = dim V0, so u.K.u = dim^2 sum kv V0 (by hand)
     u = (pts - pts.mean(0)).ravel()
-    assert u @ (K @ u) == pytest.approx(dim ** 2 * np.sum(vol.kv * vol.V0), rel=1e-12)
+    assert u @ (K @ u) == pytest.approx(dim**2 * np.sum(vol.kv * vol.V0), rel=1e-12)
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -123,6 +137,7 @@ def test_linearised_stiffness_is_the_force_jacobian_at_rest(dim):
 
 # -- springs + volume: statics and calibration ---------------------------------------------
 
+
 def dense_K(pts, spr, el, params):
     """K of springs (outer products of b_e) plus volume blocks, dense, written here."""
     dim = pts.shape[1]
@@ -132,13 +147,15 @@ def dense_K(pts, spr, el, params):
     K = np.zeros((pts.size, pts.size))
     for s_, (i, j) in enumerate(spr):
         b = np.zeros(pts.size)
-        b[i * dim:(i + 1) * dim], b[j * dim:(j + 1) * dim] = -d[s_], d[s_]
+        b[i * dim : (i + 1) * dim], b[j * dim : (j + 1) * dim] = -d[s_], d[s_]
         K += params[s_] * np.outer(b, b)
     vol = VolumeTerm.build(pts, el, 1.0)
     g = volume_gradients(pts, vol.elements)
     for m_, nodes in enumerate(vol.elements):
         dofs = (nodes[:, None] * dim + np.arange(dim)).ravel()
-        K[np.ix_(dofs, dofs)] += params[e + m_] / vol.V0[m_] * np.outer(g[m_].ravel(), g[m_].ravel())
+        K[np.ix_(dofs, dofs)] += (
+            params[e + m_] / vol.V0[m_] * np.outer(g[m_].ravel(), g[m_].ravel())
+        )
     return K
 
 
@@ -164,26 +181,40 @@ def sv_setup(shape, seed=0, shared=False, grouped=False, sigma=0.3):
     for i, (fr, f) in enumerate(zip(frees, forces)):
         U[i, fr] = np.linalg.solve(K[np.ix_(fr, fr)], f[fr])
     cols = VolumeTerm.build(pts, el, 1.0).columns(pts)
-    prob = FitProblem.from_network(pts, spr, k0, frees, forces, U, np.ones(pts.size), names,
-                                   groups=None if pg.max() + 1 == e + m else pg, extra_columns=cols)
+    prob = FitProblem.from_network(
+        pts,
+        spr,
+        k0,
+        frees,
+        forces,
+        U,
+        np.ones(pts.size),
+        names,
+        groups=None if pg.max() + 1 == e + m else pg,
+        extra_columns=cols,
+    )
     return prob, truth, dict(pts=pts, spr=spr, el=el, frees=frees, forces=forces, U=U)
 
 
 @pytest.mark.parametrize("shape", [(4, 3), (3, 3, 3)])
 def test_statics_and_adjoint_gradient_over_springs_and_volumes(shape):
     prob, truth, a = sv_setup(shape, seed=2)
-    assert prob.G(truth) <= 1e-10 * prob.G_ref_norm()          # the problem's sparse solve = the dense one
+    assert prob.G(truth) <= 1e-10 * prob.G_ref_norm()  # the problem's sparse solve = the dense one
     rng = np.random.default_rng(1)
     k = prob.k0 * np.exp(0.2 * rng.standard_normal(prob.n_springs))
     _, g = value_and_grad(prob, k)
     e = len(a["spr"])
-    idx = np.concatenate([rng.choice(e, 4, replace=False), e + rng.choice(prob.n_springs - e, 6, replace=False)])
+    idx = np.concatenate(
+        [rng.choice(e, 4, replace=False), e + rng.choice(prob.n_springs - e, 6, replace=False)]
+    )
     h = 1e-4
     for i in idx:
         kp, km = k.copy(), k.copy()
         kp[i] *= 1 + h
         km[i] *= 1 - h
-        ref = (value_and_grad(prob, kp, grad=False)[0] - value_and_grad(prob, km, grad=False)[0]) / (2 * h * k[i])
+        ref = (
+            value_and_grad(prob, kp, grad=False)[0] - value_and_grad(prob, km, grad=False)[0]
+        ) / (2 * h * k[i])
         assert g[i] == pytest.approx(ref, rel=1e-5, abs=1e-7 * np.abs(g).max())
     # the per-element formula, dense: dG^2/dkv_e = 2 sum_loads (lambda . gV_e)(u . gV_e) / V0_e
     pts = a["pts"]
@@ -198,23 +229,30 @@ def test_statics_and_adjoint_gradient_over_springs_and_volumes(shape):
         Kf = K[np.ix_(fr, fr)]
         u[fr] = np.linalg.solve(Kf, f[fr])
         lam[fr] = np.linalg.solve(Kf, ur[fr] - u[fr])
-        mine += 2 * np.einsum("ed,ed->e", gv, lam[dofs]) * np.einsum("ed,ed->e", gv, u[dofs]) / vol.V0
+        mine += (
+            2 * np.einsum("ed,ed->e", gv, lam[dofs]) * np.einsum("ed,ed->e", gv, u[dofs]) / vol.V0
+        )
     assert np.allclose(g[e:], mine, rtol=1e-8, atol=1e-10 * np.abs(mine).max())
 
 
-@pytest.mark.parametrize("shape, mode, method", [((4, 3), "element", "gauss-newton"),
-                                                 ((4, 3), "element", "equilibrium-gap"),
-                                                 ((3, 3, 3), "shared", "lbfgs"),
-                                                 ((3, 3, 3), "grouped", "gauss-newton")])
+@pytest.mark.parametrize(
+    "shape, mode, method",
+    [
+        ((4, 3), "element", "gauss-newton"),
+        ((4, 3), "element", "equilibrium-gap"),
+        ((3, 3, 3), "shared", "lbfgs"),
+        ((3, 3, 3), "grouped", "gauss-newton"),
+    ],
+)
 def test_known_springs_and_volume_constants_are_recovered(shape, mode, method):
     """A reference made by springs + volume with known [k, kv] is fitted back: G -> 0 and
     every constant (per element, one per body, or per spring group) found."""
     prob, truth, a = sv_setup(shape, seed=3, shared=mode == "shared", grouped=mode == "grouped")
     e = len(a["spr"])
-    assert np.max(np.abs(prob.k0[e:] / truth[e:] - 1)) > 0.05          # the start is off
+    assert np.max(np.abs(prob.k0[e:] / truth[e:] - 1)) > 0.05  # the start is off
     res = optimize(prob, method, {}, seed=0)
     assert res.G_final / res.G_initial <= 1e-8
     assert np.max(np.abs(res.k[e:] / truth[e:] - 1)) < 1e-6
     assert np.max(np.abs(res.k / truth - 1)) < 1e-6
     if mode == "shared":
-        assert np.ptp(res.k[e:]) <= 1e-12 * res.k[e]                  # one constant for the body
+        assert np.ptp(res.k[e:]) <= 1e-12 * res.k[e]  # one constant for the body

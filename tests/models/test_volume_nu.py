@@ -48,6 +48,7 @@ def bar(tmp_path_factory):
     from harness.geometry import grid_points
     from harness.models.cells import hex_to_tets
     from harness.models.topology import grid_structure
+
     shape = (5, 3, 3)
     pts = grid_points(np.zeros(3), np.array([2.0, 1.0, 1.0]), shape)
     tets = hex_to_tets(grid_structure(shape, "edges").cells["hexahedron"])
@@ -59,6 +60,7 @@ def bar(tmp_path_factory):
 def fitted(tmp_path, mesh, tets, nu, volume):
     """(G_norm of the fit, K of the fitted model, K of the FEM at the same nodes)."""
     import reference
+
     f = tmp_path / f"bulk-{nu}-{volume}.toml"
     f.write_text(CASE.format(mesh=mesh, E=E, nu=nu, S=S, volume=volume))
     case = load_case(f)
@@ -72,8 +74,11 @@ def fitted(tmp_path, mesh, tets, nu, volume):
     hyd = ("sxx", "syy", "szz")
     u = sum(res.displacement(n) for n in hyd)
     u_ref = sum(np.asarray(ref.displacement(net.points, n)) for n in hyd)
-    return row["G_norm_final"], effective_bulk_modulus(net.points, tets, u, S), \
-        effective_bulk_modulus(net.points, tets, u_ref, S)
+    return (
+        row["G_norm_final"],
+        effective_bulk_modulus(net.points, tets, u, S),
+        effective_bulk_modulus(net.points, tets, u_ref, S),
+    )
 
 
 def test_bulk_modulus_of_the_fitted_model_follows_the_fem_towards_incompressibility(tmp_path, bar):
@@ -82,7 +87,8 @@ def test_bulk_modulus_of_the_fitted_model_follows_the_fem_towards_incompressibil
     for nu in (0.3, 0.49):
         for volume in ("none", "shared"):
             G, K, K_fem = fitted(tmp_path, mesh, tets, nu, volume)
-            assert K_fem == pytest.approx(E / (3 * (1 - 2 * nu)), rel=1e-6)     # the FEM: the closed form
+            # the FEM: the closed form
+            assert K_fem == pytest.approx(E / (3 * (1 - 2 * nu)), rel=1e-6)
             out[nu, volume] = G, K
     # the FEM's K grows 20x from nu 0.3 to 0.49; springs alone cannot follow (the Cauchy limit)
     assert out[0.49, "none"][1] / out[0.3, "none"][1] < 2
@@ -90,5 +96,5 @@ def test_bulk_modulus_of_the_fitted_model_follows_the_fem_towards_incompressibil
     # displacements, which at nu 0.49 hardly see the volumetric part)
     assert out[0.49, "shared"][1] / out[0.3, "shared"][1] > 4
     assert out[0.49, "shared"][1] > 5 * out[0.49, "none"][1]
-    for nu in (0.3, 0.49):                        # and fit the FEM better at both ratios
+    for nu in (0.3, 0.49):  # and fit the FEM better at both ratios
         assert out[nu, "shared"][0] < out[nu, "none"][0]

@@ -26,20 +26,27 @@ def random_walk(prob, mode, n, check_every, refactor_every=48, seed=0):
     for it in range(n):
         e = int(springs[it])
         kn = eng.k[e] * np.exp(0.3 * rng.uniform(-1, 1))
-        eng.upcoming = springs[it + 1:it + 33]
+        eng.upcoming = springs[it + 1 : it + 33]
         Gn = eng.propose(e, kn)
         if it % check_every == 0:
             k2 = eng.k.copy()
             k2[e] = kn
             errs.append(abs(Gn / prob.G(k2) - 1))
-        eng.accept()                       # every proposal accepted: worst case for drift
+        eng.accept()  # every proposal accepted: worst case for drift
     errs.append(abs(eng.G() / prob.G(eng.k) - 1))
     return eng, max(errs)
 
 
-@pytest.mark.parametrize("mode,shape,n", [("dense", (5, 5), 3000), ("sparse", (5, 5), 2000),
-                                          ("dense", (3, 3, 3), 2000), ("sparse", (16, 16), 600),
-                                          ("sparse", (34, 34), 300)])
+@pytest.mark.parametrize(
+    "mode,shape,n",
+    [
+        ("dense", (5, 5), 3000),
+        ("sparse", (5, 5), 2000),
+        ("dense", (3, 3, 3), 2000),
+        ("sparse", (16, 16), 600),
+        ("sparse", (34, 34), 300),
+    ],
+)
 def test_incremental_G_matches_full_resolve(mode, shape, n):
     prob, _ = recoverable_problem(shape, seed=1)
     eng, err = random_walk(prob, mode, n, check_every=n // 6)
@@ -86,7 +93,7 @@ def test_sa_improves_a_recoverable_problem():
     assert res.G_final == pytest.approx(res.info["G_best_tracked"], rel=1e-9)
     err0 = np.mean(np.abs(np.log(prob.k0 / k_true)))
     err1 = np.mean(np.abs(np.log(res.k / k_true)))
-    assert err1 < 0.7 * err0                      # the constants move toward the truth
+    assert err1 < 0.7 * err0  # the constants move toward the truth
     assert np.all(np.diff(res.trace[:, 0]) >= 0)
 
 
@@ -104,7 +111,7 @@ def test_sa_budget_and_paper_defaults():
     assert res.n_steps == 100 and res.info["stop"] == "max_steps"
     assert (res.info["nlimit"], res.info["glimit"], res.info["temperatures"]) == (2 * e, e, 2 * e)
     res = optimize(prob, "sa", {"temperatures": 3, "nlimit": 5, "glimit": 100}, seed=0)
-    assert res.n_steps == 3 * 6                   # Fig. 6: repeat ... until k > nlimit
+    assert res.n_steps == 3 * 6  # Fig. 6: repeat ... until k > nlimit
 
 
 def test_two_chains_keep_the_best_and_share_chain_zero():
@@ -121,6 +128,7 @@ def test_accepting_an_unchanged_constant_keeps_G_exact(mode):
     """A proposal clipped at a bound does not change k; accepting it is a no-op that
     leaves the incremental state exact and computes no 1/0 in the Woodbury core."""
     import warnings
+
     prob, _ = recoverable_problem((6, 6), sigma=0.3, seed=3)
     eng = IncrementalG(prob, prob.k0, mode=mode, refactor_every=48)
     rng = np.random.default_rng(1)
@@ -134,18 +142,22 @@ def test_accepting_an_unchanged_constant_keeps_G_exact(mode):
     assert abs(eng.G() / prob.G(eng.k) - 1) < 1e-9
 
 
-@pytest.mark.parametrize("options, field", [
-    ({"temperatures": "x"}, "optimizer.options.temperatures"),
-    ({"r": "fast"}, "optimizer.options.r"),
-    ({"nlimit": -1}, "optimizer.options.nlimit"),
-    ({"engine": "gpu"}, "optimizer.options.engine"),
-    ({"refactor_every": 0}, "optimizer.options.refactor_every"),
-    ({"r": 1.5}, "optimizer.options"),
-])
+@pytest.mark.parametrize(
+    "options, field",
+    [
+        ({"temperatures": "x"}, "optimizer.options.temperatures"),
+        ({"r": "fast"}, "optimizer.options.r"),
+        ({"nlimit": -1}, "optimizer.options.nlimit"),
+        ({"engine": "gpu"}, "optimizer.options.engine"),
+        ({"refactor_every": 0}, "optimizer.options.refactor_every"),
+        ({"r": 1.5}, "optimizer.options"),
+    ],
+)
 def test_bad_sa_options_are_one_line_errors(options, field):
     """Wrong types or values are a SpringbenchError naming the option, not a traceback."""
     from harness.errors import SpringbenchError
     from harness.optimize.annealing import check_options
+
     with pytest.raises(SpringbenchError) as err:
         check_options(options)
     assert str(err.value).startswith(f"{field}: ") and "\n" not in str(err.value)

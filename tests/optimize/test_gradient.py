@@ -47,17 +47,41 @@ def modal_problem(weight=1.0, seed=0):
     k_true = k0 * np.exp(0.3 * rng.standard_normal(len(spr)))
     u_ref = solve_network(pts, spr, k_true, frees, forces)
     masses = rng.uniform(0.5, 1.5, len(pts))
-    clamp = frees[2]                                   # shear-x: edge y = y0 clamped
-    tmp = FitProblem.from_network(pts, spr, k_true, frees, forces, u_ref, np.ones(pts.size), names,
-                                  masses=masses, freq_target=np.ones(4), modal_free=clamp)
+    clamp = frees[2]  # shear-x: edge y = y0 clamped
+    tmp = FitProblem.from_network(
+        pts,
+        spr,
+        k_true,
+        frees,
+        forces,
+        u_ref,
+        np.ones(pts.size),
+        names,
+        masses=masses,
+        freq_target=np.ones(4),
+        modal_free=clamp,
+    )
     target = frequencies(tmp, k_true)
-    prob = FitProblem.from_network(pts, spr, k0, frees, forces, u_ref, np.ones(pts.size), names,
-                                   masses=masses, freq_target=target, freq_weight=weight, modal_free=clamp)
+    prob = FitProblem.from_network(
+        pts,
+        spr,
+        k0,
+        frees,
+        forces,
+        u_ref,
+        np.ones(pts.size),
+        names,
+        masses=masses,
+        freq_target=target,
+        freq_weight=weight,
+        modal_free=clamp,
+    )
     return prob, k_true
 
 
 def test_frequencies_match_dense_generalised_eigenproblem():
     import scipy.linalg as sla
+
     prob, k_true = modal_problem()
     mt = prob.modal
     K = (mt.B @ sp.diags(k_true) @ mt.B.T).toarray()
@@ -84,6 +108,7 @@ def test_lbfgs_with_frequency_term_fits_both():
 
 def test_static_only_methods_refuse_the_frequency_term():
     from harness.errors import SpringbenchError
+
     prob, _ = modal_problem(weight=1.0)
     for method in ("sa", "gauss-newton"):
         with pytest.raises(SpringbenchError, match="lbfgs"):
@@ -121,20 +146,25 @@ def test_lbfgs_with_frequency_term_from_the_equilibrium_gap_start():
     assert res.G_final / res.G_initial < 1e-6
     assert np.max(np.abs(res.info["freq_rel_error"])) < 1e-6
     from harness.errors import SpringbenchError
+
     with pytest.raises(SpringbenchError, match="lbfgs"):
-        optimize(prob, "equilibrium-gap", {}, seed=0)       # static only: says which method can
+        optimize(prob, "equilibrium-gap", {}, seed=0)  # static only: says which method can
 
 
-@pytest.mark.parametrize("method,options,match", [
-    ("gauss-newton", {"maxiter": "forty"}, "maxiter = 'forty' is not a number >= 0"),
-    ("gauss-newton", {"maxiter": -3}, "optimizer.options.maxiter"),
-    ("lbfgs", {"init": 1}, "init = 1 is not a string"),
-    ("lbfgs", {"max_seconds": True}, "not a number"),
-    ("nelder-mead", {"xatol": float("nan")}, "xatol"),
-    ("equilibrium-gap", {"rtol": "tight"}, "equilibrium-gap option rtol"),
-])
+@pytest.mark.parametrize(
+    "method,options,match",
+    [
+        ("gauss-newton", {"maxiter": "forty"}, "maxiter = 'forty' is not a number >= 0"),
+        ("gauss-newton", {"maxiter": -3}, "optimizer.options.maxiter"),
+        ("lbfgs", {"init": 1}, "init = 1 is not a string"),
+        ("lbfgs", {"max_seconds": True}, "not a number"),
+        ("nelder-mead", {"xatol": float("nan")}, "xatol"),
+        ("equilibrium-gap", {"rtol": "tight"}, "equilibrium-gap option rtol"),
+    ],
+)
 def test_bad_option_values_are_one_line_errors(method, options, match):
     from harness.errors import SpringbenchError
+
     prob, _ = recoverable_problem((3, 3), grouped=method == "nelder-mead")
     with pytest.raises(SpringbenchError, match=match) as err:
         optimize(prob, method, options, seed=0)
@@ -146,10 +176,15 @@ def test_lbfgs_with_frequency_term_rejects_a_start_worse_than_k0():
     error differences neighbouring nodes); with the frequency term too, lbfgs must compare
     Phi there with Phi(k0) = 1 + the frequency term at k0 and start from k0 instead."""
     from harness.optimize.gradient import Objective, freq_term_and_grad
+
     prob, _ = modal_problem(weight=1.0)
     rng = np.random.default_rng(5)
-    noisy = prob.with_reference([b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
-    assert Objective(noisy).phi0 == pytest.approx(1.0 + freq_term_and_grad(noisy, noisy.k0)[0], rel=1e-12)
+    noisy = prob.with_reference(
+        [b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks]
+    )
+    assert Objective(noisy).phi0 == pytest.approx(
+        1.0 + freq_term_and_grad(noisy, noisy.k0)[0], rel=1e-12
+    )
     res = optimize(noisy, "lbfgs", {"init": "equilibrium-gap", "maxiter": 30}, seed=0)
     assert res.info.get("init_rejected") is True
     assert res.G_final < 0.9 * res.G_initial

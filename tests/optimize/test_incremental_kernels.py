@@ -25,7 +25,7 @@ def walk(eng, prob, n, seed, accept_p=0.85, check=()):
     out = []
     for it in range(n):
         e = int(springs[it])
-        eng.upcoming = springs[it + 1:it + 70]
+        eng.upcoming = springs[it + 1 : it + 70]
         kn = eng.k[e] * np.exp(0.3 * rng.uniform(-1, 1))
         Gn = eng.propose(e, kn)
         if it in check:
@@ -53,7 +53,7 @@ def test_compiled_kernels_equal_their_python_source(monkeypatch):
         e = int(springs[it])
         kn = fast.k[e] * np.exp(0.3 * rng.uniform(-1, 1))
         for eng in (fast, slow):
-            eng.upcoming = springs[it + 1:it + 20]
+            eng.upcoming = springs[it + 1 : it + 20]
         a, b = fast.propose(e, kn), slow.propose(e, kn)
         assert a == pytest.approx(b, rel=1e-12)
         if rng.random() < 0.8:
@@ -68,12 +68,13 @@ def test_compiled_kernels_equal_their_python_source(monkeypatch):
 @pytest.mark.parametrize("shape", [(30, 30), (7, 7, 7)])
 def test_compiled_substitution_matches_lapack_and_direct(shape):
     from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+
     prob, _ = recoverable_problem(shape, sigma=0.3, seed=1)
     ls = prob.load_sets()[0]
     K = ls.stiffness(prob.k0 * np.exp(np.random.default_rng(0).normal(0, 0.5, prob.n_springs)))
     fac = MultifrontalCholesky(K, Symbolic(K, ls.coords, leaf=32))
     R = np.random.default_rng(1).normal(size=(K.shape[0], 40))
-    X = fac.solve(R)                                   # compiled path (>= SUBST_MIN columns)
+    X = fac.solve(R)  # compiled path (>= SUBST_MIN columns)
     assert np.allclose(X, fac._solve(R), rtol=1e-10, atol=1e-12 * np.abs(X).max())
     direct = spla.spsolve(K.tocsc(), R[:, :3])
     assert np.allclose(X[:, :3], direct, rtol=1e-8, atol=1e-10 * np.abs(direct).max())
@@ -108,11 +109,19 @@ def test_loads_sharing_K_with_different_weights(mode):
     from dataclasses import replace
 
     from harness.optimize.problem import FitProblem
+
     base, _ = recoverable_problem((5, 4), sigma=0.3, seed=6)
     b0 = base.blocks[0]
-    other = replace(b0, name="heavier", w=b0.w * np.linspace(0.5, 3.0, len(b0.w)),
-                    f=-0.5 * b0.f, u_ref=-0.4 * b0.u_ref)
-    prob = FitProblem((b0, other) + base.blocks[1:], base.k0, coords=(base.coords[0],) + base.coords)
+    other = replace(
+        b0,
+        name="heavier",
+        w=b0.w * np.linspace(0.5, 3.0, len(b0.w)),
+        f=-0.5 * b0.f,
+        u_ref=-0.4 * b0.u_ref,
+    )
+    prob = FitProblem(
+        (b0, other) + base.blocks[1:], base.k0, coords=(base.coords[0],) + base.coords
+    )
     eng = IncrementalG(prob, prob.k0, mode=mode, refactor_every=30, batch=16)
     assert len(prob.load_sets()) == len(base.load_sets()) and eng.S == len(prob.load_sets()) + 1
     assert walk(eng, prob, 300, seed=3, check=range(0, 300, 60)) < 1e-9

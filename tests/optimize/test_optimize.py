@@ -27,8 +27,8 @@ def dense_incidence(points, springs):
     for e, (i, j) in enumerate(springs):
         d = points[j] - points[i]
         d = d / np.linalg.norm(d)
-        Bd[j * dim:(j + 1) * dim, e] = d
-        Bd[i * dim:(i + 1) * dim, e] = -d
+        Bd[j * dim : (j + 1) * dim, e] = d
+        Bd[i * dim : (i + 1) * dim, e] = -d
     return Bd
 
 
@@ -51,7 +51,7 @@ def test_G_matches_dense_solve(shape):
     names, frees, forces = basic_loads(pts)
     rng = np.random.default_rng(3)
     k0 = rng.uniform(0.5, 2.0, len(spr))
-    u_ref = rng.normal(size=forces.shape)          # arbitrary reference: constrained dofs count too
+    u_ref = rng.normal(size=forces.shape)  # arbitrary reference: constrained dofs count too
     w = rng.uniform(1, 3, pts.size)
     prob = FitProblem.from_network(pts, spr, k0, frees, forces, u_ref, w, names)
     k = rng.uniform(0.5, 2.0, len(spr))
@@ -60,6 +60,7 @@ def test_G_matches_dense_solve(shape):
 
 def test_nested_dissection_factor_matches_direct_solve():
     import scipy.sparse.linalg as spla
+
     prob, _ = recoverable_problem((34, 34))
     s = prob.load_sets()[0]
     assert s.perm is not None and np.array_equal(np.sort(s.perm), np.arange(s.B.shape[0]))
@@ -76,7 +77,7 @@ def test_lbfgs_recovers_constants():
     prob, k_true = recoverable_problem((5, 5), sigma=0.3, seed=1)
     res = optimize(prob, "lbfgs", {}, seed=0)
     assert res.G_final / res.G_initial <= 1e-8
-    assert np.max(np.abs(res.k / k_true - 1)) < 1e-5        # all constants identifiable here
+    assert np.max(np.abs(res.k / k_true - 1)) < 1e-5  # all constants identifiable here
     assert res.G_final == pytest.approx(prob.G(res.k))
 
 
@@ -117,9 +118,13 @@ def test_bad_problem_input_is_one_line_error():
     pts, spr, _ = grid_network((3, 3))
     names, frees, forces = basic_loads(pts)
     with pytest.raises(SpringbenchError, match="k0"):
-        FitProblem.from_network(pts, spr, -np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names)
+        FitProblem.from_network(
+            pts, spr, -np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names
+        )
     with pytest.raises(SpringbenchError, match="names"):
-        FitProblem.from_network(pts, spr, np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names[:2])
+        FitProblem.from_network(
+            pts, spr, np.ones(len(spr)), frees, forces, forces, np.ones(pts.size), names[:2]
+        )
 
 
 @pytest.mark.parametrize("shape, big", [((34, 34), None), ((9, 9, 9), None), ((9, 9, 9), 1)])
@@ -130,6 +135,7 @@ def test_multifrontal_cholesky_matches_direct_solve(shape, big, monkeypatch):
 
     from harness.linalg import multifrontal
     from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+
     if big is not None:
         monkeypatch.setattr(multifrontal, "BIG_FRONT", big)
     prob, _ = recoverable_problem(shape, seed=3)
@@ -151,8 +157,8 @@ def dense_equation_error(points, springs, k0, frees, forces, u_ref, w):
     Bd = dense_incidence(points, springs)
     rows, rhs = [], []
     for free, f, u in zip(frees, forces, u_ref):
-        u0 = np.where(free, u, 0.0)                            # the model's u is 0 on constrained dofs
-        Bu = Bd.T @ u0                                         # spring elongations of u*
+        u0 = np.where(free, u, 0.0)  # the model's u is 0 on constrained dofs
+        Bu = Bd.T @ u0  # spring elongations of u*
         sw = np.sqrt(w[free]) / np.sqrt(np.mean(f[free] ** 2))
         rows.append(sw[:, None] * (Bd[free] * (k0 * Bu)[None, :]))
         rhs.append(sw * f[free])
@@ -162,21 +168,24 @@ def dense_equation_error(points, springs, k0, frees, forces, u_ref, w):
 @pytest.mark.parametrize("shape", [(4, 3), (3, 3, 2)])
 def test_equilibrium_gap_matches_dense_lstsq(shape):
     from harness.optimize.equilibrium import equilibrium_gap_factors
+
     pts, spr, _ = grid_network(shape)
     names, frees, forces = basic_loads(pts)
     rng = np.random.default_rng(7)
     k0 = rng.uniform(0.5, 2.0, len(spr))
     k_true = k0 * rng.uniform(0.7, 1.4, len(spr))
     from harness.optimize.synthetic import solve_network
+
     u_ref = solve_network(pts, spr, k_true, frees, forces)
-    u_ref = u_ref * (1 + 0.02 * rng.standard_normal(u_ref.shape))  # not representable: a real least squares
+    # not representable: a real least squares
+    u_ref = u_ref * (1 + 0.02 * rng.standard_normal(u_ref.shape))
     w = rng.uniform(1, 3, pts.size)
     prob = FitProblem.from_network(pts, spr, k0, frees, forces, u_ref, w, names, bounds=(1e-6, 1e6))
     A, b = dense_equation_error(pts, spr, k0, frees, forces, u_ref, w)
     seen = np.linalg.norm(A, axis=0) > 0
     ref = np.ones(len(k0))
     ref[seen] = np.linalg.lstsq(A[:, seen], b, rcond=None)[0]
-    assert np.linalg.matrix_rank(A[:, seen]) == seen.sum()       # identifiable: a unique answer
+    assert np.linalg.matrix_rank(A[:, seen]) == seen.sum()  # identifiable: a unique answer
     x, info = equilibrium_gap_factors(prob, {"reg": 1e-14, "rtol": 1e-13})
     assert info["eg_clipped"] == 0 and np.all(ref > 0)
     assert np.allclose(x, ref, rtol=1e-6, atol=1e-8)
@@ -191,6 +200,7 @@ def test_equilibrium_gap_recovers_identifiable_constants(shape, grouped):
     # springs some load stretches and that touch a free dof (else the equation error has no
     # column for them), from an independent solve and dense incidence
     from harness.optimize.synthetic import solve_network
+
     pts, spr, _ = grid_network(shape, diagonals="face")
     _, frees, forces = basic_loads(pts, s=float(np.prod(shape)) ** (1 / len(shape)))
     Bd = dense_incidence(pts, spr)
@@ -203,9 +213,13 @@ def test_equilibrium_gap_recovers_identifiable_constants(shape, grouped):
     xt = k_true / prob.k0
     if grouped:
         n = np.bincount(prob.groups)
-        x, xt, seen = np.bincount(prob.groups, x) / n, np.bincount(prob.groups, xt) / n, np.bincount(prob.groups, seen) > 0
+        x, xt, seen = (
+            np.bincount(prob.groups, x) / n,
+            np.bincount(prob.groups, xt) / n,
+            np.bincount(prob.groups, seen) > 0,
+        )
     assert np.max(np.abs(x[seen] / xt[seen] - 1)) < 1e-6
-    assert np.allclose(x[~seen], 1.0)                            # unseen: left at k0
+    assert np.allclose(x[~seen], 1.0)  # unseen: left at k0
 
 
 def test_init_equilibrium_gap_then_output_error_refines_a_noisy_reference():
@@ -214,13 +228,15 @@ def test_init_equilibrium_gap_then_output_error_refines_a_noisy_reference():
     end above it or above the pure runs' starting G."""
     prob, k_true = recoverable_problem((6, 6), sigma=0.3, seed=3)
     rng = np.random.default_rng(5)
-    noisy = prob.with_reference([b.u_ref * (1 + 0.003 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
+    noisy = prob.with_reference(
+        [b.u_ref * (1 + 0.003 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks]
+    )
     eg = optimize(noisy, "equilibrium-gap", {}, seed=0)
     assert eg.G_final < eg.G_initial
     for method in ("gauss-newton", "lbfgs"):
         res = optimize(noisy, method, {"init": "equilibrium-gap", "maxiter": 60}, seed=0)
         assert res.info["init"] == "equilibrium-gap"
-        assert res.G_initial == pytest.approx(eg.G_initial)       # G0 stays G(k0)
+        assert res.G_initial == pytest.approx(eg.G_initial)  # G0 stays G(k0)
         assert res.G_final < 0.99 * eg.G_final
         assert res.G_final == pytest.approx(noisy.G(res.k), rel=1e-9)
     with pytest.raises(SpringbenchError, match="init"):
@@ -236,15 +252,21 @@ def test_gauss_newton_stops_converged_at_the_noise_floor():
     ftol = 0 it runs on (until maxiter or until no step descends) and gains less than 1e-6
     relative after the converged stop."""
     from harness.optimize.synthetic import noisy
+
     prob, k_true = recoverable_problem((12, 12), sigma=0.1, seed=2, diagonals="face")
     p = noisy(prob, 1e-4, seed=7)
     floor = p.G(k_true)
     res = optimize(p, "gauss-newton", {"init": "equilibrium-gap", "maxiter": 200}, seed=0)
     assert res.info["stop"] == "converged" and res.info["iterations"] < 100
     assert res.G_final < floor
-    longer = optimize(p, "gauss-newton", {"init": "equilibrium-gap", "maxiter": res.info["iterations"] + 15, "ftol": 0.0},
-                      seed=0)
-    assert longer.info["iterations"] > res.info["iterations"]     # ran on (to maxiter or to no-descent)
+    longer = optimize(
+        p,
+        "gauss-newton",
+        {"init": "equilibrium-gap", "maxiter": res.info["iterations"] + 15, "ftol": 0.0},
+        seed=0,
+    )
+    # ran on (to maxiter or to no-descent)
+    assert longer.info["iterations"] > res.info["iterations"]
     assert longer.G_final >= res.G_final * (1 - 1e-6)
 
 
@@ -263,7 +285,8 @@ def test_with_reference_equals_a_fresh_problem():
     k = rng.uniform(0.5, 2.0, len(spr))
     assert p2.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u2, w), rel=1e-10)
     assert p2.G(k) == pytest.approx(fresh.G(k), rel=1e-12)
-    assert p1.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u1, w), rel=1e-10)   # p1 untouched
+    # p1 untouched
+    assert p1.G(k) == pytest.approx(dense_G(pts, spr, k, frees, forces, u1, w), rel=1e-10)
     with pytest.raises(SpringbenchError, match="references"):
         p1.with_reference([u2[0][frees[0]]])
 
@@ -274,7 +297,9 @@ def test_a_start_worse_than_k0_is_rejected():
     must fall back to k0 and still end below G(k0)."""
     prob, _ = recoverable_problem((6, 6), sigma=0.3, seed=3)
     rng = np.random.default_rng(5)
-    noisy = prob.with_reference([b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks])
+    noisy = prob.with_reference(
+        [b.u_ref * (1 + 0.05 * rng.standard_normal(b.u_ref.shape)) for b in prob.blocks]
+    )
     eg = optimize(noisy, "equilibrium-gap", {}, seed=0)
     assert eg.info["stop"] == "worse than k0" and np.array_equal(eg.k, noisy.k0)
     for method in ("gauss-newton", "lbfgs"):
@@ -289,6 +314,7 @@ def test_per_matrix_values_are_made_once_and_dropped_with_their_matrix():
     import scipy.sparse as sp
 
     from harness.optimize import problem as pr
+
     B = sp.random(30, 40, 0.2, format="csc", random_state=0)
     made = []
     for _ in range(3):
@@ -303,13 +329,24 @@ def test_per_matrix_values_are_made_once_and_dropped_with_their_matrix():
 def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     from harness.optimize import problem as pr
     from harness.optimize import select as sel
+
     prob, _ = recoverable_problem((34, 34))
     k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
     whole = prob.G2(k)
     part = sel.subset(prob, [0])
-    again = FitProblem(tuple(dataclasses.replace(b, B=b.B.copy()) for b in part.blocks), part.k0, None,
-                       part.bounds, None, part.coords)                  # fresh matrices: nothing shared
-    assert part.load_sets()[0].stiffness(k).data.tobytes() == again.load_sets()[0].stiffness(k).data.tobytes()
+    again = FitProblem(
+        tuple(dataclasses.replace(b, B=b.B.copy()) for b in part.blocks),
+        part.k0,
+        None,
+        part.bounds,
+        None,
+        part.coords,
+    )  # fresh matrices: nothing shared
+    assert (
+        part.load_sets()[0].stiffness(k).data.tobytes()
+        == again.load_sets()[0].stiffness(k).data.tobytes()
+    )
     assert part.G2(k) == again.G2(k) and 0 < part.G2(k) <= whole
     shared = part.load_sets()[0].B
-    assert shared is prob.load_sets()[0].B and "kmap" in pr._PER_MATRIX[id(shared)][1]     # built once, shared
+    # built once, shared
+    assert shared is prob.load_sets()[0].B and "kmap" in pr._PER_MATRIX[id(shared)][1]

@@ -36,7 +36,7 @@ def test_prior_value_and_gradient(grouped):
     x = 0.3 * rng.standard_normal(prob.n_params)
     a = 0.7
     xe = x if prob.groups is None else x[prob.groups]
-    mean_sq = sum(v * v for v in xe) / prob.n_springs           # the definition, spring by spring
+    mean_sq = sum(v * v for v in xe) / prob.n_springs  # the definition, spring by spring
     val, g = prior_term(prob, x, a)
     assert val == pytest.approx(a * mean_sq, rel=1e-12)
     gx = g if prob.groups is None else np.bincount(prob.groups, weights=g, minlength=prob.n_params)
@@ -63,9 +63,9 @@ def test_prior_fit_recovers_the_truth_as_the_weight_goes_to_zero():
         res = optimize(prob, "lbfgs", {"prior": a}, seed=0)
         errors.append(np.max(np.abs(np.log(res.k / k_true))))
         assert res.info["prior"] == a
-    assert errors[0] > errors[1] > errors[2]       # the bias shrinks with the weight ...
-    assert errors[2] < 1e-3                        # ... to the truth
-    assert errors[0] > 1e-3                        # and a real weight does pull (the test can fail)
+    assert errors[0] > errors[1] > errors[2]  # the bias shrinks with the weight ...
+    assert errors[2] < 1e-3  # ... to the truth
+    assert errors[0] > 1e-3  # and a real weight does pull (the test can fail)
 
 
 def test_prior_pulls_towards_the_start():
@@ -73,7 +73,7 @@ def test_prior_pulls_towards_the_start():
     prob, k_true = recoverable_problem((5, 5), sigma=0.3, seed=1)
     free = optimize(prob, "lbfgs", {}, seed=0)
     held = optimize(prob, "lbfgs", {"prior": 1e3}, seed=0)
-    dev = lambda k: np.sqrt(np.mean(np.log(k / prob.k0) ** 2))      # noqa: E731
+    dev = lambda k: np.sqrt(np.mean(np.log(k / prob.k0) ** 2))  # noqa: E731
     assert dev(held.k) < 0.05 * dev(free.k)
     assert held.G_final > 0.5 * held.G_initial
 

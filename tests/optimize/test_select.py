@@ -33,7 +33,11 @@ def problem(truth_factor, seed=0):
     L = np.linalg.norm(p[springs[:, 1]] - p[springs[:, 0]], axis=1)
     k0 = 1.0 / L
     u = solve_network(p, springs, k0 * truth_factor, free, forces)
-    return FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names), p, springs
+    return (
+        FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names),
+        p,
+        springs,
+    )
 
 
 def test_balanced_sums_the_loads_own_normalised_g():
@@ -41,7 +45,8 @@ def test_balanced_sums_the_loads_own_normalised_g():
     k = prob.k0 * 1.3
     own = []
     for b, u in zip(prob.blocks, prob.solve(k)):
-        own.append(np.sum(b.w * (b.u_ref - u) ** 2) / np.sum(b.w * b.u_ref ** 2))   # no constrained part here
+        # no constrained part here
+        own.append(np.sum(b.w * (b.u_ref - u) ** 2) / np.sum(b.w * b.u_ref**2))
     assert sel.balanced(prob).G2(k) == pytest.approx(sum(own), rel=1e-12)
     assert np.allclose(sel.per_load(prob, k) ** 2, own, rtol=1e-12)
 
@@ -50,11 +55,12 @@ def test_best_scale_is_the_minimum_of_g_over_a_global_factor():
     rng = np.random.default_rng(1)
     prob, _, _ = problem(2.5 * np.exp(0.3 * rng.standard_normal(1)))
     s = sel.best_scale(prob)
-    num = minimize_scalar(lambda t: prob.G2(prob.k0 * t), bounds=(0.1, 10), method="bounded",
-                          options={"xatol": 1e-10})
+    num = minimize_scalar(
+        lambda t: prob.G2(prob.k0 * t), bounds=(0.1, 10), method="bounded", options={"xatol": 1e-10}
+    )
     assert s == pytest.approx(num.x, rel=1e-6)
     exact, _, _ = problem(np.full(1, 2.5))
-    assert sel.best_scale(exact) == pytest.approx(2.5, rel=1e-10)          # u scales as 1 / s exactly
+    assert sel.best_scale(exact) == pytest.approx(2.5, rel=1e-10)  # u scales as 1 / s exactly
 
 
 def test_folds_leave_families_out_and_the_clamped_states_together():
@@ -63,20 +69,28 @@ def test_folds_leave_families_out_and_the_clamped_states_together():
 
 def _row(name, a, b, rule=None):
     folds = ("constant", "clamped")
-    r = {"model": name, "constant": a, "clamped": b, **sel.summary({"constant": a, "clamped": b}, folds)}
+    r = {
+        "model": name,
+        "constant": a,
+        "clamped": b,
+        **sel.summary({"constant": a, "clamped": b}, folds),
+    }
     r["ratio"] = sel.ratio_to_rule(r, rule or r)
     return r
 
 
 def test_choose_by_score_keeps_the_rule_unless_a_candidate_beats_it_under_the_clamps():
     rule = _row("rule", 0.40, 0.05)
-    free_only = _row("free-only", 0.10, 0.08, rule)        # far better without a clamp, worse with one: never
+    # far better without a clamp, worse with one: never
+    free_only = _row("free-only", 0.10, 0.08, rule)
     assert sel.choose([rule, free_only], "score")["model"] == "rule"
     both = _row("both", 0.30, 0.04, rule)
     assert sel.choose([rule, free_only, both], "score")["model"] == "both"
     assert both["score"] == pytest.approx(0.5 * (0.30 + 0.04))
-    no_clamp = [{"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
-                {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))}]
+    no_clamp = [
+        {"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
+        {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))},
+    ]
     assert sel.choose(no_clamp, "score")["model"] == "c"
 
 
@@ -92,8 +106,10 @@ def test_choose_by_ratio_weighs_the_clamps_as_much_as_every_free_family():
     assert tie["ratio"] == pytest.approx(1.0) and sel.choose([rule, tie, near])["model"] == "rule"
     better = _row("better", 0.30, 0.045, rule)
     assert sel.choose([rule, tie, near, better, free_only])["model"] == "free-only"
-    no_clamp = [{"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
-                {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))}]
+    no_clamp = [
+        {"model": "rule", "constant": 0.4, **sel.summary({"constant": 0.4}, ("constant",))},
+        {"model": "c", "constant": 0.3, **sel.summary({"constant": 0.3}, ("constant",))},
+    ]
     no_clamp[1]["ratio"] = sel.ratio_to_rule(no_clamp[1], no_clamp[0])
     no_clamp[0]["ratio"] = 1.0
     assert no_clamp[1]["ratio"] == pytest.approx(0.75) and sel.choose(no_clamp)["model"] == "c"
@@ -108,15 +124,17 @@ CANDS = [c for c in sel.CANDIDATES if c.name in ("scale", "springs-prior1")]
 def test_select_keeps_an_exact_rule_and_fits_a_wrong_one(factor, choice):
     prob, p, springs = problem(np.full(1, factor))
     groups = np.zeros(prob.n_springs, int)
-    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60}, {"maxiter": 200}, 3)
+    s = sel.select(
+        prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60}, {"maxiter": 200}, 3
+    )
     assert [r["model"] for r in s.table] == ["rule", "scale", "springs-prior1"]
     if choice == "rule":
         assert s.choice == "rule" and np.array_equal(s.k, prob.k0)
         assert s.table[0]["score"] <= 1e-12
     else:
         assert s.choice != "rule" and len(s.starts) == 3
-        assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9)        # u twice the truth: 100 % off
-        assert sel.per_load(prob, s.k).max() < 1e-3                        # the factor is recovered
+        assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9)  # u twice the truth: 100 % off
+        assert sel.per_load(prob, s.k).max() < 1e-3  # the factor is recovered
         assert all(math.isfinite(r["score"]) for r in s.table)
 
 
@@ -129,16 +147,25 @@ def test_training_score_weighs_families_and_the_clamped_states_alike():
     assert sel.training_score([0.2, 0.4], [sel.CLAMPED] * 2) == pytest.approx(0.3, rel=1e-14)
     # the rule's row of a validation table scores the same
     row = {"model": "rule", "constant": 0.2, "bending": 0.5, "clamped": 0.3}
-    assert sel.summary(row, ("constant", "bending", "clamped"))["score"] == pytest.approx(0.325, rel=1e-14)
+    assert sel.summary(row, ("constant", "bending", "clamped"))["score"] == pytest.approx(
+        0.325, rel=1e-14
+    )
 
 
 def test_best_ranks_rules_by_the_balanced_score_not_the_pooled_g():
     from harness.stages.sms_measures import rank
-    rows = [{"stiffness": "uniform", "G_norm_final": 0.11, "G_fit_score": 0.29},      # pooled best, balanced worse
-            {"stiffness": "learned", "G_norm_final": 0.15, "G_fit_score": 0.21},
-            {"stiffness": "mt", "G_norm_final": 0.05, "G_fit_score": math.nan}]
+
+    rows = [
+        {
+            "stiffness": "uniform",
+            "G_norm_final": 0.11,
+            "G_fit_score": 0.29,
+        },  # pooled best, balanced worse
+        {"stiffness": "learned", "G_norm_final": 0.15, "G_fit_score": 0.21},
+        {"stiffness": "mt", "G_norm_final": 0.05, "G_fit_score": math.nan},
+    ]
     assert min(rows, key=rank)["stiffness"] == "learned"
-    assert min(rows[2:], key=rank)["stiffness"] == "mt"          # without a score: the pooled G
+    assert min(rows[2:], key=rank)["stiffness"] == "mt"  # without a score: the pooled G
 
 
 def test_features_fit_recovers_planted_coefficients():
@@ -147,40 +174,56 @@ def test_features_fit_recovers_planted_coefficients():
     p, springs, _ = grid_network((6, 4))
     L = np.linalg.norm(p[springs[:, 1]] - p[springs[:, 0]], axis=1)
     d = (p[springs[:, 1]] - p[springs[:, 0]]) / L[:, None]
-    X = np.column_stack([np.abs(d[:, 0]), p[springs].mean(axis=1)[:, 1] / p[:, 1].max()])   # direction, height
+    # direction, height
+    X = np.column_stack([np.abs(d[:, 0]), p[springs].mean(axis=1)[:, 1] / p[:, 1].max()])
     planted = np.array([0.4, -0.5, 0.3])
     names, free, forces = basic_loads(p)
     k0 = 1.0 / L
     u = solve_network(p, springs, k0 * np.exp(planted[0] + X @ planted[1:]), free, forces)
-    prob = sel.balanced(FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names))
+    prob = sel.balanced(
+        FitProblem.from_network(p, springs, k0, free, forces, u, np.ones(p.size), names)
+    )
     cand = next(c for c in sel.CANDIDATES if c.name == "features")
     M = sel.basis(prob, prob.n_springs, X)
     for x0 in sel.starts(prob, 2, 0, M):
         k = sel.fit(prob, cand, {"maxiter": 300}, x0, features=X)
         assert sel.per_load(prob, k).max() < 1e-5
         np.testing.assert_allclose(np.log(k / k0), planted[0] + X @ planted[1:], atol=1e-4)
-    assert sel.starts(prob, 2, 0, M)[1] == pytest.approx([math.log(sel.best_scale(prob)), 0, 0], abs=1e-12)
+    assert sel.starts(prob, 2, 0, M)[1] == pytest.approx(
+        [math.log(sel.best_scale(prob)), 0, 0], abs=1e-12
+    )
 
 
 def test_features_candidates_need_features_and_are_skipped_without():
     prob, _, _ = problem(np.full(1, 2.0))
     groups = np.zeros(prob.n_springs, int)
     cands = [c for c in sel.CANDIDATES if c.name in ("scale", "features")]
-    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, cands, {"maxiter": 30}, {"maxiter": 60}, 2)
+    s = sel.select(
+        prob, prob.n_springs, FAMILIES, 1.0, groups, cands, {"maxiter": 30}, {"maxiter": 60}, 2
+    )
     assert [r["model"] for r in s.table] == ["rule", "scale"]
 
 
 def test_affordable_needs_half_the_steps_within_each_share():
-    assert sel.affordable(24, 30, 0.1, None) == 0.0                    # no cap: always
-    assert sel.affordable(24, 30, 0.1, 1.5) == 0.0                     # 15 steps of 0.1 s fit in 1.5 s
+    assert sel.affordable(24, 30, 0.1, None) == 0.0  # no cap: always
+    assert sel.affordable(24, 30, 0.1, 1.5) == 0.0  # 15 steps of 0.1 s fit in 1.5 s
     assert sel.affordable(24, 30, 0.1, 1.4) == pytest.approx(24 * 15 * 0.1)
 
 
 def test_select_skips_a_validation_it_cannot_afford_and_keeps_the_rule():
-    prob, _, _ = problem(np.full(1, 2.0))                  # a wrong rule: a validation would fit it
+    prob, _, _ = problem(np.full(1, 2.0))  # a wrong rule: a validation would fit it
     groups = np.zeros(prob.n_springs, int)
-    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60, "max_seconds": 1e-12},
-                   {"maxiter": 200}, 3)
+    s = sel.select(
+        prob,
+        prob.n_springs,
+        FAMILIES,
+        1.0,
+        groups,
+        CANDS,
+        {"maxiter": 60, "max_seconds": 1e-12},
+        {"maxiter": 200},
+        3,
+    )
     assert s.choice == "rule" and s.skipped > 0 and [r["model"] for r in s.table] == ["rule"]
     assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9) and np.array_equal(s.k, prob.k0)
 
@@ -197,13 +240,37 @@ def test_select_trusts_the_callers_solve_to_skip_without_solving(monkeypatch):
 
     def no_solve(*a, **k):
         raise AssertionError("solved")
+
     monkeypatch.setattr(sel, "per_load", no_solve)
-    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60, "max_seconds": 1.0},
-                   {"maxiter": 200}, 3, rule_solve=(given, 10.0))
-    assert s.choice == "rule" and s.skipped == pytest.approx(sel.affordable(len(CANDS) * 3, 60, sel.STEP_COST * 10.0, 1.0))
+    s = sel.select(
+        prob,
+        prob.n_springs,
+        FAMILIES,
+        1.0,
+        groups,
+        CANDS,
+        {"maxiter": 60, "max_seconds": 1.0},
+        {"maxiter": 200},
+        3,
+        rule_solve=(given, 10.0),
+    )
+    assert s.choice == "rule" and s.skipped == pytest.approx(
+        sel.affordable(len(CANDS) * 3, 60, sel.STEP_COST * 10.0, 1.0)
+    )
     want = {"constant": given[:2].mean(), "bending": given[2:4].mean(), "clamped": given[4:].mean()}
     assert {f: s.table[0][f] for f in want} == pytest.approx(want, rel=1e-12)
     monkeypatch.setattr(sel, "per_load", real)
-    s = sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"maxiter": 60}, {"maxiter": 200}, 3,
-                   rule_solve=(given, 10.0))
-    assert s.choice != "rule" and s.table[0]["clamped"] == pytest.approx(1.0, rel=1e-9)   # its own solve
+    s = sel.select(
+        prob,
+        prob.n_springs,
+        FAMILIES,
+        1.0,
+        groups,
+        CANDS,
+        {"maxiter": 60},
+        {"maxiter": 200},
+        3,
+        rule_solve=(given, 10.0),
+    )
+    # its own solve
+    assert s.choice != "rule" and s.table[0]["clamped"] == pytest.approx(1.0, rel=1e-9)

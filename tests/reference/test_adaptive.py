@@ -38,7 +38,8 @@ def write_mesh(path, mesh):
 
 def mesh_case(tmp_path, mesh_file, dim, loads, reference_keys="", parts=""):
     p = tmp_path / "c.toml"
-    p.write_text(textwrap.dedent(f"""
+    p.write_text(
+        textwrap.dedent(f"""
         name = "a"
         dim = {dim}
         [body]
@@ -49,7 +50,11 @@ def mesh_case(tmp_path, mesh_file, dim, loads, reference_keys="", parts=""):
         E = {E}
         nu = {NU}
         density = 1.0
-        """) + textwrap.dedent(loads) + "[reference]\n" + textwrap.dedent(reference_keys))
+        """)
+        + textwrap.dedent(loads)
+        + "[reference]\n"
+        + textwrap.dedent(reference_keys)
+    )
     return load_case(p)
 
 
@@ -80,10 +85,17 @@ def independent(mesh, trac=(0.0, -1.0), grav=(0.0, -5.0)):
 def load(mesh, trac=(0.0, -1.0), grav=(0.0, -5.0)):
     """The load vector of :func:`independent` (the same dof order as the product's)."""
     e = skfem.ElementVector(skfem.ElementTriP2())
-    F = skfem.asm(skfem.LinearForm(lambda v, w: grav[0] * v[0] + grav[1] * v[1]), skfem.Basis(mesh, e, intorder=4))
-    end = mesh.facets_satisfying(lambda x: np.abs(x[0] - mesh.p[0].max()) < 1e-9, boundaries_only=True)
-    return F + skfem.asm(skfem.LinearForm(lambda v, w: trac[0] * v[0] + trac[1] * v[1]),
-                         skfem.FacetBasis(mesh, e, facets=end, intorder=4))
+    F = skfem.asm(
+        skfem.LinearForm(lambda v, w: grav[0] * v[0] + grav[1] * v[1]),
+        skfem.Basis(mesh, e, intorder=4),
+    )
+    end = mesh.facets_satisfying(
+        lambda x: np.abs(x[0] - mesh.p[0].max()) < 1e-9, boundaries_only=True
+    )
+    return F + skfem.asm(
+        skfem.LinearForm(lambda v, w: trac[0] * v[0] + trac[1] * v[1]),
+        skfem.FacetBasis(mesh, e, facets=end, intorder=4),
+    )
 
 
 def at_vertices(b, u, n):
@@ -99,6 +111,7 @@ def lshape(tmp_path_factory):
 
 
 # -- the indicators --------------------------------------------------------------------
+
 
 def test_residuals_vanish_where_the_element_is_exact():
     """u = (x^2, xy, yz) with lambda = mu = 1: by hand, div sigma = (3 lambda + 5 mu,
@@ -119,9 +132,11 @@ def test_residuals_vanish_where_the_element_is_exact():
     field = estimator.Field(None, U, np.broadcast_to(-div, (d.nelems, 3)).copy(), free)
     assert estimator.element_residual(d, [field], C).max() < 1e-24
     assert estimator.jump_residual(d, [field], C).max() < 1e-24
-    bare = estimator.element_residual(d, [estimator.Field(None, U, np.zeros((d.nelems, 3)), free)], C)[0]
+    bare = estimator.element_residual(
+        d, [estimator.Field(None, U, np.zeros((d.nelems, 3)), free)], C
+    )[0]
     h = estimator.diameters(m.p, m.t)
-    np.testing.assert_allclose(bare, h ** 2 / d.nelems * (div ** 2).sum(), rtol=1e-10)
+    np.testing.assert_allclose(bare, h**2 / d.nelems * (div**2).sum(), rtol=1e-10)
 
 
 def test_indicators_are_rounding_for_a_closed_form_and_zero_on_a_clamp(tmp_path, lshape):
@@ -131,7 +146,10 @@ def test_indicators_are_rounding_for_a_closed_form_and_zero_on_a_clamp(tmp_path,
     mesh = base_mesh(case)
     d = Discretisation(mesh, "tri", "P2")
     U = solve_mesh(case, mesh)
-    C, rho = element_stiffness(case.material, d.centroids()), densities(case.material, d.centroids())
+    C, rho = (
+        element_stiffness(case.material, d.centroids()),
+        densities(case.material, d.centroids()),
+    )
     bbox = body_bbox(case, mesh)
     fixed = {l.name: fixed_dofs(d, case, l, bbox) for l in case.loads}
     eta = estimator.indicators(d, case, case.loads, U, C, rho, bbox, fixed)
@@ -168,21 +186,35 @@ def test_effectivity_against_an_exact_solution(tmp_path):
         part = "x0"
         vector = [{-G * L}, 0.0]
         """
-    parts = "[body.parts]\na = { box = [[0.0, 0.0], [0.0, 0.0]] }\nb = { box = [[1.0, 0.0], [1.0, 0.0]] }\n"
-    exact = G ** 2 * H * L ** 3 / (3 * E)
+    parts = (
+        "[body.parts]\na = { box = [[0.0, 0.0], [0.0, 0.0]] }\n"
+        "b = { box = [[1.0, 0.0], [1.0, 0.0]] }\n"
+    )
+    exact = G**2 * H * L**3 / (3 * E)
     ratios = []
     for order in ("P1", "P2"):
         case = mesh_case(tmp_path, f, 2, loads, f'element = "{order}"\n', parts)
         for k in range(3):
             mesh = base_mesh(case).refined(k) if k else base_mesh(case)
             d = Discretisation(mesh, "tri", order)
-            C, rho = element_stiffness(case.material, d.centroids()), densities(case.material, d.centroids())
+            C, rho = (
+                element_stiffness(case.material, d.centroids()),
+                densities(case.material, d.centroids()),
+            )
             bbox = body_bbox(case, mesh)
             load = case.loads[0]
             u = solve_mesh(case, mesh, disc=d)["push"]
             err2 = exact - load_vector(d, case, load, bbox, rho) @ u
-            eta2 = estimator.indicators(d, case, [load], {"push": u}, C, rho, bbox,
-                                        {"push": fixed_dofs(d, case, load, bbox)})["push"].sum()
+            eta2 = estimator.indicators(
+                d,
+                case,
+                [load],
+                {"push": u},
+                C,
+                rho,
+                bbox,
+                {"push": fixed_dofs(d, case, load, bbox)},
+            )["push"].sum()
             if order == "P2":
                 assert abs(err2) < 1e-10 * exact and eta2 < 1e-20 * exact
             else:
@@ -203,17 +235,31 @@ def test_p2_effectivity_and_adaptive_beats_uniform(tmp_path, lshape):
 
     def energy_error(m, uh):
         return np.sqrt(truth - load(m) @ uh)
+
     adaptive = energy_error(mesh, U["bend"])
     m = base_mesh(case)
     eff, uniform = [], []
     while not uniform or uniform[-1][0] < history[-1]["n_dofs"]:
         d = Discretisation(m, "tri", "P2")
-        C, rho = element_stiffness(case.material, d.centroids()), densities(case.material, d.centroids())
+        C, rho = (
+            element_stiffness(case.material, d.centroids()),
+            densities(case.material, d.centroids()),
+        )
         bbox = body_bbox(case, m)
         uh = solve_mesh(case, m, disc=d)
-        np.testing.assert_allclose(load_vector(d, case, case.loads[0], bbox, rho), load(m), atol=1e-12)
-        eta2 = estimator.indicators(d, case, case.loads, uh, C, rho, bbox,
-                                    {"bend": fixed_dofs(d, case, case.loads[0], bbox)})["bend"].sum()
+        np.testing.assert_allclose(
+            load_vector(d, case, case.loads[0], bbox, rho), load(m), atol=1e-12
+        )
+        eta2 = estimator.indicators(
+            d,
+            case,
+            case.loads,
+            uh,
+            C,
+            rho,
+            bbox,
+            {"bend": fixed_dofs(d, case, case.loads[0], bbox)},
+        )["bend"].sum()
         uniform.append((d.ndof, energy_error(m, uh["bend"])))
         eff.append(np.sqrt(eta2) / uniform[-1][1])
         m = m.refined()
@@ -223,6 +269,7 @@ def test_p2_effectivity_and_adaptive_beats_uniform(tmp_path, lshape):
 
 # -- the estimate where the models are scored --------------------------------------------
 
+
 def test_point_estimate_bounds_the_true_error_at_every_vertex(tmp_path):
     """A holed plate (gmsh) clamped at x = 0 and bent: the reference's per-point
     estimate at the user's vertices against the error of its displacement there, from
@@ -231,8 +278,14 @@ def test_point_estimate_bounds_the_true_error_at_every_vertex(tmp_path):
     and is not a wild over-estimate."""
     pytest.importorskip("gmsh")
     from tests import meshes
-    case = mesh_case(tmp_path, meshes.holed_plate(tmp_path, size=0.08), 2, CANTILEVER,
-                     "max_refine = 3\ntol = 1e-8\n")
+
+    case = mesh_case(
+        tmp_path,
+        meshes.holed_plate(tmp_path, size=0.08),
+        2,
+        CANTILEVER,
+        "max_refine = 3\ntol = 1e-8\n",
+    )
     ref = reference.solve(case, cache=False)
     nv = base_mesh(case).p.shape[1]
     pts = base_mesh(case).p.T
@@ -243,26 +296,33 @@ def test_point_estimate_bounds_the_true_error_at_every_vertex(tmp_path):
     e = ref.error_estimate(pts, "bend")
     assert np.all(e >= err), np.max(err / np.maximum(e, 1e-300))
     assert e.max() < 30 * err.max()
-    assert ref.error_estimate["bend"] == pytest.approx(e.max() / np.linalg.norm(u, axis=1).max(), rel=1e-9)
+    assert ref.error_estimate["bend"] == pytest.approx(
+        e.max() / np.linalg.norm(u, axis=1).max(), rel=1e-9
+    )
     assert ref.level >= 2 and np.isfinite(ref.error_estimate["bend"])
 
 
 def test_no_refinement_no_estimate_and_closed_forms_are_exact(tmp_path, lshape):
-    one = reference.solve(mesh_case(tmp_path, lshape, 2, CANTILEVER, "max_refine = 0\n"), cache=False)
+    one = reference.solve(
+        mesh_case(tmp_path, lshape, 2, CANTILEVER, "max_refine = 0\n"), cache=False
+    )
     assert np.isnan(one.error_estimate["bend"]) and not one.met_tol
     assert np.isnan(one.error_estimate(one.mesh.p.T[:3], "bend")).all()
-    exact = reference.solve(mesh_case(tmp_path, lshape, 2, '[loads]\nset = "homogeneous2d"\n'), cache=False)
+    exact = reference.solve(
+        mesh_case(tmp_path, lshape, 2, '[loads]\nset = "homogeneous2d"\n'), cache=False
+    )
     assert exact.level == 0 and exact.met_tol and max(exact.error_estimate.values()) == 0.0
 
 
 def test_doerfler_marks_the_fewest_elements_for_the_share():
     eta2 = np.array([1.0, 4.0, 2.0, 3.0])
-    assert set(estimator.doerfler(eta2, 0.5)) == {1, 3}            # 4 + 3 >= 5
+    assert set(estimator.doerfler(eta2, 0.5)) == {1, 3}  # 4 + 3 >= 5
     assert set(estimator.doerfler(eta2, 0.1)) == {1}
     assert set(estimator.doerfler(eta2, 0.1, least=0.5)) == {1, 3}
 
 
 # -- a 3-D gmsh body -------------------------------------------------------------------------
+
 
 def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_path, monkeypatch):
     """A gmsh cylinder clamped and loaded on slabs that cut its tetrahedra (calibrate's
@@ -273,6 +333,7 @@ def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_p
     clamped entities."""
     pytest.importorskip("gmsh")
     from tests import meshes
+
     f = meshes.cylinder(tmp_path, size=0.08)
     loads = """
         [[loads.case]]
@@ -284,8 +345,10 @@ def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_p
         part = "tip"
         vector = [0.0, -100.0, 0.0]
         """
-    parts = ("[body.parts]\nclamp = { box = [[-1.0, -1.0, -1.0], [0.03, 1.0, 1.0]] }\n"
-             "tip = { box = [[0.47, -1.0, -1.0], [1.0, 1.0, 1.0]] }\n")
+    parts = (
+        "[body.parts]\nclamp = { box = [[-1.0, -1.0, -1.0], [0.03, 1.0, 1.0]] }\n"
+        "tip = { box = [[0.47, -1.0, -1.0], [1.0, 1.0, 1.0]] }\n"
+    )
     case = mesh_case(tmp_path, f, 3, loads, "max_refine = 1\ntol = 1e-6\n", parts)
     monkeypatch.setenv("SPRINGBENCH_CACHE", str(tmp_path / "cache"))
     ref = reference.solve(case)
@@ -299,24 +362,34 @@ def test_gmsh_body_gets_a_finite_cached_estimate_and_keeps_the_users_parts(tmp_p
     np.testing.assert_array_equal(again.error_estimate(pts, "tip"), e)
     np.testing.assert_array_equal(again.displacement(pts, "tip"), ref.displacement(pts, "tip"))
     # the user's loaded facets: boundary triangles with all vertices (and centroid) in the slab
-    faces = np.sort(np.vstack([m0.t[[a, b, c]].T for a, b, c in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3))]), axis=1)
+    faces = np.sort(
+        np.vstack([m0.t[[a, b, c]].T for a, b, c in ((0, 1, 2), (0, 1, 3), (0, 2, 3), (1, 2, 3))]),
+        axis=1,
+    )
     uniq, count = np.unique(faces, axis=0, return_counts=True)
     bnd = uniq[count == 1]
     loaded = bnd[(m0.p[0, bnd] >= 0.47 - 1e-9).all(axis=1)]
-    x = m0.p[:, loaded]                      # (3, facets, 3 vertices)
-    area = 0.5 * np.linalg.norm(np.cross((x[:, :, 1] - x[:, :, 0]).T, (x[:, :, 2] - x[:, :, 0]).T), axis=1).sum()
+    x = m0.p[:, loaded]  # (3, facets, 3 vertices)
+    area = (
+        0.5
+        * np.linalg.norm(
+            np.cross((x[:, :, 1] - x[:, :, 0]).T, (x[:, :, 2] - x[:, :, 0]).T), axis=1
+        ).sum()
+    )
     parts_ = UserMeshParts(case, m0)
     for mesh in (m0, m0.refined(), ref.mesh):
         d = Discretisation(mesh, "tet", "P2")
         bbox = body_bbox(case, mesh)
-        F = load_vector(d, case, case.loads[0], bbox, np.ones(d.nelems), parts=parts_).reshape(-1, 3)
+        F = load_vector(d, case, case.loads[0], bbox, np.ones(d.nelems), parts=parts_).reshape(
+            -1, 3
+        )
         assert F.sum(axis=0) == pytest.approx([0.0, -100.0 * area, 0.0], abs=1e-9 * 100 * area)
         fixed = np.unique(fixed_dofs(d, case, case.loads[0], bbox, parts=parts_) // 3)
-        on_clamp = (d.doflocs[0] <= 0.03 + 1e-9)
-        user_clamped = (m0.p[0] <= 0.03 + 1e-9)
+        on_clamp = d.doflocs[0] <= 0.03 + 1e-9
+        user_clamped = m0.p[0] <= 0.03 + 1e-9
         assert set(fixed) <= set(np.flatnonzero(on_clamp))
         assert set(np.flatnonzero(user_clamped)) <= set(fixed)
-        assert len(fixed) < on_clamp.sum()      # the slab's own points would be more
+        assert len(fixed) < on_clamp.sum()  # the slab's own points would be more
 
 
 # -- the estimate against an independent 3-D solve -------------------------------------------
@@ -336,22 +409,28 @@ SHEAR = """
 def test_cube_estimate_bounds_the_independent_error_without_a_wild_factor(tmp_path):
     """A 3 x 3 x 3 cube of tetrahedra (vertices at thirds, as the B&C cube_333) sheared:
     face z = 0 clamped, traction along x on z = 3. The truth at the user's vertices is the
-    independent graded Q2 solve of tests/independent_elasticity.py (its own assembly,
+    independent graded Q2 solve of tests/independent/ (its own assembly,
     mesh and solver, extrapolated; its own error checked far below the reference's).
     The reference's per-point estimate bounds the true error at every vertex and its
     largest value is within a small factor of the largest true error (the estimate over
     consecutive adaptive levels was ~10x)."""
-    from tests import independent_elasticity as ie
+    from tests import independent as ie
+
     m = skfem.MeshTet.init_tensor(*[np.linspace(0.0, 3.0, 4)] * 3)
-    case = mesh_case(tmp_path, write_mesh(tmp_path / "cube.vtu", m), 3, SHEAR, "max_refine = 3\ntol = 1e-8\n")
+    case = mesh_case(
+        tmp_path, write_mesh(tmp_path / "cube.vtu", m), 3, SHEAR, "max_refine = 3\ntol = 1e-8\n"
+    )
     ref = reference.solve(case, cache=False)
     pts = base_mesh(case).p.T
-    truth, change, _ = ie.extrapolated_shear((3.0, 3.0, 3.0), E, NU, 1.0, pts, levels=(4, 8, 12), knot=0.75)
+    truth, change, _ = ie.extrapolated_shear(
+        (3.0, 3.0, 3.0), E, NU, 1.0, pts, levels=(4, 8, 12), knot=0.75
+    )
     umax = np.linalg.norm(truth, axis=1).max()
     err = np.linalg.norm(ref.displacement(pts, "shear") - truth, axis=1)
-    assert change < 0.05 * err.max() / umax                 # the truth's own error: far smaller
+    assert change < 0.05 * err.max() / umax  # the truth's own error: far smaller
     e = ref.error_estimate(pts, "shear")
-    moving = err > 1e-9 * umax                              # not the clamped vertices
+    moving = err > 1e-9 * umax  # not the clamped vertices
     assert np.all(e[moving] >= err[moving]), np.min(e[moving] / err[moving])
     assert e.max() < 4.0 * err.max(), (e.max(), err.max())
-    assert len(ref.history) >= 3 and ref.history[-1]["n_dofs"] >= 8 * ref.history[0]["n_dofs"]  # i, j, k
+    # i, j, k
+    assert len(ref.history) >= 3 and ref.history[-1]["n_dofs"] >= 8 * ref.history[0]["n_dofs"]

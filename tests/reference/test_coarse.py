@@ -21,7 +21,7 @@ def test_transfer_reproduces_the_coarse_polynomials_and_lies_in_the_fine_space()
     grid = coarse.grid_mesh(fine, 0.1)
     assert grid.p.shape[1] < 0.25 * fine.p.shape[1]
     cd, fd = Discretisation(grid, "tri", "P2"), Discretisation(fine, "tri", "P2")
-    q = lambda x: np.stack([1 + x[0] - 2 * x[1] ** 2, x[0] * x[1]], axis=-1)   # noqa: E731
+    q = lambda x: np.stack([1 + x[0] - 2 * x[1] ** 2, x[0] * x[1]], axis=-1)  # noqa: E731
     u = coarse.transfer(cd, fd) @ q(cd.doflocs).ravel()
     assert np.allclose(u, q(fd.doflocs).ravel(), atol=1e-12)
 
@@ -36,11 +36,14 @@ def test_coarse_levels_estimate_bounds_the_independent_error(tmp_path, monkeypat
     error at every vertex."""
     pytest.importorskip("gmsh")
     from tests import meshes
+
     monkeypatch.setattr(adaptive, "MAX_DOFS", {2: 1, 3: 1})
-    case = mesh_case(tmp_path, meshes.holed_plate(tmp_path, size=size), 2, CANTILEVER, "max_refine = 1\n")
+    case = mesh_case(
+        tmp_path, meshes.holed_plate(tmp_path, size=size), 2, CANTILEVER, "max_refine = 1\n"
+    )
     ref = reference.solve(case, cache=False)
     mesh = base_mesh(case)
-    assert ref.level == 0 and ref.mesh.p.shape[1] == mesh.p.shape[1]          # not refined
+    assert ref.level == 0 and ref.mesh.p.shape[1] == mesh.p.shape[1]  # not refined
     pts = mesh.p.T
     truth = [at_vertices(*independent(mesh.refined(r))[:2], len(pts)) for r in (2, 3)]
     u = ref.displacement(pts, "bend")
@@ -49,14 +52,19 @@ def test_coarse_levels_estimate_bounds_the_independent_error(tmp_path, monkeypat
     e = ref.error_estimate(pts, "bend")
     assert err.max() <= e.max() < 5 * err.max(), (e.max(), err.max())
     assert np.all(e >= err)
-    assert ref.error_estimate["bend"] == pytest.approx(e.max() / np.linalg.norm(u, axis=1).max(), rel=1e-9)
+    assert ref.error_estimate["bend"] == pytest.approx(
+        e.max() / np.linalg.norm(u, axis=1).max(), rel=1e-9
+    )
 
 
 def test_a_mesh_the_budget_refines_keeps_the_pointwise_estimate(tmp_path):
     """Below the budget the adaptive levels stay (no coarse levels, no uniform bound)."""
     m = skfem.MeshTri.init_sqsymmetric().refined(2)
     from tests.reference.test_adaptive import write_mesh
-    case = mesh_case(tmp_path, write_mesh(tmp_path / "sq.vtu", m), 2, CANTILEVER, "max_refine = 1\n")
+
+    case = mesh_case(
+        tmp_path, write_mesh(tmp_path / "sq.vtu", m), 2, CANTILEVER, "max_refine = 1\n"
+    )
     ref = reference.solve(case, cache=False)
     assert ref.level >= 1 and ref.changes is not None and ref.changes.uniform is None
 
@@ -67,14 +75,18 @@ def test_galerkin_levels_solved_by_the_two_level_method_equal_the_cholesky():
     subspace, gives the same fields as the Cholesky of the same system."""
     from harness.case.elasticity import element_stiffness
     from harness.case.reader import Material
-    fine = skfem.MeshTet.init_tensor(*[np.linspace(0, s, n) for s, n in ((2.0, 9), (1.0, 5), (1.0, 5))])
+
+    fine = skfem.MeshTet.init_tensor(
+        *[np.linspace(0, s, n) for s, n in ((2.0, 9), (1.0, 5), (1.0, 5))]
+    )
     grid = coarse.grid_mesh(fine, 0.3)
     d, cd = Discretisation(fine, "tet", "P2"), Discretisation(grid, "tet", "P2")
     K = d.stiffness(element_stiffness(Material(1.0, 0.45), d.centroids()))
     x = d.doflocs
     fixed = np.flatnonzero(np.repeat(x[0] < 1e-12, 3))
     F = np.zeros(d.ndof)
-    F[2::3] = -np.where(x[0] > 2 - 1e-12, 1.0, 0.0) - 0.1 * x[0]      # a tip load and a graded body load
+    # a tip load and a graded body load
+    F[2::3] = -np.where(x[0] > 2 - 1e-12, 1.0, 0.0) - 0.1 * x[0]
     kw = dict(coarse=cd, fine=d)
     direct = coarse.galerkin_solve(K, {"a": F}, {"a": fixed}, "direct", **kw)["a"]
     info = []

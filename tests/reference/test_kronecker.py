@@ -20,11 +20,11 @@ from tests.reference.test_tensorpre import _orthotropic
 
 
 def test_axis_matrices_are_the_q2_element_matrices():
-    nodes = np.array([0.0, 0.15, 0.3, 0.8, 1.3])            # two cells, 0.3 and 1.0 long
+    nodes = np.array([0.0, 0.15, 0.3, 0.8, 1.3])  # two cells, 0.3 and 1.0 long
     m = axis_matrices(nodes)
     Me = np.array([[4, 2, -1], [2, 16, 2], [-1, 2, 4]]) / 30.0
     Ae = np.array([[7, -8, 1], [-8, 16, -8], [1, -8, 7]]) / 3.0
-    De = np.array([[-3, -4, 1], [4, 0, -4], [-1, 4, 3]]) / 6.0    # int N_i' N_j on [0, 1]
+    De = np.array([[-3, -4, 1], [4, 0, -4], [-1, 4, 3]]) / 6.0  # int N_i' N_j on [0, 1]
     M0, A0, D0 = np.zeros((5, 5)), np.zeros((5, 5)), np.zeros((5, 5))
     for s, h in ((slice(0, 3), 0.3), (slice(2, 5), 1.0)):
         M0[s, s] += h * Me
@@ -41,7 +41,9 @@ def _skfem_stiffness(mesh, C: np.ndarray):
     dim = mesh.p.shape[0]
     elem = skfem.ElementVector(skfem.ElementHex2() if dim == 3 else skfem.ElementQuad2())
     basis = skfem.Basis(mesh, elem, intorder=4)
-    pairs = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)] if dim == 3 else [(0, 0), (1, 1), (0, 1)]
+    pairs = (
+        [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)] if dim == 3 else [(0, 0), (1, 1), (0, 1)]
+    )
 
     def voigt(e):
         return [e[i, j] if i == j else 2 * e[i, j] for i, j in pairs]
@@ -60,7 +62,7 @@ def test_apply_equals_the_assembled_stiffness(dim, material):
     mesh = tensor_mesh(graded_axes(np.zeros(dim), size, 2))
     C = _orthotropic(dim) if material == "ortho" else np.linalg.inv(isotropic_compliance(1e3, 0.45))
     if dim == 2 and material == "iso":
-        C = C[np.ix_([0, 1, 5], [0, 1, 5])]          # plane strain
+        C = C[np.ix_([0, 1, 5], [0, 1, 5])]  # plane strain
     basis, K = _skfem_stiffness(mesh, C)
     # scikit-fem's vector dofs: component c of scalar node i at basis.nodal_dofs / ... (interleaved)
     locs = basis.doflocs[:, ::dim]

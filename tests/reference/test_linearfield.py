@@ -30,10 +30,16 @@ def _disc(cell: str) -> Discretisation:
 def _stretch(d: Discretisation):
     """stretch-x: roller on x = 0, the corner (0, 0, 0) fixed in y, z, (0, 1, 0) in z."""
     x = d.doflocs
-    at = lambda p, q: np.all(np.abs(x - np.array(q)[:, None]) < 1e-9, axis=0)   # noqa: E731, ARG005
-    fixed = np.unique(np.concatenate([d.part_dofs(lambda p: p[0] < 1e-9, [0]),
-                                      d.part_dofs(lambda p: at(p, (0, 0, 0)), [1, 2]),
-                                      d.part_dofs(lambda p: at(p, (0, SIZE[1], 0)), [2])]))
+    at = lambda p, q: np.all(np.abs(x - np.array(q)[:, None]) < 1e-9, axis=0)  # noqa: E731, ARG005
+    fixed = np.unique(
+        np.concatenate(
+            [
+                d.part_dofs(lambda p: p[0] < 1e-9, [0]),
+                d.part_dofs(lambda p: at(p, (0, 0, 0)), [1, 2]),
+                d.part_dofs(lambda p: at(p, (0, SIZE[1], 0)), [2]),
+            ]
+        )
+    )
     F = d.traction_load(d.part_facets(lambda p: p[0] > SIZE[0] - 1e-9), (S, 0.0, 0.0))
     return fixed, F
 
@@ -44,7 +50,9 @@ def test_a_stretch_is_its_closed_form_without_a_solve(cell):
     C = np.tile(np.linalg.inv(isotropic_compliance(E, NU)), (d.nelems, 1, 1))
     fixed, F = _stretch(d)
     info: list = []
-    U = solve_system(lambda: d.stiffness(C), {"stretch": F}, {"stretch": fixed}, "auto", d, records=info, C=C)
+    U = solve_system(
+        lambda: d.stiffness(C), {"stretch": F}, {"stretch": fixed}, "auto", d, records=info, C=C
+    )
     want = -NU * S / E * d.doflocs.T
     want[:, 0] = S / E * d.doflocs[0]
     assert info[0].method == "linear" and info[0].residual <= 1e-10
@@ -57,7 +65,12 @@ def test_a_shear_is_not_linear_and_goes_to_the_solver():
     K = d.stiffness(C)
     fixed = d.part_dofs(lambda p: p[2] < 1e-9, range(3))
     F = d.traction_load(d.part_facets(lambda p: p[2] > SIZE[2] - 1e-9), (S, 0.0, 0.0))
-    assert linearfield.solve(lambda V: K @ V, d.doflocs, F[:, None], fixed, float(abs(K).sum(axis=1).max())) is None
+    assert (
+        linearfield.solve(
+            lambda V: K @ V, d.doflocs, F[:, None], fixed, float(abs(K).sum(axis=1).max())
+        )
+        is None
+    )
     info: list = []
     U = solve_system(K, {"shear": F}, {"shear": fixed}, "auto", d, records=info, C=C)
     free = np.setdiff1d(np.arange(d.ndof), fixed)

@@ -17,7 +17,8 @@ from reference.solvers import sparse
 
 def _case(tmp_path):
     p = tmp_path / "m.toml"
-    p.write_text(textwrap.dedent("""
+    p.write_text(
+        textwrap.dedent("""
         name = "m"
         dim = 3
         [body]
@@ -32,7 +33,8 @@ def _case(tmp_path):
         [reference]
         max_refine = 0
         modes = 5
-        """))
+        """)
+    )
     return load_case(p)
 
 
@@ -49,8 +51,9 @@ def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch, ope
     monkeypatch.setattr(sparse, "inverse", lambda *a: used.append(real(*a)) or used[-1])
     sol = reference.solve(case, cache=False)
     f = sol.frequencies(5)
-    assert len(used) == 1 and used[0] is not None                    # eigsh never fell back to SuperLU
-    assert (operator == "two-level") == (used[0].__name__ == "solve")  # the CG's closure, not the factor's
+    assert len(used) == 1 and used[0] is not None  # eigsh never fell back to SuperLU
+    # the CG's closure, not the factor's
+    assert (operator == "two-level") == (used[0].__name__ == "solve")
     K, M, _, _ = _system(sol, case)
     lam = sl.eigh(K.toarray(), M.toarray(), eigvals_only=True, subset_by_index=[0, 4])
     np.testing.assert_allclose(f, np.sqrt(lam) / (2 * np.pi), rtol=1e-9)
@@ -58,6 +61,7 @@ def test_shift_invert_frequencies_match_a_dense_solve(tmp_path, monkeypatch, ope
 
 def _system(sol, case):
     from harness.case.elasticity import densities, element_stiffness
+
     d = sol.disc
     K = d.stiffness(element_stiffness(case.material, d.centroids()))
     M = d.mass(densities(case.material, d.centroids()))
@@ -82,9 +86,12 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     from reference import methods
 
     case = _case(tmp_path)
-    load = "shear-xy"                                   # face y0 clamped; the one load solved
-    case = dataclasses.replace(case, reference=dataclasses.replace(case.reference, max_refine=2),
-                               loads=tuple(l for l in case.loads if l.name == load))
+    load = "shear-xy"  # face y0 clamped; the one load solved
+    case = dataclasses.replace(
+        case,
+        reference=dataclasses.replace(case.reference, max_refine=2),
+        loads=tuple(l for l in case.loads if l.name == load),
+    )
     sol = reference.solve(case, cache=False)
     sizes = [sol.levels.disc(m).ndof for m in sol.levels.meshes]
     assert sizes[0] < sizes[1] < sizes[2] == sol.disc.ndof
@@ -99,12 +106,12 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     for k in (0, 1, 2):
         f.append(modal_with(int(sizes[k])))
         assert sol.modal_mesh is (sol.levels.meshes[k] if k < 2 else sol.mesh)
-    assert sol.modal_disc is sol.disc                                  # the finest fits: its own
+    assert sol.modal_disc is sol.disc  # the finest fits: its own
     assert sol.modes(5, load=load).shape == (5, sol.mesh.p.shape[1], 3)
     change = [np.abs(f[i] / f[2] - 1).max() for i in (0, 1)]
     assert change[1] < change[0] / 2 and change[0] < 0.01, change
 
-    f0 = modal_with(1)                                                 # none fits: the coarsest
+    f0 = modal_with(1)  # none fits: the coarsest
     mesh = sol.levels.meshes[0]
     assert sol.modal_mesh is mesh and sol.modes(5, load=load).shape == (5, mesh.p.shape[1], 3)
     np.testing.assert_allclose(f0, f[0], rtol=1e-12)
@@ -115,6 +122,13 @@ def test_graded_modes_come_from_a_level_within_the_budget(tmp_path, monkeypatch)
     free = np.setdiff1d(np.arange(basis.N), clamped)
     # scipy's own shift-invert (SuperLU), not the product's operator; a dense solve of these
     # 6k dofs took ~50 s
-    lam = np.sort(spla.eigsh(K[free][:, free].tocsc(), k=5, M=M[free][:, free].tocsc(), sigma=0.0,
-                             return_eigenvectors=False))
+    lam = np.sort(
+        spla.eigsh(
+            K[free][:, free].tocsc(),
+            k=5,
+            M=M[free][:, free].tocsc(),
+            sigma=0.0,
+            return_eigenvectors=False,
+        )
+    )
     np.testing.assert_allclose(f0, np.sqrt(lam) / (2 * np.pi), rtol=1e-9)

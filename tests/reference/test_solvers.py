@@ -20,20 +20,34 @@ from reference.solvers.record import SolveRecord
 METHODS = ["auto", "direct", "cholesky", "superlu", "amg", "cg"]
 
 
-def elasticity(cell="tet", order="P2", size=(1.0, 1.0, 1.0), divs=(2, 2, 2), E=1e3, nu=0.3, scale=1.0,
-               clamp="face", traction=(0.0, 0.3, -1.0)):
+def elasticity(
+    cell="tet",
+    order="P2",
+    size=(1.0, 1.0, 1.0),
+    divs=(2, 2, 2),
+    E=1e3,
+    nu=0.3,
+    scale=1.0,
+    clamp="face",
+    traction=(0.0, 0.3, -1.0),
+):
     """Free-dof system of a box [0, size] * scale: (A, b, near_null, coords, d, free).
     clamp='face': x = 0 clamped; 'symmetry': the normal component fixed on the three
     planes x = 0, y = 0, z = 0 (no rigid motion left, stretches stay homogeneous);
     'none': nothing fixed (singular)."""
     dim = len(size)
-    M = {("tet", 3): skfem.MeshTet, ("hex", 3): skfem.MeshHex, ("tri", 2): skfem.MeshTri,
-         ("quad", 2): skfem.MeshQuad}[cell, dim]
+    M = {
+        ("tet", 3): skfem.MeshTet,
+        ("hex", 3): skfem.MeshHex,
+        ("tri", 2): skfem.MeshTri,
+        ("quad", 2): skfem.MeshQuad,
+    }[cell, dim]
     mesh = M.init_tensor(*[np.linspace(0, L * scale, k + 1) for L, k in zip(size, divs)])
     d = Discretisation(mesh, cell, order)
     C = np.linalg.inv(isotropic_compliance(E, nu))
     if dim == 2:
         from harness.case.elasticity import plane
+
         C = plane(C, "strain")
     K = d.stiffness(np.tile(C, (d.nelems, 1, 1)))
     tol = 1e-9 * scale
@@ -64,12 +78,20 @@ def test_matches_dense_solve_and_records_it(small, method):
     x = sparse.solve(A, b, method, R, coords=X, records=info)
     assert x.shape == b.shape
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
-    assert len(info) == 1 and isinstance(info[0], SolveRecord)       # one record a solve
+    assert len(info) == 1 and isinstance(info[0], SolveRecord)  # one record a solve
     assert info[-1].method in ("amg", "amg-strong", "cholesky", "superlu", "cg")
-    assert info[-1].residual == pytest.approx(np.linalg.norm(b - A @ x) / np.linalg.norm(b), rel=1e-6, abs=1e-16)
+    assert info[-1].residual == pytest.approx(
+        np.linalg.norm(b - A @ x) / np.linalg.norm(b), rel=1e-6, abs=1e-16
+    )
     assert info[-1].residual <= info[-1].rtol
     assert info[-1].seconds > 0
-    expected = {"direct": "cholesky", "cholesky": "cholesky", "superlu": "superlu", "amg": "amg", "auto": "cholesky"}
+    expected = {
+        "direct": "cholesky",
+        "cholesky": "cholesky",
+        "superlu": "superlu",
+        "amg": "amg",
+        "auto": "cholesky",
+    }
     if method in expected:
         assert info[-1].method == expected[method] and info[-1].fallbacks == ()
 
@@ -79,12 +101,18 @@ def test_positional_call_without_info_or_coords(small):
     Cholesky reads the locations off the rigid-body modes, without both it is SuperLU."""
     A, b, R, _, _, _ = small
     truth = np.linalg.solve(A.toarray(), b)
-    for method, near_null, used in [("direct", R, "cholesky"), ("direct", None, "superlu"), ("amg", R, "amg")]:
+    for method, near_null, used in [
+        ("direct", R, "cholesky"),
+        ("direct", None, "superlu"),
+        ("amg", R, "amg"),
+    ]:
         info = []
         x = sparse.solve(A, b, method, near_null, records=info)
         assert info[-1].method == used
         np.testing.assert_allclose(x, truth, rtol=0, atol=1e-9 * np.abs(truth).max())
-    assert np.allclose(sparse.solve(A, b, "direct", R), truth, rtol=0, atol=1e-9 * np.abs(truth).max())
+    assert np.allclose(
+        sparse.solve(A, b, "direct", R), truth, rtol=0, atol=1e-9 * np.abs(truth).max()
+    )
 
 
 def test_coordinates_from_rigid_modes(small):
@@ -93,9 +121,10 @@ def test_coordinates_from_rigid_modes(small):
     # rigid_modes uses centred coordinates divided by their largest magnitude
     c = d.doflocs.mean(axis=1)
     s = np.abs(d.doflocs - c[:, None]).max()
-    np.testing.assert_allclose(Y, (X - c) / s, atol=1.0)    # filled ones: neighbour means (within an element)
+    # filled ones: neighbour means (within an element)
+    np.testing.assert_allclose(Y, (X - c) / s, atol=1.0)
     exact = np.abs(Y - (X - c) / s) < 1e-12
-    assert exact.sum(axis=1).min() >= 2                      # each dof carries 2 of its 3
+    assert exact.sum(axis=1).min() >= 2  # each dof carries 2 of its 3
     assert sparse._coords_from_modes(A, np.ones((A.shape[0], 6))) is None
 
 
@@ -105,6 +134,7 @@ def test_many_right_hand_sides_share_one_setup(small, monkeypatch):
     truth = np.linalg.solve(A.toarray(), B)
     calls = {"sym": 0, "amg": 0}
     from harness.linalg import multifrontal
+
     sym = multifrontal.Symbolic
     hier = sparse._hierarchy
 
@@ -116,7 +146,7 @@ def test_many_right_hand_sides_share_one_setup(small, monkeypatch):
         calls["amg"] += 1
         return hier(*a, **k)
 
-    monkeypatch.setattr(sparse, "Symbolic", counting_sym)      # where the solve looks it up
+    monkeypatch.setattr(sparse, "Symbolic", counting_sym)  # where the solve looks it up
     monkeypatch.setattr(sparse, "_hierarchy", counting_hier)
     for method in ("cholesky", "amg"):
         info = []
@@ -132,8 +162,14 @@ def test_thin_nearly_incompressible_bar_closed_form(method):
     """10:1 bar, nu = 0.49, stretched by sigma on x = L with symmetry planes: u = (sigma x,
     -nu sigma y, -nu sigma z) / E exactly (a linear field is in the P2 space)."""
     E, nu, sig = 2.0e3, 0.49, 3.0
-    A, b, R, X, d, free = elasticity(size=(10.0, 1.0, 1.0), divs=(20, 2, 2), E=E, nu=nu, clamp="symmetry",
-                                     traction=(sig, 0.0, 0.0))
+    A, b, R, X, d, free = elasticity(
+        size=(10.0, 1.0, 1.0),
+        divs=(20, 2, 2),
+        E=E,
+        nu=nu,
+        clamp="symmetry",
+        traction=(sig, 0.0, 0.0),
+    )
     info = []
     x = sparse.solve(A, b, method, R, coords=X, records=info)
     p = d.doflocs
@@ -175,7 +211,7 @@ def test_amg_that_fails_falls_back_to_cholesky(monkeypatch):
     truth = np.linalg.solve(A.toarray(), b)
     monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
     monkeypatch.setattr(sparse, "STRONG_MAXITER", 3)
-    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 1e6)      # never skip the strong AMG
+    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 1e6)  # never skip the strong AMG
     for method in ("auto", "amg", "cg"):
         if method == "auto":
             monkeypatch.setattr(plan, "CHOLESKY_GFLOP", 0.0)
@@ -202,7 +238,10 @@ def test_broken_hierarchy_falls_back(monkeypatch, small):
     monkeypatch.setattr(sparse, "_hierarchy", raising)
     info = []
     x = sparse.solve(A, b, "amg", R, coords=X, records=info)
-    assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["amg", "amg-strong"]
+    assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == [
+        "amg",
+        "amg-strong",
+    ]
     assert "setup failed" in info[-1].fallbacks[0].reason
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
 
@@ -212,7 +251,7 @@ def test_broken_hierarchy_falls_back(monkeypatch, small):
 
     monkeypatch.setattr(sparse, "_hierarchy", lambda *a, **k: Negative())
     info = []
-    x = sparse.solve(A, b, "amg", None, records=info)          # no modes, no coords: SuperLU
+    x = sparse.solve(A, b, "amg", None, records=info)  # no modes, no coords: SuperLU
     assert info[-1].method == "superlu" and "breakdown" in info[-1].fallbacks[0].reason
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
 
@@ -289,7 +328,7 @@ def test_auto_chooses_by_the_cholesky_estimate(small, monkeypatch):
     sparse.solve(A, b, "auto", R, coords=X, records=info)
     assert info[-1].method == "amg" and info[-1].fallbacks == ()
     assert info[-1].residual <= info[-1].rtol
-    assert plan.choose("auto", 1000, 3) == "direct" and plan.choose("auto", 10 ** 6, 3) == "amg"
+    assert plan.choose("auto", 1000, 3) == "direct" and plan.choose("auto", 10**6, 3) == "amg"
     assert plan.choose("cg", 10, 2) == "cg"
 
 

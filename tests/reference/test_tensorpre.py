@@ -40,13 +40,15 @@ def test_lattice_recognises_q2_tensor_meshes_only():
     d = _box((3.0, 1.0, 1.0), 2, "hex")
     lat = Lattice.q2(d.doflocs)
     axes, index = lat.axes, lat.index
-    ijk = np.unravel_index(index, [len(x) for x in axes])      # x slowest
+    ijk = np.unravel_index(index, [len(x) for x in axes])  # x slowest
     for a in range(3):
         np.testing.assert_allclose(axes[a][ijk[a]], d.doflocs[a], atol=1e-12)
     mesh = d.mesh
     p = mesh.p.copy()
-    inner = np.flatnonzero(np.all((p > 1e-9) & (p < mesh.p.max(axis=1, keepdims=True) - 1e-9), axis=0))[0]
-    p[:, inner] += 0.01                                       # one vertex off the lattice
+    inner = np.flatnonzero(
+        np.all((p > 1e-9) & (p < mesh.p.max(axis=1, keepdims=True) - 1e-9), axis=0)
+    )[0]
+    p[:, inner] += 0.01  # one vertex off the lattice
     assert Lattice.q2(Discretisation(skfem.MeshHex(p, mesh.t), "hex", "P2").doflocs) is None
 
 
@@ -59,8 +61,14 @@ def test_whole_planes_fixed_give_the_exact_block_inverse(cell):
     C = np.tile(_orthotropic(dim), (d.nelems, 1, 1))
     K = d.stiffness(C).tocsr()
     x = d.doflocs
-    fixed = np.unique(np.concatenate([d.part_dofs(lambda p: p[0] < 1e-9, range(dim)),
-                                      d.part_dofs(lambda p: p[1] < 1e-9, [1])]))
+    fixed = np.unique(
+        np.concatenate(
+            [
+                d.part_dofs(lambda p: p[0] < 1e-9, range(dim)),
+                d.part_dofs(lambda p: p[1] < 1e-9, [1]),
+            ]
+        )
+    )
     free = np.setdiff1d(np.arange(d.ndof), fixed)
     A = K[free][:, free]
     comp = free % dim
@@ -79,29 +87,40 @@ def test_point_constraints_keep_it_symmetric_positive_definite():
     components without a whole fixed plane: no preconditioner."""
     d = _box((2.0, 1.0, 1.0), 1, "hex")
     C = np.tile(np.linalg.inv(isotropic_compliance(100.0, 0.45)), (d.nelems, 1, 1))
-    top = lambda p: (p[0] < 1e-9) & (p[1] < 1e-9) & (p[2] > 1 - 1e-9)          # noqa: E731
-    top2 = lambda p: (p[0] > 2 - 1e-9) & (p[1] < 1e-9) & (p[2] > 1 - 1e-9)     # noqa: E731
-    fixed = np.unique(np.concatenate([d.part_dofs(lambda p: p[2] < 1e-9, range(3)), d.part_dofs(top, [0]),
-                                      d.part_dofs(top2, [0, 1])]))
+    top = lambda p: (p[0] < 1e-9) & (p[1] < 1e-9) & (p[2] > 1 - 1e-9)  # noqa: E731
+    top2 = lambda p: (p[0] > 2 - 1e-9) & (p[1] < 1e-9) & (p[2] > 1 - 1e-9)  # noqa: E731
+    fixed = np.unique(
+        np.concatenate(
+            [
+                d.part_dofs(lambda p: p[2] < 1e-9, range(3)),
+                d.part_dofs(top, [0]),
+                d.part_dofs(top2, [0, 1]),
+            ]
+        )
+    )
     free = np.setdiff1d(np.arange(d.ndof), fixed)
     P = tensorpre.preconditioner(d.doflocs, free, C)
     Pd = np.column_stack([P(e) for e in np.eye(len(free))])
     np.testing.assert_allclose(Pd, Pd.T, atol=1e-12 * np.abs(Pd).max())
     assert np.linalg.eigvalsh(0.5 * (Pd + Pd.T)).min() > 0
-    corner = lambda p: (p[0] < 1e-9) & (p[1] < 1e-9) & (p[2] < 1e-9)           # noqa: E731
-    stretch = np.unique(np.concatenate([d.part_dofs(lambda p: p[0] < 1e-9, [0]), d.part_dofs(corner, [1, 2])]))
+    corner = lambda p: (p[0] < 1e-9) & (p[1] < 1e-9) & (p[2] < 1e-9)  # noqa: E731
+    stretch = np.unique(
+        np.concatenate([d.part_dofs(lambda p: p[0] < 1e-9, [0]), d.part_dofs(corner, [1, 2])])
+    )
     assert tensorpre.preconditioner(d.doflocs, np.setdiff1d(np.arange(d.ndof), stretch), C) is None
 
 
 def _shear_problem(nu=0.49, n=2, regions=False):
     d = _box((4.0, 1.0, 1.0), n, "hex")
     C = np.tile(np.linalg.inv(isotropic_compliance(1e3, nu)), (d.nelems, 1, 1))
-    if regions:   # a stiffer half: the preconditioner sees the mean moduli only
+    if regions:  # a stiffer half: the preconditioner sees the mean moduli only
         C[d.centroids()[:, 0] > 2.0] *= 2.0
     K = d.stiffness(C)
     fixed = d.part_dofs(lambda p: p[2] < 1e-9, range(3))
-    F = {"shear": d.traction_load(d.part_facets(lambda p: p[2] > 1 - 1e-9), (1.0, 0.0, 0.0)),
-         "sag": d.body_load(np.tile([0.0, -1.0, -2.0], (d.nelems, 1)))}
+    F = {
+        "shear": d.traction_load(d.part_facets(lambda p: p[2] > 1 - 1e-9), (1.0, 0.0, 0.0)),
+        "sag": d.body_load(np.tile([0.0, -1.0, -2.0], (d.nelems, 1))),
+    }
     return d, C, K, F, {n: fixed for n in F}
 
 
@@ -112,7 +131,7 @@ def test_tensor_solves_match_the_cholesky(regions):
     U = solve_system(K, F, fx, "tensor", d, records=info, C=C)
     V = solve_system(K, F, fx, "cholesky", d)
     assert info[0].method == "tensor" and not info[0].fallbacks
-    assert info[0].matrix_free == (not regions)      # one tensor: K never assembled
+    assert info[0].matrix_free == (not regions)  # one tensor: K never assembled
     for n in F:
         assert np.abs(U[n] - V[n]).max() <= 1e-8 * np.abs(V[n]).max()
 
@@ -136,7 +155,7 @@ def test_a_failed_tensor_cg_falls_back(monkeypatch, how):
 
 
 @pytest.mark.parametrize("regions", [False, True])
-@pytest.mark.parametrize("smallest", [0, 10 ** 9])
+@pytest.mark.parametrize("smallest", [0, 10**9])
 def test_auto_takes_it_from_its_smallest_size(monkeypatch, smallest, regions):
     """One tensor: the matrix-free CG from plan.MATRIX_FREE_MIN; two: the assembled one
     from plan.TENSOR_MIN."""
@@ -166,7 +185,9 @@ def test_a_drifted_cg_is_restarted_from_the_true_residual(monkeypatch):
     monkeypatch.setattr(sparse, "_pcg", drifting)
     d, C, K, F, fx = _shear_problem(nu=0.3)
     info: list = []
-    U = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "tensor", d, records=info, C=C)
+    U = solve_system(
+        K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "tensor", d, records=info, C=C
+    )
     V = solve_system(K, {"shear": F["shear"]}, {"shear": fx["shear"]}, "cholesky", d)
     assert info[0].method == "tensor" and not info[0].fallbacks and len(calls) >= 2
     assert np.abs(U["shear"] - V["shear"]).max() <= 1e-8 * np.abs(V["shear"]).max()

@@ -23,13 +23,19 @@ def _problem():
     C = np.linalg.inv(isotropic_compliance(1e3, 0.49))
     basis, K = _skfem_stiffness(mesh, C)
     x = basis.doflocs[:, ::3]
-    nodes = lambda f: np.flatnonzero(f(x))                                  # noqa: E731
-    fixed = np.unique(np.concatenate([(3 * nodes(lambda p: p[2] < 1e-9)[:, None] + np.arange(3)).ravel(),  # clamped z0
-                                      3 * nodes(lambda p: p[1] < 1e-9) + 1]))                    # u_y = 0 on y0
+    nodes = lambda f: np.flatnonzero(f(x))  # noqa: E731
+    fixed = np.unique(
+        np.concatenate(
+            [
+                (3 * nodes(lambda p: p[2] < 1e-9)[:, None] + np.arange(3)).ravel(),  # clamped z0
+                3 * nodes(lambda p: p[1] < 1e-9) + 1,
+            ]
+        )
+    )  # u_y = 0 on y0
     b = np.zeros((K.shape[0], 2))
     top = nodes(lambda p: p[2] > 1 - 1e-9)
-    b[3 * top, 0] = 1.0                                                     # x-forces on the top face's nodes
-    b[3 * nodes(lambda p: p[0] > 3 - 1e-9) + 2, 1] = -1.0                   # z-forces on the end x1
+    b[3 * top, 0] = 1.0  # x-forces on the top face's nodes
+    b[3 * nodes(lambda p: p[0] > 3 - 1e-9) + 2, 1] = -1.0  # z-forces on the end x1
     return x, C, K, fixed, b
 
 
@@ -43,7 +49,7 @@ def test_the_matrix_free_solve_is_the_dense_solve():
     assert rec.matrix_free and rec.residual <= rec.rtol and rec.iterations > 10
     assert np.abs(got - want).max() <= 1e-8 * np.abs(want).max()
     assert np.all(got[fixed] == 0)
-    exact, again = tensorsolve.solve(A, b, fixed, x0=want)          # from the solution: nothing to do
+    exact, again = tensorsolve.solve(A, b, fixed, x0=want)  # from the solution: nothing to do
     assert again.iterations == 0 and np.abs(exact - want).max() <= 1e-12 * np.abs(want).max()
 
 
@@ -54,7 +60,7 @@ def test_lattice_fields_round_trip():
     assert lat.to_lattice(v).shape == (2, 3) + lat.shape and lat.field_shape == (3,) + lat.shape
     np.testing.assert_array_equal(lat.from_lattice(lat.to_lattice(v)), v)
     np.testing.assert_array_equal(lat.from_lattice(lat.to_lattice(v[:, 0])), v[:, 0])
-    grid = Lattice.of(x)        # any tensor grid; q2 checks the midpoints besides
+    grid = Lattice.of(x)  # any tensor grid; q2 checks the midpoints besides
     assert all(np.array_equal(a, b) for a, b in zip(grid.axes, lat.axes))
     np.testing.assert_array_equal(lat.to_lattice(v[:, 0])[1].ravel()[grid.index], v[1::3, 0])
     np.testing.assert_array_equal(grid.grid(v[1::3, :1])[..., 0], lat.to_lattice(v[:, 0])[1])
@@ -62,7 +68,7 @@ def test_lattice_fields_round_trip():
 
 @pytest.mark.slow
 def test_levels_in_one_thread_or_two_agree(tmp_path, monkeypatch):
-    monkeypatch.setattr(plan, "MATRIX_FREE_MIN", {3: 0})       # the coarse levels through the CG too
+    monkeypatch.setattr(plan, "MATRIX_FREE_MIN", {3: 0})  # the coarse levels through the CG too
     case = box_case(tmp_path, size=(2.0, 1.0, 1.0), nu=0.45, reference_keys="max_refine = 0")
     runs = []
     for workers in (1, 2):

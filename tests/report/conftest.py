@@ -14,16 +14,20 @@ from tests.fakestage import FAKE, write_case
 ROOT = Path(__file__).resolve().parents[2]
 STORED = ROOT / "results"
 # stored results copied into the test's folder: (suite, case, data files besides the manifest)
-FIXTURES = [("deussen1995", "fig08_grid25_grouped", ["trace.csv", "deformed-deussen-sa.npz"]),
-            ("bourguignon2000", "volume_cube343", ["volume.csv"]),
-            ("bourguignon2000", "fem_cube333_tetra", ["anisotropy.csv"])]
+FIXTURES = [
+    ("deussen1995", "fig08_grid25_grouped", ["trace.csv", "deformed-deussen-sa.npz"]),
+    ("bourguignon2000", "volume_cube343", ["volume.csv"]),
+    ("bourguignon2000", "fem_cube333_tetra", ["anisotropy.csv"]),
+]
 
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     """A small results folder holding copies of a few stored results (their manifests and
     data files) and a benchmark CSV."""
-    missing = [f"{s}/{c}" for s, c, _ in FIXTURES if not (STORED / s / c / "result-seed0.json").is_file()]
+    missing = [
+        f"{s}/{c}" for s, c, _ in FIXTURES if not (STORED / s / c / "result-seed0.json").is_file()
+    ]
     if missing:
         pytest.skip(f"stored results missing: {missing}")
     res = tmp_path_factory.mktemp("site") / "results"
@@ -31,7 +35,8 @@ def site(tmp_path_factory):
         dst = res / suite / case
         dst.mkdir(parents=True)
         m = json.loads((STORED / suite / case / "result-seed0.json").read_text())
-        m["file"] = str(ROOT / "cases" / suite / f"{case}.toml")   # the manifest names this checkout's case
+        # the manifest names this checkout's case
+        m["file"] = str(ROOT / "cases" / suite / f"{case}.toml")
         (dst / "result-seed0.json").write_text(json.dumps(m))
         for f in files:
             shutil.copy(STORED / suite / case / f, dst / f)
@@ -46,6 +51,7 @@ def built(site):
     case), rebuilt by `springbench report`: (index.html, its text)."""
     mp = pytest.MonkeyPatch()
     from harness import registry
+
     mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": FAKE}))
     try:
         suite = site.parent / "cases" / "demo"

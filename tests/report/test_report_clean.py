@@ -20,19 +20,29 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def fake_bench(folder: Path, monkeypatch, frame: str):
-    """``bench reference`` runs a module written here whose run() returns ``frame`` (Python source)."""
+    """``bench reference`` runs a module written here whose run() returns ``frame`` (Python
+    source)."""
     import re
 
     from harness import registry
-    name = "fake_bench_" + re.sub(r"\W", "_", folder.name)      # one module per test (imports are cached)
+
+    # one module per test (imports are cached)
+    name = "fake_bench_" + re.sub(r"\W", "_", folder.name)
     (folder / f"{name}.py").write_text(f"import pandas\ndef run(quick):\n    return {frame}\n")
     monkeypatch.syspath_prepend(str(folder))
-    monkeypatch.setattr(registry, "BENCHES", registry.BENCHES.with_entries({**registry.BENCHES.entries,
-                                                                             "reference": name}))
+    monkeypatch.setattr(
+        registry,
+        "BENCHES",
+        registry.BENCHES.with_entries({**registry.BENCHES.entries, "reference": name}),
+    )
 
 
 def snapshot(folder: Path) -> dict:
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 @pytest.fixture
@@ -44,12 +54,14 @@ def drawn(monkeypatch):
     def counting(mods, folder):
         names.extend(m.NAME for m in mods)
         return real(mods, folder)
+
     monkeypatch.setattr(figures, "_make", counting)
     return names
 
 
 def test_report_twice_is_byte_identical_and_a_copy_redraws_nothing(tmp_path, fake, drawn, capsys):
     from harness.run.runner import run_suite
+
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a", "rows=3 files=1")
     write_case(suite, "b", "rows=2", extra="[run]\nseeds = [0, 1]")
@@ -58,7 +70,7 @@ def test_report_twice_is_byte_identical_and_a_copy_redraws_nothing(tmp_path, fak
     assert cli.main(["report", "--results", str(res)]) == 0
     first = snapshot(res)
     assert "README.md" in first and "index.html" in first
-    copy = tmp_path / "copy"                 # a fresh checkout: new mtimes, another folder
+    copy = tmp_path / "copy"  # a fresh checkout: new mtimes, another folder
     shutil.copytree(res, copy)
     drawn.clear()
     assert cli.main(["report", "--results", str(copy)]) == 0
@@ -67,6 +79,7 @@ def test_report_twice_is_byte_identical_and_a_copy_redraws_nothing(tmp_path, fak
     assert drawn == [] and snapshot(copy) == first
     # new data for one kind: that kind alone is redrawn in that folder
     import pandas as pd
+
     trace = copy / "demo" / "a" / "trace.csv"
     t = pd.read_csv(trace)
     more = t.tail(1).copy()
@@ -80,6 +93,7 @@ def test_report_twice_is_byte_identical_and_a_copy_redraws_nothing(tmp_path, fak
 
 def test_report_and_bench_write_into_runs_by_default(tmp_path, monkeypatch, capsys):
     import harness.paths as paths
+
     monkeypatch.setattr(paths, "DEFAULT_RUNS", tmp_path / "runs")
     monkeypatch.setattr(paths, "DEFAULT_RESULTS", tmp_path / "results")
     assert cli.main(["report"]) == 2
@@ -91,6 +105,7 @@ def test_report_and_bench_write_into_runs_by_default(tmp_path, monkeypatch, caps
     import pandas as pd
 
     from harness.commands import bench
+
     fake_bench(tmp_path, monkeypatch, "pandas.DataFrame({'n': [1]})")
     assert bench.main(args) == 0
     assert pd.read_csv(tmp_path / "runs" / "bench" / "reference.csv")["n"].tolist() == [1]

@@ -18,11 +18,39 @@ import pytest
 
 from harness.report.headlines import fmt, pair
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
+HERE = Path(__file__).resolve().parents[1]  # tests/
 ROOT = HERE.parent
 
-VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
-BLOCK = {"table", "div", "ul", "ol", "dl", "figure", "section", "h1", "h2", "h3", "p", "details", "nav"}
+VOID = {
+    "area",
+    "base",
+    "br",
+    "col",
+    "embed",
+    "hr",
+    "img",
+    "input",
+    "link",
+    "meta",
+    "source",
+    "track",
+    "wbr",
+}
+BLOCK = {
+    "table",
+    "div",
+    "ul",
+    "ol",
+    "dl",
+    "figure",
+    "section",
+    "h1",
+    "h2",
+    "h3",
+    "p",
+    "details",
+    "nav",
+}
 
 
 class Page(HTMLParser):
@@ -110,7 +138,8 @@ def test_page_is_valid_html5_with_relative_links_that_resolve(built):
     assert page.imgs and all(i.get("alt") and i.get("width") and i.get("height") for i in page.imgs)
     root = path.parent
     for link in page.links:
-        assert link and not re.match(r"^[a-z]+:|^/", link), link      # relative: works from file:// and http
+        # relative: works from file:// and http
+        assert link and not re.match(r"^[a-z]+:|^/", link), link
         target, _, frag = unquote(link).partition("#")
         if target:
             assert (root / target).is_file(), link
@@ -119,13 +148,15 @@ def test_page_is_valid_html5_with_relative_links_that_resolve(built):
     for name in ("summary.csv", "seeds.csv"):
         assert f"demo/{name}" in page.links
     assert "bench/sa.csv" in page.links
-    assert re.search(r"<li>c: [^<]*material\.E: E must be positive", text)   # a failed row says why
+    assert re.search(r"<li>c: [^<]*material\.E: E must be positive", text)  # a failed row says why
     # every figure of every case is reachable, the key ones shown full width with a caption
     pngs = {p.relative_to(root).as_posix() for p in root.rglob("fig-*.png")}
     assert pngs and pngs <= set(page.links)
     assert text.count("<figure>") == text.count("<figcaption>") >= 4
-    assert {"bourguignon2000/volume_cube343/fig-volume.png",
-            "deussen1995/fig08_grid25_grouped/fig-deformed-deussen-sa.png"} <= {i["src"] for i in page.imgs}
+    assert {
+        "bourguignon2000/volume_cube343/fig-volume.png",
+        "deussen1995/fig08_grid25_grouped/fig-deformed-deussen-sa.png",
+    } <= {i["src"] for i in page.imgs}
 
 
 def test_curated_tables_come_from_the_stored_results(built, site):
@@ -134,16 +165,25 @@ def test_curated_tables_come_from_the_stored_results(built, site):
     # no raw dump: every table is a curated one, far narrower than summary.csv
     assert max(len(t[0]) for t in page.tables) <= 12
     assert len(pd.read_csv(site / "deussen1995" / "summary.csv").columns) > 30
-    # Deussen Fig. 8: the SA row, against the stored manifest's own numbers and the case's paper values
-    m = json.loads((site / "deussen1995" / "fig08_grid25_grouped" / "result-seed0.json").read_text())
+    # Deussen Fig. 8: the SA row, against the stored manifest's own numbers and the case's paper
+    # values
+    m = json.loads(
+        (site / "deussen1995" / "fig08_grid25_grouped" / "result-seed0.json").read_text()
+    )
     sa = next(r for r in m["rows"] if r.get("optimizer") == "sa" and r.get("objective", "G") == "G")
     row = next(r for r in table(page, "case") if r["case"].startswith("Fig. 8"))
     g0, g1 = map(number, row["G before \u2192 after"].split("\u2192"))
-    assert g0 == pytest.approx(sa["G_initial"], rel=5e-3) and g1 == pytest.approx(sa["G_final"], rel=5e-3)
+    assert g0 == pytest.approx(sa["G_initial"], rel=5e-3) and g1 == pytest.approx(
+        sa["G_final"], rel=5e-3
+    )
     ours, paper = (number(v) for v in row["improvement ours / paper"].split("/"))
     assert ours == pytest.approx(sa["G_initial"] / sa["G_final"], rel=2e-2)
     assert paper == pytest.approx(m["expect"]["G_initial"] / m["expect"]["G_final"], rel=2e-2)
-    assert row["weights"] == "1:6:18" and row["springs"] == str(sa["n_springs"]) and row["status"] == "ok"
+    assert (
+        row["weights"] == "1:6:18"
+        and row["springs"] == str(sa["n_springs"])
+        and row["status"] == "ok"
+    )
     # B&C Fig. 3: the peak |dV/V| of each model, straight from the stored curve
     vol = pd.read_csv(site / "bourguignon2000" / "volume_cube343" / "volume.csv")
     peak = next(r for r in table(page, "experiment") if r["experiment"].startswith("Fig. 3"))
@@ -159,13 +199,18 @@ def test_volume_figure_overlays_the_original_program(site):
     """The figure's alignment of the original record with our curve reproduces the stage's
     own deviation column (computed when the case ran, by another code path)."""
     from harness.report.figures import volume
+
     folder = site / "bourguignon2000" / "volume_cube343"
     orig = volume.original_curves(folder)
     if not orig:
-        pytest.skip("the original program's record (../shared/reference-data/bourguignon2000) is not here")
+        pytest.skip(
+            "the original program's record (../shared/reference-data/bourguignon2000) is not here"
+        )
     dev = volume.deviations(pd.read_csv(folder / "volume.csv"), orig)
-    stage = {r["model"]: r["max_dev_vs_original_percent"] for r in
-             json.loads((folder / "result-seed0.json").read_text())["rows"]}
+    stage = {
+        r["model"]: r["max_dev_vs_original_percent"]
+        for r in json.loads((folder / "result-seed0.json").read_text())["rows"]
+    }
     assert set(dev) == {"MS", "MT0", "MT"}
     for model, (_, _, d) in dev.items():
         assert np.abs(d).max() == pytest.approx(stage[model], rel=1e-6, abs=1e-12)
@@ -177,17 +222,23 @@ def test_3d_shapes_show_the_faces_towards_the_viewer(tmp_path):
     from itertools import product
 
     from harness.report.figures import deformed
+
     p = np.array(list(product([0.0, 1.0], repeat=3)))
-    edges = np.array([(i, j) for i in range(8) for j in range(i + 1, 8) if np.abs(p[i] - p[j]).sum() == 1])
+    edges = np.array(
+        [(i, j) for i in range(8) for j in range(i + 1, 8) if np.abs(p[i] - p[j]).sum() == 1]
+    )
     nodes, springs = deformed.visible_surface(p, edges)
     assert len(edges) == 12 and springs.sum() == 9
     assert p[~nodes].tolist() == [[0.0, 1.0, 0.0]]
-    np.savez(tmp_path / "deformed-m.npz", points=p, springs=edges, u_ref_pull=0.01 * p, u_pull=0.011 * p)
+    np.savez(
+        tmp_path / "deformed-m.npz", points=p, springs=edges, u_ref_pull=0.01 * p, u_pull=0.011 * p
+    )
     assert [f.name for f in deformed.make(tmp_path)] == ["fig-deformed-m.png"]
 
 
 def test_log_axis_only_where_values_span_decades():
     from harness.report.figures import log_if_decades, subplots
+
     fig, ax = subplots()
     assert not log_if_decades(ax, [1.0, 10.0]) and ax.get_yscale() == "linear"
     assert not log_if_decades(ax, [-1.0, 1000.0])
@@ -195,22 +246,41 @@ def test_log_axis_only_where_values_span_decades():
 
 
 def _chromium() -> str:
-    exe = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
+    exe = next(
+        (
+            shutil.which(n)
+            for n in ("chromium", "chromium-browser", "google-chrome")
+            if shutil.which(n)
+        ),
+        None,
+    )
     if exe is None:
         pytest.skip("chromium is not installed (apt-get install -y chromium; .ci/run installs it)")
     return exe
 
 
 def _browse(exe: str, tmp: Path, *args: str) -> subprocess.CompletedProcess:
-    cmd = [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-           "--disable-background-networking", "--disable-component-update", "--disable-sync",
-           f"--user-data-dir={tmp / 'profile'}", "--window-size=1280,2000", *args]
+    cmd = [
+        exe,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-quic",
+        "--no-first-run",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        f"--user-data-dir={tmp / 'profile'}",
+        "--window-size=1280,2000",
+        *args,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
 
 
 @pytest.mark.slow
 def test_page_renders_in_headless_chromium(built, tmp_path):
     from PIL import Image
+
     exe = _chromium()
     path, text = built
     shot = tmp_path / "page.png"
@@ -218,11 +288,16 @@ def test_page_renders_in_headless_chromium(built, tmp_path):
     assert shot.is_file(), r.stderr[-2000:]
     img = np.asarray(Image.open(shot).convert("L"), float)
     assert img.shape == (2000, 1280)
-    assert (img < 200).mean() > 0.01 and img.std() > 10     # text and tables, not a blank page
+    assert (img < 200).mean() > 0.01 and img.std() > 10  # text and tables, not a blank page
     # the DOM as Chromium parsed it, with the page's layout width measured after load
     probe = path.with_name("index-probe.html")
-    probe.write_text(text.replace("</body>", "<script>var d = document.documentElement; document.body.setAttribute("
-                                  "'data-overflow', String(d.scrollWidth - d.clientWidth));</script></body>"))
+    probe.write_text(
+        text.replace(
+            "</body>",
+            "<script>var d = document.documentElement; document.body.setAttribute("
+            "'data-overflow', String(d.scrollWidth - d.clientWidth));</script></body>",
+        )
+    )
     r = _browse(exe, tmp_path, "--dump-dom", probe.as_uri())
     dom = r.stdout
     assert "<h1>springbench results</h1>" in dom, r.stderr[-2000:]

@@ -23,7 +23,7 @@ from harness import cli
 from harness.case.reader import Case, load_case
 from harness.errors import CaseError
 
-HERE = Path(__file__).resolve().parents[1]   # tests/
+HERE = Path(__file__).resolve().parents[1]  # tests/
 CATALOGUE = sorted((HERE / "bad_inputs").glob("*.toml"))
 ERROR = re.compile(r"^springbench( \w+)?: (error: )?")
 
@@ -58,9 +58,17 @@ def test_catalogue_is_large_and_annotated():
     from tests.commands.test_bad_commands import COMMAND_CASES
     from tests.commands.test_bad_outputs import OUTPUT_CASES
     from tests.commands.test_bad_score import SCORE_FLAG_CASES
-    names = ([f"case file {p.name}" for p in CATALOGUE] + [f"cli {' '.join(a)}" for a, _ in CLI_CASES]
-             + CALIBRATE_CASES + BAD_CASES + COMMAND_CASES + OUTPUT_CASES + SCORE_FLAG_CASES
-             + [f"case key {key} = a {kind} ({base['']['name']})" for base, key, kind in PARAMS])
+
+    names = (
+        [f"case file {p.name}" for p in CATALOGUE]
+        + [f"cli {' '.join(a)}" for a, _ in CLI_CASES]
+        + CALIBRATE_CASES
+        + BAD_CASES
+        + COMMAND_CASES
+        + OUTPUT_CASES
+        + SCORE_FLAG_CASES
+        + [f"case key {key} = a {kind} ({base['']['name']})" for base, key, kind in PARAMS]
+    )
     assert len(set(names)) == len(names) >= 300, len(names)
     assert all(header(p, "expect") for p in CATALOGUE)
 
@@ -91,6 +99,7 @@ def catalogue_run(tmp_path_factory):
     import shutil
 
     from harness import registry
+
     work = tmp_path_factory.mktemp("catalogue")
     cat = work / "bad_inputs"  # a copy: the fake stage writes calls.log beside the case files
     shutil.copytree(HERE / "bad_inputs", cat)
@@ -98,12 +107,24 @@ def catalogue_run(tmp_path_factory):
     out = {}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": "tests.fakestage"}))
-        for mode, paths in (("--quick", [cat]),
-                            ("--full", [cat / p.name for p in CATALOGUE if header(p, "only") == ["full"]])):
+        for mode, paths in (
+            ("--quick", [cat]),
+            ("--full", [cat / p.name for p in CATALOGUE if header(p, "only") == ["full"]]),
+        ):
             err = io.StringIO()
             with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-                code = cli.main(["run", *map(str, paths), "--results", str(res), "--jobs", "1",
-                                 "--no-figures", mode])
+                code = cli.main(
+                    [
+                        "run",
+                        *map(str, paths),
+                        "--results",
+                        str(res),
+                        "--jobs",
+                        "1",
+                        "--no-figures",
+                        mode,
+                    ]
+                )
             out[mode] = (code, [ln for ln in err.getvalue().splitlines() if ln.strip()])
     return res, out
 
@@ -124,10 +145,14 @@ def test_catalogue_run(path, catalogue_run):
 
 def test_catalogue_run_writes_only_inside_results(catalogue_run):
     import pandas as pd
+
     res, out = catalogue_run
     root = res.parent
-    assert all(p.resolve().is_relative_to(res.resolve()) or p.is_relative_to(root / "bad_inputs")
-               for p in root.rglob("*") if p.is_file())
+    assert all(
+        p.resolve().is_relative_to(res.resolve()) or p.is_relative_to(root / "bad_inputs")
+        for p in root.rglob("*")
+        if p.is_file()
+    )
     assert not (HERE / "bad_inputs" / "calls.log").exists()
     df = pd.read_csv(res / "bad_inputs" / "summary.csv")
     assert (df.status == "error").all() and len(df) == len(CATALOGUE)
@@ -141,7 +166,10 @@ CLI_CASES = [
     (["run", "--quick", "--full"], "not allowed with argument"),
     (["run", "--frobnicate"], "unrecognized arguments: --frobnicate"),
     (["run", "no/such/case.toml"], "no/such/case.toml: no such file or folder (check the path)"),
-    (["run", "--scheduler", "tcp://127.0.0.1:1", "CASES"], "--scheduler: --scheduler needs --executor dask"),
+    (
+        ["run", "--scheduler", "tcp://127.0.0.1:1", "CASES"],
+        "--scheduler: --scheduler needs --executor dask",
+    ),
     (["run", "CASES", "--results", "AFILE"], "--results: exists and is not a folder"),
     (["report", "no/such/results"], "no/such/results: no such folder"),
     (["validate"], "the following arguments are required: FILE"),
@@ -154,8 +182,14 @@ CLI_CASES = [
 @pytest.mark.parametrize("argv, expect", CLI_CASES, ids=[" ".join(a) for a, _ in CLI_CASES])
 def test_cli_flags(argv, expect, tmp_path, capsys, fake):
     (tmp_path / "AFILE").write_text("x")
-    argv = [str(tmp_path / "AFILE") if a == "AFILE" else str(HERE / "bad_inputs" / "E_zero.toml")
-            if a == "CASES" else a for a in argv]
+    argv = [
+        str(tmp_path / "AFILE")
+        if a == "AFILE"
+        else str(HERE / "bad_inputs" / "E_zero.toml")
+        if a == "CASES"
+        else a
+        for a in argv
+    ]
     code, err, _ = cli_run(argv, capsys)
     assert code == 2
     assert len(err) == 1 and ERROR.match(err[0]) and "Traceback" not in err[0], err
@@ -164,17 +198,28 @@ def test_cli_flags(argv, expect, tmp_path, capsys, fake):
 
 def test_through_a_real_process(tmp_path):
     """The installed entry point: exit status 2, one line, no traceback."""
-    for argv in (["validate", str(HERE / "bad_inputs" / "mesh_inverted_tet.toml")],
-                 ["run", "--jobs", "-3"],
-                 ["report", str(tmp_path)]):
-        p = subprocess.run([sys.executable, "-m", "harness", *argv], capture_output=True, text=True,
-                           timeout=120, cwd=tmp_path, env={**os.environ, "PYTHONPATH": os.pathsep.join(
-                               [str(HERE.parent), os.environ.get("PYTHONPATH", "")])})
+    for argv in (
+        ["validate", str(HERE / "bad_inputs" / "mesh_inverted_tet.toml")],
+        ["run", "--jobs", "-3"],
+        ["report", str(tmp_path)],
+    ):
+        p = subprocess.run(
+            [sys.executable, "-m", "harness", *argv],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            cwd=tmp_path,
+            env={
+                **os.environ,
+                "PYTHONPATH": os.pathsep.join([str(HERE.parent), os.environ.get("PYTHONPATH", "")]),
+            },
+        )
         lines = p.stderr.strip().splitlines()
         assert p.returncode == 2 and len(lines) == 1 and "Traceback" not in p.stderr, p.stderr
 
 
 # -- case files cannot run code ---------------------------------------------------------------
+
 
 def test_case_files_cannot_run_code(tmp_path):
     marker = tmp_path / "pwned"
@@ -196,7 +241,9 @@ nu = 0.25
     root = HERE.parent / "harness"
     for f in ("case/reader.py", "case/schema.py", "case/sections.py"):
         src = (root / f).read_text()
-        assert not re.search(r"\b(eval|exec|compile|__import__)\s*\(|pickle|yaml|import_module", src), f
+        assert not re.search(
+            r"\b(eval|exec|compile|__import__)\s*\(|pickle|yaml|import_module", src
+        ), f
 
 
 # -- property test: the parser returns a Case or raises CaseError, nothing else -----------------
@@ -205,26 +252,123 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-KEYS = ["name", "dim", "description", "tags", "body", "shape", "size", "origin", "vertices", "file",
-        "format", "parts", "box", "material", "E", "nu", "density", "plane", "fibre", "E_fibre",
-        "E_cross", "direction", "field", "regions", "loads", "set", "magnitude", "case", "constraint",
-        "part", "components", "traction", "vector", "gravity", "reference", "element", "cell", "tol",
-        "quick", "full", "score", "weights", "run", "seeds", "stages", "expect", "values", "model",
-        "kind", "bogus", "x0"]
-WORDS = ["x0", "x1", "y0", "x0y0", "basic2d", "basic3d", "rectangle", "box", "polygon", "mesh",
-         "stress", "strain", "P1", "P2", "tri", "quad", "tet", "hex", "all", "z", "vertical", "sms",
-         "stretch-x", "..", "", "/", "nan"]
-SCALARS = (st.booleans() | st.integers(-5, 5) | st.integers() | st.floats() | st.text(max_size=6)
-           | st.sampled_from(WORDS))
-VALUES = st.recursive(SCALARS, lambda ch: st.lists(ch, max_size=4)
-                      | st.dictionaries(st.sampled_from(KEYS) | st.text(max_size=4), ch, max_size=4),
-                      max_leaves=12)
+KEYS = [
+    "name",
+    "dim",
+    "description",
+    "tags",
+    "body",
+    "shape",
+    "size",
+    "origin",
+    "vertices",
+    "file",
+    "format",
+    "parts",
+    "box",
+    "material",
+    "E",
+    "nu",
+    "density",
+    "plane",
+    "fibre",
+    "E_fibre",
+    "E_cross",
+    "direction",
+    "field",
+    "regions",
+    "loads",
+    "set",
+    "magnitude",
+    "case",
+    "constraint",
+    "part",
+    "components",
+    "traction",
+    "vector",
+    "gravity",
+    "reference",
+    "element",
+    "cell",
+    "tol",
+    "quick",
+    "full",
+    "score",
+    "weights",
+    "run",
+    "seeds",
+    "stages",
+    "expect",
+    "values",
+    "model",
+    "kind",
+    "bogus",
+    "x0",
+]
+WORDS = [
+    "x0",
+    "x1",
+    "y0",
+    "x0y0",
+    "basic2d",
+    "basic3d",
+    "rectangle",
+    "box",
+    "polygon",
+    "mesh",
+    "stress",
+    "strain",
+    "P1",
+    "P2",
+    "tri",
+    "quad",
+    "tet",
+    "hex",
+    "all",
+    "z",
+    "vertical",
+    "sms",
+    "stretch-x",
+    "..",
+    "",
+    "/",
+    "nan",
+]
+SCALARS = (
+    st.booleans()
+    | st.integers(-5, 5)
+    | st.integers()
+    | st.floats()
+    | st.text(max_size=6)
+    | st.sampled_from(WORDS)
+)
+VALUES = st.recursive(
+    SCALARS,
+    lambda ch: (
+        st.lists(ch, max_size=4)
+        | st.dictionaries(st.sampled_from(KEYS) | st.text(max_size=4), ch, max_size=4)
+    ),
+    max_leaves=12,
+)
 
-BASE = {"name": "p", "dim": 2, "body": {"shape": "rectangle", "size": [2.0, 1.0]},
-        "material": {"E": 100.0, "nu": 0.3},
-        "loads": {"set": "basic2d", "case": [{"name": "pull", "constraint": [{"part": "x0"}],
-                                              "traction": [{"part": "x1", "vector": [1.0, 0.0]}]}]},
-        "score": {"weights": [1.0, 3.0, 15.0]}, "run": {"seeds": [0, 1]}}
+BASE = {
+    "name": "p",
+    "dim": 2,
+    "body": {"shape": "rectangle", "size": [2.0, 1.0]},
+    "material": {"E": 100.0, "nu": 0.3},
+    "loads": {
+        "set": "basic2d",
+        "case": [
+            {
+                "name": "pull",
+                "constraint": [{"part": "x0"}],
+                "traction": [{"part": "x1", "vector": [1.0, 0.0]}],
+            }
+        ],
+    },
+    "score": {"weights": [1.0, 3.0, 15.0]},
+    "run": {"seeds": [0, 1]},
+}
 
 
 def toml_value(v) -> str:
@@ -233,7 +377,9 @@ def toml_value(v) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+        return (
+            "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf") if math.isinf(v) else repr(v)
+        )
     if isinstance(v, str):
         return json.dumps(v, ensure_ascii=False)
     if isinstance(v, list):

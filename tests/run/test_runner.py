@@ -76,6 +76,7 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     module re-runs its cases; editing nothing re-runs nothing."""
     import shutil
     import uuid
+
     mods = tmp_path / "mods"
     mods.mkdir()
     name = f"fake_copy_{uuid.uuid4().hex[:8]}"
@@ -89,7 +90,9 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     manifest = json.loads((res / "demo" / "a" / "result-seed0.json").read_text())
     assert str(src.resolve()) in manifest["code"] and "harness/case/reader.py" in manifest["code"]
-    assert not any(k.startswith(("harness/commands/", "harness/report/figures/")) for k in manifest["code"])
+    assert not any(
+        k.startswith(("harness/commands/", "harness/report/figures/")) for k in manifest["code"]
+    )
     rep = run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     assert len(rep.skipped) == 1 and len(calls(suite)) == 1
     src.write_text(src.read_text() + "\n# an edit\n")
@@ -133,7 +136,7 @@ def test_same_seed_identical_tables(tmp_path, fake):
     run_suite([suite], results=res, jobs=1, figures=False, progress=False, force=True)
     second = (res / "demo" / "summary.csv").read_text()
     assert len(calls(suite)) == 6
-    assert first != second                       # the timing column did change ...
+    assert first != second  # the timing column did change ...
     assert strip_timing(first) == strip_timing(second)  # ... nothing else did
     df = __import__("pandas").read_csv(res / "demo" / "summary.csv")
     a = df[df.case == "a"]
@@ -151,7 +154,10 @@ def test_seed_folders_and_pruning(tmp_path, fake):
     run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     d = res / "demo" / "a"
     assert (d / "seed3" / "trace.csv").exists() and (d / "seed4" / "volume.csv").exists()
-    assert sorted(f.name for f in d.glob("result-seed*.json")) == ["result-seed3.json", "result-seed4.json"]
+    assert sorted(f.name for f in d.glob("result-seed*.json")) == [
+        "result-seed3.json",
+        "result-seed4.json",
+    ]
     p.write_text(p.read_text().replace("[3, 4]", "3"))
     run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     assert [f.name for f in d.glob("result-seed*.json")] == ["result-seed3.json"]
@@ -160,17 +166,21 @@ def test_seed_folders_and_pruning(tmp_path, fake):
 
 def test_expect_columns_beside_ours(tmp_path, fake):
     suite = tmp_path / "cases" / "paper"
-    write_case(suite, "fig8", "rows=2",
-               extra='[expect]\nsource = "Deussen 1995 Fig. 8"\n'
-                     'values = {G_initial = 2.8, m1 = {G_final = 0.55}}')
+    write_case(
+        suite,
+        "fig8",
+        "rows=2",
+        extra='[expect]\nsource = "Deussen 1995 Fig. 8"\n'
+        "values = {G_initial = 2.8, m1 = {G_final = 0.55}}",
+    )
     res = tmp_path / "results"
     run_suite([suite], results=res, jobs=1, figures=False, progress=False)
     df = __import__("pandas").read_csv(res / "paper" / "summary.csv")
     cols = list(df.columns)
     i = cols.index("G_initial")
-    assert cols[i + 1:i + 3] == ["paper_G_initial", "ratio_G_initial"]
+    assert cols[i + 1 : i + 3] == ["paper_G_initial", "ratio_G_initial"]
     j = cols.index("G_final")
-    assert cols[j + 1:j + 3] == ["paper_G_final", "ratio_G_final"]
+    assert cols[j + 1 : j + 3] == ["paper_G_final", "ratio_G_final"]
     assert (df.paper_G_initial == 2.8).all()
     assert df.ratio_G_initial.tolist() == pytest.approx((df.G_initial / 2.8).tolist(), rel=1e-15)
     m1 = df[df.model == "m1"].iloc[0]
@@ -205,7 +215,9 @@ def test_case_names_cannot_leave_the_results_folder(tmp_path, fake):
     assert set(errors) == {"up.toml", "abs.toml", "sub.toml", "twin2.toml"}
     assert all("name" in e for e in errors.values())
     written = {p.resolve() for p in tmp_path.rglob("*") if p.is_file()}
-    assert all(p.is_relative_to(res.resolve()) or p.is_relative_to(suite.resolve()) for p in written)
+    assert all(
+        p.is_relative_to(res.resolve()) or p.is_relative_to(suite.resolve()) for p in written
+    )
     assert (res / "demo" / "Fig_8__grouped_" / "result-seed0.json").exists()
     assert not (tmp_path / "escaped").exists() and not Path("/tmp/absolute").exists()
 
@@ -218,8 +230,9 @@ def test_pool_matches_serial(tmp_path, fake):
     rep = run_suite([suite], results=r1, jobs=1, figures=False, progress=False)
     rep2 = run_suite([suite], results=r2, jobs=2, figures=False, progress=False)
     assert len(rep2.ran) == 4 and not rep2.failed
-    assert strip_timing((r1 / "demo" / "summary.csv").read_text()) == \
-        strip_timing((r2 / "demo" / "summary.csv").read_text())
+    assert strip_timing((r1 / "demo" / "summary.csv").read_text()) == strip_timing(
+        (r2 / "demo" / "summary.csv").read_text()
+    )
     assert len(rep.ran) == 4
 
 
@@ -239,12 +252,14 @@ def test_dead_worker_is_an_error_row_and_others_finish(tmp_path, fake, capsys):
 
 def test_status_reaches_the_progress_bar(tmp_path, fake):
     from harness.run import runner
+
     seen = []
 
     class Spy(runner._Progress):
         def set(self, label, msg):
             seen.append((label, msg))
             super().set(label, msg)
+
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a", "sleep=1")
     write_case(suite, "b", "sleep=1")
@@ -265,13 +280,31 @@ def test_dask_local_cluster_matches_serial(tmp_path, fake):
     write_case(suite, "b", "rows=1 files=1")
     r1, r2 = tmp_path / "serial", tmp_path / "dask"
     run_suite([suite], results=r1, jobs=1, figures=False, progress=False)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
-        assert cli.main(["run", str(suite), "--results", str(r2), "--executor", "dask",
-                         "--scheduler", cluster.scheduler_address, "--no-figures"]) == 0
-    assert strip_timing((r1 / "demo" / "summary.csv").read_text()) == \
-        strip_timing((r2 / "demo" / "summary.csv").read_text())
-    assert (r2 / "demo" / "b" / "deformed.npz").read_bytes() == (r1 / "demo" / "b" / "deformed.npz").read_bytes()
+    with distributed.LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
+        assert (
+            cli.main(
+                [
+                    "run",
+                    str(suite),
+                    "--results",
+                    str(r2),
+                    "--executor",
+                    "dask",
+                    "--scheduler",
+                    cluster.scheduler_address,
+                    "--no-figures",
+                ]
+            )
+            == 0
+        )
+    assert strip_timing((r1 / "demo" / "summary.csv").read_text()) == strip_timing(
+        (r2 / "demo" / "summary.csv").read_text()
+    )
+    assert (r2 / "demo" / "b" / "deformed.npz").read_bytes() == (
+        r1 / "demo" / "b" / "deformed.npz"
+    ).read_bytes()
 
 
 @pytest.mark.slow
@@ -279,14 +312,24 @@ def test_dask_dead_worker_is_an_error_row(tmp_path, fake):
     """A job that kills its Dask worker each time becomes an error row; the others finish."""
     distributed = pytest.importorskip("distributed")
     import dask
+
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a", "rows=1")
     write_case(suite, "b", "die=1")
-    with dask.config.set({"distributed.scheduler.allowed-failures": 1}), \
-            distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                     dashboard_address=None) as cluster:
-        rep = run_suite([suite], results=tmp_path / "r", executor="dask",
-                        scheduler=cluster.scheduler_address, figures=False, progress=False)
+    with (
+        dask.config.set({"distributed.scheduler.allowed-failures": 1}),
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+    ):
+        rep = run_suite(
+            [suite],
+            results=tmp_path / "r",
+            executor="dask",
+            scheduler=cluster.scheduler_address,
+            figures=False,
+            progress=False,
+        )
     assert [r.job.case for r in rep.failed] == ["b"]
     assert "Dask worker died" in rep.failed[0].error
     df = __import__("pandas").read_csv(tmp_path / "r" / "demo" / "summary.csv")
@@ -296,13 +339,28 @@ def test_dask_dead_worker_is_an_error_row(tmp_path, fake):
 def test_unreachable_scheduler_is_one_line(tmp_path, fake, capsys, monkeypatch):
     pytest.importorskip("distributed")
     from harness.run import runner
+
     monkeypatch.setattr(runner, "DASK_CONNECT_TIMEOUT", "1s")
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
-    code = cli.main(["run", str(suite), "--results", str(tmp_path / "r"), "--executor", "dask",
-                     "--scheduler", "tcp://127.0.0.1:9"])
+    code = cli.main(
+        [
+            "run",
+            str(suite),
+            "--results",
+            str(tmp_path / "r"),
+            "--executor",
+            "dask",
+            "--scheduler",
+            "tcp://127.0.0.1:9",
+        ]
+    )
     err = capsys.readouterr().err
-    assert code == 2 and "--scheduler: cannot connect to the Dask scheduler" in err and "Traceback" not in err
+    assert (
+        code == 2
+        and "--scheduler: cannot connect to the Dask scheduler" in err
+        and "Traceback" not in err
+    )
 
 
 @pytest.mark.slow
@@ -311,11 +369,14 @@ def test_sigkill_loses_no_finished_case(tmp_path):
     write_case(suite, "a_fast", "rows=1")
     write_case(suite, "b_slow", "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
-              f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main; "
-              f"sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '1']))")
-    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    script = (
+        f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
+        f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main; "
+        f"sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '1']))"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     done = res / "demo" / "a_fast" / "result-seed0.json"
     t0 = time.monotonic()
     try:
@@ -329,12 +390,17 @@ def test_sigkill_loses_no_finished_case(tmp_path):
     assert proc.returncode == -signal.SIGKILL
     assert json.loads(done.read_text())["status"] == "ok"
     assert not (res / "demo" / "b_slow" / "result-seed0.json").exists()
-    assert not list(res.rglob(".*.tmp")) and not list(res.rglob(".*.part.*"))   # harness.outputs' temp files
-    (suite / "b_slow.toml").write_text((suite / "b_slow.toml").read_text().replace("sleep=60", "sleep=0"))
+    # harness.outputs' temp files
+    assert not list(res.rglob(".*.tmp")) and not list(res.rglob(".*.part.*"))
+    (suite / "b_slow.toml").write_text(
+        (suite / "b_slow.toml").read_text().replace("sleep=60", "sleep=0")
+    )
     n = len(calls(suite))
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120
+    )
     assert proc.returncode == 0, proc.stderr
-    assert calls(suite)[n:] == ["b_slow 0"]   # a_fast was skipped, not recomputed
+    assert calls(suite)[n:] == ["b_slow 0"]  # a_fast was skipped, not recomputed
     assert "1 ran, 1 unchanged" in proc.stdout
 
 
@@ -347,14 +413,21 @@ def test_ctrl_c_stops_workers_quietly(tmp_path):
     for n in ("b_slow", "c_slow"):
         write_case(suite, n, "sleep=60")
     res = tmp_path / "results"
-    script = (f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
-              f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main\n"
-              f"if __name__ == '__main__':\n"
-              f"    sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '2']))\n")
+    script = (
+        f"import sys; sys.path.insert(0, {str(ROOT)!r}); import harness.registry as r; "
+        f"r.STAGES = r.STAGES.with_entries({{'fake': {FAKE!r}}}); from harness.cli import main\n"
+        f"if __name__ == '__main__':\n"
+        f"    sys.exit(main(['run', {str(suite)!r}, '--results', {str(res)!r}, '--jobs', '2']))\n"
+    )
     (tmp_path / "go.py").write_text(script)
-    proc = subprocess.Popen([sys.executable, str(tmp_path / "go.py")], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [sys.executable, str(tmp_path / "go.py")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     t0 = time.monotonic()
     while not (len(calls(suite)) >= 3 and (res / "demo" / "a_fast" / "result-seed0.json").exists()):
         assert proc.poll() is None and time.monotonic() - t0 < 90, "jobs did not start"
@@ -363,7 +436,9 @@ def test_ctrl_c_stops_workers_quietly(tmp_path):
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 130
-    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("springbench: interrupted")
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith(
+        "springbench: interrupted"
+    )
     deadline = time.monotonic() + 20
     while True:  # every worker of the group is gone (zombies are reaped within seconds)
         try:

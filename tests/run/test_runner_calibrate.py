@@ -30,8 +30,27 @@ def tri_mesh(tmp_path):
 def test_rule_export_matches_hand_computed_constants(tri_mesh, tmp_path, capsys):
     out = tmp_path / "m.vtu"
     E = 2.5e4
-    assert cli.main(["calibrate", str(tri_mesh), "--E", str(E), "--nu", "0.3", "--method", "rule",
-                     "--rule", "deussen", "--out", str(out), "--max-refine", "0"]) == 0
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(tri_mesh),
+                "--E",
+                str(E),
+                "--nu",
+                "0.3",
+                "--method",
+                "rule",
+                "--rule",
+                "deussen",
+                "--out",
+                str(out),
+                "--max-refine",
+                "0",
+            ]
+        )
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "sms-mesh[deussen]" in printed and "G_norm_initial" in printed
     data = json.loads(out.with_suffix(".json").read_text())
@@ -41,8 +60,8 @@ def test_rule_export_matches_hand_computed_constants(tri_mesh, tmp_path, capsys)
     # mesh edges: 4x3 horizontal + 5x2 vertical + 8 diagonals
     assert len(springs) == 12 + 10 + 8
     assert np.allclose(data["spring_rest_length"], L, rtol=1e-14)
-    assert np.allclose(data["spring_stiffness"], E * L / 4, rtol=1e-12)   # Deussen: k = E s0 / 4
-    assert np.allclose(data["spring_stiffness_times_length"], E * L ** 2 / 4, rtol=1e-12)
+    assert np.allclose(data["spring_stiffness"], E * L / 4, rtol=1e-12)  # Deussen: k = E s0 / 4
+    assert np.allclose(data["spring_stiffness_times_length"], E * L**2 / 4, rtol=1e-12)
     net, _ = read_vtu(out)
     assert np.allclose(net.k, data["spring_stiffness"]) and net.n_nodes == 15
     # the moment-matched masses carry the body's mass (density 1000 kg/m^3, unit thickness)
@@ -52,9 +71,31 @@ def test_rule_export_matches_hand_computed_constants(tri_mesh, tmp_path, capsys)
 @pytest.mark.slow
 def test_lbfgs_improves_the_score(tri_mesh, tmp_path, capsys):
     out = tmp_path / "m.vtu"
-    assert cli.main(["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3", "--method", "lbfgs", "--prior-weight",
-                     "0", "--budget", "3", "--out", str(out), "--max-refine", "0"]) == 0     # a fit, not validated
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(tri_mesh),
+                "--E",
+                "1e4",
+                "--nu",
+                "0.3",
+                "--method",
+                "lbfgs",
+                "--prior-weight",
+                "0",
+                "--budget",
+                "3",
+                "--out",
+                str(out),
+                "--max-refine",
+                "0",
+            ]
+        )
+        == 0
+    )  # a fit, not validated
     import pandas as pd
+
     df = pd.read_csv(out.with_suffix(".csv"))
     fit = df[df.optimizer == "lbfgs"].iloc[0]
     assert fit.G_final < 0.9 * fit.G_initial
@@ -62,17 +103,38 @@ def test_lbfgs_improves_the_score(tri_mesh, tmp_path, capsys):
 
 def _calibrate(mesh, out, *argv):
     import pandas as pd
-    assert cli.main(["calibrate", str(mesh), "--E", "1e4", "--nu", "0.3", *argv,
-                     "--budget", "3", "--out", str(out), "--max-refine", "0"]) == 0
+
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(mesh),
+                "--E",
+                "1e4",
+                "--nu",
+                "0.3",
+                *argv,
+                "--budget",
+                "3",
+                "--out",
+                str(out),
+                "--max-refine",
+                "0",
+            ]
+        )
+        == 0
+    )
     return pd.read_csv(out.with_suffix(".csv")), json.loads(out.with_suffix(".json").read_text())
 
 
 @pytest.mark.slow
 def test_gauss_newton_from_the_equilibrium_gap_improves_the_score(tri_mesh, tmp_path):
-    df, _ = _calibrate(tri_mesh, tmp_path / "m.vtu", "--method", "gauss-newton", "--init", "equilibrium-gap")
+    df, _ = _calibrate(
+        tri_mesh, tmp_path / "m.vtu", "--method", "gauss-newton", "--init", "equilibrium-gap"
+    )
     fit = df[df.optimizer == "gauss-newton"].iloc[0]
     assert fit.G_final < 0.9 * fit.G_initial
-    assert (df.seed == 0).all() and isinstance(fit.opt_stop, str)      # the run is recorded
+    assert (df.seed == 0).all() and isinstance(fit.opt_stop, str)  # the run is recorded
 
 
 @pytest.mark.slow
@@ -80,7 +142,9 @@ def test_equilibrium_gap_improves_or_exports_the_rule_unchanged(tri_mesh, tmp_pa
     """The equation-error estimate is not min G for a FEM reference: it either lowers G or
     (when it is worse than the rule) falls back to the rule's constants, exactly those that
     ``--method rule`` exports."""
-    df, data = _calibrate(tri_mesh, tmp_path / "m.vtu", "--method", "equilibrium-gap", "--rule", "lloyd")
+    df, data = _calibrate(
+        tri_mesh, tmp_path / "m.vtu", "--method", "equilibrium-gap", "--rule", "lloyd"
+    )
     _, rule = _calibrate(tri_mesh, tmp_path / "r.vtu", "--method", "rule", "--rule", "lloyd")
     fit = df[df.optimizer == "equilibrium-gap"].iloc[0]
     if fit.G_final == pytest.approx(fit.G_initial, rel=1e-12):
@@ -92,19 +156,39 @@ def test_equilibrium_gap_improves_or_exports_the_rule_unchanged(tri_mesh, tmp_pa
 
 def test_init_needs_a_gradient_fit(tri_mesh, tmp_path, capsys):
     out = tmp_path / "m.vtu"
-    assert cli.main(["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3", "--method", "sa",
-                     "--init", "equilibrium-gap", "--out", str(out)]) == 2
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(tri_mesh),
+                "--E",
+                "1e4",
+                "--nu",
+                "0.3",
+                "--method",
+                "sa",
+                "--init",
+                "equilibrium-gap",
+                "--out",
+                str(out),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "--init" in err and "gauss-newton" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 
-@pytest.mark.parametrize("flags, expect", [
-    (["--nu", "0.7"], "--nu: 0.7 is out of range"),
-    (["--E", "-1"], "--E: -1.0 is not a positive number"),
-    (["--out", "model.txt"], "--out: 'model.txt' does not end in .vtu"),
-    (["--budget", "0"], "--budget"),
-])
+@pytest.mark.parametrize(
+    "flags, expect",
+    [
+        (["--nu", "0.7"], "--nu: 0.7 is out of range"),
+        (["--E", "-1"], "--E: -1.0 is not a positive number"),
+        (["--out", "model.txt"], "--out: 'model.txt' does not end in .vtu"),
+        (["--budget", "0"], "--budget"),
+    ],
+)
 def test_bad_flags_are_one_line(tri_mesh, tmp_path, capsys, flags, expect):
     argv = {"--E": "1e4", "--nu": "0.3", "--out": str(tmp_path / "m.vtu")}
     argv.update(dict(zip(flags[::2], flags[1::2])))
@@ -115,7 +199,15 @@ def test_bad_flags_are_one_line(tri_mesh, tmp_path, capsys, flags, expect):
 
 def test_bad_mesh_is_one_line_naming_the_mesh(tmp_path, capsys):
     from pathlib import Path
+
     bad = Path(__file__).resolve().parents[1] / "bad_inputs" / "meshes" / "tri_inverted.vtu"
-    code = cli.main(["calibrate", str(bad), "--E", "1", "--nu", "0.3", "--out", str(tmp_path / "m.vtu")])
+    code = cli.main(
+        ["calibrate", str(bad), "--E", "1", "--nu", "0.3", "--out", str(tmp_path / "m.vtu")]
+    )
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and "tri_inverted.vtu" in err[0] and "inverted triangle" in err[0]
+    assert (
+        code == 2
+        and len(err) == 1
+        and "tri_inverted.vtu" in err[0]
+        and "inverted triangle" in err[0]
+    )

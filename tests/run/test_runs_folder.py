@@ -29,28 +29,34 @@ def test_run_writes_to_runs_by_default(folders):
     published, runs, case = folders
     assert cli.main(["run", str(case), "--jobs", "1", "--no-figures"]) == 0
     assert (runs / "index.html").is_file() and list(runs.glob("*/summary.csv"))
-    assert sorted(p.name for p in published.iterdir()) == ["keep.txt"]       # untouched
+    assert sorted(p.name for p in published.iterdir()) == ["keep.txt"]  # untouched
 
 
 def test_a_quick_run_into_the_published_folder_is_refused(folders, capsys):
     published, runs, case = folders
-    assert cli.main(["run", str(case), "--jobs", "1", "--no-figures", "--results", str(published)]) == 2
+    assert (
+        cli.main(["run", str(case), "--jobs", "1", "--no-figures", "--results", str(published)])
+        == 2
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--results" in err[0] and "--full" in err[0]
     assert sorted(p.name for p in published.iterdir()) == ["keep.txt"]
     assert not runs.exists()
 
 
-def test_a_second_run_into_a_locked_folder_is_refused_and_a_stale_lock_taken_over(folders, tmp_path, capsys):
+def test_a_second_run_into_a_locked_folder_is_refused_and_a_stale_lock_taken_over(
+    folders, tmp_path, capsys
+):
     import subprocess
     import sys
 
     from harness.run.lock import LOCK
+
     _, runs, case = folders
     runs.mkdir()
     sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
     try:
-        (runs / LOCK).write_text(f"{sleeper.pid}\n")               # a live run holds the folder
+        (runs / LOCK).write_text(f"{sleeper.pid}\n")  # a live run holds the folder
         assert cli.main(["run", str(case), "--jobs", "1", "--no-figures"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"pid {sleeper.pid}" in err[0] and "--results" in err[0]
@@ -58,7 +64,7 @@ def test_a_second_run_into_a_locked_folder_is_refused_and_a_stale_lock_taken_ove
     finally:
         sleeper.kill()
         sleeper.wait()
-    assert cli.main(["run", str(case), "--jobs", "1", "--no-figures"]) == 0   # its process is gone
+    assert cli.main(["run", str(case), "--jobs", "1", "--no-figures"]) == 0  # its process is gone
     assert list(runs.glob("*/summary.csv")) and not (runs / LOCK).exists()
 
 
@@ -67,9 +73,11 @@ def test_stale_scratch_folders_are_removed(tmp_path):
     import sys
 
     from harness.run.lock import clean_stale_scratch
+
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     import os
+
     stale = tmp_path / f"springbench-{dead.pid}-abc"
     live = tmp_path / f"springbench-{os.getpid()}-def"
     other = tmp_path / "springbench-xyz"

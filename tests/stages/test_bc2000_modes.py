@@ -20,8 +20,10 @@ from harness.stages.bc2000_modes import heldout_modes
 ROOT = Path(__file__).resolve().parents[2]
 CASE = ROOT / "cases/bourguignon2000/fem_cube333_tetra.toml"
 HEXA = ROOT / "cases/bourguignon2000/fem_cube333_hexa.toml"
-needs_data = pytest.mark.skipif(not (ROOT.parent / "shared/reference-data/bourguignon2000").is_dir(),
-                                reason="needs the B&C reference data")
+needs_data = pytest.mark.skipif(
+    not (ROOT.parent / "shared/reference-data/bourguignon2000").is_dir(),
+    reason="needs the B&C reference data",
+)
 
 
 def dense_frequencies(P, tets, rho, K, n):
@@ -51,6 +53,7 @@ def rms(f, g):
 @needs_data
 def test_heldout_modes_against_a_dense_eigensolve():
     import reference
+
     case = load_case(CASE)
     assert case.heldout[0] == "sag"
     case = dataclasses.replace(case, reference=dataclasses.replace(case.reference, max_refine=0))
@@ -63,12 +66,17 @@ def test_heldout_modes_against_a_dense_eigensolve():
     theta1 = 1.7 * theta0
     loads = linear.case_loads(P, case)
     from harness.stages.bc2000 import lumped_masses
-    cols = heldout_modes(ref, case, lumped_masses(P, tets, case.material.density), loads, Ks, theta0, theta1)
+
+    cols = heldout_modes(
+        ref, case, lumped_masses(P, tets, case.material.density), loads, Ks, theta0, theta1
+    )
     n = case.reference.modes
     f_fem = ref.frequencies(n, load="sag")
-    f0, f1 = (dense_frequencies(P, tets, case.material.density, sum(t * K for t, K in zip(th, Ks)), n)
-              for th in (theta0, theta1))
-    np.testing.assert_allclose(f1, np.sqrt(1.7) * f0, rtol=1e-10)       # K scaled by 1.7: f by its root
+    f0, f1 = (
+        dense_frequencies(P, tets, case.material.density, sum(t * K for t, K in zip(th, Ks)), n)
+        for th in (theta0, theta1)
+    )
+    np.testing.assert_allclose(f1, np.sqrt(1.7) * f0, rtol=1e-10)  # K scaled by 1.7: f by its root
     assert cols["freq_error_heldout_initial"] == pytest.approx(rms(f0, f_fem), rel=1e-9)
     assert cols["freq_error_heldout"] == pytest.approx(rms(f1, f_fem), rel=1e-9)
     assert cols["f1_ratio"] == pytest.approx(f1[0] / f_fem[0], rel=1e-9)
@@ -83,6 +91,7 @@ def test_fem_stage_reports_heldout_modes_of_the_fitted_constants(tmp_path):
     import reference
     from harness.stages import StageContext
     from harness.stages import bc2000 as stage
+
     case = load_case(CASE)
     rows = stage.run(case, StageContext(out_dir=tmp_path / "out"))
     mesh = read_mesh(case.body.file, case.body.format)
@@ -100,11 +109,12 @@ def test_fem_stage_reports_heldout_modes_of_the_fitted_constants(tmp_path):
 def _blocks(a, b, c):
     """Block-diagonal K of 2x2 blocks [[a, b], [c, a]]: eigenvalues a +- sqrt(b c) by hand."""
     blocks = [np.array([[ai, bi], [ci, ai]]) for ai, bi, ci in zip(a, b, c)]
-    return sp.block_diag(blocks).tocsr(), np.sort_complex(np.concatenate(
-        [a + np.sqrt((b * c).astype(complex)), a - np.sqrt((b * c).astype(complex))]))
+    return sp.block_diag(blocks).tocsr(), np.sort_complex(
+        np.concatenate([a + np.sqrt((b * c).astype(complex)), a - np.sqrt((b * c).astype(complex))])
+    )
 
 
-@pytest.mark.parametrize("nodes", [40, 800])          # dense (80 dofs) and sparse (1600) paths
+@pytest.mark.parametrize("nodes", [40, 800])  # dense (80 dofs) and sparse (1600) paths
 def test_matrix_eigenvalues_of_a_nonsymmetric_matrix(nodes):
     """A non-symmetric K with eigenvalues known by hand (real, then a complex pair): the
     general solver finds them in order of real part; the frequency of the non-real pair is
@@ -112,8 +122,8 @@ def test_matrix_eigenvalues_of_a_nonsymmetric_matrix(nodes):
     rng = np.random.default_rng(3)
     a = rng.uniform(10, 50, nodes)
     b = rng.uniform(0.5, 2.0, nodes)
-    c = b * rng.uniform(0.2, 0.9, nodes)         # b c > 0: real eigenvalues
-    a[0], c[0] = 5.0, -4.0 / b[0]                 # block 0: 5 +- 2i, the lowest real part
+    c = b * rng.uniform(0.2, 0.9, nodes)  # b c > 0: real eigenvalues
+    a[0], c[0] = 5.0, -4.0 / b[0]  # block 0: 5 +- 2i, the lowest real part
     K, exact = _blocks(a, b, c)
     exact = exact[np.lexsort((exact.imag, exact.real))]
     masses = np.ones(nodes)
@@ -122,13 +132,14 @@ def test_matrix_eigenvalues_of_a_nonsymmetric_matrix(nodes):
     np.testing.assert_allclose(lam, exact[:5], rtol=1e-9)
     f = matrix_frequencies(K, masses, free, 5)
     np.testing.assert_allclose(f, np.sqrt(exact[:5]).real / (2 * np.pi), rtol=1e-9)
-    Ks = (K + K.T) / 2                              # symmetric: eigenvalues a +- (b + c) / 2
+    Ks = (K + K.T) / 2  # symmetric: eigenvalues a +- (b + c) / 2
     ev = np.sort(np.concatenate([a + (b + c) / 2, a - (b + c) / 2]))
     np.testing.assert_allclose(matrix_eigenvalues(Ks, masses, free, 5), ev[:5], rtol=1e-9)
 
 
 class _FEM:
     """A stand-in reference whose frequencies are 1 Hz: f1_ratio is then the model's f1."""
+
     def frequencies(self, n, load=None):
         return np.ones(n)
 
@@ -148,20 +159,22 @@ def test_hexa_MT_modes_under_the_clamp_are_not_zero():
     P, hexes = mesh.points, mesh.cells["hexahedron"]
     m = build("MT", case.section("model"), mesh, 1.0, material=case.material)
     Ks = linear.unit_stiffnesses(m)
-    theta = linear.current_parameters(m)          # the program's constants (ks 2.5, kvs 5)
+    theta = linear.current_parameters(m)  # the program's constants (ks 2.5, kvs 5)
     K = sum(t * Kj for t, Kj in zip(theta, Ks)).toarray()
     h = 1e-6
     Kfd = np.zeros_like(K)
     for j in range(K.shape[1]):
         dx = np.zeros(K.shape[1])
         dx[j] = h
-        Kfd[:, j] = -(m.forces(P + dx.reshape(-1, 3)) - m.forces(P - dx.reshape(-1, 3))).ravel() / (2 * h)
+        Kfd[:, j] = -(m.forces(P + dx.reshape(-1, 3)) - m.forces(P - dx.reshape(-1, 3))).ravel() / (
+            2 * h
+        )
     np.testing.assert_allclose(K, Kfd, atol=1e-7 * np.abs(K).max())
-    assert np.abs(Kfd - Kfd.T).max() > 1e-2 * np.abs(Kfd).max()          # not symmetric
+    assert np.abs(Kfd - Kfd.T).max() > 1e-2 * np.abs(Kfd).max()  # not symmetric
     free = np.repeat(np.abs(P[:, 0] - P[:, 0].min()) > 1e-12, 3)
     sv = np.linalg.svd(Kfd[free][:, free], compute_uv=False)
-    assert sv[-1] > 1e-4 * sv[0]                                          # no zero mode
-    X = P[hexes]                                  # bricks: volume = product of the extents
+    assert sv[-1] > 1e-4 * sv[0]  # no zero mode
+    X = P[hexes]  # bricks: volume = product of the extents
     assert np.allclose(np.sort(np.abs(X - X.min(axis=1)[:, None]), axis=1)[:, :1], 0)
     vol = np.prod(X.max(axis=1) - X.min(axis=1), axis=1)
     mass = np.zeros(len(P))
@@ -174,4 +187,5 @@ def test_hexa_MT_modes_under_the_clamp_are_not_zero():
     assert cols["freq_error_heldout"] == pytest.approx(rms(f, np.ones(n)), rel=1e-6)
     Kf = Kfd[free][:, free]
     s = 1 / np.sqrt(np.repeat(mass, 3)[free])
-    assert sl.eigh(Kf * s[:, None] * s[None, :], eigvals_only=True)[0] < 0   # a symmetric solver's reading
+    # a symmetric solver's reading
+    assert sl.eigh(Kf * s[:, None] * s[None, :], eigvals_only=True)[0] < 0

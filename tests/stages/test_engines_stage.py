@@ -6,7 +6,6 @@ springbench's rule export run in Newton scores what the export's own linear stat
 solved here, score; the mean rows are the means of the load rows. An engine that is not
 installed leaves rows that say which extra installs it."""
 
-
 import numpy as np
 import pandas as pd
 import pytest
@@ -23,7 +22,11 @@ FOLDER = ROOT / "cases" / "engines"
 
 def test_case_files_are_the_generators_output_and_valid():
     gen = generator("engines")
-    assert len(list(FOLDER.glob("*.toml"))) == len(gen.DESCRIPTIONS) * len(gen.SIZES) * len(gen.NUS) == 24
+    assert (
+        len(list(FOLDER.glob("*.toml")))
+        == len(gen.DESCRIPTIONS) * len(gen.SIZES) * len(gen.NUS)
+        == 24
+    )
     for body in gen.DESCRIPTIONS:
         tets = []
         for resolution in gen.SIZES:
@@ -34,7 +37,7 @@ def test_case_files_are_the_generators_output_and_valid():
                 assert S.applies(case) and case.material.nu == nu and case.body.file.exists()
                 assert load_case(p, "quick").section("model")["exports"] == ("rule",)
             tets.append(S.n_tets(case.body.file))
-        assert tets[1] > 2 * tets[0] > 0, body          # two resolutions, the fine one > 2x the tets
+        assert tets[1] > 2 * tets[0] > 0, body  # two resolutions, the fine one > 2x the tets
 
 
 @pytest.mark.slow
@@ -47,17 +50,21 @@ def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_pa
     df = S.case_rows(case, tmp_path, spec)
     loads = df[df.load != "mean"]
     assert set(loads.engine) == {"newton-tets", "mujoco-flex", "newton-springs"}
-    assert (loads.engine_status == "settled").all(), loads[["engine", "model", "load", "engine_status", "note"]]
+    assert (loads.engine_status == "settled").all(), loads[
+        ["engine", "model", "load", "engine_status", "note"]
+    ]
     own = loads[loads.model == S.OWN].pivot(index="load", columns="engine", values="G_norm")
-    assert np.allclose(own["newton-tets"], own["mujoco-flex"], rtol=0.02), own      # the same P1, two engines
+    # the same P1, two engines
+    assert np.allclose(own["newton-tets"], own["mujoco-flex"], rtol=0.02), own
     rule = loads[loads.model.str.startswith("springbench rule")].set_index("load").G_norm
     from harness.export.pack import read_pack
     from harness.export.vtu import read_vtu
     from harness.models.springs import incidence, stiffness_matrix
+
     pack = read_pack(tmp_path / "pack")
     net, _ = read_vtu(tmp_path / "exports" / "rule.vtu")
     K = stiffness_matrix(incidence(net.points, net.springs), net.k).tocsr()
-    for name in spec["loads"]:                       # linear statics of the export, solved here
+    for name in spec["loads"]:  # linear statics of the export, solved here
         ld = pack.load(name)
         u = held_solve(K, ld, pack.points.shape)
         g = np.linalg.norm(u - ld.u_fem) / np.linalg.norm(ld.u_fem)
@@ -71,31 +78,65 @@ def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_pa
 def test_an_engine_not_installed_leaves_rows_naming_the_extra(monkeypatch, tmp_path):
     monkeypatch.setattr(S, "_installed", lambda engine: False)
     calls = []
-    monkeypatch.setattr(S, "cli", lambda *argv: calls.append(argv[0]) or type("P", (), {"returncode": 0})())
+    monkeypatch.setattr(
+        S, "cli", lambda *argv: calls.append(argv[0]) or type("P", (), {"returncode": 0})()
+    )
     monkeypatch.setattr(S, "read_pack", lambda folder: None)
     spec = dict(load_case(FOLDER / "beam-coarse_nu0.30.toml").section("model"), loads=("tip",))
     rows = S.study(tmp_path / "m.msh", 1e5, 0.3, 1e3, spec, tmp_path)
-    assert calls == ["pack"]                              # no export made for an engine that is missing
+    assert calls == ["pack"]  # no export made for an engine that is missing
     assert [(r["engine"], r["engine_status"]) for r in rows] == [
-        ("newton-tets", "not-installed"), ("mujoco-flex", "not-installed"), ("newton-springs", "not-installed")]
+        ("newton-tets", "not-installed"),
+        ("mujoco-flex", "not-installed"),
+        ("newton-springs", "not-installed"),
+    ]
     rows = S.engine_rows(None, tmp_path, "mujoco-flex", ["tip", "sag"], tmp_path / "run")
     assert [r["load"] for r in rows] == ["tip", "sag"]
     assert all(r["engine_status"] == "not-installed" and '".[engines]"' in r["note"] for r in rows)
-    df = S.with_means(pd.DataFrame([dict(r, engine="mujoco-flex", model=S.OWN, G_norm=np.nan, max_error=np.nan,
-                                         G_ref=np.nan, steps=np.nan, wall_s=np.nan) for r in rows]))
+    df = S.with_means(
+        pd.DataFrame(
+            [
+                dict(
+                    r,
+                    engine="mujoco-flex",
+                    model=S.OWN,
+                    G_norm=np.nan,
+                    max_error=np.nan,
+                    G_ref=np.nan,
+                    steps=np.nan,
+                    wall_s=np.nan,
+                )
+                for r in rows
+            ]
+        )
+    )
     assert df.iloc[-1]["load"] == "mean" and df.iloc[-1]["engine_status"] == "see loads"
 
 
 def test_the_bench_is_the_suite_with_the_engine_status_as_status(monkeypatch):
     from harness.bench import engines as B
     from harness.registry import BENCHES
+
     assert BENCHES.target("engines") == "harness.bench.engines"
     seen = []
 
     def fake(case, scratch, spec=None, status=None):
         seen.append((case.name, spec))
-        return pd.DataFrame([dict(body="beam", load="mean", engine="e", model="m", G_norm=0.1, n_tets=1, nu=0.3,
-                                  engine_status="settled")])
+        return pd.DataFrame(
+            [
+                dict(
+                    body="beam",
+                    load="mean",
+                    engine="e",
+                    model="m",
+                    G_norm=0.1,
+                    n_tets=1,
+                    nu=0.3,
+                    engine_status="settled",
+                )
+            ]
+        )
+
     monkeypatch.setattr(B, "case_rows", fake)
     df = B.run(quick=True)
     assert seen == [("beam-coarse_nu0.30", seen[0][1])] and seen[0][1]["budget"] == B.QUICK_BUDGET

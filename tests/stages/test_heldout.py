@@ -18,7 +18,10 @@ WEIGHTS = (1.0, 3.0, 15.0)
 
 def case(tmp_path):
     p = tmp_path / "h.toml"
-    p.write_text(plate_case("held", f"""
+    p.write_text(
+        plate_case(
+            "held",
+            f"""
         [reference]
         divisions = 4
         max_refine = 1
@@ -34,7 +37,10 @@ def case(tmp_path):
         [optimizer]
         method = "lbfgs"
         options = {{ maxiter = 40 }}
-        """, loads='heldout = ["shear-y", "stretch-y"]'))
+        """,
+            loads='heldout = ["shear-y", "stretch-y"]',
+        )
+    )
     return load_case(p)
 
 
@@ -52,19 +58,27 @@ def test_heldout_loads_are_scored_not_fitted(tmp_path, monkeypatch):
     original = fit_problem.FitProblem.from_network.__func__
 
     def spy(cls, *args, **kw):
-        seen.append(list(args[7]))          # the load names the optimiser is given
+        seen.append(list(args[7]))  # the load names the optimiser is given
         return original(cls, *args, **kw)
+
     monkeypatch.setattr(fit_problem.FitProblem, "from_network", classmethod(spy))
     ctx = StageContext(out_dir=tmp_path / "out")
     rows = stage.run(c, ctx)
     assert seen == [["stretch-x", "shear-x"]]
     for row in rows:
-        tag = row["stiffness"] if row["optimizer"] == "none" else f"{row['stiffness']}-{row['optimizer']}"
+        tag = (
+            row["stiffness"]
+            if row["optimizer"] == "none"
+            else f"{row['stiffness']}-{row['optimizer']}"
+        )
         npz = np.load(ctx.out_dir / f"deformed-{tag}.npz")
         net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
-        assert row["G_norm_final"] == pytest.approx(g_norm(npz, c.fit_loads, net.classes), rel=1e-10)
+        assert row["G_norm_final"] == pytest.approx(
+            g_norm(npz, c.fit_loads, net.classes), rel=1e-10
+        )
         assert row["G_heldout"] == pytest.approx(g_norm(npz, c.heldout, net.classes), rel=1e-10)
-        each = [g_norm(npz, [n], net.classes) for n in c.heldout]      # every held-out load counts alike
+        # every held-out load counts alike
+        each = [g_norm(npz, [n], net.classes) for n in c.heldout]
         for n, g in zip(c.heldout, each):
             assert row[f"G_heldout_{n}"] == pytest.approx(g, rel=1e-10)
         assert row["G_heldout_mean"] == pytest.approx(np.mean(each), rel=1e-10)
@@ -73,5 +87,6 @@ def test_heldout_loads_are_scored_not_fitted(tmp_path, monkeypatch):
     assert fit["optimizer"] == "lbfgs" and fit["G_norm_final"] < fit["G_norm_initial"]
     assert fit["G_heldout_initial"] == pytest.approx(rows[0]["G_heldout"], rel=1e-12)
     assert fit["G_heldout_mean_initial"] == pytest.approx(rows[0]["G_heldout_mean"], rel=1e-12)
-    assert fit["freq_error_heldout"] == pytest.approx(fit["freq_error_final"], rel=1e-12)   # no mode was fitted
+    # no mode was fitted
+    assert fit["freq_error_heldout"] == pytest.approx(fit["freq_error_final"], rel=1e-12)
     assert set(pd.DataFrame(rows).columns) >= {"G_heldout", "G_ref_heldout", "ref_error_heldout"}

@@ -87,8 +87,10 @@ def test_classes_share_the_model_and_springs_equals_the_plain_case(tmp_path):
     tri = model.volume.elements
     m = skfem.MeshTri(model.points.T, tri.T)
     lam, mu = lame_parameters(E, NU)
-    K = skfem.asm(linear_elasticity(2 * lam * mu / (lam + 2 * mu), mu),
-                  skfem.Basis(m, skfem.ElementVector(skfem.ElementTriP1()))).toarray()
+    K = skfem.asm(
+        linear_elasticity(2 * lam * mu / (lam + 2 * mu), mu),
+        skfem.Basis(m, skfem.ElementVector(skfem.ElementTriP1())),
+    ).toarray()
     s = 1 / np.sqrt(np.repeat(model.masses, 2))
     omega = np.sqrt(np.linalg.eigvalsh(s[:, None] * K * s[None, :]).max())
     assert p1["dt_stable"] == pytest.approx(2 / omega, rel=1e-9)

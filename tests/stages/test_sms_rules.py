@@ -15,36 +15,64 @@ pytest.importorskip("gmsh")
 
 
 def rows(mesh, out, *argv):
-    assert cli.main(["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45", "--method", "rule",
-                     "--max-refine", "0", "--out", str(out), *argv]) == 0
-    return pd.read_csv(out.with_suffix(".csv")).set_index("stiffness"), out.with_suffix(".json").read_text()
+    assert (
+        cli.main(
+            [
+                "calibrate",
+                str(mesh),
+                "--E",
+                "1e5",
+                "--nu",
+                "0.45",
+                "--method",
+                "rule",
+                "--max-refine",
+                "0",
+                "--out",
+                str(out),
+                *argv,
+            ]
+        )
+        == 0
+    )
+    return pd.read_csv(out.with_suffix(".csv")).set_index("stiffness"), out.with_suffix(
+        ".json"
+    ).read_text()
 
 
 @pytest.mark.slow
 def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, monkeypatch):
     import json
+
     mesh = meshes.cylinder(tmp_path)
     full, full_json = rows(mesh, tmp_path / "full.vtu")
     from harness.mechanics import statics
+
     solved = []
     solve_all = statics.solve_all
 
     def counting(nets, case, loads=None):
         solved.append((len(list(nets)), None if loads is None else len(loads)))
         return solve_all(nets, case, loads)
+
     monkeypatch.setattr(statics, "solve_all", counting)
     from harness.export import engine_loads
-    monkeypatch.setattr(engine_loads, "settle_recipe", lambda net, case: None)     # the export's solve, not a rule's
+
+    # the export's solve, not a rule's
+    monkeypatch.setattr(engine_loads, "settle_recipe", lambda net, case: None)
     monkeypatch.setattr(sms_rules, "ALL_RULES_DOFS", 0)
     part, part_json = rows(mesh, tmp_path / "part.vtu")
     skipped = part.index[part.G_fit_score.isna()]
     assert len(skipped) >= 1
-    assert solved[0] == (len(part), 24) and len(solved) - 1 == len(part) - len(skipped)   # free states, then each rule
+    # free states, then each rule
+    assert solved[0] == (len(part), 24) and len(solved) - 1 == len(part) - len(skipped)
     best = full.G_fit_score.min()
     for r in skipped:
         assert best < part.loc[r, "G_fit_score_bound"] <= full.loc[r, "G_fit_score"] + 1e-12, r
     for r in part.index.difference(skipped):
         for col in ("G_fit_score", "G_norm_final", "G_heldout_mean"):
             assert part.loc[r, col] == pytest.approx(full.loc[r, col], rel=1e-9), (r, col)
-    assert json.loads(part_json)["spring_stiffness"] == pytest.approx(json.loads(full_json)["spring_stiffness"])
+    assert json.loads(part_json)["spring_stiffness"] == pytest.approx(
+        json.loads(full_json)["spring_stiffness"]
+    )
     assert part.index[part.exported][0] == full.index[full.exported][0]
