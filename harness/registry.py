@@ -160,10 +160,7 @@ LOAD_SETS = Registry(
 # mesh formats of our own (any other name is a meshio format): reader(path) -> Mesh
 MESH_READERS = Registry(
     "mesh format",
-    {
-        "bc2000": "harness.io.meshfile:read_bc2000",
-        "meshio": "harness.io.meshfile:read_meshio",
-    },
+    {"bc2000": "harness.io.meshfile:read_bc2000", "meshio": "harness.io.meshfile:read_meshio"},
 )
 
 # ``ENGINE`` / ``[model] engines``: adapter(pack, options) -> {load: Answer};

@@ -189,6 +189,7 @@ class ReferenceSolution:
                 Kf, np.repeat(d.doflocs.T, d.dim, axis=0)[free], None if P is None else P[free]
             )
             opinv = None if solve is None else LinearOperator(Kf.shape, matvec=solve, dtype=float)
+            # seeded: same bits
             lam, vec = eigsh(
                 Kf.tocsc(),
                 k=k,
@@ -197,7 +198,7 @@ class ReferenceSolution:
                 which="LM",
                 OPinv=opinv,
                 v0=np.random.default_rng(0).standard_normal(Kf.shape[0]),
-            )  # seeded: same bits
+            )
         order = np.argsort(lam)
         lam, vec = lam[order], vec[:, order]
         modes = np.zeros((k, d.ndof))

@@ -29,10 +29,8 @@ from pathlib import Path
 
 FOLDER = Path(__file__).resolve().parent
 NUS = (0.3, 0.45, 0.49)
-SIZES = {
-    "coarse": 400,
-    "fine": 1200,
-}  # target tets; the elbow's curvature gives ~1,000 at the coarsest
+# target tets; the elbow's curvature gives ~1,000 at the coarsest
+SIZES = {"coarse": 400, "fine": 1200}
 TARGETS = {"elbow": {"coarse": 400, "fine": 2500}}
 E, DENSITY = 1e5, 1000.0
 DESCRIPTIONS = {

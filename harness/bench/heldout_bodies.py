@@ -101,9 +101,8 @@ def make_body(body: Body, path: Path, n_tets: int) -> int:
     h = (8.5 * 0.005 / n_tets) ** (1 / 3)
     for attempt in range(2):
         gmsh.initialize(["-noenv"])
-        signal.signal(
-            signal.SIGPIPE, signal.SIG_IGN
-        )  # gmsh's start resets it: a closed pipe would kill us
+        # gmsh's start resets it: a closed pipe would kill us
+        signal.signal(signal.SIGPIPE, signal.SIG_IGN)
         try:
             for key, value in (
                 ("General.Terminal", 0),

@@ -160,9 +160,8 @@ def network_stiffness(data: dict) -> sp.csr_matrix:
         S = sp.csr_matrix(
             (np.ones(on.sum()), (where[ends[on]], spring[on])), shape=(len(a), len(s))
         )
-        H = (
-            sp.diags(1 / np.asarray(data["kn_spring_count"], float)) @ S @ sp.diags(1 / L) @ G
-        )  # ds_a/du
+        # ds_a/du
+        H = sp.diags(1 / np.asarray(data["kn_spring_count"], float)) @ S @ sp.diags(1 / L) @ G
         c = (
             np.asarray(data["kn_stiffness"], float)
             * np.asarray(data["kn_node_volume"], float)

@@ -88,10 +88,7 @@ MATERIAL = {
 }
 
 COMPONENTS = ("x", "y", "z", "all")
-CONSTRAINT = {
-    "part": Field("str"),
-    "components": Field("strs", ("all",), choices=COMPONENTS),
-}
+CONSTRAINT = {"part": Field("str"), "components": Field("strs", ("all",), choices=COMPONENTS)}
 TRACTION = {
     "part": Field("str"),
     "vector": Field("floats", None, length=(2, 3)),

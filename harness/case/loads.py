@@ -29,10 +29,8 @@ from harness.io.meshfile import boundary_facets, read_mesh
 if TYPE_CHECKING:
     from harness.case.case import Body
 
-ANCHORED = (
-    "homogeneous",
-    "linear",
-)  # sets whose loads are held at anchor points (boxes: only linear)
+# sets whose loads are held at anchor points (boxes: only linear)
+ANCHORED = ("homogeneous", "linear")
 
 
 def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tuple[int, ...]:
@@ -123,11 +121,12 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
                 fix="add [[loads.case.constraint]] with a part",
             )
         given = tracs or any(u[key] is not None for key in ("gravity", "body_force"))
+        # constraints alone: a modal case
         if (
             given
             and not any(any(t.vector) or any(t.twist or ()) for t in tracs)
             and not any(any(u[key] or ()) for key in ("gravity", "body_force"))
-        ):  # constraints alone: a modal case
+        ):
             raise CaseError(
                 f"load '{u['name']}' is zero: nothing moves (G would be 0/0)",
                 file=file,

@@ -18,10 +18,7 @@ import numpy as np
 from harness.case import sections as case_sections
 from harness.case.case import Body, Case, Fibre, Material, ReferenceSpec, Region
 from harness.case.elasticity import transversely_isotropic_compliance
-from harness.case.fields import (
-    GRADED_LEVELS,
-    TOP,
-)
+from harness.case.fields import GRADED_LEVELS, TOP
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean

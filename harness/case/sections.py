@@ -28,10 +28,8 @@ SELECT_CANDIDATES = (
     "springs-prior1+node-volume",
     "springs-prior0.1+node-volume",
 )
-SELECT_CRITERIA = (
-    "ratio",
-    "score",
-)  # how a candidate must beat the rule (harness/optimize/select.py choose)
+# how a candidate must beat the rule (harness/optimize/select.py choose)
+SELECT_CRITERIA = ("ratio", "score")
 SELECT_DEFAULT = (
     "springs-prior1",
     "springs-prior0.1",
@@ -402,7 +400,7 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
             min=0,
             check=lambda v: None if any(v) else "all zero (G would be 0/0)",
             doc="G_{a:b:c} weights: inner, border, corner, not all zero",
-        ),
+        )
     },
     # [expect]: the paper's numbers, reported beside ours
     "expect": {

@@ -82,16 +82,14 @@ def case_text(
         if method in ("lbfgs", "gauss-newton") and args.init != "none"
         else ""
     )
-    budget = (
-        "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"
-    )  # one solve
+    # one solve
+    budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"
     chosen = selects(args)
     if method == "lbfgs" and not chosen:
         init += f", prior = {prior_weight(args)!r}"
     opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
-    if (
-        args.rule == "best"
-    ):  # no rule is first: the stage ranks them (and solves only the ones that can win)
+    # no rule is first: the stage ranks them (and solves only the ones that can win)
+    if args.rule == "best":
         opt += 'start = "best"\n'
     if chosen:
         opt += "[optimizer.select]\n"

@@ -30,13 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.engines.settle import (
-    float32_resolution,
-    p1_omega_max,
-    pack_omega,
-    settle,
-    unsupported,
-)
+from harness.engines.settle import float32_resolution, p1_omega_max, pack_omega, settle, unsupported
 from harness.errors import SpringbenchError
 from harness.models.masses import lumped_masses
 

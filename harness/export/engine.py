@@ -64,9 +64,10 @@ def stable_step(points, springs, k, masses, kd=None, volume=None) -> dict:
         lam, vec = np.linalg.eigh(A.toarray())
         lam, v = lam[-1], vec[:, -1]
     else:
+        # seeded start
         lam, vec = spla.eigsh(
             A, k=1, which="LA", tol=1e-8, v0=np.random.default_rng(0).standard_normal(A.shape[0])
-        )  # seeded start
+        )
         lam, v = lam[0], vec[:, 0]
     omega = float(np.sqrt(max(lam, 0.0)))
     zeta = 0.0

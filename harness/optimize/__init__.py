@@ -46,10 +46,8 @@ class FitResult:
 def check_method_options(method: str, options: dict) -> dict:
     """``options`` of ``method`` over its defaults, checked without running it (for
     ``springbench validate``: unknown keys and unusable values are one-line errors)."""
-    from harness.optimize import (
-        gauss_newton,
-        gradient,
-    )  # slow to import (tests/test_imports.py LAZY)
+    # slow to import (tests/test_imports.py LAZY)
+    from harness.optimize import gauss_newton, gradient
 
     if method in ("sa", "sa-refactor"):
         return annealing.check_options(options)

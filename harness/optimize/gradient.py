@@ -102,6 +102,7 @@ def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
     else:
         import scipy.sparse as sp
 
+        # seeded start
         mu, phi = spla.eigsh(
             K,
             k=nk,
@@ -109,7 +110,7 @@ def frequencies(problem: FitProblem, k: np.ndarray, vectors: bool = False):
             sigma=0.0,
             which="LM",
             v0=np.random.default_rng(0).standard_normal(K.shape[0]),
-        )  # seeded start
+        )
         o = np.argsort(mu)
         mu, phi = mu[o], phi[:, o]
         phi = phi / np.sqrt(np.sum(phi * phi * mt.m[:, None], axis=0))[None, :]

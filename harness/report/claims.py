@@ -242,11 +242,8 @@ def headline_findings(suites) -> list[str]:
         make = CLAIMS.get(suite.name)
         try:
             out += make(df) if make else generic(suite.name, df)
-        except (
-            KeyError,
-            TypeError,
-            ValueError,
-        ):  # a foreign or partial summary: no sentence, never a crash
+        # a foreign or partial summary: no sentence, never a crash
+        except (KeyError, TypeError, ValueError):
             continue
         # there: the estimate against tol
         k, m = coarse(df) if suite.name != "verification" else (0, 0)

@@ -24,17 +24,11 @@ import numpy as np
 from harness.report.markdown import markdown_table
 
 COLUMNS = ("G_norm_final", "G_heldout", "freq_error_final", "k_spread", "dt_stable")
-CAUCHY_NU = {
-    2: 1.0 / 3.0,
-    3: 0.25,
-}  # central-force lattices: isotropic only here (2-D plane stress)
+# central-force lattices: isotropic only here (2-D plane stress)
+CAUCHY_NU = {2: 1.0 / 3.0, 3: 0.25}
 FAMILIES = ("sag", "tip", "torsion", "bridge")  # the held-out families, in table order
-NOT_LOADS = (
-    "initial",
-    "mean",
-    "mean_initial",
-    "mean_spread",
-)  # G_heldout_<x> columns that are no load
+# G_heldout_<x> columns that are no load
+NOT_LOADS = ("initial", "mean", "mean_initial", "mean_spread")
 RULE_CLASS = "springs"  # the rules' rows: this class's unfitted rows, one per stiffness rule
 
 

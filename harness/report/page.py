@@ -21,14 +21,7 @@ from harness.report.columns import glossary
 from harness.report.frames import REF_COARSE
 from harness.report.headlines import headline_tables
 from harness.report.origin import lines
-from harness.report.text import (
-    BENCH,
-    KEY_FIGURES,
-    SUITES,
-    UNITS,
-    case_label,
-    figure_caption,
-)
+from harness.report.text import BENCH, KEY_FIGURES, SUITES, UNITS, case_label, figure_caption
 
 ORDER = ("deussen1995", "bourguignon2000", "verification")
 CSS = """

@@ -150,7 +150,7 @@ KEY_FIGURES = {
             "own model and springbench's exports run in Newton; coarse mesh dashed, fine "
             "solid (Newton's and "
             "MuJoCo's tetrahedra coincide).",
-        ),
+        )
     ],
     "bourguignon2000": [
         (

@@ -33,13 +33,7 @@ from harness.mechanics.dynamics import simulate, stiffness
 from harness.mechanics.static_path import solve_static_path
 from harness.models.anisotropic import frame
 from harness.models.masses import sub_tet_volumes
-from harness.scoring import (
-    case_weights,
-    g_arrays,
-    ref_columns,
-    ref_status,
-    reference_displacements,
-)
+from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
 from harness.stages.bc2000_build import (  # noqa: F401
     _cells,
     _dt,

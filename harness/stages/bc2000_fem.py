@@ -13,13 +13,7 @@ from harness.case.parts import classify_nodes
 from harness.errors import CaseError, SpringbenchError
 from harness.mechanics import anisotropy as an
 from harness.models.anisotropic import build_anisotropic
-from harness.scoring import (
-    case_weights,
-    g_arrays,
-    ref_columns,
-    ref_status,
-    reference_displacements,
-)
+from harness.scoring import case_weights, g_arrays, ref_columns, ref_status, reference_displacements
 from harness.stages.bc2000_build import _cells, _label, _meshes, build, lumped_masses
 from harness.stages.bc2000_modes import heldout_modes
 

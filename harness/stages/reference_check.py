@@ -61,6 +61,7 @@ def run(case, ctx) -> list[dict]:
     rows = []
     for load in case.loads:
         est = float(sol.error_estimate[load.name])
+        # NaN (one level) too
         row = dict(
             case=case.name,
             model="FEM",
@@ -73,7 +74,7 @@ def run(case, ctx) -> list[dict]:
             closed_form_error=closed_form_error(case, sol, load),
             cached=sol.from_cache,
             status="ok" if est < case.reference.tol else "ref-coarse",
-        )  # NaN (one level) too
+        )
         if "modal" in case.tags:
             ctx.status(f"FEM modes ({load.name})")
             row["f1_hz"] = float(sol.frequencies(load=load.name)[0])

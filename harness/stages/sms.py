@@ -196,11 +196,12 @@ def _run(case, ctx, spec, cls) -> list[dict]:
             )
         )
         made[rule] = time.perf_counter() - t1
+    # noqa: E731
     score = (
         None
         if u_ref is None
         else lambda r: fit_score_of(r, case, u_ref, names, base.classes, weights)
-    )  # noqa: E731
+    )
     solved, bounds = solve_rules(
         case, nets, score, rules[0] if opt.get("start", "first") != "best" else None, ctx.status
     )

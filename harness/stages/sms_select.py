@@ -61,11 +61,8 @@ def optimise(setting, run_, base, first, first_res=None):
     t0 = time.perf_counter()
     kv0 = initial_kv(case.material, case.dim)
     cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
-    terms, volumes, at = (
-        [],
-        {},
-        base.n_springs,
-    )  # the volume terms some candidate needs, after the springs
+    # the volume terms some candidate needs, after the springs
+    terms, volumes, at = ([], {}, base.n_springs)
     for on in dict.fromkeys(c.volume for c in cands if c.volume):
         terms.append(with_volume(base, on, kv0).volume)
         volumes[on] = (at, at + terms[-1].n_elements)

@@ -176,10 +176,8 @@ def test_clamp_and_traction_on_groups_in_fem_and_model(tmp_path, cyl):
         atol=1e-10 * np.abs(T).max() * A,
     )
     fixed = fixed_dofs(d, c, c.loads[0], bbox)
-    for disc in (
-        d,
-        Discretisation(mesh.refined(), c.reference.cell, c.reference.element),
-    ):  # refined: the same
+    # refined: the same
+    for disc in (d, Discretisation(mesh.refined(), c.reference.cell, c.reference.element)):
         on_face = np.abs(disc.doflocs[0]) < 1e-12  # face, by hand
         assert len(fixed_dofs(disc, c, c.loads[0], bbox)) == 3 * on_face.sum()
         bf = disc.mesh.boundary_facets()
@@ -255,10 +253,7 @@ def test_scaled_copy_keeps_the_groups(tmp_path, cyl):
 
 @pytest.mark.parametrize(
     "traction,dim,field",
-    [
-        ("twist = [1.0, 0.0, 0.0]", 2, "traction[0].twist"),
-        ("", 3, "traction[0]"),
-    ],
+    [("twist = [1.0, 0.0, 0.0]", 2, "traction[0].twist"), ("", 3, "traction[0]")],
 )
 def test_twist_and_empty_tractions_are_one_line_errors(tmp_path, capsys, traction, dim, field):
     p = tmp_path / "t.toml"

@@ -334,6 +334,7 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
     whole = prob.G2(k)
     part = sel.subset(prob, [0])
+    # fresh matrices: nothing shared
     again = FitProblem(
         tuple(dataclasses.replace(b, B=b.B.copy()) for b in part.blocks),
         part.k0,
@@ -341,7 +342,7 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
         part.bounds,
         None,
         part.coords,
-    )  # fresh matrices: nothing shared
+    )
     assert (
         part.load_sets()[0].stiffness(k).data.tobytes()
         == again.load_sets()[0].stiffness(k).data.tobytes()

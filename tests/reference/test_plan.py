@@ -54,20 +54,18 @@ def test_without_coordinates_superlu_is_the_direct_method():
         "superlu",
     )
     assert choose_plan(System(10, 2, "direct", coords=False)).steps == ("superlu",)
+    # the two-level needs the coordinates too
     assert choose_plan(System(10, 2, "two-level", coarse=True, coords=False)).steps == (
         "amg",
         "amg-strong",
         "superlu",
-    )  # the two-level needs the coordinates too
+    )
 
 
 def test_named_methods_and_the_problem_level_choices():
     assert choose_plan(System(10, 2, "cg")).steps == ("cg", "amg", "amg-strong", "cholesky")
-    assert choose_plan(System(10, 2, "tensor")).steps == (
-        "amg",
-        "amg-strong",
-        "cholesky",
-    )  # no preconditioner
+    # no preconditioner
+    assert choose_plan(System(10, 2, "tensor")).steps == ("amg", "amg-strong", "cholesky")
     assert choose_plan(System(10, 3, "tensor", matrix_free=True)).matrix_free  # asked for by name
     assert not choose_plan(
         System(plan.MATRIX_FREE_MIN[3] - 1, 3, "auto", matrix_free=True)

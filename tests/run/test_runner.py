@@ -17,10 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from harness import (
-    cli,
-    registry,
-)
+from harness import cli, registry
 from harness.report.build import TIMING
 from harness.run.runner import run_suite
 from tests.fakestage import FAKE, calls, write_case

@@ -32,9 +32,8 @@ class MTClass(ModelClass):
         return sms_mt.optimise(setting, run, start, first)
 
     def columns(self, case, spec: dict, net) -> dict:
-        return {
-            "n_elements": len(net.volume.body.cells)
-        }  # B&C's elements (the springs: connectivity)
+        # B&C's elements (the springs: connectivity)
+        return {"n_elements": len(net.volume.body.cells)}
 
     def constants(self, net) -> dict:
         return sms_mt.constants(net)
