@@ -23,6 +23,7 @@ HISTORY = [
     r"\bbefore this (?:sess[i]on|ch[a]nge)\b",
     r"\bany ?mo[r]e\b",
     r"\bearlier r[u]ns\b",
+    r"\bthe first v[e]rsion\b",
 ]
 # others' trackers
 EXTERNAL = re.compile(r"\b(numba|scikit-fem|meshio|newton|warp|mujoco|pyamg|scipy) issue", re.I)
