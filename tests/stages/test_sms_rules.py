@@ -15,29 +15,10 @@ pytest.importorskip("gmsh")
 
 
 def rows(mesh, out, *argv):
-    assert (
-        cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                "1e5",
-                "--nu",
-                "0.45",
-                "--method",
-                "rule",
-                "--max-refine",
-                "0",
-                "--out",
-                str(out),
-                *argv,
-            ]
-        )
-        == 0
-    )
-    return pd.read_csv(out.with_suffix(".csv")).set_index("stiffness"), out.with_suffix(
-        ".json"
-    ).read_text()
+    args = ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45", "--method", "rule"]
+    assert cli.main([*args, "--max-refine", "0", "--out", str(out), *argv]) == 0
+    table = pd.read_csv(out.with_suffix(".csv")).set_index("stiffness")
+    return table, out.with_suffix(".json").read_text()
 
 
 @pytest.mark.slow
@@ -56,10 +37,10 @@ def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, 
         return solve_all(nets, case, loads)
 
     monkeypatch.setattr(statics, "solve_all", counting)
-    from harness.export import engine_loads
+    from harness.commands import calibrate_write
 
     # the export's solve, not a rule's
-    monkeypatch.setattr(engine_loads, "settle_recipe", lambda net, case: None)
+    monkeypatch.setattr(calibrate_write, "settle_recipe", lambda net, case: None)
     monkeypatch.setattr(sms_rules, "ALL_RULES_DOFS", 0)
     part, part_json = rows(mesh, tmp_path / "part.vtu")
     skipped = part.index[part.G_fit_score.isna()]
