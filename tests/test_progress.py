@@ -95,15 +95,10 @@ def test_calibrate_phases_drive_the_clock():
     bounds = [c[1] for c in rec.calls if c[0] == "bound"]
     assert bounds == [None, None, (VALIDATION_BUDGET + 1) * 60.0, 60.0]  # once per phase
     phases = [c[1] for c in rec.calls if c[0] == "set" and c[1]]
-    assert phases == [
-        "building the network",
-        "FEM reference",
-        "FEM reference",
-        "validation fit 1",
-        "validation fit 2",
-        "final fit",
-        "final fit",
-    ]
+    assert phases == (
+        ["building the network", "FEM reference", "FEM reference"]
+        + ["validation fit 1", "validation fit 2", "final fit", "final fit"]
+    )
 
 
 @pytest.mark.slow
@@ -113,22 +108,11 @@ def test_calibrate_on_a_terminal(monkeypatch, tmp_path, quiet):
 
     pytest.importorskip("gmsh")
     mesh = meshes.cylinder(tmp_path)
-    argv = [
-        "calibrate",
-        str(mesh),
-        "--E",
-        "1e5",
-        "--nu",
-        "0.3",
-        "--prior-weight",
-        "1",
-        "--budget",
-        "2",
-        "--max-refine",
-        "0",
-        "--out",
-        str(tmp_path / "m.vtu"),
-    ] + (["--quiet"] if quiet else [])
+    argv = (
+        ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3"]
+        + ["--prior-weight", "1", "--budget", "2", "--max-refine", "0"]
+        + ["--out", str(tmp_path / "m.vtu")]
+    ) + (["--quiet"] if quiet else [])
     tty = terminal(monkeypatch)
     assert cli.main(argv) == 0
     text = tty.getvalue()
@@ -146,17 +130,10 @@ def test_run_quiet_prints_no_case_lines(tmp_path, fake, capsys):
     assert "[1/1] a: ok" in capsys.readouterr().out  # not a terminal: one line per case
     assert (
         cli.main(
-            [
-                "run",
-                str(suite),
-                "--results",
-                str(res),
-                "--jobs",
-                "1",
-                "--no-figures",
-                "--force",
-                "--quiet",
-            ]
+            (
+                ["run", str(suite), "--results", str(res), "--jobs", "1"]
+                + ["--no-figures", "--force", "--quiet"]
+            )
         )
         == 0
     )

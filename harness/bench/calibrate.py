@@ -82,22 +82,8 @@ def cylinder(path: Path, n_tets: int) -> int:
 def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess]:
     """(seconds, process) of one cold ``springbench calibrate``: its own process and an
     empty reference cache."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "harness",
-        "calibrate",
-        str(mesh),
-        "--E",
-        "1e5",
-        "--nu",
-        "0.45",
-        "--budget",
-        str(BUDGET),
-        "--out",
-        str(out),
-        *extra,
-    ]
+    cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
+    cmd += ["--budget", str(BUDGET), "--out", str(out), *extra]
     env = dict(os.environ, SPRINGBENCH_CACHE=str(out.parent / f"cache-{out.stem}"))
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)

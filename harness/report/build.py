@@ -80,58 +80,19 @@ from harness.report.nu_sweep import markdown_section, skipped_lines, sweep_frame
 from harness.report.page import index_html, page_suites
 from harness.report.readme import readme_md
 
-HEAD = [
-    "case",
-    "model",
-    "load",
-    "stage",
-    "seed",
-    "status",
-    "mode",
-    "n_nodes",
-    "n_springs",
-    "n_elements",
-    "n_dofs",
-    "structure",
-    "rule",
-    "stiffness",
-    "optimizer",
-    "objective",
-    "grouped",
-    "weights",
-    "G_initial",
-    "G_final",
-    "improvement",
-    "G_norm_initial",
-    "G_norm_final",
-    "G_ref",
-    "ref_error_max",
-    "G_heldout_initial",
-    "G_heldout",
-    "G_ref_heldout",
-    "ref_error_heldout",
-    "G_s_initial",
-    "G_s_final",
-    "G_abc_initial",
-    "G_abc_final",
-    "freq_error",
-    "f1_ratio",
-    "freq_error_initial",
-    "freq_error_final",
-    "freq_error_heldout",
-    "error_estimate",
-    "closed_form_error",
-    "tip_ratio",
-    "flexion_ratio",
-    "pull_stiffness_spread",
-    "pull_drift_max",
-    "static_status",
-    "engine",
-    "G_norm",
-    "max_error",
-    "engine_status",
-    "wall_s",
-]
+HEAD = (
+    ["case", "model", "load", "stage", "seed", "status", "mode", "n_nodes"]
+    + ["n_springs", "n_elements", "n_dofs", "structure", "rule", "stiffness"]
+    + ["optimizer", "objective", "grouped", "weights", "G_initial", "G_final"]
+    + ["improvement", "G_norm_initial", "G_norm_final", "G_ref"]
+    + ["ref_error_max", "G_heldout_initial", "G_heldout", "G_ref_heldout"]
+    + ["ref_error_heldout", "G_s_initial", "G_s_final", "G_abc_initial"]
+    + ["G_abc_final", "freq_error", "f1_ratio", "freq_error_initial"]
+    + ["freq_error_final", "freq_error_heldout", "error_estimate"]
+    + ["closed_form_error", "tip_ratio", "flexion_ratio"]
+    + ["pull_stiffness_spread", "pull_drift_max", "static_status", "engine"]
+    + ["G_norm", "max_error", "engine_status", "wall_s"]
+)
 TAIL = ["seconds", "error"]
 TIMING = re.compile(r"^(seconds|time|wall|wall_s)$|^seconds_|_(seconds|ms|per_s|per_second)$")
 RESULT_GLOB = "result-seed*.json"

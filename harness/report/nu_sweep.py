@@ -187,20 +187,8 @@ def family_frame(df):
             rows[c] = np.nan
     rows["_order"] = np.arange(len(rows))
     rows = rows.sort_values(["body", "nu", "_order"], kind="stable")
-    cols = [
-        "body",
-        "dim",
-        "nu",
-        "kind",
-        "model",
-        "fit",
-        *fams,
-        "G_heldout_mean",
-        "G_heldout_mean_spread",
-        "G_norm_final",
-        "status",
-        "heldout_derived",
-    ]
+    cols = ["body", "dim", "nu", "kind", "model", "fit", *fams, "G_heldout_mean"]
+    cols += ["G_heldout_mean_spread", "G_norm_final", "status", "heldout_derived"]
     return rows[cols].reset_index(drop=True)
 
 
@@ -331,15 +319,10 @@ def markdown_section(df) -> list[str]:
         cols = [f for f in fams if b[f].notna().any()]  # a 2-D body has no torsion
         for _, g in b.groupby("nu", sort=True):
             t = g[
-                [
-                    "model",
-                    "fit",
-                    *cols,
-                    "G_heldout_mean",
-                    "G_heldout_mean_spread",
-                    "G_norm_final",
-                    "status",
-                ]
+                (
+                    ["model", "fit", *cols, "G_heldout_mean", "G_heldout_mean_spread"]
+                    + ["G_norm_final", "status"]
+                )
             ].copy()
             t["model"] = [m + (" *" if x else "") for m, x in zip(t["model"], g["heldout_derived"])]
             t = t.rename(

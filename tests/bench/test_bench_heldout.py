@@ -139,26 +139,11 @@ def test_network_statics_equals_springbench(bar, tmp_path, model):
     out = tmp_path / "model.vtu"
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(bar),
-                "--E",
-                "1e5",
-                "--nu",
-                "0.3",
-                "--method",
-                "rule",
-                "--rule",
-                "lloyd",
-                "--model",
-                model,
-                "--max-refine",
-                "0",
-                "--heldout",
-                "none",
-                "--out",
-                str(out),
-            ]
+            (
+                ["calibrate", str(bar), "--E", "1e5", "--nu", "0.3", "--method", "rule"]
+                + ["--rule", "lloyd", "--model", model, "--max-refine", "0"]
+                + ["--heldout", "none", "--out", str(out)]
+            )
         )
         == 0
     )

@@ -63,17 +63,10 @@ def test_stretch_constraints_remove_rigid_motions(dim):
 
 def test_basic3d_names_follow_design():
     names = [l.name for l in basic3d(1.0)]
-    assert names == [
-        "stretch-x",
-        "stretch-y",
-        "stretch-z",
-        "shear-xy",
-        "shear-yx",
-        "shear-xz",
-        "shear-zx",
-        "shear-yz",
-        "shear-zy",
-    ]
+    assert names == (
+        ["stretch-x", "stretch-y", "stretch-z", "shear-xy", "shear-yx"]
+        + ["shear-xz", "shear-zx", "shear-yz", "shear-zy"]
+    )
     shear_xz = basic3d(1.0)[5]
     assert shear_xz.constraints[0].part == "z0" and shear_xz.tractions[0].part == "z1"
     assert shear_xz.tractions[0].vector == (1.0, 0.0, 0.0)

@@ -54,21 +54,11 @@ def calibrate_case(tmp_path, mesh, groups=False):
     p = argparse.ArgumentParser()
     cal.add_arguments(p)
     args = p.parse_args(
-        [
-            str(mesh),
-            "--E",
-            str(E),
-            "--nu",
-            str(NU),
-            "--density",
-            str(RHO),
-            "--method",
-            "rule",
-            "--max-refine",
-            "0",
-            "--out",
-            str(tmp_path / "m.vtu"),
-        ]
+        (
+            [str(mesh), "--E", str(E), "--nu", str(NU), "--density", str(RHO)]
+            + ["--method", "rule", "--max-refine", "0"]
+            + ["--out", str(tmp_path / "m.vtu")]
+        )
     )
     ends = end_loads(m.points, m.cells, *(("clamp", "tip", m.groups) if groups else ()))
     (tmp_path / "c.toml").write_text(case_text(args, m.dim, m.cells, ends=ends))

@@ -214,18 +214,10 @@ def test_unknown_group_is_one_line_error(tmp_path, cyl, capsys):
     err = [line for line in capsys.readouterr().err.strip().splitlines() if "box.toml" in line]
     assert code == 2 and len(err) == 1 and "body.parts.clamp.group" in err[0]
     code = cli.main(
-        [
-            "calibrate",
-            str(cyl),
-            "--E",
-            "1e5",
-            "--nu",
-            "0.3",
-            "--clamp",
-            "nope",
-            "--out",
-            str(tmp_path / "m.vtu"),
-        ]
+        (
+            ["calibrate", str(cyl), "--E", "1e5", "--nu", "0.3", "--clamp", "nope"]
+            + ["--out", str(tmp_path / "m.vtu")]
+        )
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert (

@@ -230,24 +230,11 @@ def test_calibrate_holds_out_torsion_on_named_groups(tmp_path, cyls, capsys):
     mesh = cyls[0.05]
     out = tmp_path / "m.vtu"
     code = cli.main(
-        [
-            "calibrate",
-            str(mesh),
-            "--E",
-            str(E),
-            "--nu",
-            str(NU),
-            "--method",
-            "rule",
-            "--max-refine",
-            "0",
-            "--clamp",
-            "clamp",
-            "--load-region",
-            "tip",
-            "--out",
-            str(out),
-        ]
+        (
+            ["calibrate", str(mesh), "--E", str(E), "--nu", str(NU)]
+            + ["--method", "rule", "--max-refine", "0", "--clamp", "clamp"]
+            + ["--load-region", "tip", "--out", str(out)]
+        )
     )
     assert code == 0
     assert "group 'clamp' clamped" in capsys.readouterr().out  # the clamp is said on stdout
@@ -279,21 +266,9 @@ def cal_args(mesh, out):
     p = argparse.ArgumentParser()
     cal.add_arguments(p)
     return p.parse_args(
-        [
-            str(mesh),
-            "--E",
-            str(E),
-            "--nu",
-            str(NU),
-            "--method",
-            "rule",
-            "--max-refine",
-            "0",
-            "--clamp",
-            "clamp",
-            "--load-region",
-            "tip",
-            "--out",
-            str(out),
-        ]
+        (
+            [str(mesh), "--E", str(E), "--nu", str(NU), "--method", "rule"]
+            + ["--max-refine", "0", "--clamp", "clamp", "--load-region", "tip"]
+            + ["--out", str(out)]
+        )
     )

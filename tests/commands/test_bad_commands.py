@@ -93,21 +93,12 @@ def _networks(net: meshio.Mesh) -> dict:
 
 
 SCORE_CASES = sorted(
-    [
-        "spring_index_out_of_range",
-        "spring_to_itself",
-        "nan_point",
-        "nan_stiffness",
-        "negative_stiffness",
-        "zero_stiffness",
-        "no_stiffness",
-        "no_springs",
-        "three_d_network",
-        "floating_node",
-        "empty_file",
-        "truncated",
-        "not_a_mesh",
-    ]
+    (
+        ["spring_index_out_of_range", "spring_to_itself", "nan_point"]
+        + ["nan_stiffness", "negative_stiffness", "zero_stiffness"]
+        + ["no_stiffness", "no_springs", "three_d_network", "floating_node"]
+        + ["empty_file", "truncated", "not_a_mesh"]
+    )
 ) + ["missing", "a_folder"]
 
 

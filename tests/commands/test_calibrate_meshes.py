@@ -32,19 +32,10 @@ def made(tmp_path_factory):
 
 def calibrate(mesh, out, *argv, refine="0"):
     code = cli.main(
-        [
-            "calibrate",
-            str(mesh),
-            "--E",
-            "1e5",
-            "--density",
-            str(RHO),
-            "--out",
-            str(out),
-            "--max-refine",
-            refine,
-            *argv,
-        ]
+        (
+            ["calibrate", str(mesh), "--E", "1e5", "--density", str(RHO)]
+            + ["--out", str(out), "--max-refine", refine, *argv]
+        )
     )
     assert code == 0
     return json.loads(out.with_suffix(".json").read_text()), pd.read_csv(out.with_suffix(".csv"))

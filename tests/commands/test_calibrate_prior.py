@@ -20,21 +20,10 @@ def heldout(mesh, out, *argv):
     """(G_heldout_mean of the exported constants, of the start rule, the exported row, the JSON)."""
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                "1e5",
-                "--nu",
-                "0.45",
-                "--max-refine",
-                "0",
-                "--budget",
-                "20",
-                "--out",
-                str(out),
-                *argv,
-            ]
+            (
+                ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
+                + ["--max-refine", "0", "--budget", "20", "--out", str(out), *argv]
+            )
         )
         == 0
     )

@@ -16,24 +16,14 @@ README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 
 # phrases that tell how things used to be (history belongs in CHANGELOG.md)
-HISTORY = [
-    r"\bused to\b",
-    r"\bpreviously\b",
-    r"\bformerly\b",
-    r"\bwas ~",
-    r"\bwere ~",
-    r"\bthe old ",
-    r"\bbefore this session\b",
-    r"\bthis session\b",
-    r"\bearlier runs\b",
-    r"\bno longer\b",
-    r"\bnow\b",
-    r"\bany ?more\b",
-    r"\bhad been\b",
-    r"\bused to be\b",
-    r"\bthe new default\b",
-    r"\bbefore the\b (?:change|fix|rewrite|solver|caching)",
-]
+HISTORY = (
+    [r"\bused to\b", r"\bpreviously\b", r"\bformerly\b", r"\bwas ~"]
+    + [r"\bwere ~", r"\bthe old ", r"\bbefore this session\b"]
+    + [r"\bthis session\b", r"\bearlier runs\b", r"\bno longer\b", r"\bnow\b"]
+    + [r"\bany ?more\b", r"\bhad been\b", r"\bused to be\b"]
+    + [r"\bthe new default\b"]
+    + [r"\bbefore the\b (?:change|fix|rewrite|solver|caching)"]
+)
 
 
 def _markdown_pages() -> list[Path]:
@@ -75,17 +65,10 @@ def test_mkdocs_build_strict(tmp_path):
     site = tmp_path / "site"
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     res = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "mkdocs",
-            "build",
-            "--strict",
-            "-f",
-            str(ROOT / "mkdocs.yml"),
-            "-d",
-            str(site),
-        ],
+        (
+            [sys.executable, "-m", "mkdocs", "build", "--strict"]
+            + ["-f", str(ROOT / "mkdocs.yml"), "-d", str(site)]
+        ),
         cwd=ROOT,
         capture_output=True,
         text=True,

@@ -27,18 +27,10 @@ def pack_of(folder, size):
     out = folder / f"pack{size}"
     assert (
         cli.main(
-            [
-                "pack",
-                str(mesh),
-                "--E",
-                str(E),
-                "--nu",
-                str(NU),
-                "--density",
-                str(RHO),
-                "--out",
-                str(out),
-            ]
+            (
+                ["pack", str(mesh), "--E", str(E), "--nu", str(NU)]
+                + ["--density", str(RHO), "--out", str(out)]
+            )
         )
         == 0
     )
@@ -117,20 +109,11 @@ def test_newton_runs_a_springbench_export_to_its_linear_statics(packs, tmp_path)
     mesh, out, pack = by_size[0.06]
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                str(E),
-                "--nu",
-                str(NU),
-                "--density",
-                str(RHO),
-                "--method",
-                "rule",
-                "--out",
-                str(tmp_path / "m.vtu"),
-            ]
+            (
+                ["calibrate", str(mesh), "--E", str(E), "--nu", str(NU)]
+                + ["--density", str(RHO), "--method", "rule"]
+                + ["--out", str(tmp_path / "m.vtu")]
+            )
         )
         == 0
     )
@@ -203,23 +186,12 @@ def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_pat
     mesh, _, pack = by_size[0.06]
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                str(E),
-                "--nu",
-                "0.45",
-                "--density",
-                str(RHO),
-                "--method",
-                "rule",
-                "--model",
-                "springs+node-volume",
-                "--quiet",
-                "--out",
-                str(tmp_path / "m.vtu"),
-            ]
+            (
+                ["calibrate", str(mesh), "--E", str(E), "--nu", "0.45"]
+                + ["--density", str(RHO), "--method", "rule"]
+                + ["--model", "springs+node-volume", "--quiet"]
+                + ["--out", str(tmp_path / "m.vtu")]
+            )
         )
         == 0
     )
@@ -267,22 +239,11 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
     if engine == "newton-springs":
         assert (
             cli.main(
-                [
-                    "calibrate",
-                    str(mesh),
-                    "--E",
-                    str(E),
-                    "--nu",
-                    str(NU),
-                    "--density",
-                    str(RHO),
-                    "--method",
-                    "rule",
-                    "--max-refine",
-                    "0",
-                    "--out",
-                    str(tmp_path / "m.vtu"),
-                ]
+                (
+                    ["calibrate", str(mesh), "--E", str(E), "--nu", str(NU)]
+                    + ["--density", str(RHO), "--method", "rule", "--max-refine", "0"]
+                    + ["--out", str(tmp_path / "m.vtu")]
+                )
             )
             == 0
         )
@@ -296,16 +257,10 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
     )
     assert (
         cli.main(
-            [
-                "score",
-                "--displacements",
-                str(u),
-                str(out),
-                "--loads",
-                "tip,sag",
-                "--out",
-                str(table),
-            ]
+            (
+                ["score", "--displacements", str(u), str(out), "--loads", "tip,sag"]
+                + ["--out", str(table)]
+            )
         )
         == 0
     )
@@ -313,16 +268,8 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
 
     g = pd.read_csv(table).set_index("load").G_norm
     worst = float(g.drop("total").max())
-    gate = [
-        "score",
-        "--displacements",
-        str(u),
-        str(out),
-        "--loads",
-        "tip,sag",
-        "--junit",
-        str(report),
-    ]
+    gate = ["score", "--displacements", str(u), str(out), "--loads", "tip,sag"]
+    gate += ["--junit", str(report)]
     assert cli.main([*gate, "--max-g-norm", str(1.5 * worst)]) == 0
     assert cli.main([*gate, "--max-g-norm", str(0.5 * worst)]) == 1
     cases = ElementTree.parse(report).getroot().iter("testcase")

@@ -26,18 +26,10 @@ def packed(tmp_path_factory):
     mesh = meshes.holed_block(d, size=0.09)
     assert (
         cli.main(
-            [
-                "pack",
-                str(mesh),
-                "--E",
-                str(E),
-                "--nu",
-                str(NU),
-                "--density",
-                str(RHO),
-                "--out",
-                str(d / "p"),
-            ]
+            (
+                ["pack", str(mesh), "--E", str(E), "--nu", str(NU)]
+                + ["--density", str(RHO), "--out", str(d / "p")]
+            )
         )
         == 0
     )
@@ -96,20 +88,11 @@ def test_score_gate_junit_and_g_against_numpy(packed, tmp_path, capsys):
     }
     np.savez(tmp_path / "u.npz", **fields)
     code = cli.main(
-        [
-            "score",
-            "--displacements",
-            str(tmp_path / "u.npz"),
-            str(d / "p"),
-            "--max-g-norm",
-            "0.5",
-            "--max",
-            "tip=0.001",
-            "--out",
-            str(tmp_path / "g.csv"),
-            "--junit",
-            str(tmp_path / "j.xml"),
-        ]
+        (
+            ["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p")]
+            + ["--max-g-norm", "0.5", "--max", "tip=0.001"]
+            + ["--out", str(tmp_path / "g.csv"), "--junit", str(tmp_path / "j.xml")]
+        )
     )
     assert code == 1  # tip misses its own gate
     import pandas as pd
@@ -128,28 +111,20 @@ def test_score_gate_junit_and_g_against_numpy(packed, tmp_path, capsys):
     assert [c.get("name") for c in cases if c.find("failure") is not None] == ["tip"]
     assert (
         cli.main(
-            [
-                "score",
-                "--displacements",
-                str(tmp_path / "u.npz"),
-                str(d / "p"),
-                "--max-g-norm",
-                "0.5",
-            ]
+            (
+                ["score", "--displacements", str(tmp_path / "u.npz"), str(d / "p")]
+                + ["--max-g-norm", "0.5"]
+            )
         )
         == 0
     )
     np.savez(tmp_path / "fem.npz", **{ld.name: ld.u_fem for ld in pack.loads})
     assert (
         cli.main(
-            [
-                "score",
-                "--displacements",
-                str(tmp_path / "fem.npz"),
-                str(d / "p"),
-                "--max-g-norm",
-                "0",
-            ]
+            (
+                ["score", "--displacements", str(tmp_path / "fem.npz"), str(d / "p")]
+                + ["--max-g-norm", "0"]
+            )
         )
         == 0
     )
@@ -206,22 +181,11 @@ def test_scoring_springbench_statics_on_a_pack_gives_calibrates_own_heldout_g(pa
     d, mesh, pack = packed
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                str(E),
-                "--nu",
-                str(NU),
-                "--density",
-                str(RHO),
-                "--method",
-                "rule",
-                "--rule",
-                "vangelder",
-                "--out",
-                str(tmp_path / "m.vtu"),
-            ]
+            (
+                ["calibrate", str(mesh), "--E", str(E), "--nu", str(NU)]
+                + ["--density", str(RHO), "--method", "rule", "--rule", "vangelder"]
+                + ["--out", str(tmp_path / "m.vtu")]
+            )
         )
         == 0
     )

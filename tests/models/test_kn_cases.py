@@ -120,28 +120,12 @@ def test_calibrate_exports_the_kn_term(tmp_path):
     out = tmp_path / "bar-kn.vtu"
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                "1e5",
-                "--nu",
-                "0.45",
-                "--model",
-                "springs+kn",
-                "--method",
-                "gauss-newton",
-                "--max-refine",
-                "0",
-                "--rule",
-                "lloyd",
-                "--loads",
-                "homogeneous",
-                "--k-ratio",
-                "100",
-                "--out",
-                str(out),
-            ]
+            (
+                ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
+                + ["--model", "springs+kn", "--method", "gauss-newton"]
+                + ["--max-refine", "0", "--rule", "lloyd", "--loads", "homogeneous"]
+                + ["--k-ratio", "100", "--out", str(out)]
+            )
         )
         == 0
     )

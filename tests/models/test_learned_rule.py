@@ -149,18 +149,10 @@ def test_rules_fit_command_writes_a_rule_calibrate_can_read(tmp_path, made, caps
     out = tmp_path / "rule.json"
     assert (
         cli.main(
-            [
-                "rules",
-                "fit",
-                str(made["ellipse"]),
-                "--nu",
-                "0.3",
-                "0.45",
-                "--maxiter",
-                "5",
-                "--out",
-                str(out),
-            ]
+            (
+                ["rules", "fit", str(made["ellipse"]), "--nu", "0.3", "0.45"]
+                + ["--maxiter", "5", "--out", str(out)]
+            )
         )
         == 0
     )

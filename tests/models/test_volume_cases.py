@@ -105,24 +105,11 @@ def test_calibrate_exports_the_volume_term(tmp_path):
     out = tmp_path / "bar-sv.vtu"
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                "1e5",
-                "--nu",
-                "0.45",
-                "--model",
-                "springs+volume",
-                "--method",
-                "gauss-newton",
-                "--max-refine",
-                "0",
-                "--rule",
-                "lloyd",
-                "--out",
-                str(out),
-            ]
+            (
+                ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
+                + ["--model", "springs+volume", "--method", "gauss-newton"]
+                + ["--max-refine", "0", "--rule", "lloyd", "--out", str(out)]
+            )
         )
         == 0
     )

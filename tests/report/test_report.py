@@ -22,15 +22,11 @@ def test_figures_from_stored_data_and_report_rebuild(tmp_path, fake, capsys):
     rep = run_suite([suite], results=res, jobs=1, progress=False)
     assert not rep.failed
     a = res / "demo" / "a"
-    kinds = [
-        "fig-trace.png",
-        "fig-volume.png",
-        "fig-spectrum.png",
-        "fig-anisotropy.png",
-        "fig-lloyd.png",
-        "fig-deformed.png",
-        "fig-fibres.png",
-    ]
+    kinds = (
+        ["fig-trace.png", "fig-volume.png", "fig-spectrum.png"]
+        + ["fig-anisotropy.png", "fig-lloyd.png", "fig-deformed.png"]
+        + ["fig-fibres.png"]
+    )
     for k in kinds:
         assert (a / k).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", k
     assert (res / "demo" / "fig-lloyd-bars.png").exists()  # suite figure from summary.csv
@@ -77,35 +73,16 @@ def test_broken_data_file_is_a_warning_not_a_crash(tmp_path, capsys):
 
 
 def test_column_order_is_stable():
-    cols = [
-        "zeta",
-        "G_final",
-        "seconds",
-        "paper_G_final",
-        "case",
-        "alpha",
-        "ratio_G_final",
-        "model",
-        "paper_unknown",
-        "error",
-        "seed",
-        "G_initial",
-    ]
+    cols = (
+        ["zeta", "G_final", "seconds", "paper_G_final", "case", "alpha"]
+        + ["ratio_G_final", "model", "paper_unknown", "error", "seed"]
+        + ["G_initial"]
+    )
     out = report.order_columns(cols)
-    assert out == [
-        "case",
-        "model",
-        "seed",
-        "G_initial",
-        "G_final",
-        "paper_G_final",
-        "ratio_G_final",
-        "alpha",
-        "zeta",
-        "paper_unknown",
-        "seconds",
-        "error",
-    ]
+    assert out == (
+        ["case", "model", "seed", "G_initial", "G_final", "paper_G_final"]
+        + ["ratio_G_final", "alpha", "zeta", "paper_unknown", "seconds", "error"]
+    )
     assert report.order_columns(reversed(cols)) == out
 
 

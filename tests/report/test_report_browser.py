@@ -47,22 +47,13 @@ def chromium() -> str:
 
 
 def browse(exe: str, tmp: Path, width: int, *args: str) -> subprocess.CompletedProcess:
-    cmd = [
-        exe,
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        "--hide-scrollbars",
-        f"--user-data-dir={tmp / f'profile{width}'}",
-        f"--window-size={width},1600",
-        "--virtual-time-budget=10000",
-        *args,
-    ]
+    cmd = (
+        [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"]
+        + ["--no-first-run", "--disable-background-networking"]
+        + ["--disable-component-update", "--disable-sync"]
+        + ["--hide-scrollbars", f"--user-data-dir={tmp / f'profile{width}'}"]
+        + [f"--window-size={width},1600", "--virtual-time-budget=10000", *args]
+    )
     return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
 
 

@@ -260,20 +260,13 @@ def _chromium() -> str:
 
 
 def _browse(exe: str, tmp: Path, *args: str) -> subprocess.CompletedProcess:
-    cmd = [
-        exe,
-        "--headless",
-        "--no-sandbox",
-        "--disable-gpu",
-        "--disable-quic",
-        "--no-first-run",
-        "--disable-background-networking",
-        "--disable-component-update",
-        "--disable-sync",
-        f"--user-data-dir={tmp / 'profile'}",
-        "--window-size=1280,2000",
-        *args,
-    ]
+    cmd = (
+        [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic"]
+        + ["--no-first-run", "--disable-background-networking"]
+        + ["--disable-component-update"]
+        + ["--disable-sync", f"--user-data-dir={tmp / 'profile'}"]
+        + ["--window-size=1280,2000", *args]
+    )
     return subprocess.run(cmd, capture_output=True, text=True, timeout=300)
 
 

@@ -252,88 +252,22 @@ hypothesis = pytest.importorskip("hypothesis")
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
-KEYS = [
-    "name",
-    "dim",
-    "description",
-    "tags",
-    "body",
-    "shape",
-    "size",
-    "origin",
-    "vertices",
-    "file",
-    "format",
-    "parts",
-    "box",
-    "material",
-    "E",
-    "nu",
-    "density",
-    "plane",
-    "fibre",
-    "E_fibre",
-    "E_cross",
-    "direction",
-    "field",
-    "regions",
-    "loads",
-    "set",
-    "magnitude",
-    "case",
-    "constraint",
-    "part",
-    "components",
-    "traction",
-    "vector",
-    "gravity",
-    "reference",
-    "element",
-    "cell",
-    "tol",
-    "quick",
-    "full",
-    "score",
-    "weights",
-    "run",
-    "seeds",
-    "stages",
-    "expect",
-    "values",
-    "model",
-    "kind",
-    "bogus",
-    "x0",
-]
-WORDS = [
-    "x0",
-    "x1",
-    "y0",
-    "x0y0",
-    "basic2d",
-    "basic3d",
-    "rectangle",
-    "box",
-    "polygon",
-    "mesh",
-    "stress",
-    "strain",
-    "P1",
-    "P2",
-    "tri",
-    "quad",
-    "tet",
-    "hex",
-    "all",
-    "z",
-    "vertical",
-    "sms",
-    "stretch-x",
-    "..",
-    "",
-    "/",
-    "nan",
-]
+KEYS = (
+    ["name", "dim", "description", "tags", "body", "shape", "size"]
+    + ["origin", "vertices", "file", "format", "parts", "box", "material"]
+    + ["E", "nu", "density", "plane", "fibre", "E_fibre", "E_cross"]
+    + ["direction", "field", "regions", "loads", "set", "magnitude", "case"]
+    + ["constraint", "part", "components", "traction", "vector", "gravity"]
+    + ["reference", "element", "cell", "tol", "quick", "full", "score"]
+    + ["weights", "run", "seeds", "stages", "expect", "values", "model"]
+    + ["kind", "bogus", "x0"]
+)
+WORDS = (
+    ["x0", "x1", "y0", "x0y0", "basic2d", "basic3d", "rectangle", "box"]
+    + ["polygon", "mesh", "stress", "strain", "P1", "P2", "tri", "quad"]
+    + ["tet", "hex", "all", "z", "vertical", "sms", "stretch-x", "..", ""]
+    + ["/", "nan"]
+)
 SCALARS = (
     st.booleans()
     | st.integers(-5, 5)

@@ -282,17 +282,10 @@ def test_dask_local_cluster_matches_serial(tmp_path, fake):
     ) as cluster:
         assert (
             cli.main(
-                [
-                    "run",
-                    str(suite),
-                    "--results",
-                    str(r2),
-                    "--executor",
-                    "dask",
-                    "--scheduler",
-                    cluster.scheduler_address,
-                    "--no-figures",
-                ]
+                (
+                    ["run", str(suite), "--results", str(r2), "--executor", "dask"]
+                    + ["--scheduler", cluster.scheduler_address, "--no-figures"]
+                )
             )
             == 0
         )
@@ -341,16 +334,10 @@ def test_unreachable_scheduler_is_one_line(tmp_path, fake, capsys, monkeypatch):
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     code = cli.main(
-        [
-            "run",
-            str(suite),
-            "--results",
-            str(tmp_path / "r"),
-            "--executor",
-            "dask",
-            "--scheduler",
-            "tcp://127.0.0.1:9",
-        ]
+        (
+            ["run", str(suite), "--results", str(tmp_path / "r")]
+            + ["--executor", "dask", "--scheduler", "tcp://127.0.0.1:9"]
+        )
     )
     err = capsys.readouterr().err
     assert (

@@ -32,22 +32,11 @@ def test_rule_export_matches_hand_computed_constants(tri_mesh, tmp_path, capsys)
     E = 2.5e4
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(tri_mesh),
-                "--E",
-                str(E),
-                "--nu",
-                "0.3",
-                "--method",
-                "rule",
-                "--rule",
-                "deussen",
-                "--out",
-                str(out),
-                "--max-refine",
-                "0",
-            ]
+            (
+                ["calibrate", str(tri_mesh), "--E", str(E), "--nu", "0.3"]
+                + ["--method", "rule", "--rule", "deussen", "--out", str(out)]
+                + ["--max-refine", "0"]
+            )
         )
         == 0
     )
@@ -73,24 +62,11 @@ def test_lbfgs_improves_the_score(tri_mesh, tmp_path, capsys):
     out = tmp_path / "m.vtu"
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(tri_mesh),
-                "--E",
-                "1e4",
-                "--nu",
-                "0.3",
-                "--method",
-                "lbfgs",
-                "--prior-weight",
-                "0",
-                "--budget",
-                "3",
-                "--out",
-                str(out),
-                "--max-refine",
-                "0",
-            ]
+            (
+                ["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3"]
+                + ["--method", "lbfgs", "--prior-weight", "0", "--budget", "3"]
+                + ["--out", str(out), "--max-refine", "0"]
+            )
         )
         == 0
     )  # a fit, not validated
@@ -106,21 +82,10 @@ def _calibrate(mesh, out, *argv):
 
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(mesh),
-                "--E",
-                "1e4",
-                "--nu",
-                "0.3",
-                *argv,
-                "--budget",
-                "3",
-                "--out",
-                str(out),
-                "--max-refine",
-                "0",
-            ]
+            (
+                ["calibrate", str(mesh), "--E", "1e4", "--nu", "0.3", *argv]
+                + ["--budget", "3", "--out", str(out), "--max-refine", "0"]
+            )
         )
         == 0
     )
@@ -158,20 +123,10 @@ def test_init_needs_a_gradient_fit(tri_mesh, tmp_path, capsys):
     out = tmp_path / "m.vtu"
     assert (
         cli.main(
-            [
-                "calibrate",
-                str(tri_mesh),
-                "--E",
-                "1e4",
-                "--nu",
-                "0.3",
-                "--method",
-                "sa",
-                "--init",
-                "equilibrium-gap",
-                "--out",
-                str(out),
-            ]
+            (
+                ["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3"]
+                + ["--method", "sa", "--init", "equilibrium-gap", "--out", str(out)]
+            )
         )
         == 2
     )

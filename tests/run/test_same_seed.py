@@ -50,15 +50,10 @@ def test_two_runs_write_the_same_table(tmp_path, monkeypatch):
     for out, jobs in (("a", "1"), ("b", "2")):
         assert (
             cli.main(
-                [
-                    "run",
-                    str(suite),
-                    "--jobs",
-                    jobs,
-                    "--no-figures",
-                    "--results",
-                    str(tmp_path / out),
-                ]
+                (
+                    ["run", str(suite), "--jobs", jobs, "--no-figures"]
+                    + ["--results", str(tmp_path / out)]
+                )
             )
             == 0
         )
