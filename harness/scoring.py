@@ -100,9 +100,28 @@ def g_arrays(
 def fit_and_heldout(
     u_ref: np.ndarray, u: np.ndarray, classes: np.ndarray, weights, names, fit, heldout
 ) -> tuple[ScoreResult, ScoreResult | None]:
-    """Scores of u against u_ref (L, n, dim) over loads ``names`` kept apart: on the
-    fitted loads ``fit`` and on the held-out ones ``heldout`` (None when there are none),
-    the same weights (docs/design.md, "Fitted and held-out loads")."""
+    """Scores of a model on the fitted loads and on the held-out ones, kept apart
+    (docs/design.md, "Fitted and held-out loads").
+
+    Parameters
+    ----------
+    u_ref, u : ndarray, shape (L, n, dim)
+        The reference's and the model's displacements of the L loads ``names`` (m).
+    classes : ndarray of int, shape (n,)
+        Each node's class (0 inner, 1 border, 2 corner).
+    weights : (float, float, float)
+        a:b:c of G_{a:b:c}, the same on both sides.
+    names : sequence of str
+        The loads' names, in the order of the first axis.
+    fit, heldout : sequence of str
+        The fitted and the held-out loads (names from ``names``).
+
+    Returns
+    -------
+    (ScoreResult, ScoreResult or None)
+        :func:`g_arrays` on the fitted loads, and on the held-out ones (None when there
+        are none).
+    """
     names = list(names)
     u_ref, u = np.asarray(u_ref, float), np.asarray(u, float)
 
@@ -164,8 +183,23 @@ def g_ref_arrays(
 
         G_ref = sqrt(sum_i sum_p w_p e_{i,p}^2) / sqrt(sum_i sum_p w_p |u_ref,i(p)|^2)
 
-    u_ref (L, n, dim), e (L, n) in displacement units, classes (n,), weights (a, b, c).
-    Returns (total, per load (L,)); NaN where e is NaN (no estimate) or u_ref is zero."""
+    Parameters
+    ----------
+    u_ref : ndarray, shape (L, n, dim)
+        The reference's displacements (m).
+    e : ndarray, shape (L, n)
+        Its estimated error at the nodes (m).
+    classes : ndarray of int, shape (n,)
+        Each node's class (0 inner, 1 border, 2 corner).
+    weights : (float, float, float)
+        a:b:c, as for G.
+
+    Returns
+    -------
+    (float, ndarray of shape (L,))
+        G_ref over all loads and per load; NaN where e is NaN (no estimate) or u_ref is
+        zero.
+    """
     u_ref = np.asarray(u_ref, float)
     e = np.asarray(e, float)
     if u_ref.ndim != 3 or e.shape != u_ref.shape[:2]:
