@@ -47,75 +47,43 @@ def _time_solve(A, b, R, method):
     return sec, float(np.linalg.norm(A @ x - b) / np.linalg.norm(b))
 
 
+def _solve_row(dim: int, d, solver: str, seconds, t_asm, residual, ratio, note) -> dict:
+    """One row of task "solve": a P2 system of d.ndof dofs solved by ``solver``."""
+    return dict(
+        task="solve",
+        dim=dim,
+        element="P2 tri" if dim == 2 else "P2 tet",
+        n_dofs=d.ndof,
+        solver=solver,
+        seconds=seconds,
+        assembly_seconds=t_asm,
+        residual=residual,
+        ratio=ratio,
+        note=note,
+    )
+
+
 def run(quick: bool = False) -> pd.DataFrame:
     rows = []
     sizes_2d = [16, 32] if quick else [32, 64, 128]
     for n in steps(sizes_2d, "bench reference 2-D", "size"):
         d, A, b, R, t_asm = _system("tri", n)
         t_dir, r_dir = _time_solve(A, b, R, "direct")
-        rows.append(
-            dict(
-                task="solve",
-                dim=2,
-                element="P2 tri",
-                n_dofs=d.ndof,
-                solver="direct",
-                seconds=t_dir,
-                assembly_seconds=t_asm,
-                residual=r_dir,
-                ratio=1.0,
-                note="baseline: direct",
-            )
-        )
+        rows.append(_solve_row(2, d, "direct", t_dir, t_asm, r_dir, 1.0, "baseline: direct"))
         t_amg, r_amg = _time_solve(A, b, R, "amg")
-        rows.append(
-            dict(
-                task="solve",
-                dim=2,
-                element="P2 tri",
-                n_dofs=d.ndof,
-                solver="amg",
-                seconds=t_amg,
-                assembly_seconds=t_asm,
-                residual=r_amg,
-                ratio=t_dir / t_amg,
-                note="ratio = direct / amg time",
-            )
-        )
+        ratio, note = t_dir / t_amg, "ratio = direct / amg time"
+        rows.append(_solve_row(2, d, "amg", t_amg, t_asm, r_amg, ratio, note))
     sizes_3d = [(3, True), (4, True)] if quick else [(4, True), (6, True), (10, False)]
     for n, with_direct in steps(sizes_3d, "bench reference 3-D", "size"):
         d, A, b, R, t_asm = _system("tet", n)
         t_amg, r_amg = _time_solve(A, b, R, "amg")
-        t_dir, r_dir = _time_solve(A, b, R, "direct") if with_direct else (np.nan, np.nan)
         if with_direct:
-            rows.append(
-                dict(
-                    task="solve",
-                    dim=3,
-                    element="P2 tet",
-                    n_dofs=d.ndof,
-                    solver="direct",
-                    seconds=t_dir,
-                    assembly_seconds=t_asm,
-                    residual=r_dir,
-                    ratio=1.0,
-                    note="baseline: direct",
-                )
-            )
-        rows.append(
-            dict(
-                task="solve",
-                dim=3,
-                element="P2 tet",
-                n_dofs=d.ndof,
-                solver="amg",
-                seconds=t_amg,
-                assembly_seconds=t_asm,
-                residual=r_amg,
-                ratio=t_dir / t_amg if with_direct else np.nan,
-                note="ratio = direct / amg time" if with_direct else "direct skipped (too slow)",
-            )
-        )
+            t_dir, r_dir = _time_solve(A, b, R, "direct")
+            rows.append(_solve_row(3, d, "direct", t_dir, t_asm, r_dir, 1.0, "baseline: direct"))
+            ratio, note = t_dir / t_amg, "ratio = direct / amg time"
+        else:
+            ratio, note = np.nan, "direct skipped (too slow)"
+        rows.append(_solve_row(3, d, "amg", t_amg, t_asm, r_amg, ratio, note))
     # probes: 2-D P2 mesh with ~8k elements
     mesh = skfem.MeshTri.init_tensor(np.linspace(0, 2, 91), np.linspace(0, 1, 46))
     basis = skfem.CellBasis(mesh, skfem.ElementTriP2())
