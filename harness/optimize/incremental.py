@@ -217,29 +217,7 @@ class IncrementalG:
     def _warm_up(self):
         """Compile or load the kernels now (not inside a timed SA loop): a proposal and an
         accept at m = 0 on the empty batch; the next real accept overwrites what they wrote."""
-        self._kp(
-            0,
-            0,
-            1.0,
-            self.gf[0],
-            self.gv[0],
-            self.U0f,
-            self.Yt.reshape(-1),
-            self.batch,
-            self.nmax,
-            self.acc_i,
-            self.acc_v,
-            self.T,
-            self.Hz,
-            self.sig,
-            self.Cv,
-            self.PV,
-            self.AV,
-            self.YY,
-            self.YR,
-            self.bY,
-            *self.scratch,
-        )
+        self._proposal(0, 0, 1.0)
         self._ka(
             0,
             0,
@@ -378,16 +356,10 @@ class IncrementalG:
     def G(self) -> float:
         return float(np.sqrt(max(self.G2, 0.0)))
 
-    def propose(self, e: int, k_new: float) -> float:
-        delta = k_new - self.k[e]
-        if delta == 0.0:  # clipped at a bound: a no-op, and 1/delta would poison the Woodbury core
-            self._pending = (e, k_new, None)
-            return self.G()
-        j = self.col.get(e)
-        if j is None:
-            self._new_batch(e)
-            j = self.col[e]
-        d2 = self._kp(
+    def _proposal(self, e: int, j: int, delta: float) -> float:
+        """The proposal kernel for spring e (batch column j, k += delta) on the current
+        state: the change of G^2."""
+        return self._kp(
             self.m,
             j,
             delta,
@@ -410,6 +382,17 @@ class IncrementalG:
             self.bY,
             *self.scratch,
         )
+
+    def propose(self, e: int, k_new: float) -> float:
+        delta = k_new - self.k[e]
+        if delta == 0.0:  # clipped at a bound: a no-op, and 1/delta would poison the Woodbury core
+            self._pending = (e, k_new, None)
+            return self.G()
+        j = self.col.get(e)
+        if j is None:
+            self._new_batch(e)
+            j = self.col[e]
+        d2 = self._proposal(e, j, delta)
         self._pending = (e, k_new, (delta, j))
         self._last_j = j
         return float(np.sqrt(max(self.G2 + d2, 0.0)))
