@@ -1,7 +1,8 @@
 """Progress on stderr with an ETA (tqdm), for the long commands: a bar over known steps
-(:func:`steps`: the benchmarks' sizes and cases) and a clock for work whose remaining time
-is bounded by a budget (:class:`Clock`: calibrate). Both are silent with ``--quiet``
-(:func:`configure`) and whenever stderr is not a terminal (logs and pipes get no bars);
+(:func:`steps`: the benchmarks' sizes and cases) and a clock for work in phases whose
+remaining time is estimated from the work done (:class:`Clock`: calibrate). Both are
+silent with ``--quiet`` (:func:`configure`) and whenever stderr is not a terminal (logs
+and pipes get no bars);
 ``springbench run`` has its own suite bar (harness/run/runner.py) under the same rule.
 """
 
@@ -42,7 +43,7 @@ def steps(items, desc: str, unit: str = "step"):
 
 class Clock:
     """A live line for work in phases: the phase, the latest detail, the elapsed time and,
-    once :meth:`bound` says how long the rest can take at most, a bar and that ETA. Ticks
+    once :meth:`bound` says about how long the rest will take, a bar and that ETA. Ticks
     once a second on its own (a long FEM solve says nothing for minutes)."""
 
     def __init__(self, desc: str):
@@ -71,7 +72,7 @@ class Clock:
         self._draw()
 
     def bound(self, seconds: float | None) -> None:
-        """The rest takes at most ``seconds`` from now (None: unknown)."""
+        """The rest takes about ``seconds`` from now (None: unknown)."""
         self.end = None if seconds is None else time.monotonic() + max(float(seconds), 0.0)
         self._draw()
 
@@ -97,10 +98,10 @@ class Clock:
             total = max(self.end, now) - self.t0
             self.bar.total = total
             self.bar.n = min(now - self.t0, total)
-            # the bound, not tqdm's rate estimate
+            # the phase's own estimate, not tqdm's rate
             left = tqdm.format_interval(max(self.end - now, 0.0))
             self.bar.bar_format = (
-                "{desc} {percentage:3.0f}%|{bar}| {elapsed}, at most " + left + " left{postfix}"
+                "{desc} {percentage:3.0f}%|{bar}| {elapsed}, about " + left + " left{postfix}"
             )
         self.bar.refresh()
 

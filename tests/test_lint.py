@@ -76,3 +76,53 @@ def test_the_history_scan_finds_history_and_spares_other_trackers():
         f"# {old} file stays",
     ]
     assert history_lines("\n".join(lines)) == [lines[0], lines[1], lines[3]]
+
+
+# handlers of these that neither raise nor stand here change behaviour silently
+SWALLOWED = ("ImportError", "ModuleNotFoundError", "TypeError")
+# (file, what the handler does instead): optional tools a benchmark reports as missing in
+# its table, and the report's conversion of a cell to a number
+ALLOWED = {
+    ("harness/bench/heldout.py", "a row saying gmsh is missing"),
+    ("harness/bench/calibrate.py", "a row saying gmsh is missing"),
+    ("harness/report/findings.py", "a cell that is not a number is NaN"),
+    ("harness/report/numbers.py", "a cell that is not a number is printed as it is"),
+    ("harness/report/claims.py", "a foreign or partial summary gets no sentence"),
+    ("harness/report/figures/volume.py", "results moved from their cases: no such figure"),
+    ("harness/export/pack.py", "a one-line error naming the pack (its _bad raises)"),
+}
+
+
+def silent_handlers(text: str) -> list[int]:
+    """Lines of the ``except`` clauses catching an import or type error whose body raises
+    nothing: a missing module or a wrong call would take another path unseen."""
+    import ast
+
+    out = []
+    for node in ast.walk(ast.parse(text)):
+        if not isinstance(node, ast.ExceptHandler) or node.type is None:
+            continue
+        types = node.type.elts if isinstance(node.type, ast.Tuple) else [node.type]
+        names = {t.id for t in types if isinstance(t, ast.Name)}
+        raises = any(isinstance(n, ast.Raise) for b in node.body for n in ast.walk(b))
+        if names & set(SWALLOWED) and not raises:
+            out.append(node.lineno)
+    return out
+
+
+def test_no_import_or_type_error_is_swallowed():
+    allowed = {f for f, _ in ALLOWED}
+    found = {}
+    for folder in ("harness", "reference"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            rel = path.relative_to(ROOT).as_posix()
+            lines = silent_handlers(path.read_text(encoding="utf-8"))
+            if lines and rel not in allowed:
+                found[rel] = lines
+    assert not found, f"except clauses that swallow {SWALLOWED}: {found}"
+    # the scan finds the pattern it is for, and spares a handler that raises
+    swallow = "try:\n    import x\nexcept ImportError:\n    x = None\n"
+    retry = "try:\n    f(a, b=1)\nexcept TypeError:\n    f(a)\n"
+    loud = "try:\n    import x\nexcept ImportError as e:\n    raise SystemExit(str(e))\n"
+    assert silent_handlers(swallow) == [3] and silent_handlers(retry) == [3]
+    assert silent_handlers(loud) == []

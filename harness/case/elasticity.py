@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from harness.case.case import Material
 from harness.case.fibres import fibre_directions
 
 _VOIGT = [(0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1)]
@@ -82,6 +83,14 @@ def plane(C: np.ndarray, mode: str) -> np.ndarray:
 
 def lame(E: float, nu: float) -> tuple[float, float]:
     return E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+
+
+def isotropic(E: float, nu: float, density: float = 1.0, plane: str = "stress") -> Material:
+    """The isotropic :class:`Material` of (E, nu, density); ValueError unless E > 0 and
+    -1 < nu < 0.5 (where both Lame constants are finite and mu > 0)."""
+    if not (np.isfinite(E) and E > 0 and -1.0 < nu < 0.5):
+        raise ValueError(f"E = {E!r}, nu = {nu!r} is no isotropic material (E > 0, -1 < nu < 0.5)")
+    return Material(float(E), float(nu), float(density), plane)
 
 
 def in_region(region, points: np.ndarray) -> np.ndarray:

@@ -65,7 +65,17 @@ def load_case(path, mode: str = "quick") -> Case:
         raise CaseError(f"not valid TOML ({exc})", file=file, fix="fix the syntax at that line")
     except UnicodeDecodeError:
         raise CaseError("not a text file", file=file, fix="case files are UTF-8 TOML")
-    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    return case_of(raw, path, mode, hashlib.sha256(path.read_bytes()).hexdigest())
+
+
+def case_of(
+    raw: dict, path: Path, mode: str = "quick", digest: str = "", material: Material | None = None
+) -> Case:
+    """The validated Case of a case table (a case file's parsed TOML, or one a command
+    builds in memory); ``path`` names it in errors and anchors its relative files;
+    ``material``: the Material a command built itself (the table's [material] is checked
+    and must say the same). Mistakes are one-line CaseErrors, as for :func:`load_case`."""
+    file = str(path)
     for m in MODES:
         if m in raw and not isinstance(raw[m], dict):
             raise CaseError("expected a table", file=file, field=m)
@@ -85,7 +95,7 @@ def load_case(path, mode: str = "quick") -> Case:
     raise_all(errors)
     dim = d["dim"]
     body = _body(d["body"], dim, path, file)
-    material = _material(d["material"], dim, file)
+    material = _same(material, _material(d["material"], dim, file), file)
     body = with_anchors(d["loads"], body, file)
     loads, load_set = parse_loads(d["loads"], dim, body, file)
     heldout = parse_heldout(d["loads"], loads, file)
@@ -107,6 +117,13 @@ def load_case(path, mode: str = "quick") -> Case:
         digest=digest,
         heldout=heldout,
     )
+
+
+def _same(given: Material | None, read: Material, file: str) -> Material:
+    """The material a command built, when it agrees with its table's; else the table's."""
+    if given is not None and given != read:
+        raise CaseError(f"{given} differs from the table's {read}", file=file, field="material")
+    return read if given is None else given
 
 
 def _section(key: str, value, file: str) -> dict:

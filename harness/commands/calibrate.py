@@ -116,8 +116,8 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out
               loads of each one's own G_norm), G_heldout_loads ({load: G_norm}), choice (rule, the
               validated capacity, or fit), validation (the table that chose: each model's score per
-              left-out family), validation_skipped (null when the validation ran, else the --budget
-              in s that lets it run), G_heldout_mean_spread (over the final fit's starts),
+              left-out family), validation_skipped (always null: the validation always runs),
+              G_heldout_mean_spread (over the final fit's starts),
               reference_error (FEM's own, relative; the worst of reference_error_fitted and
               reference_error_heldout), status (the exported row's reference status: ok, or
               ref-coarse: the FEM's own error is above a tenth of the model's or missed its tol),
@@ -319,9 +319,10 @@ def add_arguments(p):
     p.add_argument(
         "--budget",
         type=float,
-        default=60.0,
-        help="optimiser wall-time budget in seconds (default 60): the fit's starts share it; the "
-        "validation fits stop at their iteration limit or their share of twice it (large meshes)",
+        default=None,
+        help="a wall-time cap in seconds on the fit (default: none): fits stop by iteration "
+        "counts fixed before the run, so the answer does not depend on the machine or its load; "
+        "a fit that runs longer than the cap aborts with an error",
     )
     p.add_argument(
         "--format",
@@ -331,6 +332,14 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser (sa; >= 0)")
     p.add_argument(
         "--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)"
+    )
+    p.add_argument(
+        "--save-case",
+        dest="save_case",
+        type=Path,
+        default=None,
+        metavar="CASE.toml",
+        help="also write the case calibrate runs as a TOML case file (springbench run takes it)",
     )
     p.add_argument(
         "--quiet",
@@ -343,25 +352,26 @@ def add_arguments(p):
 def main(args) -> int:
     from harness.commands.calibrate_check import check
     from harness.commands.calibrate_run import run
+    from harness.commands.calibrate_settings import Settings
     from harness.commands.calibrate_write import write
     from harness.progress import configure
 
-    check(args, PRIOR_WEIGHT)
-    configure(getattr(args, "quiet", False))
+    s = Settings.of(args)
+    check(s, PRIOR_WEIGHT)
+    configure(s.quiet)
     from harness.case.mesh_checks import check_mesh
     from harness.io.meshfile import read_mesh
 
-    mesh = read_mesh(args.mesh, args.format)
-    check_mesh(mesh, str(args.mesh))  # the mesh's mistakes first, before anything is built on it
+    mesh = read_mesh(s.mesh, s.format)
+    check_mesh(mesh, str(s.mesh))  # the mesh's mistakes first, before anything is built on it
     with tempfile.TemporaryDirectory(prefix="springbench-calibrate-") as tmp:
         tmp = Path(tmp)
         try:
-            rows, net, case = run(args, mesh, tmp)
-            write(args, rows, net, case)  # the case may read its mesh file (in tmp) again
-        except SpringbenchError as exc:  # name the user's mesh, never our temporary files
-            if exc.file is None or str(tmp) in str(exc.file):
-                raise type(exc)(
-                    exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix
-                ) from None
+            rows, net, case = run(s, mesh, tmp)
+            write(s, rows, net, case)
+        except SpringbenchError as exc:  # name the user's mesh and flags, never our temporary files
+            field = "--budget" if exc.field == "optimizer.options.max_seconds" else exc.field
+            if exc.file is None or str(tmp) in str(exc.file) or field != exc.field:
+                raise type(exc)(exc.message, file=str(s.mesh), field=field, fix=exc.fix) from None
             raise
     return 0

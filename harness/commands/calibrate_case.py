@@ -1,15 +1,15 @@
 """The case ``springbench calibrate`` runs: its vocabularies (methods, models, masses, units),
-the prior weight, and the in-memory TOML case built from the arguments and the user's mesh."""
+the prior weight, and the in-memory Case built from the settings and the user's mesh (as a
+case table; TOML text only for ``--save-case``)."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
-from harness.case.default_loads import PEAK_STRAIN
 from harness.errors import CaseError, SpringbenchError
 from harness.models.stiffness_rules import RULES as STIFFNESS_RULES
+from harness.stages.sms_select import FINAL_MAXITER
 
 METHODS = {
     "rule": "none",
@@ -44,131 +44,158 @@ UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
 
 
-def magnitude(args) -> float:
-    return args.magnitude if args.magnitude is not None else 1e-3 * args.E
+def magnitude(s) -> float:
+    """The fitted loads' stress: --magnitude, else 1e-3 E."""
+    return s.magnitude if s.magnitude is not None else 1e-3 * s.E
 
 
-def prior_weight(args) -> float:
+def prior_weight(s) -> float:
     """The lbfgs prior weight: --prior-weight, else the default."""
-    w = getattr(args, "prior_weight", None)
-    return float(PRIOR_WEIGHT if w is None else w)
+    return float(PRIOR_WEIGHT if s.prior_weight is None else s.prior_weight)
 
 
-def selects(args) -> bool:
+def selects(s) -> bool:
     """Whether the fit's capacity is chosen by validation (harness/stages/sms_select.py):
     the default lbfgs fit of springs, unless --prior-weight fixes it."""
-    return (
-        METHODS[args.method] == "lbfgs"
-        and getattr(args, "prior_weight", None) is None
-        and getattr(args, "model", "springs") == "springs"
-    )
+    return METHODS[s.method] == "lbfgs" and s.prior_weight is None and s.model == "springs"
 
 
-def case_text(
-    args, dim: int, cell_types=(), mesh_file: Path | None = None, rules=None, ends=None
-) -> str:
-    """The in-memory case that calibrate runs: the mesh body, the material, the fitted
-    load set and the held-out end loads, an SMS on the mesh's nodes and edges."""
-    mesh = json.dumps(str(Path(mesh_file or args.mesh).resolve()))
-    fmt = f"format = {json.dumps(args.format)}\n" if args.format and mesh_file is None else ""
-    s = magnitude(args)
-    if rules is None:
-        first = args.rule if args.rule != "best" else "lloyd"
-        rules = [first] + [r for r in RULES if r != first]
-    method = METHODS[args.method]
-    cell = "".join(f'cell = "{CELLS[c]}"\n' for c in list(cell_types)[:1] if c in CELLS)
-    init = (
-        f', init = "{args.init}"'
-        if method in ("lbfgs", "gauss-newton") and args.init != "none"
-        else ""
-    )
-    # one solve
-    budget = "" if method == "equilibrium-gap" else f"max_seconds = {float(args.budget)!r}"
-    chosen = selects(args)
-    if method == "lbfgs" and not chosen:
-        init += f", prior = {prior_weight(args)!r}"
-    opt = "" if method == "none" else f"options = {{{budget}{init}}}\n"
+def _optimizer(s) -> dict:
+    """The case's [optimizer] table."""
+    method = METHODS[s.method]
+    out: dict = {"method": method}
+    options: dict = {}
+    if method != "equilibrium-gap" and s.budget is not None:  # one solve: no budget
+        options["max_seconds"] = float(s.budget)  # a cap that aborts, never a stop
+    if method in ("lbfgs", "gauss-newton") and s.init != "none":
+        options["init"] = s.init
+    if method == "lbfgs" and not selects(s):  # a fixed capacity: its own fit, by count
+        options.update(prior=prior_weight(s), maxiter=FINAL_MAXITER)
+    if method != "none":
+        out["options"] = options
     # no rule is first: the stage ranks them (and solves only the ones that can win)
-    if args.rule == "best":
-        opt += 'start = "best"\n'
-    if chosen:
-        opt += "[optimizer.select]\n"
-    parts, cases, held = ("", "", "")
+    if s.rule == "best":
+        out["start"] = "best"
+    if selects(s):
+        out["select"] = {}
+    return out
+
+
+def _end_tables(ends, m):
+    import tomllib
+
+    parts, cases = ends.toml(m)
+    raw = tomllib.loads("[body.parts]\n" + parts + cases)
+    return raw["body"]["parts"], raw["loads"]["case"]
+
+
+def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=None) -> dict:
+    """The case calibrate runs, as a case table (docs/case-files.md): the mesh body, the
+    material, the fitted load set and the held-out end loads, an SMS on the mesh's nodes
+    and edges."""
+    body: dict = {"shape": "mesh", "file": str(Path(mesh_file or s.mesh).resolve())}
+    if s.format and mesh_file is None:
+        body["format"] = s.format
+    first = s.rule if s.rule != "best" else "lloyd"
+    loads: dict = {"set": f"{s.loads}{dim}d", "magnitude": float(magnitude(s))}
     if ends is not None:
-        parts, cases = ends.toml(
-            ends.magnitudes(
-                args.E, args.nu, args.density, getattr(args, "peak_strain", PEAK_STRAIN)
-            )
-        )
-        parts = "[body.parts]\n" + parts
-        held = f"heldout = {json.dumps(list(ends.names))}\n"
-    return (
-        f'name = "calibrate"\ndim = {dim}\n'
-        f'[body]\nshape = "mesh"\nfile = {mesh}\n{fmt}{parts}'
-        f"[material]\nE = {float(args.E)!r}\nnu = {float(args.nu)!r}\ndensity = "
-        f"{float(args.density)!r}\n"
-        f'plane = "{args.plane}"\n'
-        f'[loads]\nset = "{args.loads}{dim}d"\nmagnitude = {float(s)!r}\n{held}{cases}'
-        f"[reference]\nmodes = 0\ntol = {float(args.tol)!r}\nmax_refine = {int(args.max_refine)}\n"
-        f'solver = "{args.solver}"\n{cell}'
-        f'[model]\nkind = "sms"\nplacement = "mesh"\nmasses = "{args.masses}"\nstiffness = '
-        f"{json.dumps(rules)}\n"
-        f'volume = "{VOLUME.get(getattr(args, "model", "springs"), "none")}"\n'
-        f'kn = "{KN.get(getattr(args, "model", "springs"), "none")}"\n'
-        f'[optimizer]\nmethod = "{method}"\n{opt}'
-    )
+        parts, cases = _end_tables(ends, ends.magnitudes(s.E, s.nu, s.density, s.peak_strain))
+        body["parts"] = parts
+        loads.update(heldout=list(ends.names), case=cases)
+    reference = {"modes": 0, "tol": float(s.tol), "max_refine": int(s.max_refine)}
+    reference["solver"] = s.solver
+    reference.update({"cell": CELLS[c] for c in list(cell_types)[:1] if c in CELLS})
+    return {
+        "name": "calibrate",
+        "dim": dim,
+        "body": body,
+        "material": {
+            "E": float(s.E),
+            "nu": float(s.nu),
+            "density": float(s.density),
+            "plane": s.plane,
+        },
+        "loads": loads,
+        "reference": reference,
+        "model": {
+            "kind": "sms",
+            "placement": "mesh",
+            "masses": s.masses,
+            "stiffness": [first] + [r for r in RULES if r != first],
+            "volume": VOLUME.get(s.model, "none"),
+            "kn": KN.get(s.model, "none"),
+        },
+        "optimizer": _optimizer(s),
+    }
 
 
-def mesh_case(args, mesh, tmp: Path):
-    """The in-memory case of ``args`` for the read ``mesh`` (its file written to tmp when
-    it must be scaled to m), printing the clamp and load faces it chose."""
-    from harness.case.default_loads import end_loads
-    from harness.case.reader import load_case
-    from harness.io.mesh_groups import require_group, scaled_copy
+def case_text(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=None) -> str:
+    """:func:`case_table` as a TOML case file (``--save-case``; ``springbench run`` runs it)."""
+    from harness.io.toml_text import dumps
 
-    for flag, group in (("--clamp", args.clamp), ("--load-region", args.load_region)):
-        if group is not None and args.heldout == "none":
+    return dumps(case_table(s, dim, cell_types, mesh_file, ends))
+
+
+def check_regions(s, mesh) -> None:
+    """--clamp / --load-region: groups of the mesh, and only with held-out loads."""
+    from harness.io.mesh_groups import require_group
+
+    for flag, group in (("--clamp", s.clamp), ("--load-region", s.load_region)):
+        if group is not None and s.heldout == "none":
             raise SpringbenchError(
                 "--heldout none has no held-out loads", field=flag, fix="drop it, or --heldout ends"
             )
         if group is not None:
-            require_group(mesh, group, file=str(args.mesh), field=flag)
-    mesh_file = None
-    if args.length_unit != "m" or args.format == "bc2000":  # hand the body over in metres
-        import meshio
+            require_group(mesh, group, file=str(s.mesh), field=flag)
 
+
+def metre_mesh(s, mesh, tmp: Path) -> Path | None:
+    """The mesh file in metres, written to ``tmp`` when its coordinates are in another unit
+    or its format is bc2000 (None: the user's own file is the body)."""
+    import meshio
+
+    from harness.io.mesh_groups import scaled_copy
+
+    if s.length_unit == "m" and s.format != "bc2000":
+        return None
+    scale = UNITS[s.length_unit]
+    if s.clamp or s.load_region:  # the file itself, scaled: its groups stay
+        mesh_file = scaled_copy(s.mesh, s.format, scale, tmp)
+    else:
         mesh_file = tmp / "mesh.vtu"
-        if args.clamp or args.load_region:  # the file itself, scaled: its groups stay
-            mesh_file = scaled_copy(args.mesh, args.format, UNITS[args.length_unit], tmp)
-        else:
-            meshio.write(
-                mesh_file,
-                meshio.Mesh(
-                    mesh.points * UNITS[args.length_unit], [(c, a) for c, a in mesh.cells.items()]
-                ),
-            )
-        print(
-            f"  mesh coordinates in {args.length_unit}: scaled by {UNITS[args.length_unit]:g} to m",
-            file=sys.stderr,
+        meshio.write(
+            mesh_file, meshio.Mesh(mesh.points * scale, [(c, a) for c, a in mesh.cells.items()])
         )
-    pts = mesh.points * UNITS[args.length_unit]
-    ends = (
-        end_loads(pts, mesh.cells, args.clamp, args.load_region, mesh.groups)
-        if args.heldout == "ends"
-        else None
-    )
-    if ends is not None:  # on stdout, before the work: a wrong clamp is seen at once
+    print(f"  mesh coordinates in {s.length_unit}: scaled by {scale:g} to m", file=sys.stderr)
+    return mesh_file
+
+
+def mesh_case(s, mesh, tmp: Path):
+    """The in-memory Case of settings ``s`` for the read ``mesh`` (its file written to tmp
+    when it must be scaled to m), printing the clamp and load faces it chose."""
+    from harness.case.default_loads import end_loads
+    from harness.case.elasticity import isotropic
+    from harness.case.reader import case_of
+    from harness.io.toml_text import dumps
+
+    check_regions(s, mesh)
+    mesh_file = metre_mesh(s, mesh, tmp)
+    pts = mesh.points * UNITS[s.length_unit]
+    ends = None
+    if s.heldout == "ends":
+        ends = end_loads(pts, mesh.cells, s.clamp, s.load_region, mesh.groups)
+        # on stdout, before the work: a wrong clamp is seen at once
         print(
             f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead",
             flush=True,
         )
-    (tmp / "calibrate.toml").write_text(
-        case_text(args, mesh.dim, mesh.cells, mesh_file, None, ends)
-    )
-    try:
-        case = load_case(tmp / "calibrate.toml")
+    table = case_table(s, mesh.dim, mesh.cells, mesh_file, ends)
+    if s.save_case is not None:
+        s.save_case.write_text(dumps(table))  # what ran, for the user to run again or edit
+    material = isotropic(s.E, s.nu, s.density, s.plane)
+    try:  # the case is named after the user's mesh: errors name it
+        return case_of(table, Path(s.mesh).resolve(), material=material)
     except CaseError as exc:
         raise SpringbenchError(
-            exc.message, file=str(args.mesh), field=exc.field, fix=exc.fix
+            exc.message, file=str(s.mesh), field=exc.field, fix=exc.fix
         ) from None
-    return case

@@ -1,5 +1,6 @@
-"""One calibration: the stage run on the calibrate case, the exported row chosen, its network
-read back (with its volume or kn term), and the optional cap on the constants' spread."""
+"""One calibration: the stage run on the in-memory calibrate case, the exported row and its
+network (with its volume or kn term) taken from the stage's result, and the optional cap on
+the constants' spread."""
 
 from __future__ import annotations
 
@@ -7,16 +8,12 @@ import math
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 import reference
-from harness.commands.calibrate_case import mesh_case, selects
+from harness.commands.calibrate_case import mesh_case
 from harness.commands.calibrate_progress import tracker
 from harness.export.engine import spring_damping, stable_step
-from harness.export.vtu import read_vtu
 from harness.mechanics import statics
-from harness.models.kn import load as load_kn
-from harness.models.volume import load as load_volume
 from harness.progress import Clock
 from harness.scoring import case_weights, fit_and_heldout, ref_status, reference_displacements
 from harness.stages import StageContext
@@ -24,42 +21,30 @@ from harness.stages import sms as stage
 from harness.stages.sms_measures import rank
 
 
-def run(args, mesh, tmp: Path):
-    """(rows, the exported network, the case) of one calibration in the folder tmp."""
-    case = mesh_case(args, mesh, tmp)
+def run(s, mesh, tmp: Path):
+    """(rows, the exported network, the case) of one calibration (settings ``s``; a mesh in
+    other units than m is handed over as a file in tmp)."""
+    case = mesh_case(s, mesh, tmp)
     clock = Clock("calibrate")  # on a terminal only (and not with --quiet)
     try:
-        ctx = StageContext(
-            out_dir=tmp / "out", seed=args.seed, status=tracker(clock, args.budget, selects(args))
-        )
-        rows = stage.run(case, ctx)
+        ctx = StageContext(out_dir=tmp / "out", seed=s.seed, status=tracker(clock))
+        result = stage.models(case, ctx)
     finally:
         clock.close()
-    if args.method == "rule":
-        exported = min(rows, key=rank) if args.rule == "best" else rows[0]
+    rows = list(result.rows)
+    if s.method == "rule":
+        at = rows.index(min(rows, key=rank)) if s.rule == "best" else 0
     else:
-        exported = rows[-1]
-    tag = (
-        exported["stiffness"]
-        if exported.get("optimizer", "none") == "none"
-        else f"{exported['stiffness']}-select"
-        if "choice" in exported
-        else f"{exported['stiffness']}-{exported['optimizer']}"
-    )
-    net, _ = read_vtu(ctx.out_dir / f"model-{tag}.vtu")
-    if (ctx.out_dir / f"volume-{tag}.npz").exists():  # springs + volume: the term beside the VTU
-        net = load_volume(ctx.out_dir / f"volume-{tag}.npz", net)
-    if (ctx.out_dir / f"kn-{tag}.npz").exists():  # springs + kn (harness/models/kn.py)
-        net = load_kn(ctx.out_dir / f"kn-{tag}.npz", net)
-    if args.k_ratio is not None:
-        capped = capped_row(net, case, exported, args.k_ratio, args.damping_ratio)
+        at = len(rows) - 1
+    exported, net = rows[at], result.networks[at]
+    if result.validations[at]:  # the validated fit's table (harness/stages/sms_select.py)
+        exported["_validation"] = [dict(r) for r in result.validations[at]]
+    if s.k_ratio is not None:
+        capped = capped_row(net, case, exported, s.k_ratio, s.damping_ratio)
         rows.append(capped)
         net, exported = capped.pop("_net"), capped
     for r in rows:
         r["exported"] = r is exported
-    validation = ctx.out_dir / "validation.csv"
-    if validation.exists():  # the validated fit's table (harness/stages/sms_select.py)
-        exported["_validation"] = pd.read_csv(validation).to_dict("records")
     return rows, net, case
 
 

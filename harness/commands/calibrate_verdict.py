@@ -16,16 +16,6 @@ def validation_sentence(row, table) -> str:
     """What the validation chose, in one sentence."""
     by = {r["model"]: r.get("score") for r in table}
     fams = row.get("val_families", "")
-    skipped = row.get("val_skipped", math.nan)
-    if isinstance(skipped, float) and math.isfinite(skipped):
-        from harness.stages.sms_select import VALIDATION_BUDGET
-
-        return (
-            f"Validation skipped: its fits could not take enough steps on this mesh within "
-            f"{VALIDATION_BUDGET:g}x --budget, so the rule {row['stiffness']} is exported "
-            "(as --method rule --rule "
-            f"{row['stiffness']}); --budget {math.ceil(skipped)} lets it run."
-        )
     ratios = {
         r["model"]: r["ratio"]
         for r in table

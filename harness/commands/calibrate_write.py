@@ -17,7 +17,7 @@ from harness.report.findings import heldout_error
 from harness.stages.sms_measures import rank
 
 
-def _choice(args, row) -> str:
+def _choice(s, row) -> str:
     """The JSON's ``choice``: 'rule' (the rule's constants exported: --method rule, or no
     candidate beat the rule on validation), the validated candidate's name, or 'fit'
     (a fit whose capacity the user fixed)."""
@@ -56,18 +56,18 @@ COLUMNS = (
 ).split()
 
 
-def metadata(args, rows, exported, net, case) -> dict:
+def metadata(s, rows, exported, net, case) -> dict:
     """The JSON's keys beyond the network's own: material, loads, errors, choice, verdict,
     the optimiser's stops and the engines' load records."""
     if "choice" in exported:
         weight = exported.get("opt_prior", math.nan)
     else:
-        weight = prior_weight(args) if args.method == "lbfgs" else math.nan
+        weight = prior_weight(s) if s.method == "lbfgs" else math.nan
     meta = dict(
-        E=args.E,
-        nu=args.nu,
-        density=args.density,
-        damping_ratio=args.damping_ratio,
+        E=s.E,
+        nu=s.nu,
+        density=s.density,
+        damping_ratio=s.damping_ratio,
         loads_fitted=list(case.fit_loads),
         loads_heldout=list(case.heldout),
         **{key: exported.get(col, math.nan) for key, col in FROM_ROW.items()},
@@ -75,9 +75,9 @@ def metadata(args, rows, exported, net, case) -> dict:
         reference_error=_worst(
             exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)
         ),
-        choice=_choice(args, exported),
+        choice=_choice(s, exported),
         validation=cv.records(exported.pop("_validation", None)),
-        masses=args.masses,
+        masses=s.masses,
         prior_weight=weight,
     )
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
@@ -99,13 +99,13 @@ def metadata(args, rows, exported, net, case) -> dict:
     return meta
 
 
-def write(args, rows, net, case):
+def write(s, rows, net, case):
     """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
     exported = next(r for r in rows if r["exported"])
-    meta = metadata(args, rows, exported, net, case)
+    meta = metadata(s, rows, exported, net, case)
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
     cols = [c for c in COLUMNS if any(c in r for r in rows) or c == "dt_safe"]
-    out = args.out  # the three files appear together or not at all (disk full: none)
+    out = s.out  # the three files appear together or not at all (disk full: none)
     with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
         data = export(net, vtu, meta)  # the VTU and its .json beside it
         # one step in the table, the JSON's
@@ -115,7 +115,7 @@ def write(args, rows, net, case):
     print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
     print(cv.heldout_sentence(exported, rules, case.heldout))
     print(cv.fitted_sentence(exported, min(rules, key=rank)))
-    print(cv.reference_sentence(exported, meta, bool(case.heldout), args.max_refine))
+    print(cv.reference_sentence(exported, meta, bool(case.heldout), s.max_refine))
     if "choice" in exported:
         print(cv.validation_sentence(exported, meta["validation"] or []))
     if data["dt_stable"] is not None:
@@ -127,6 +127,6 @@ def write(args, rows, net, case):
         step = data.get("warning", "")
     k = data["spring_stiffness"]
     print(
-        f"-> {args.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
-        f"masses {args.masses}, k {min(k):.3g}..{max(k):.3g} N/m, {step}"
+        f"-> {s.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
+        f"masses {s.masses}, k {min(k):.3g}..{max(k):.3g} N/m, {step}"
     )

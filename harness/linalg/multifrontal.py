@@ -332,17 +332,14 @@ def _subst_kernel():
     (~100-300 fronts x 8 calls) costs as much as the flops for the SA engine's batches of
     32-64 right-hand sides (``bench sa``)."""
     if not _KERNEL:
-        try:
-            import numba
+        import numba
 
-            _KERNEL.append(numba.njit(cache=True, nogil=True)(_subst))
-        except ImportError:  # pragma: no cover - numba is a declared dependency
-            _KERNEL.append(None)
+        _KERNEL.append(numba.njit(cache=True, nogil=True)(_subst))
     return _KERNEL[0]
 
 
 def warm_up() -> bool:
-    """Compile (first time) or load the cached substitution kernel; False without numba."""
+    """Compile (first time) or load the cached substitution kernel (numba, a dependency)."""
     k = _subst_kernel()
     if k is not None and len(_KERNEL) == 1:
         z = np.zeros(1, np.int64)

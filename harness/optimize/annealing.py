@@ -8,7 +8,8 @@ worse state with probability exp((G_current - G_new) / T). Differences from the 
 deliberate: the temperature is relative, T = T0 * G(k0), so T0 is unit-free (the paper's
 [1e-4, 1e-3] then means "a worsening of 0.01-0.1 % of the initial G is accepted with
 probability 1/e"); the best state seen is kept (the figure's G_min is the current state);
-budgets by steps or wall time and an optional convergence threshold end the run early.
+budgets by steps and an optional convergence threshold end the run early (a wall-time cap,
+``max_seconds``, only aborts it: harness/optimize/deadline.py).
 
 G of a proposal comes from :class:`IncrementalG` (rank-1 updates, no factorisation) or,
 for method "sa-refactor" and for grouped mode, from a full re-solve (:class:`RefactorG`).
@@ -23,6 +24,7 @@ import numpy as np
 
 from harness.errors import SpringbenchError
 from harness.linalg.sparse import single_thread_blas
+from harness.optimize.deadline import deadline as limit
 from harness.optimize.incremental import IncrementalG
 from harness.optimize.options import check_options as check_numbers
 from harness.optimize.options import static_only
@@ -38,7 +40,7 @@ DEFAULTS = dict(
     factor=0.2,  # proposal spread: k *= exp(factor * U(-1, 1))
     tol=0.0,  # stop when a temperature improves G by < tol (relative) with no uphill move; 0: off
     max_steps=None,  # budget in proposals (None: unlimited)
-    max_seconds=None,  # budget in wall seconds (None: unlimited)
+    max_seconds=None,  # wall-time cap: passing it aborts the chain (None: none)
     chains=1,  # independent chains (seeds) in parallel processes; the best is kept
     engine="auto",  # "auto" | "dense" | "sparse" (incremental) | "refactor"
     # accepts between base renewals; "auto": dense 64, sparse flop balance 64..1024
@@ -100,6 +102,7 @@ def anneal(
     opts = check_options(options)
     static_only(problem, "sa")
     t_start = time.perf_counter()
+    cap = limit(opts, "the annealing chain")
     grouped = problem.groups is not None
     npar = problem.n_params
     e = problem.n_springs
@@ -107,7 +110,6 @@ def anneal(
     nlimit = int(opts["nlimit"] if opts["nlimit"] is not None else 2 * e)
     glimit = int(opts["glimit"] if opts["glimit"] is not None else e)
     max_steps = opts["max_steps"]
-    max_seconds = opts["max_seconds"]
     lo, hi = problem.bounds
     use_refactor = refactor or grouped or opts["engine"] == "refactor"
     if use_refactor:
@@ -176,17 +178,12 @@ def anneal(
             if max_steps is not None and steps >= max_steps:
                 stop = "max_steps"
                 break
-            if (
-                max_seconds is not None
-                and (steps & 15) == 0
-                and time.perf_counter() - t_start >= max_seconds
-            ):
-                stop = "max_seconds"
-                break
+            if (steps & 15) == 0:
+                cap.check()
         uphill_total += uphill
         trace.append((steps, Gcur))
         if status is not None and i % 10 == 0:
-            status(f"sa T#{i} G={Gcur:.4g} best={best_G:.4g} steps={steps}")
+            status(f"sa T#{i + 1} of {temperatures} G={Gcur:.4g} best={best_G:.4g} steps={steps}")
         if stop:
             break
         if opts["tol"] > 0 and uphill == 0 and (G_start - Gcur) <= opts["tol"] * G_start:

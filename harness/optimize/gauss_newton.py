@@ -9,6 +9,7 @@ import time
 
 import numpy as np
 
+from harness.optimize.deadline import deadline as limit
 from harness.optimize.gradient import start_point
 from harness.optimize.options import check_options, static_only
 from harness.optimize.problem import FitProblem, value_and_grad
@@ -21,7 +22,7 @@ GN_DEFAULTS = dict(
     probes=0,  # random probes for a Jacobi preconditioner diag(J^T J) ~ E[(J^T z)^2]; 0: none
     # (it did not help on grid networks, hence off; nor did the spring-tension
     # Jacobi estimate that helps lbfgs: fewer solves, same G per solve)
-    max_seconds=None,
+    max_seconds=None,  # wall-time cap: passing it aborts (harness/optimize/deadline.py)
     target=0.0,  # stop when G / G(k0) <= target
     init="none",  # start point: "none" (k0) or "equilibrium-gap" (equilibrium.py)
     ftol=1e-8,  # converged (as MINPACK's lmder): an accepted step lowers G^2, and its model
@@ -77,12 +78,14 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     mu I) p = -J^T r: G is a least-squares norm, so Gauss-Newton uses its structure where
     L-BFGS only sees a scalar; on recoverable problems (zero residual) it converges fast.
     Each CG step costs one forward and one adjoint solve per load set with the kept
-    factorisation. Grouped mode sums the Jacobian columns of a group."""
+    factorisation. Grouped mode sums the Jacobian columns of a group. It stops by maxiter,
+    ftol (converged) or target; max_seconds only aborts (harness/optimize/deadline.py)."""
     import scipy.sparse.linalg as spla_
 
     opts = check_options(options, GN_DEFAULTS, "gauss-newton")
     static_only(problem, "gauss-newton")
     t0 = time.perf_counter()
+    cap = limit(opts, "the gauss-newton fit")
     lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
     npar = problem.n_params
     groups = problem.groups
@@ -94,9 +97,7 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         return g if groups is None else np.bincount(groups, weights=g, minlength=npar)
 
     x, init_info = start_point(problem, opts["init"])
-    t_fac = time.perf_counter()
     Jc = _Jacobian(problem, problem.k_of(np.exp(x)))
-    t_fac = time.perf_counter() - t_fac  # one factorisation round: reserved at the deadline
     G0sq = Jc.G2 if opts["init"] == "none" else value_and_grad(problem, problem.k0, grad=False)[0]
     trace = [(0, np.sqrt(G0sq))] + ([] if opts["init"] == "none" else [(0, np.sqrt(Jc.G2))])
     if Jc.G2 > G0sq:  # a start worse than k0: fall back to k0
@@ -104,18 +105,11 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         init_info["init_rejected"] = True
     mu = None
     stop, nit, n_solves, done_its = "maxiter", 0, 0, 0
-    deadline = None if opts["max_seconds"] is None else t0 + opts["max_seconds"]
-
-    class _Out(Exception):
-        pass
-
     for nit in range(1, int(opts["maxiter"]) + 1):
         if opts["target"] > 0 and Jc.G2 <= (opts["target"] ** 2) * G0sq:
             stop = "target"
             break
-        if deadline is not None and time.perf_counter() >= deadline:
-            stop = "max_seconds"
-            break
+        cap.check()
         r = Jc.residual()
         g = reduce(Jc.rmatvec(r))
         rng = np.random.default_rng([seed, nit])
@@ -135,31 +129,21 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
             matvec=lambda v: reduce(Jc.rmatvec(Jc.matvec(expand(v)))) + mu * v,
         )
         Minv = spla_.LinearOperator((npar, npar), dtype=float, matvec=lambda v: v / (diag + mu))
-
-        last = [None]
-
-        def cb(xk):
-            last[0] = np.array(xk)
-            if deadline is not None and time.perf_counter() >= deadline - t_fac:
-                raise _Out
-
         rtol = float(opts["cg_rtol"])  # fixed: a loose Eisenstat-Walker forcing term did worse here
-        try:
-            p, _ = spla_.cg(A, -g, rtol=rtol, maxiter=int(opts["cg_maxiter"]), callback=cb, M=Minv)
-        # out of time: a truncated CG iterate is still a descent direction; try it once
-        except _Out:
-            stop = "max_seconds"
-            if last[0] is None:
-                break
-            p = last[0]
+        p, _ = spla_.cg(
+            A,
+            -g,
+            rtol=rtol,
+            maxiter=int(opts["cg_maxiter"]),
+            callback=lambda xk: cap.check(),
+            M=Minv,
+        )
         # model decrease of G^2/2
         pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(expand(p)) ** 2)))
         n_solves += Jc.n_solves
         # backtrack before giving up
-        for t in (1.0,) if stop == "max_seconds" else (1.0, 0.25, 1 / 16):
-            if t < 1 and deadline is not None and time.perf_counter() >= deadline - t_fac:
-                stop = "max_seconds"
-                break
+        for t in (1.0, 0.25, 1 / 16):
+            cap.check()
             xn = np.clip(x + t * p, lo, hi)
             Jn = _Jacobian(problem, problem.k_of(np.exp(xn)))
             if Jn.G2 < Jc.G2:
@@ -173,13 +157,15 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
         else:
             mu *= 16.0
             small = mu > 1e12 * mu0
-        if small and stop != "max_seconds":
+        if small:
             stop = "converged"
         trace.append((nit, np.sqrt(Jc.G2)))
         done_its = nit
         if status is not None:
-            status(f"gauss-newton it {nit} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}")
-        if stop in ("max_seconds", "converged"):
+            status(
+                f"gauss-newton it {nit} of {int(opts['maxiter'])} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}"
+            )
+        if stop == "converged":
             break
     k = problem.k_of(np.exp(x))
     G_final = float(np.sqrt(Jc.G2))  # from a fresh factorisation at k (no incremental state)

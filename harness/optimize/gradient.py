@@ -41,6 +41,7 @@ import scipy.optimize as so
 import scipy.sparse.linalg as spla
 
 from harness.errors import SpringbenchError
+from harness.optimize.deadline import deadline as limit
 from harness.optimize.equilibrium import equilibrium_gap_factors
 from harness.optimize.options import check_options
 from harness.optimize.problem import FitProblem, stiffness, value_and_grad
@@ -48,7 +49,7 @@ from harness.optimize.problem import FitProblem, stiffness, value_and_grad
 LBFGS_DEFAULTS = dict(
     maxiter=15000,  # L-BFGS-B iterations
     maxfun=None,  # function evaluations (None: 1.25 * maxiter)
-    max_seconds=None,  # wall-time budget
+    max_seconds=None,  # wall-time cap: passing it aborts (harness/optimize/deadline.py)
     target=0.0,  # stop when G / G(k0) <= target
     memory=20,  # L-BFGS history length (scipy's maxcor)
     gtol=0.0,  # projected-gradient tolerance on Phi = G^2/G0^2 (+ freq term)
@@ -61,7 +62,7 @@ LBFGS_DEFAULTS = dict(
 
 NM_DEFAULTS = dict(
     maxiter=None,  # Nelder-Mead iterations (None: 400 * parameters)
-    max_seconds=None,
+    max_seconds=None,  # as lbfgs's
     xatol=1e-10,  # simplex size in log k
     fatol=0.0,  # objective spread (on Phi)
     target=0.0,
@@ -131,11 +132,11 @@ def freq_term_and_grad(problem: FitProblem, k: np.ndarray):
 
 class Objective:
     """Phi(x) = G^2/G0^2 (+ frequency term) over x = log(k/k0) per parameter, with its
-    gradient; remembers the best point and stops at a target or a time budget."""
+    gradient; remembers the best point and stops at a target. ``deadline`` (a
+    :class:`harness.optimize.deadline.Deadline`, or None) is checked before each
+    evaluation: passing it aborts the fit."""
 
-    def __init__(
-        self, problem: FitProblem, target: float = 0.0, max_seconds=None, prior: float = 0.0
-    ):
+    def __init__(self, problem: FitProblem, target: float = 0.0, deadline=None, prior: float = 0.0):
         self.p = problem
         self.prior = float(prior)
         self.tension2 = np.zeros(problem.n_springs)  # squared spring tensions at k0 (for scalings)
@@ -146,8 +147,7 @@ class Objective:
                 field="optimizer",
                 fix="check the reference displacements",
             )
-        self.target, self.max_seconds = target, max_seconds
-        self.t0 = time.perf_counter()
+        self.target, self.deadline = target, deadline
         self.n_eval = 0
         self.phi0 = 1.0  # Phi at k0: k0 is a point seen (a start elsewhere may be worse)
         if problem.modal is not None and problem.modal.weight > 0:
@@ -159,6 +159,8 @@ class Objective:
         return self.p.k_of(np.exp(x))
 
     def __call__(self, x, grad=True):
+        if self.deadline is not None:
+            self.deadline.check()
         k = self.k(x)
         G2, g = value_and_grad(self.p, k, grad)
         phi = G2 / self.G0sq
@@ -188,8 +190,6 @@ class Objective:
     def done(self) -> str | None:
         if self.target > 0 and self.best[2] <= self.target * np.sqrt(self.G0sq):
             return "target"
-        if self.max_seconds is not None and time.perf_counter() - self.t0 >= self.max_seconds:
-            return "max_seconds"
         return None
 
 
@@ -247,13 +247,15 @@ class _Stop(Exception):
     pass
 
 
-def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dict:
+def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None, deadline=None) -> dict:
     """L-BFGS-B over log(k/k0) with the problem's bounds, in variables y = x / d scaled by the
-    spring tensions at k0 (option ``scale``, see tension_scaling); deterministic (seed unused)."""
+    spring tensions at k0 (option ``scale``, see tension_scaling); deterministic (seed unused).
+    It stops by maxiter, maxfun, gtol, ftol or target; ``deadline`` (a cap shared by several
+    fits; None: the option max_seconds) only aborts (harness/optimize/deadline.py)."""
     opts = check_options(options, LBFGS_DEFAULTS, "lbfgs")
     t0 = time.perf_counter()
-    obj = Objective(problem, opts["target"], opts["max_seconds"], opts["prior"])
-    obj.t0 = t0
+    cap = limit(opts, "the lbfgs fit", deadline)
+    obj = Objective(problem, opts["target"], cap, opts["prior"])
     x0, init_info = start_point(problem, opts["init"])
     lo, hi = problem.bounds
     n = problem.n_params
@@ -264,7 +266,7 @@ def lbfgs(problem: FitProblem, options: dict, seed: int = 0, status=None) -> dic
     def cb(xk):
         nit[0] += 1
         if status is not None and nit[0] % 10 == 0:
-            status(f"lbfgs it {nit[0]} G={obj.best[2]:.4g}")
+            status(f"lbfgs it {nit[0]} of {int(opts['maxiter'])} G={obj.best[2]:.4g}")
         if obj.done():
             raise _Stop
 
@@ -327,7 +329,8 @@ def nelder_mead(problem: FitProblem, options: dict, seed: int = 0, status=None) 
             fix="use grouped mode (groups) or method = 'lbfgs'",
         )
     t0 = time.perf_counter()
-    obj = Objective(problem, opts["target"], opts["max_seconds"], opts["prior"])
+    cap = limit(opts, "the nelder-mead fit")
+    obj = Objective(problem, opts["target"], cap, opts["prior"])
     lo, hi = problem.bounds
     n = problem.n_params
 

@@ -163,15 +163,12 @@ _KERNELS: dict = {}
 
 
 def _kernels():
-    """(propose, accept), compiled by numba (cached on disk) when it is installed."""
+    """(propose, accept), compiled by numba (a declared dependency; cached on disk)."""
     if not _KERNELS:
-        try:
-            import numba
+        import numba
 
-            jit = numba.njit(
-                cache=True, nogil=True, fastmath={"reassoc", "contract"}
-            )  # vectorised sums
-            _KERNELS.update(propose=jit(_propose), accept=jit(_accept))
-        except ImportError:  # pragma: no cover - numba is a declared dependency
-            _KERNELS.update(propose=_propose, accept=_accept)
+        jit = numba.njit(
+            cache=True, nogil=True, fastmath={"reassoc", "contract"}
+        )  # vectorised sums
+        _KERNELS.update(propose=jit(_propose), accept=jit(_accept))
     return _KERNELS["propose"], _KERNELS["accept"]

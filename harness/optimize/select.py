@@ -25,7 +25,9 @@ clamped fold's; the rule itself (no fit) is scored the same way. The criterion
 
 Else the rule is the choice. The chosen candidate is refitted on all training states from
 several starts. The held-out loads never choose anything: they are not in the problem
-given here.
+given here. Nothing is chosen by the clock: the validation always runs, every fit stops by
+iteration counts and tolerances fixed before the run, and a wall-time cap only aborts
+(:func:`select`).
 
 Every training state counts alike: each load's misfit is divided by its own reference
 norm (``balanced``), so the fit and the scores see the relative error of each state, not
@@ -41,12 +43,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from harness.case.sections import SELECT_CANDIDATES, SELECT_CRITERIA
+from harness.optimize.deadline import Deadline
+from harness.optimize.deadline import deadline as limit
 from harness.optimize.problem import FitProblem, per_matrix, value_and_grad
 
 
@@ -102,7 +105,6 @@ class Selection:
     starts: tuple
     table: tuple
     families: tuple
-    skipped: float = 0.0  # > 0: the validation did not run; the seconds it would need
     stops: tuple = ()
 
     @property
@@ -196,10 +198,13 @@ def columns(
     return FitProblem(blocks, k0, g, problem.bounds, None, problem.coords)
 
 
-def fit(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> np.ndarray:
+def fit(
+    problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None, deadline=None
+) -> np.ndarray:
     """The candidate's constants fitted on ``problem`` (L-BFGS-B, adjoint gradient), from
-    the rule (x0 None) or from log(k/k0) = x0 per parameter."""
-    return fit_result(problem, cand, options, x0, features)["k"]
+    the rule (x0 None) or from log(k/k0) = x0 per parameter; ``deadline``: a cap that
+    aborts (harness/optimize/deadline.py; None: the options' max_seconds)."""
+    return fit_result(problem, cand, options, x0, features, deadline)["k"]
 
 
 def basis(problem: FitProblem, n_springs: int, features: np.ndarray) -> np.ndarray:
@@ -214,23 +219,18 @@ def basis(problem: FitProblem, n_springs: int, features: np.ndarray) -> np.ndarr
     return M
 
 
-def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> dict:
+def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None, deadline=None) -> dict:
     """k = k0 exp(M x) with x fitted by L-BFGS-B on G^2 / G0^2 (adjoint gradient; a few
     parameters: no prior), from x0 (None: 0, the rule); ``options``: maxiter (default
-    200) and max_seconds (the best point seen when it is reached)."""
+    200), the stop; max_seconds (or ``deadline``, a cap shared with other fits) aborts."""
     from scipy.optimize import minimize
 
+    cap = limit(options, "the features fit", deadline)
     G0sq = value_and_grad(problem, problem.k0, grad=False)[0]
-    budget = options.get("max_seconds")
-    deadline = None if budget is None else time.perf_counter() + float(budget)
     best = [math.inf, None]
 
-    class Stop(Exception):
-        pass
-
     def phi(x):
-        if deadline is not None and best[1] is not None and time.perf_counter() > deadline:
-            raise Stop
+        cap.check()
         k = problem.k0 * np.exp(np.clip(M @ x, -30, 30))
         G2, g = value_and_grad(problem, k)
         if G2 / G0sq < best[0]:
@@ -240,38 +240,39 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None) -> 
     from harness.optimize.gradient import scipy_stop
 
     x = np.zeros(M.shape[1]) if x0 is None else np.asarray(x0, float)
-    try:
-        stop = scipy_stop(
-            minimize(
-                phi,
-                x,
-                jac=True,
-                method="L-BFGS-B",
-                bounds=[(-7.0, 7.0)] * len(x),
-                options={"maxiter": int(options.get("maxiter") or 200)},
-            )
+    stop = scipy_stop(
+        minimize(
+            phi,
+            x,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=[(-7.0, 7.0)] * len(x),
+            options={"maxiter": int(options.get("maxiter") or 200)},
         )
-    except Stop:
-        stop = "max_seconds"
+    )
     return {
         "k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)),
         "info": {"phi": float(best[0]), "stop": stop},
     }
 
 
-def fit_result(problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None) -> dict:
+def fit_result(
+    problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None, deadline=None
+) -> dict:
     """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit
-    ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features)."""
+    ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features);
+    ``deadline`` as :func:`fit`'s."""
     from harness.optimize.gradient import lbfgs
 
     if cand.groups == "features":
-        return features_fit(problem, basis(problem, len(features), features), options, x0)
+        M = basis(problem, len(features), features)
+        return features_fit(problem, M, options, x0, deadline)
     opts = dict(options)
     if cand.groups == "spring":
         opts["prior"] = cand.prior
     if x0 is not None:
         opts["x0"] = np.asarray(x0, float)
-    return lbfgs(problem, opts)
+    return lbfgs(problem, opts, deadline=deadline)
 
 
 def best_scale(problem: FitProblem) -> float:
@@ -322,9 +323,10 @@ def select(
     seed: int = 0,
     status=lambda msg: None,
     features: np.ndarray | None = None,
-    rule_solve: tuple | None = None,
+    rule_scores=None,
     volumes: dict | None = None,
     criterion: str = "ratio",
+    max_seconds: float | None = None,
 ) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume terms] (k0 the rule's
@@ -333,36 +335,26 @@ def select(
     ``options``: the validation fits' L-BFGS-B options, ``final``: the final fit's, from
     ``n_starts`` starts (seeded by ``seed``); ``features`` (springs, q): the learned rule's
     geometric features of the springs, which 'features' candidates need (None: skipped);
-    ``rule_solve``: (each block's own normalised G at the rule, the seconds of one solve of
-    all blocks) when the caller has solved them: a validation those seconds show to be
-    unaffordable is skipped without a solve here; ``criterion``: how a candidate must beat
-    the rule (:func:`choose`)."""
+    ``rule_scores``: each block's own normalised G at the rule, when the caller has solved
+    them (else solved here); ``criterion``: how a candidate must beat the rule.
+
+    The validation always runs, and every fit stops by its options' maxiter and tolerances,
+    the same counts on every mesh: the choice and the constants depend on the input and the
+    seed alone. ``max_seconds`` caps the wall time of the whole call (validation and final
+    fit) and only aborts (harness/optimize/deadline.py); the options must not hold one."""
+    if "max_seconds" in {**(options or {}), **(final or {})}:
+        raise ValueError("select caps its fits together: pass max_seconds=, not in the options")
     options = dict(options or {"maxiter": 40})
+    cap = Deadline(max_seconds, "the validated fit")
     problem = balanced(problem)
     folds = make_folds(families)
     rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
-    n_fits, maxiter = len(candidates) * len(folds), int(options.get("maxiter") or 40)
-    need = 0.0
-    if rule_solve is not None:
-        scores, seconds = np.asarray(rule_solve[0], float), float(rule_solve[1])
-        need = affordable(n_fits, maxiter, STEP_COST * seconds, options.get("max_seconds"))
-    if not need:
-        scores = per_load(rule, rule.k0)  # the first solve builds what the fits share (per_matrix)
-        t0 = time.perf_counter()
-        per_load(rule, rule.k0)
-        step = STEP_COST * (time.perf_counter() - t0)
-        need = affordable(n_fits, maxiter, step, options.get("max_seconds"))
+    # the first solve builds what the fits share (per_matrix)
+    scores = per_load(rule, rule.k0) if rule_scores is None else np.asarray(rule_scores, float)
     table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
-    for cand in candidates if not need else ():
-        cp = columns(problem, n_springs, cand, kv0, groups, volumes)
-        row = {"model": cand.name}
-        for f, out in folds.items() if len(folds) > 1 else ():
-            status(f"validation: {cand.name} without {f}")
-            rest = [i for i in range(len(families)) if i not in set(out)]
-            k = fit(subset(cp, rest), cand, options, features=features)
-            row[f] = float(per_load(subset(cp, out), k).mean())
-        table.append(row)
+    each = ((c, columns(problem, n_springs, c, kv0, groups, volumes)) for c in candidates)
+    table += validate(each, len(candidates), families, options, cap, status, features)
     names = tuple(folds)
     for row in table:
         row.update(summary(row, names))
@@ -370,14 +362,16 @@ def select(
         row["ratio"] = ratio_to_rule(row, table[0])
     best = choose(table, criterion)
     if best["model"] == "rule":
-        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names, need)
+        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names)
     cand = next(c for c in candidates if c.name == best["model"])
     cp = columns(problem, n_springs, cand, kv0, groups, volumes)
     fits = []
     M = basis(cp, n_springs, features) if cand.groups == "features" else None
     for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
-        status(f"fitting {cand.name} on every training state (start {i + 1} of {n_starts})")
-        r = fit_result(cp, cand, dict(final or options), x0, features)
+        where = f"{cand.name} on every training state (start {i + 1} of {n_starts})"
+        cap.phase = f"the validated fit's final fit ({where})"
+        status(f"fitting {where}")
+        r = fit_result(cp, cand, dict(final or options), x0, features, cap)
         # the training objective, prior included
         fits.append((r["info"]["phi"], r["k"], str(r["info"].get("stop"))))
     fits.sort(key=lambda t: t[0])
@@ -390,18 +384,26 @@ def select(
     )
 
 
-STEP_COST = 1.5  # a fit's step (solve and adjoint) in solves of all training states
-MIN_STEPS = 0.5  # validation runs only if its fits can take this fraction of their maxiter
-
-
-def affordable(n_fits: int, maxiter: int, step: float, share) -> float:
-    """0 if ``n_fits`` validation fits of ``maxiter`` steps of ``step`` seconds each can
-    take MIN_STEPS of their steps within ``share`` seconds apiece (None: no cap); else
-    the seconds they would need: fits stopped after a few steps stay near the rule, and
-    their choice would be the rule by starvation, not by validation."""
-    if share is None or n_fits == 0 or share >= MIN_STEPS * maxiter * step:
-        return 0.0
-    return n_fits * MIN_STEPS * maxiter * step
+def validate(each, n_cands: int, families, options, cap, status, features) -> list:
+    """The validation table's rows of the ``n_cands`` (candidate, its problem) pairs ``each``:
+    every candidate fitted without each fold in turn and scored on it, fit j of n announced
+    by ``status`` and named in ``cap``'s phase (:func:`select`'s other arguments). No fold
+    to leave out (one family): rows without scores."""
+    folds = make_folds(families)
+    n = n_cands * len(folds) if len(folds) > 1 else 0
+    rows, j = [], 0
+    for cand, cp in each:
+        row = {"model": cand.name}
+        for f, out in folds.items() if n else ():
+            j += 1
+            where = f"{cand.name} without {f} (fit {j} of {n})"
+            cap.phase = f"the validated fit's validation ({where})"
+            status(f"validation: {where}")
+            rest = [i for i in range(len(families)) if i not in set(out)]
+            k = fit(subset(cp, rest), cand, options, features=features, deadline=cap)
+            row[f] = float(per_load(subset(cp, out), k).mean())
+        rows.append(row)
+    return rows
 
 
 CLAMPED = "clamped"  # the family of the training states that hold a face (not the linear sets')

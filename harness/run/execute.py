@@ -10,6 +10,8 @@ import signal
 import time
 import traceback
 
+import numpy as np
+
 from harness.case.reader import load_case
 from harness.errors import CaseError, SpringbenchError
 from harness.run.jobs import Job, JobResult, _error_row, _jsonable, loaded_sources
@@ -60,12 +62,7 @@ class DaskSink:
 
 def _seed_everything(seed: int):
     random.seed(seed)
-    try:
-        import numpy as np
-
-        np.random.seed(seed % 2**32)
-    except ImportError:  # pragma: no cover
-        pass
+    np.random.seed(seed % 2**32)
 
 
 def execute(job: Job, sink=None) -> JobResult:

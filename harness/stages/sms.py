@@ -27,10 +27,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+import reference
 from harness import registry, scoring
 from harness.case.loads import modal_load
 from harness.errors import CaseError, SpringbenchError
@@ -39,12 +41,13 @@ from harness.mechanics import statics
 from harness.models.sms import model_spec
 from harness.models.stiffness_rules import spring_constants
 from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
-from harness.optimize import check_method_options
+from harness.optimize import check_method_options, optimize
 from harness.stages import sms_measures as measures
 from harness.stages.classes.base import Setting
 from harness.stages.classes.springs import of_spec
 from harness.stages.sms_fit import case_file
 from harness.stages.sms_rules import fit_score_of, solve_rules
+from harness.stages.sms_runs import optimiser_runs, time_to_reach
 
 NAME = "sms"
 
@@ -55,26 +58,11 @@ def applies(case) -> bool:
 
 
 def _reference(case, ctx):
-    try:
-        import reference
-    except ImportError:
-        return None, "reference package not available"
+    """(the case's reference solution, "") or (None, why) for a case the FEM cannot solve."""
     try:
         return reference.solve(case, status=ctx.status), ""
-    except TypeError:
-        return reference.solve(case), ""
-    except SpringbenchError:
-        raise
     except NotImplementedError as exc:
         return None, f"reference: {exc}"
-
-
-def _optimizer():
-    try:
-        from harness.optimize import optimize
-    except ImportError:
-        return None
-    return optimize
 
 
 def _expect(case) -> dict:
@@ -86,30 +74,45 @@ def _expect(case) -> dict:
     }
 
 
+@dataclass(frozen=True)
+class Result:
+    """The stage's rows and, beside each, its network (None for a row without one: a rule
+    not solved) and the validation table of a validated fit (empty for other rows)."""
+
+    rows: tuple
+    networks: tuple
+    validations: tuple
+
+
 def run(case, ctx) -> list[dict]:
-    """The case's rows; with ``[model] classes``, each class's rows in turn (its files in
-    the sub-folder named after it)."""
+    """The case's rows (the runner's view of :func:`models`)."""
+    return list(models(case, ctx).rows)
+
+
+def models(case, ctx) -> Result:
+    """The case's rows and networks; with ``[model] classes``, each class's in turn (its
+    files in the sub-folder named after it)."""
     spec = model_spec(case)
     names = list(spec.get("classes") or ())
     if not names:
         return _run(case, ctx, spec, of_spec(spec))
-    rows = []
+    parts = []
     for name in names:
         cls = registry.MODEL_CLASSES.load(name)
-        rows += _run(
-            case, dataclasses.replace(ctx, out_dir=ctx.out_dir / name), cls.spec(spec), cls
+        parts.append(
+            _run(case, dataclasses.replace(ctx, out_dir=ctx.out_dir / name), cls.spec(spec), cls)
         )
-    return rows
+    return Result(*(sum((getattr(p, f) for p in parts), ()) for f in Result.__match_args__))
 
 
-def _run(case, ctx, spec, cls) -> list[dict]:
+def _run(case, ctx, spec, cls) -> Result:
     """The rows of model class ``cls`` (harness/stages/classes/) on the case."""
     opt = case.section("optimizer") or {}
     runs = cls.fit_runs(optimiser_runs(case, opt))  # case mistakes first, before any solve
     label = cls.label(spec, case)
     skip = cls.skip(case, label)
     if skip:
-        return [skip]
+        return Result((skip,), (None,), ((),))
     n_modes = _check_modes(case, opt)
     weights = scoring.case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
@@ -256,14 +259,13 @@ def _run(case, ctx, spec, cls) -> list[dict]:
             )
         rows.append(row)
 
-    optimize = _optimizer()
     fem_f = measures.fem_frequencies(ref, n_modes, modal_load(case).name)
     opt_nets, traces = {}, []
     start_row, start = rows[0], base
     if opt.get("start", "first") == "best" and u_ref is not None:
         start_row = min(rows, key=measures.rank)
         start = nets[start_row["stiffness"]]
-    if runs and optimize is not None and u_ref is not None:
+    if runs and u_ref is not None:
         setting = Setting(
             case,
             ctx,
@@ -294,11 +296,9 @@ def _run(case, ctx, spec, cls) -> list[dict]:
                 traces.append(trace)
         if traces:
             pd.concat(traces, ignore_index=True).to_csv(ctx.file("trace.csv"), index=False)
-        _time_to_reach(rows, traces)
+        time_to_reach(rows, traces)
     elif runs:
-        rows[0]["note"] = rows[0].get("note", "") or (
-            "optimiser not available" if optimize is None else ""
-        )
+        rows[0]["note"] = rows[0].get("note") or ""
 
     # every net shares base's nodes, loads and weights: one G_ref for all rows
     if u_ref is not None:
@@ -326,8 +326,11 @@ def _run(case, ctx, spec, cls) -> list[dict]:
     freqs = measures.model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = measures.error_modes(opt, n_modes)
     all_nets = {**nets, **opt_nets}
+    networks, validations = [], []
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
+        networks.append(all_nets.get(tag))
+        validations.append(tuple(row.pop("_validation", ())))
         if tag in all_nets:
             row.update(measures.engine_columns(all_nets[tag], not cls.spring_constants))
         if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
@@ -343,7 +346,7 @@ def _run(case, ctx, spec, cls) -> list[dict]:
                 row["freq_error_heldout"] = measures.freq_error(
                     freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted
                 )
-    return rows
+    return Result(tuple(rows), tuple(networks), tuple(validations))
 
 
 # -- the case's optimiser runs ---------------------------------------------------------
@@ -385,82 +388,6 @@ def check(case):
     _check_modes(case, opt)
 
 
-def optimiser_runs(case, opt) -> list[dict]:
-    """The optimiser runs of a case, in table order: [optimizer] method, then each name
-    in ``compare`` (options from ``compare_options``), then the ``frequency`` row.
-    Each is {method, options, objective, where (the case field of its options)[, modes,
-    weight]}. Mistakes the schema cannot see (a repeated optimiser, options that are not
-    a table, options with method = "none") are CaseErrors naming the file and field."""
-    method = opt.get("method", "none")
-    file = case_file(case)
-    compare = list(opt.get("compare") or ())
-    extra = dict(opt.get("compare_options") or {})
-    if method in compare or len(set(compare)) != len(compare):
-        raise CaseError(
-            f"compare repeats '{method if method in compare else compare[0]}'",
-            file=file,
-            field="optimizer.compare",
-            fix="name each optimiser once (method is run already)",
-        )
-    stray = sorted(set(extra) - set(compare))
-    if stray:
-        raise CaseError(
-            f"options for '{stray[0]}', which compare does not list",
-            file=file,
-            field="optimizer.compare_options",
-            fix=f"add '{stray[0]}' to compare or remove its options",
-        )
-
-    def options(value, where):
-        if not isinstance(value or {}, dict):
-            raise CaseError(
-                f"expected a table of options, got {value!r}",
-                file=file,
-                field=where,
-                fix="e.g. { maxiter = 100 }",
-            )
-        return dict(value or {})
-
-    mine = options(opt.get("options"), "optimizer.options")
-    if method == "none" and mine:  # would be silently ignored: no run takes them
-        raise CaseError(
-            f"options {sorted(mine)} but method = 'none' runs no optimiser",
-            file=file,
-            field="optimizer.options",
-            fix="set [optimizer] method, or remove the options",
-        )
-    runs = (
-        []
-        if method == "none"
-        else [dict(method=method, options=mine, objective="G", where="optimizer.options")]
-    )
-    if runs and opt.get("select"):  # the validated fit (harness/stages/sms_select.py)
-        runs[0]["select"] = dict(opt["select"])
-    runs += [
-        dict(
-            method=m,
-            options=dict(extra.get(m) or {}),
-            objective="G",
-            where=f"optimizer.compare_options.{m}",
-        )
-        for m in compare
-    ]
-    fq = opt.get("frequency")
-    if fq:
-        where = "optimizer.frequency.options"
-        runs.append(
-            dict(
-                method=fq["method"],
-                options=options(fq.get("options"), where),
-                objective="G+freq",
-                modes=int(fq["modes"]),
-                weight=float(fq["weight"]),
-                where=where,
-            )
-        )
-    return runs
-
-
 def _check_modes(case, opt) -> int:
     n = int(case.reference.modes or 0)
     fq = opt.get("frequency")
@@ -472,25 +399,3 @@ def _check_modes(case, opt) -> int:
             fix=f"set [reference] modes >= {fq['modes']} or lower frequency.modes",
         )
     return n
-
-
-def _time_to_reach(rows, traces):
-    """``evals_to_sa_G`` / ``seconds_to_sa_G``: when each other optimiser's trace first
-    reaches the G_final of the case's SA row (seconds pro rata of its evaluations);
-    NaN if it never does."""
-    sa = next((r for r in rows if r["optimizer"] == "sa" and r.get("objective") == "G"), None)
-    if sa is None:
-        return
-    by_model = {t["model"].iloc[0]: t for t in traces}
-    for r in rows:
-        if r["optimizer"] in ("none", "sa") or r.get("objective") != "G":
-            continue
-        t = by_model.get(f"{r['stiffness']}+{r['optimizer']}")
-        if t is None:
-            continue
-        hit = np.flatnonzero(t["G"].to_numpy() <= sa["G_final"] * (1 + 1e-9))
-        steps = float(t["step"].iloc[-1])
-        r["evals_to_sa_G"] = float(t["step"].iloc[hit[0]]) if len(hit) else math.nan
-        r["seconds_to_sa_G"] = (
-            r["seconds"] * r["evals_to_sa_G"] / steps if len(hit) and steps > 0 else math.nan
-        )

@@ -178,21 +178,19 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
 
 def trace_frame(trace, name):
     """An optimiser's trace ((step, G) rows, a G column or a DataFrame) as trace.csv rows
-    with ``model`` = name; None if there is none or it has no recognisable shape."""
+    with ``model`` = name; None if there is none. A trace that is none of these (ragged, not
+    numbers) is the optimiser's bug: numpy's error says so."""
     if trace is None or not len(trace):
         return None
-    try:
-        if isinstance(trace, pd.DataFrame):
-            df = trace.copy()
-        else:
-            arr = np.asarray(trace, float)
-            arr = arr[:, None] if arr.ndim == 1 else arr
-            df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
-        if "G" not in df.columns and df.shape[1] == 1:
-            df.columns = ["G"]
-        if "step" not in df.columns:
-            df.insert(0, "step", np.arange(len(df)))
-        df["model"] = name
-        return df
-    except (ValueError, TypeError):
-        return None
+    if isinstance(trace, pd.DataFrame):
+        df = trace.copy()
+    else:
+        arr = np.asarray(trace, float)
+        arr = arr[:, None] if arr.ndim == 1 else arr
+        df = pd.DataFrame(arr, columns=["step", "G"] if arr.shape[1] == 2 else None)
+    if "G" not in df.columns and df.shape[1] == 1:
+        df.columns = ["G"]
+    if "step" not in df.columns:
+        df.insert(0, "step", np.arange(len(df)))
+    df["model"] = name
+    return df

@@ -90,8 +90,6 @@ def test_calibrate_exports_a_runnable_model(tmp_path, made, capsys, name, nu, me
         str(nu),
         "--method",
         method,
-        "--budget",
-        "3",
         refine="1" if method == "lbfgs" else "0",
     )
     printed = capsys.readouterr().out
@@ -275,34 +273,3 @@ def test_help_names_every_output(tmp_path, made, capsys):
     text = capsys.readouterr().out
     missing = [key for key in list(data) + list(df.columns) if key not in text and key != "dim"]
     assert not missing, missing
-
-
-@pytest.mark.slow
-def test_a_validation_too_slow_to_run_is_skipped_from_the_rules_own_statics(
-    tmp_path, made, monkeypatch
-):
-    """When the validation cannot take enough steps within its budget, the stage skips it
-    from the start rule's statics alone (no solve of its own: the 200k-tet body's costs a
-    minute) and the rule's scores in the validation table are the ones a validation that
-    runs computes itself."""
-    from harness.optimize import select as sel
-    from harness.stages import sms_select
-
-    # the rule's row is the point
-    one = tuple(c for c in sel.CANDIDATES if c.name == "springs-prior1")
-    monkeypatch.setattr(sel, "CANDIDATES", one)
-    ran, _ = calibrate(made["cylinder"], tmp_path / "a.vtu", "--nu", "0.3")
-    assert ran["validation_skipped"] is None and len(ran["validation"]) == 2
-    solves = []
-    real = sel.per_load
-    monkeypatch.setattr(sel, "per_load", lambda *a, **k: solves.append(1) or real(*a, **k))
-    monkeypatch.setattr(sms_select, "VALIDATION_BUDGET", 1e-9)
-    skipped, table = calibrate(made["cylinder"], tmp_path / "b.vtu", "--nu", "0.3")
-    assert skipped["choice"] == "rule" and skipped["validation_skipped"] > 0 and not solves
-    assert len(skipped["validation"]) == 1 and skipped["validation"][0]["model"] == "rule"
-    folds = [k for k in ran["validation"][0] if k != "model"]
-    assert len(folds) >= 6
-    for fold in folds:
-        assert skipped["validation"][0][fold] == pytest.approx(
-            ran["validation"][0][fold], rel=1e-9
-        ), fold

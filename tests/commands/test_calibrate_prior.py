@@ -22,7 +22,7 @@ def heldout(mesh, out, *argv):
         cli.main(
             (
                 ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
-                + ["--max-refine", "0", "--budget", "20", "--out", str(out), *argv]
+                + ["--max-refine", "0", "--out", str(out), *argv]
             )
         )
         == 0

@@ -27,10 +27,7 @@ def cylinder(tmp_path_factory):
 
 def run(mesh, out, capsys, *argv):
     code = cli.main(
-        (
-            ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3", "--budget", "3"]
-            + ["--out", str(out), *argv]
-        )
+        (["calibrate", str(mesh), "--E", "1e5", "--nu", "0.3"] + ["--out", str(out), *argv])
     )
     captured = capsys.readouterr()
     assert code == 0, captured.err

@@ -6,7 +6,6 @@ run with ``SolverSemiImplicit`` at the exported ``dt_stable_float32`` and ``spri
 to static equilibrium under the held-out loads, against springbench's own statics of the
 same network and the FEM."""
 
-import argparse
 import json
 
 import numpy as np
@@ -16,6 +15,7 @@ from harness import cli
 from harness.case.default_loads import end_loads
 from harness.case.reader import load_case
 from harness.commands import calibrate_case
+from harness.commands.calibrate_settings import Settings
 from harness.export.vtu import read_vtu
 from harness.io.meshfile import read_mesh
 from harness.mechanics import statics
@@ -55,24 +55,17 @@ def calibrated(tmp_path, mesh, *argv):
         == 0
     )
     m = read_mesh(mesh)
-    args = argparse.Namespace(
+    args = Settings(
         mesh=mesh,
-        format=None,
+        out=out,
         E=E,
         nu=NU,
         density=RHO,
-        plane="stress",
         magnitude=S,
-        peak_strain=1e-3,
         rule="lloyd",
         method="rule",
-        init="none",
-        budget=1.0,
         loads="homogeneous",
-        masses="lumped",
-        tol=1e-3,
         max_refine=0,
-        solver="auto",
     )
     (tmp_path / "c.toml").write_text(
         calibrate_case.case_text(args, m.dim, m.cells, ends=end_loads(m.points, m.cells))

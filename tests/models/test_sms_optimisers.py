@@ -296,7 +296,7 @@ def test_plain_gradient_descent_is_slow_on_separate_constants_only(tmp_path, mon
             return optimize(problem, "none", {}, 0)
 
         monkeypatch.setattr(stage, "_reference", lambda case, ctx: (ClosedFormRef(case), ""))
-        monkeypatch.setattr(stage, "_optimizer", lambda: grab)
+        monkeypatch.setattr(stage, "optimize", grab)
         stage.run(load_case(f), StageContext(out_dir=tmp_path / f"out{grouped}"))
         res = optimize(box["p"], "lbfgs", {}, 0)
         out[grouped] = (

@@ -204,73 +204,98 @@ def test_features_candidates_need_features_and_are_skipped_without():
     assert [r["model"] for r in s.table] == ["rule", "scale"]
 
 
-def test_affordable_needs_half_the_steps_within_each_share():
-    assert sel.affordable(24, 30, 0.1, None) == 0.0  # no cap: always
-    assert sel.affordable(24, 30, 0.1, 1.5) == 0.0  # 15 steps of 0.1 s fit in 1.5 s
-    assert sel.affordable(24, 30, 0.1, 1.4) == pytest.approx(24 * 15 * 0.1)
+def jumping_clock(monkeypatch, hours: float = 3.0):
+    """time.perf_counter, everywhere, jumping ``hours`` further at every call: a machine
+    so loaded that each solve seems to take hours."""
+    import time
+
+    real, calls = time.perf_counter, [0]
+
+    def clock():
+        calls[0] += 1
+        return real() + 3600.0 * hours * calls[0]
+
+    monkeypatch.setattr(time, "perf_counter", clock)
+    return calls
 
 
-def test_select_skips_a_validation_it_cannot_afford_and_keeps_the_rule():
-    prob, _, _ = problem(np.full(1, 2.0))  # a wrong rule: a validation would fit it
+def _select(prob, **kw):
     groups = np.zeros(prob.n_springs, int)
-    s = sel.select(
+    return sel.select(
         prob,
         prob.n_springs,
         FAMILIES,
         1.0,
         groups,
         CANDS,
-        {"maxiter": 60, "max_seconds": 1e-12},
-        {"maxiter": 200},
-        3,
+        {"maxiter": 20},
+        {"maxiter": 40},
+        2,
+        **kw,
     )
-    assert s.choice == "rule" and s.skipped > 0 and [r["model"] for r in s.table] == ["rule"]
-    assert s.table[0]["score"] == pytest.approx(1.0, rel=1e-9) and np.array_equal(s.k, prob.k0)
 
 
-def test_select_trusts_the_callers_solve_to_skip_without_solving(monkeypatch):
-    """``rule_solve`` (the caller's per-load errors at the rule and the seconds their solve
-    took): a validation those seconds cannot afford is skipped with no solve here (a
-    200k-tet body's solve of all training states costs a minute), its table from the given
-    errors; seconds it can afford make select solve and time itself as without them."""
+def test_the_validated_fit_is_the_same_whatever_the_clock_says(monkeypatch):
+    """A wrong rule (off by 2): the validation runs and a fit wins, and the choice, the
+    validation table and the constants of every start are the same bit for bit when each
+    reading of the clock is hours after the last, with or without a cap that the jumps
+    never reach: nothing is chosen or stopped by the clock."""
+    prob, _, _ = problem(np.full(1, 2.0))
+    idle = _select(prob)
+    assert idle.choice != "rule" and [r["model"] for r in idle.table] == [
+        "rule",
+        *map(lambda c: c.name, CANDS),
+    ]
+    calls = jumping_clock(monkeypatch)
+    for busy in (_select(prob), _select(prob, max_seconds=1e300)):
+        assert busy.choice == idle.choice and busy.stops == idle.stops
+        assert len(busy.starts) == len(idle.starts) == 2
+        for a, b in zip(busy.starts, idle.starts):
+            assert np.array_equal(a, b)
+        assert busy.table == idle.table  # every score, bit for bit
+    assert calls[0] > 0  # the clock was read (and ignored)
+
+
+def test_a_validated_fit_past_its_cap_aborts_in_one_line(monkeypatch):
+    """max_seconds caps the whole validated fit and only aborts: a cap the (jumping) clock
+    passes is a one-line error naming the phase, the time it ran, the budget and the fix;
+    never a selection from fits cut short."""
+    from harness.optimize.deadline import BudgetExceeded
+
+    prob, _, _ = problem(np.full(1, 2.0))
+    jumping_clock(monkeypatch)
+    with pytest.raises(BudgetExceeded) as err:
+        _select(prob, max_seconds=60.0)
+    text = str(err.value)
+    assert "\n" not in text and "past its budget max_seconds = 60 s;" in text
+    assert "validation (scale without constant (fit 1 of 6))" in text
+    assert "raise --budget (or max_seconds) or coarsen the mesh" in text
+
+
+def test_the_fits_options_hold_no_cap_of_their_own():
     prob, _, _ = problem(np.full(1, 2.0))
     groups = np.zeros(prob.n_springs, int)
+    with pytest.raises(ValueError, match="max_seconds="):
+        sel.select(prob, prob.n_springs, FAMILIES, 1.0, groups, CANDS, {"max_seconds": 5.0})
+
+
+def test_select_takes_the_rules_scores_from_the_caller_without_solving(monkeypatch):
+    """``rule_scores`` (the caller's per-load errors at the rule): the rule's row is theirs
+    averaged per fold, and the candidates' rows, the choice and the constants are those of
+    a select that solves the rule itself."""
+    prob, _, _ = problem(np.full(1, 2.0))
+    own = _select(prob)
     given = np.linspace(0.1, 0.6, len(FAMILIES))
+    solved = []
     real = sel.per_load
-
-    def no_solve(*a, **k):
-        raise AssertionError("solved")
-
-    monkeypatch.setattr(sel, "per_load", no_solve)
-    s = sel.select(
-        prob,
-        prob.n_springs,
-        FAMILIES,
-        1.0,
-        groups,
-        CANDS,
-        {"maxiter": 60, "max_seconds": 1.0},
-        {"maxiter": 200},
-        3,
-        rule_solve=(given, 10.0),
-    )
-    assert s.choice == "rule" and s.skipped == pytest.approx(
-        sel.affordable(len(CANDS) * 3, 60, sel.STEP_COST * 10.0, 1.0)
-    )
+    monkeypatch.setattr(sel, "per_load", lambda p, k: solved.append(p) or real(p, k))
+    s = _select(prob, rule_scores=given)
     want = {"constant": given[:2].mean(), "bending": given[2:4].mean(), "clamped": given[4:].mean()}
     assert {f: s.table[0][f] for f in want} == pytest.approx(want, rel=1e-12)
-    monkeypatch.setattr(sel, "per_load", real)
-    s = sel.select(
-        prob,
-        prob.n_springs,
-        FAMILIES,
-        1.0,
-        groups,
-        CANDS,
-        {"maxiter": 60},
-        {"maxiter": 200},
-        3,
-        rule_solve=(given, 10.0),
-    )
-    # its own solve
-    assert s.choice != "rule" and s.table[0]["clamped"] == pytest.approx(1.0, rel=1e-9)
+    assert len(solved) == len(CANDS) * 3  # the left-out folds' scores only, not the rule's
+    fitted = ("constant", "bending", "clamped", "free", "score")  # not the ratio: the rule's
+    assert [[r[f] for f in fitted] for r in s.table[1:]] == [
+        [r[f] for f in fitted] for r in own.table[1:]
+    ]
+    assert s.choice == own.choice != "rule"
+    assert all(np.array_equal(a, b) for a, b in zip(s.starts, own.starts))

@@ -64,7 +64,7 @@ def test_lbfgs_improves_the_score(tri_mesh, tmp_path, capsys):
         cli.main(
             (
                 ["calibrate", str(tri_mesh), "--E", "1e4", "--nu", "0.3"]
-                + ["--method", "lbfgs", "--prior-weight", "0", "--budget", "3"]
+                + ["--method", "lbfgs", "--prior-weight", "0"]
                 + ["--out", str(out), "--max-refine", "0"]
             )
         )
@@ -84,7 +84,7 @@ def _calibrate(mesh, out, *argv):
         cli.main(
             (
                 ["calibrate", str(mesh), "--E", "1e4", "--nu", "0.3", *argv]
-                + ["--budget", "3", "--out", str(out), "--max-refine", "0"]
+                + ["--out", str(out), "--max-refine", "0"]
             )
         )
         == 0
