@@ -13,10 +13,10 @@ the dumbbell held on the underside of one block and loaded on the top of the oth
 E = 1e5 Pa, nu = 0.3 and 0.45, density 1000 (quick: the bracket, ~1,000 tets, nu = 0.3).
 
 Models: per (body, nu) ``springbench calibrate`` with its defaults (the fit; ``--max-refine
-1``, ``--budget 60``) in its own process with an empty reference cache (``seconds`` is its
-wall time), then ``--method rule --rule R`` for every rule, which share that cache (a
-rule's constants do not depend on the reference, which only scores them). Only the JSON
-exports are read.
+1``; its fits stop by iteration counts) in its own process with an empty reference cache
+(``seconds`` is its wall time), then ``--method rule --rule R`` for every rule, which share
+that cache (a rule's constants do not depend on the reference, which only scores them).
+Only the JSON exports are read.
 
 Loads (the study's own, clamp group held in every component): tractions on the load group
 along two directions across it, a twist about its normal (t = tau n x (x - c)), gravity,
@@ -66,21 +66,20 @@ from harness.progress import steps
 
 NUS = (0.3, 0.45)
 FULL_TETS, QUICK_TETS = 3000, 1000
-BUDGET = 60.0
 PEAK_STRAIN = 1e-3
 ACCEPT_EACH, ACCEPT_ALL = 1.0, 0.75
 COLUMNS = ["body", "n_tets", "nu", "model", "choice", "rule", "load", "err", "best_rule"]
 COLUMNS += ["ratio_to_best_rule", "seconds", "truth_seconds", "note"]
 
 
-def calibrate(mesh: Path, out: Path, nu: float, cache: Path, *extra: str, budget: float = BUDGET):
+def calibrate(mesh: Path, out: Path, nu: float, cache: Path, *extra: str):
     """(the JSON export, its choice (the JSON's, else stiffness-optimizer of the CSV's exported
     row), that row's rule, wall seconds) of one ``springbench calibrate`` in its own process
     with the reference cache ``cache``."""
     cmd = (
         [sys.executable, "-m", "harness", "calibrate", str(mesh)]
         + ["--E", repr(E), "--nu", repr(nu), "--density", repr(RHO)]
-        + ["--max-refine", "1", "--budget", repr(budget), "--out", str(out)]
+        + ["--max-refine", "1", "--out", str(out)]
         + list(extra)
     )
     t0 = time.perf_counter()
@@ -106,9 +105,7 @@ def geomean(x) -> float:
     return float(np.exp(np.mean(np.log(np.asarray(x, float)))))
 
 
-def study_one(
-    body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, budget: float = BUDGET
-) -> list[dict]:
+def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES) -> list[dict]:
     """The rows of one (body, nu): every model under every study load, and their geomeans."""
     points, tets, groups = read_body(mesh)
     loads = study_loads(body, points, groups)
@@ -133,7 +130,7 @@ def study_one(
         )
         try:
             data, row["choice"], row["rule"], row["seconds"] = calibrate(
-                mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *extra, budget=budget
+                mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *extra
             )
             u = model_answers(data, points, groups, loads, scale)
         except (
