@@ -88,7 +88,7 @@ STAGES = Registry(
 
 # ``springbench bench NAME``: modules with run(quick) -> DataFrame
 BENCHES = _modules(
-    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines"
+    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines shapes"
 )
 
 # ``[optimizer] method``: function(problem, options, seed, status) -> FitResult fields
