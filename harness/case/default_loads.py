@@ -14,14 +14,20 @@ it, the way a bar, a beam or an organ held at one end is.
   clamped, the low end loaded); and per other axis b with faces at its ends (``sides``)
   ``train-<b>-<c>``: the low end face along b clamped, the high one sheared along c (each
   axis but b; tau = 2 G eps), so the clamps a fit is validated on are not all at one
-  place. The side faces are end faces along b in a band of SIDE_BAND of the extent.
+  place. The side faces are end faces along b, grown like the ends from SIDE_BAND.
 
-The ends are end faces (harness.io.end_faces): the boundary facets within a band of 5 %
-of the length at each end of the axis whose outward normals point along it (cos >= 0.5;
-a pointed end, which has no such face: cos >= 0), the band widened (x 1.5 at a time)
-until the clamp holds three non-collinear nodes (two in 2-D) and the tip a facet. Either may
-instead be a named group of the mesh (``calibrate
---clamp`` / ``--load-region``). The FEM and the springs are clamped and loaded on the same
+The ends are end faces (harness.io.end_faces) grown until they hold a meaningful part of
+the body (harness.case.regions): the boundary facets within a band of the length at each end
+of the axis whose outward normals point along it (cos >= 0.5; then cos >= 0, for a pointed
+end, which has no such face), from 5 % of the length, the band widened x 1.5 at a time until
+the region's area across the axis is at least SHARE (0.5) of the body's mean section V / L
+and the clamp holds three non-collinear nodes (two in 2-D), the tip a facet. A flat end
+holds its whole section at 5 %: a prismatic body's ends are its flat end faces. A rounded
+end gets a cap, never a near-point clamp (a singular problem whose FEM does not converge).
+The clamp and the tip grow each on its own; the side faces the same way from SIDE_BAND.
+Either end may instead be a named group of the mesh (``calibrate --clamp`` /
+``--load-region``), used as named; a group that is nearly a point is warned about
+(:func:`near_point_warnings`). The FEM and the springs are clamped and loaded on the same
 facets (harness.case.facet_loads).
 
 Magnitudes (:meth:`EndLoads.magnitudes`) give a peak strain of about ``peak_strain``
@@ -32,21 +38,19 @@ w r / (2 G), so the linear answer is the physical one.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from harness.case.moments import EXPONENTS, mesh_moments
+from harness.case.regions import centroid_normal, grow, region, warning
 from harness.errors import SpringbenchError
-from harness.io.end_faces import BAND, COS, end_facets, outward_normals
+from harness.io.end_faces import BAND, COS, facet_geometry, facet_sizes
 from harness.io.meshfile import boundary_facets
 
 PEAK_STRAIN = 1e-3
-SIDE_BAND = (
-    0.25  # of the side faces, a fraction of the body's extent across (a curved side: a wide cap)
-)
+SIDE_BAND = 0.25  # the side faces' first band, of the body's extent across (a curved side)
 
 
 @dataclass(frozen=True)
@@ -70,12 +74,23 @@ class EndLoads:
     across: int  # the sag's and tip's direction (the thinnest other axis)
     clamp: str | None  # a mesh group's name, or None: the low end face
     tip: str | None  # a mesh group's name, or None: the high end face
-    band: float  # of the end faces, a fraction of the length
+    band: float  # of the clamp's end face (and the tip's unless tip_band), of the length
     section: Section
     dim: int = 3
     clamp_info: str = ""  # where the clamp is: centroid, normal, node count
-    cos: float = COS  # of the end faces: outward normals n . e >= cos
+    cos: float = COS  # of the clamp's end face: outward normals n . e >= cos
     sides: tuple = ()  # (axis b, band, cos) of the side clamps' end faces
+    tip_band: float | None = None  # of the tip's end face (None: band)
+    tip_cos: float | None = None  # of the tip's end face (None: cos)
+    regions: tuple = ()  # (clamp, tip) Regions: what each holds (harness.case.regions)
+
+    @property
+    def tip_end(self) -> tuple[float, float]:
+        """(band, cos) of the tip's end face."""
+        return (
+            self.band if self.tip_band is None else self.tip_band,
+            self.cos if self.tip_cos is None else self.tip_cos,
+        )
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -112,24 +127,28 @@ class EndLoads:
         return self.section.tip_radius
 
     def describe(self) -> str:
+        """The held-out loads and where they act: each region's place, area (absolute and a
+        share of the body's mean section) and node count (the clamp's after its normal)."""
         a, b = "xyz"[self.axis], "xyz"[self.across]
-        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"  # noqa: E731
         extra = (
             f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' (a twist about {a})"
             if self.dim == 3
             else ""
         )
+        clamp, tip = self.regions or (None, None)
+        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"  # noqa: E731
+        info = lambda r, n: f" ({r.describe(self.axis, self.dim, n)})" if r is not None else ""  # noqa: E731
         band = (
             ""
-            if isinstance(self.clamp, str) and isinstance(self.tip, str)
+            if self.regions or (isinstance(self.clamp, str) and isinstance(self.tip, str))
             else f" (facets within {self.band:.3g} of the length of each end, "
             f"normals n . e_{a} >= {self.cos:g})"
         )
         return (
             f"held-out loads: 'sag' (body force along -{b}), 'tip' (traction along -{b}){extra} on "
-            f"{where(self.tip, '1')}, 'bridge' (the sag with both ends clamped); "
+            f"{where(self.tip, '1')}{info(tip, True)}, 'bridge' (the sag with both ends clamped); "
             f"{where(self.clamp, '0')} "
-            f"clamped{band}{self.clamp_info}"
+            f"clamped{info(clamp, False)}{band}{self.clamp_info}"
         )
 
     def magnitudes(
@@ -150,67 +169,51 @@ class EndLoads:
         out["side"] = 2 * eps * E / (2 * (1 + nu))  # a shear traction tau = 2 G eps: eps_bc ~ eps
         return out
 
-    def toml(self, magnitudes: dict) -> tuple[str, str]:
-        """([body.parts] lines, [[loads.case]] tables) of the loads with these magnitudes."""
-        dim, m = self.dim, magnitudes
+    def tables(self, magnitudes: dict) -> tuple[dict, list]:
+        """(the case's [body.parts], its [[loads.case]] tables) of the loads with these
+        magnitudes (docs/case-files.md), for an in-memory case."""
+        dim, m, ax = self.dim, magnitudes, "xyz"
 
         def vec(axis, value):
             v = [0.0] * dim
             v[axis] = float(value)
             return v
 
-        part = lambda p, side: (
-            f"{{ group = {json.dumps(p)} }}"
-            if isinstance(p, str)
-            # noqa: E731
-            else f'{{ end = "{"xyz"[self.axis]}{side}", band = {float(self.band)!r}, '
-            f"cos = {float(self.cos)!r} }}"
-        )
-        hold = lambda name: f'[[loads.case.constraint]]\npart = "{name}"\ncomponents = "all"\n'  # noqa: E731
-        load = lambda name: f'[[loads.case]]\nname = "{name}"\n'  # noqa: E731
-        trac = lambda **kv: (
-            '[[loads.case.traction]]\npart = "tip"\n'
-            + "".join(  # noqa: E731
-                f"{k} = {v}\n" for k, v in kv.items()
-            )
-        )
-        cases = (
-            load("sag")
-            + f"gravity = {vec(self.across, -m['sag'])}\n"
-            + hold("clamp")
-            + load("tip")
-            + hold("clamp")
-            + trac(vector=vec(self.across, -m["tip"]))
-        )
+        def part(p, end, band, cos):
+            if isinstance(p, str):
+                return {"group": p}
+            return {"end": end, "band": float(band), "cos": float(cos)}
+
+        def load(name, holds, gravity=None, on=None, **traction):
+            case = {"name": name}
+            if gravity is not None:
+                case["gravity"] = gravity
+            case["constraint"] = [{"part": h, "components": "all"} for h in holds]
+            if on is not None:
+                case["traction"] = [{"part": on, **traction}]
+            return case
+
+        a, b, c = self.axis, self.across, self.second
+        cases = [load("sag", ["clamp"], vec(b, -m["sag"]))]
+        cases.append(load("tip", ["clamp"], on="tip", vector=vec(b, -m["tip"])))
         if dim == 3:
-            cases += load("tip2") + hold("clamp") + trac(vector=vec(self.second, -m["tip2"]))
-            cases += load("torsion") + hold("clamp") + trac(twist=vec(self.axis, m["torsion"]))
-        cases += (
-            load("bridge")
-            + f"gravity = {vec(self.across, -m['bridge'])}\n"
-            + hold("clamp")
-            + hold("tip")
-        )
-        back = lambda **kv: trac(**kv).replace('part = "tip"', 'part = "clamp"')  # noqa: E731
-        cases += load("train-tip") + hold("tip") + back(vector=vec(self.across, m["tip"]))
+            cases.append(load("tip2", ["clamp"], on="tip", vector=vec(c, -m["tip2"])))
+            cases.append(load("torsion", ["clamp"], on="tip", twist=vec(a, m["torsion"])))
+        cases.append(load("bridge", ["clamp", "tip"], vec(b, -m["bridge"])))
+        cases.append(load("train-tip", ["tip"], on="clamp", vector=vec(b, m["tip"])))
         if dim == 3:
-            cases += load("train-tip2") + hold("tip") + back(vector=vec(self.second, m["tip2"]))
-            cases += load("train-torsion") + hold("tip") + back(twist=vec(self.axis, -m["torsion"]))
-        parts = f"clamp = {part(self.clamp, 0)}\ntip = {part(self.tip, 1)}\n"
-        for b, band, cos in self.sides:
-            for side in (0, 1):
-                parts += (
-                    f'side-{"xyz"[b]}{side} = {{ end = "{"xyz"[b]}{side}", band = {float(band)!r}, '
-                    f"cos = {float(cos)!r} }}\n"
-                )
-        for name, b, c in self._side_states():
-            cases += (
-                load(name)
-                + hold(f"side-{'xyz'[b]}0")
-                + trac(vector=vec(c, m["side"])).replace(
-                    'part = "tip"', f'part = "side-{"xyz"[b]}1"'
-                )
-            )
+            cases.append(load("train-tip2", ["tip"], on="clamp", vector=vec(c, m["tip2"])))
+            cases.append(load("train-torsion", ["tip"], on="clamp", twist=vec(a, -m["torsion"])))
+        parts = {
+            "clamp": part(self.clamp, f"{ax[a]}0", self.band, self.cos),
+            "tip": part(self.tip, f"{ax[a]}1", *self.tip_end),
+        }
+        for side, band, cos in self.sides:
+            for end in (0, 1):
+                parts[f"side-{ax[side]}{end}"] = part(None, f"{ax[side]}{end}", band, cos)
+        for name, side, along in self._side_states():
+            held, pulled = f"side-{ax[side]}0", f"side-{ax[side]}1"
+            cases.append(load(name, [held], on=pulled, vector=vec(along, m["side"])))
         return parts, cases
 
 
@@ -218,138 +221,106 @@ def end_loads(
     points: np.ndarray, cells, clamp: str | None = None, tip: str | None = None, groups=None
 ) -> EndLoads:
     """The end loads of a mesh (points (n, dim), meshio-style cells): its end faces along
-    the longest axis, or the mesh groups named ``clamp`` / ``tip`` (``groups``:
-    harness.io.meshfile.Mesh.groups), and the side states' faces (the end faces of the
-    other axes that hold, module doc)."""
+    the longest axis grown to hold SHARE of its section (module doc), or the mesh groups
+    named ``clamp`` / ``tip`` (``groups``: harness.io.meshfile.Mesh.groups), and the side
+    states' faces (the end faces of the other axes that hold, grown the same way)."""
     points = np.asarray(points, float)
     dim = points.shape[1]
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    size = hi - lo
+    size = np.ptp(points, axis=0)
     axis = int(np.argmax(size))
     across = min((a for a in range(dim) if a != axis), key=lambda a: size[a])
     facets, inside = boundary_facets(cells, points)
+    geometry = facet_geometry(points, facets, inside)
+    moments = mesh_moments(points, cells)
+    section = float(moments[0]) / size[axis]
 
-    def group_facets(name):
-        g = groups[name]
-        held = np.zeros(len(points), bool)
-        held[
-            np.unique(np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes]).astype(int))
-        ] = True
-        return [f[held[f].all(axis=1)] for f in facets]
-
-    def holds(fac):
+    def holds(masks):
+        fac = [f[m] for f, m in zip(facets, masks)]
         nodes = np.unique(np.concatenate([f.ravel() for f in fac]))
         c = points[nodes] - points[nodes].mean(axis=0) if len(nodes) else np.zeros((0, dim))
         return len(nodes) >= dim and np.linalg.matrix_rank(c, tol=1e-9 * size.max()) >= dim - 1
 
-    if clamp is not None and not holds(group_facets(clamp)):
+    def choose(name, side, ok, role):
+        """(masks, band, cos, Region) of the group ``name`` (band, cos: None) or of the end
+        face at ``side`` grown to SHARE; None: no end face satisfies ``ok``."""
+        band = cos = None
+        if name is not None:
+            g, held = groups[name], np.zeros(len(points), bool)
+            nodes = np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes])
+            held[np.unique(nodes).astype(int)] = True
+            masks, where = [held[f].all(axis=1) for f in facets], f"group '{name}'"
+        else:
+            found = grow(points, geometry, axis, (side,), section, BAND, lambda m: ok(m[0]))
+            if found is None:
+                return None
+            band, cos, (masks,) = found
+            where = f"the {'xyz'[axis]}{side} end face"
+        info = region(points, facets, geometry, masks, axis, section, where, role, band, cos)
+        return masks, band, cos, info
+
+    held = choose(clamp, 0, holds, "clamp")
+    if clamp is not None and not holds(held[0]):
         raise SpringbenchError(
             f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
             f"needed)",
             field="--clamp",
             fix="name a face group of the mesh",
         )
-    for band, cos in _bands(BAND):
-        cf = (
-            group_facets(clamp)
-            if clamp is not None
-            else end_facets(points, facets, inside, axis, 0, band, cos)
+    loaded = choose(tip, 1, lambda m: any(x.any() for x in m), "load region")
+    if held is None or loaded is None or not any(m.any() for m in loaded[0]):
+        raise SpringbenchError(
+            "no end of the mesh's longest axis can be clamped (no face there whose normals "
+            "point along the axis)",
+            field="mesh",
+            fix="name a face group with --clamp, or --heldout none",
         )
-        tf = (
-            group_facets(tip)
-            if tip is not None
-            else end_facets(points, facets, inside, axis, 1, band, cos)
-        )
-        if holds(cf) and any(len(f) for f in tf):
-            return EndLoads(
-                axis,
-                across,
-                clamp,
-                tip,
-                band,
-                _section(points, cells, axis, tf),
-                dim,
-                _where(points, facets, inside, cf),
-                cos,
-                _sides(points, facets, inside, axis, holds),
-            )
-    raise SpringbenchError(
-        "no end of the mesh's longest axis can be clamped (no face there whose normals point "
-        "along the axis)",
-        field="mesh",
-        fix="name a face group with --clamp, or --heldout none",
+    clamp_end = None if clamp is not None else held[1:3]
+    tip_end = None if tip is not None else loaded[1:3]
+    band, cos = clamp_end or tip_end or (BAND, COS)
+    return EndLoads(
+        axis,
+        across,
+        clamp,
+        tip,
+        band,
+        _section(points, moments, axis, [f[m] for f, m in zip(facets, loaded[0])]),
+        dim,
+        centroid_normal(geometry, held[0], held[3].nodes),
+        cos,
+        _sides(points, geometry, axis, holds, float(moments[0])),
+        *(tip_end or (None, None)),
+        (held[3], loaded[3]),
     )
 
 
-def _bands(start: float):
-    """(band, cos) to try, narrowest first: the band from ``start`` x 1.5 at a time up to
-    half the extent, each with the faces' cos and then 0 (a pointed end has no face: then
-    the facets that face that way at all)."""
-    band = start
-    while band <= 0.5:
-        yield band, COS
-        yield band, 0.0
-        band *= 1.5
+def near_point_warnings(ends: EndLoads) -> list[str]:
+    """One warning line per region of ``ends`` that is nearly a point (a user's group below
+    SHARE of the section or of few facets; an end face no band grows to SHARE), naming the
+    fix; [] when both hold a meaningful part of the body. The caller prints them."""
+    flags = {"clamp": "--clamp", "load region": "--load-region"}
+    return [warning(r, flags[r.role]) for r in ends.regions if r is not None and r.near_point]
 
 
-def _sides(points, facets, inside, axis: int, holds) -> tuple:
-    """((b, band, cos), ...) per axis b but ``axis``: the first :func:`_bands` from
-    SIDE_BAND in which b's low end face holds and its high one has a facet (none: no entry)."""
+def _sides(points, geometry, axis: int, holds, volume: float) -> tuple:
+    """((b, band, cos), ...) per axis b but ``axis``: the first bands from SIDE_BAND in
+    which b's low end face holds, its high one has a facet and each holds SHARE of the
+    section across b (harness.case.regions.grow; none holding: no entry)."""
 
     def first(b):
-        for band, cos in _bands(SIDE_BAND):
-            lo, hi = (end_facets(points, facets, inside, b, side, band, cos) for side in (0, 1))
-            if holds(lo) and any(len(f) for f in hi):
-                return b, band, cos
-        return None
+        section = volume / np.ptp(points[:, b])
+        ok = lambda m: holds(m[0]) and any(x.any() for x in m[1])  # noqa: E731
+        found = grow(points, geometry, b, (0, 1), section, SIDE_BAND, ok)
+        return None if found is None else (b, found[0], found[1])
 
     return tuple(
         f for f in (first(b) for b in range(points.shape[1]) if b != axis) if f is not None
     )
 
 
-def _where(points, facets, inside, fac) -> str:
-    """': centroid (..), normal (..), N nodes' of the clamp's facets."""
-    area, centre, normal = 0.0, 0.0, 0.0
-    for f, cell in zip(facets, inside):
-        keep = _rows(f, fac)
-        if not keep.any():
-            continue
-        a = _areas(points, f[keep])
-        c, n = outward_normals(points, f[keep], cell[keep])
-        area, centre, normal = area + a.sum(), centre + a @ c, normal + a @ n
-    nodes = len(np.unique(np.concatenate([f.ravel() for f in fac])))
-    fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
-    n = normal / max(np.linalg.norm(normal), 1e-300)
-    return f": centroid ({fmt(centre / area)}), normal ({fmt(n)}), {nodes} nodes"
-
-
-def _rows(f: np.ndarray, chosen: list[np.ndarray]) -> np.ndarray:
-    """Mask of the rows of f that are among the chosen facets of the same size."""
-    same = [c for c in chosen if c.shape[1] == f.shape[1] and len(c)]
-    if not same:
-        return np.zeros(len(f), bool)
-    key = lambda a: [tuple(r) for r in np.sort(a, axis=1)]  # noqa: E731
-    want = set(key(np.concatenate(same)))
-    return np.array([r in want for r in key(f)], bool)
-
-
-def _areas(points: np.ndarray, fac: np.ndarray) -> np.ndarray:
-    """Sizes (m,) of facets (m, k): lengths in 2-D, polygon areas in 3-D."""
-    x = points[fac]
-    if x.shape[2] == 2:
-        return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
-    a = np.zeros((len(x), 3))
-    for i in range(1, x.shape[1] - 1):
-        a += np.cross(x[:, i] - x[:, 0], x[:, i + 1] - x[:, 0]) / 2
-    return np.linalg.norm(a, axis=1)
-
-
-def _section(points, cells, axis: int, tip_facets) -> Section:
-    """The body's Section along ``axis`` (its exact volume moments, harness.case.moments;
-    the tip face from ``tip_facets``)."""
+def _section(points, m, axis: int, tip_facets) -> Section:
+    """The body's Section along ``axis`` (its exact volume moments m, int x^e dV for the
+    exponents e of harness.case.moments.EXPONENTS; the tip face from ``tip_facets``)."""
     dim = points.shape[1]
-    m = mesh_moments(points, cells)  # int x^e dV for the exponents e of EXPONENTS
     V, mean = m[0], m[1 : 1 + dim] / m[0]
     square = [
         m[EXPONENTS[dim].index(tuple(2 * int(a == i) for a in range(dim)))] for i in range(dim)
@@ -358,7 +329,7 @@ def _section(points, cells, axis: int, tip_facets) -> Section:
     I = (np.array(square) / V - mean**2) * V / L
     c = np.abs(points - mean).max(axis=0)
     tip = [f for f in tip_facets if len(f)]
-    areas = [_areas(points, f) for f in tip]
+    areas = [facet_sizes(points, f) for f in tip]
     tip_area = float(sum(a.sum() for a in areas))
     centroid = sum(a @ points[f].mean(axis=1) for a, f in zip(areas, tip)) / tip_area
     nodes = np.unique(np.concatenate([f.ravel() for f in tip]))

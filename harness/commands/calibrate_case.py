@@ -4,9 +4,11 @@ case table; TOML text only for ``--save-case``)."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
+from harness import registry
 from harness.errors import CaseError, SpringbenchError
 from harness.models.stiffness_rules import RULES as STIFFNESS_RULES
 from harness.stages.sms_select import FINAL_MAXITER
@@ -19,29 +21,21 @@ METHODS = {
     "equilibrium-gap": "equilibrium-gap",
 }
 INITS = ("none", "equilibrium-gap")
-MODELS = (
-    "springs",
-    "springs+volume",
-    "springs+volume-shared",
-    "springs+kn",
-    "springs+kn-node",
-    "springs+node-volume",
-    "springs+node-volume-shared",
-)
-VOLUME = {
-    "springs": "none",
-    "springs+volume": "element",
-    "springs+volume-shared": "shared",  # [model] volume
-    "springs+node-volume": "node",
-    "springs+node-volume-shared": "node-shared",
-}
-KN = {"springs+kn": "shared", "springs+kn-node": "node"}  # [model] kn
+MODELS = registry.SPRINGS_CLASSES  # --model: the springs classes of harness/registry.py
 RULES = STIFFNESS_RULES  # every rule the harness has (harness/models/stiffness_rules.py)
-# the prior weight of lbfgs fits that validation does not choose (--model springs+volume, +kn)
+# the prior weight of lbfgs fits that validation does not choose (a --model with a term)
 PRIOR_WEIGHT = 10.0
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
+
+
+def model_name(text: str) -> str:
+    """--model's value; an ambiguous spelling is refused naming both classes it could mean."""
+    why = registry.ambiguous_class(text)
+    if why:
+        raise argparse.ArgumentTypeError(why)
+    return text
 
 
 def magnitude(s) -> float:
@@ -81,14 +75,6 @@ def _optimizer(s) -> dict:
     return out
 
 
-def _end_tables(ends, m):
-    import tomllib
-
-    parts, cases = ends.toml(m)
-    raw = tomllib.loads("[body.parts]\n" + parts + cases)
-    return raw["body"]["parts"], raw["loads"]["case"]
-
-
 def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=None) -> dict:
     """The case calibrate runs, as a case table (docs/case-files.md): the mesh body, the
     material, the fitted load set and the held-out end loads, an SMS on the mesh's nodes
@@ -97,9 +83,10 @@ def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=N
     if s.format and mesh_file is None:
         body["format"] = s.format
     first = s.rule if s.rule != "best" else "lloyd"
+    model = registry.MODEL_CLASSES.load(s.model)
     loads: dict = {"set": f"{s.loads}{dim}d", "magnitude": float(magnitude(s))}
     if ends is not None:
-        parts, cases = _end_tables(ends, ends.magnitudes(s.E, s.nu, s.density, s.peak_strain))
+        parts, cases = ends.tables(ends.magnitudes(s.E, s.nu, s.density, s.peak_strain))
         body["parts"] = parts
         loads.update(heldout=list(ends.names), case=cases)
     reference = {"modes": 0, "tol": float(s.tol), "max_refine": int(s.max_refine)}
@@ -122,8 +109,8 @@ def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=N
             "placement": "mesh",
             "masses": s.masses,
             "stiffness": [first] + [r for r in RULES if r != first],
-            "volume": VOLUME.get(s.model, "none"),
-            "kn": KN.get(s.model, "none"),
+            "volume": model.volume,  # the [model] keys of the --model class
+            "kn": model.kn,
         },
         "optimizer": _optimizer(s),
     }
@@ -173,7 +160,7 @@ def metre_mesh(s, mesh, tmp: Path) -> Path | None:
 def mesh_case(s, mesh, tmp: Path):
     """The in-memory Case of settings ``s`` for the read ``mesh`` (its file written to tmp
     when it must be scaled to m), printing the clamp and load faces it chose."""
-    from harness.case.default_loads import end_loads
+    from harness.case.default_loads import end_loads, near_point_warnings
     from harness.case.elasticity import isotropic
     from harness.case.reader import case_of
     from harness.io.toml_text import dumps
@@ -189,6 +176,8 @@ def mesh_case(s, mesh, tmp: Path):
             f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead",
             flush=True,
         )
+        for line in near_point_warnings(ends):
+            print(line, flush=True)
     table = case_table(s, mesh.dim, mesh.cells, mesh_file, ends)
     if s.save_case is not None:
         s.save_case.write_text(dumps(table))  # what ran, for the user to run again or edit

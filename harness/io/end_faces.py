@@ -61,21 +61,47 @@ def outward_normals(
     return c, n * np.where(np.einsum("ij,ij->i", n, c - inside) < 0, -1.0, 1.0)[:, None]
 
 
+def facet_sizes(points: np.ndarray, fac: np.ndarray) -> np.ndarray:
+    """Sizes (m,) of facets (m, k): lengths in 2-D, polygon areas in 3-D."""
+    x = points[fac]
+    if x.shape[2] == 2:
+        return np.linalg.norm(x[:, 1] - x[:, 0], axis=1)
+    a = np.zeros((len(x), 3))
+    for i in range(1, x.shape[1] - 1):
+        a += np.cross(x[:, i] - x[:, 0], x[:, i + 1] - x[:, 0]) / 2
+    return np.linalg.norm(a, axis=1)
+
+
+def facet_geometry(points: np.ndarray, facets, inside) -> list[tuple]:
+    """(centroids, outward unit normals, sizes) per facet array of ``facets``: computed
+    once for the many bands a region is grown through."""
+    return [
+        (*outward_normals(points, fac, cell), facet_sizes(points, fac))
+        for fac, cell in zip(facets, inside)
+    ]
+
+
+def end_masks(points: np.ndarray, geometry, axis: int, side: int, band: float, cos: float):
+    """Masks (one per facet array of ``geometry``, :func:`facet_geometry`) of the end
+    face's facets."""
+    x = points[:, axis]
+    lo, hi = float(x.min()), float(x.max())
+    width = band * (hi - lo)
+    sign = 1.0 if side else -1.0
+    return [
+        ((c[:, axis] >= hi - width) if side else (c[:, axis] <= lo + width))
+        & (sign * n[:, axis] >= cos)
+        for c, n, _ in geometry
+    ]
+
+
 def end_facets(
     points: np.ndarray, facets, inside, axis: int, side: int, band: float = BAND, cos: float = COS
 ) -> list[np.ndarray]:
     """The end face's facets: one (m, k) vertex-index array per facet size of ``facets``
     (harness.io.meshfile.boundary_facets with the cells' centroids ``inside``)."""
-    x = points[:, axis]
-    lo, hi = float(x.min()), float(x.max())
-    width = band * (hi - lo)
-    sign = 1.0 if side else -1.0
-    out = []
-    for fac, cell_centre in zip(facets, inside):
-        c, n = outward_normals(points, fac, cell_centre)
-        near = (c[:, axis] >= hi - width) if side else (c[:, axis] <= lo + width)
-        out.append(fac[near & (sign * n[:, axis] >= cos)])
-    return out
+    masks = end_masks(points, facet_geometry(points, facets, inside), axis, side, band, cos)
+    return [fac[m] for fac, m in zip(facets, masks)]
 
 
 def part_facets(part: EndPart) -> list[np.ndarray]:

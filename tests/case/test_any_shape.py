@@ -186,22 +186,27 @@ def test_lumped_masses_are_positive_and_carry_the_body(tmp_path, bodies):
 
 def test_end_loads_clamp_the_low_end_of_the_longest_axis(tmp_path, bodies):
     from harness.case.default_loads import end_loads
+    from harness.case.regions import SHARE
     from harness.io.end_faces import end_facets
 
     m = read_mesh(bodies["cylinder"])  # along x, length 0.5, radius 0.1
     e = end_loads(m.points, m.cells)
     assert e.axis == 0 and e.across in (1, 2) and e.band == pytest.approx(0.05) and e.cos == 0.5
-    # a 2-D apex end: no face looks along -x, so any facet that faces -x
+    # a 2-D apex end: no face looks along -x, so any facet that faces -x, the band grown
+    # until the two sides hold SHARE of the mean width (0.3): at x >= SHARE * 0.3 / 0.6
     m = read_mesh(meshes.wedge(tmp_path))
     e = end_loads(m.points, m.cells)
-    assert e.axis == 0 and e.across == 1 and e.band == pytest.approx(0.05) and e.cos == 0.0
+    assert e.axis == 0 and e.across == 1 and e.cos == 0.0
+    assert e.band == pytest.approx(0.05 * 1.5**4)  # the first band from 5 % past 0.25
     facets, inside = boundary_facets(m.cells, m.points)
     held = np.unique(
         np.concatenate(
             [f.ravel() for f in end_facets(m.points, facets, inside, 0, 0, e.band, e.cos)]
         )
     )
-    assert len(held) >= 2 and np.all(m.points[held, 0] <= 0.1 + 1e-12)  # the two sides at the apex
+    x = m.points[held]
+    assert np.all(x[:, 0] <= e.band + 0.1 + 1e-12)  # the two sides at the apex
+    assert np.ptp(x[:, 1]) >= SHARE * 0.3 and e.regions[0].share >= SHARE
     # and no face
     assert not any(len(f) for f in end_facets(m.points, facets, inside, 0, 0, 0.5, 0.5))
 

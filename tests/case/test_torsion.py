@@ -198,20 +198,16 @@ def test_default_end_loads_twist_the_tip_about_the_long_axis(tmp_path, cyls):
     )
     mags = e.magnitudes(E, NU, 1000.0, 1e-3)
     assert mags["torsion"] == pytest.approx(2 * 1e-3 * E / (2 * (1 + NU)) / e.radius)
-    parts, cases = e.toml(mags)
-    assert f"twist = [{mags['torsion']!r}, 0.0, 0.0]" in cases
-    assert parts.startswith('clamp = { end = "x0", band = 0.05, cos = 0.5 }\ntip = { end = "x1"')
+    parts, cases = e.tables(mags)
+    (torsion,) = [c for c in cases if c["name"] == "torsion"]
+    assert torsion["traction"] == [{"part": "tip", "twist": [mags["torsion"], 0.0, 0.0]}]
+    assert parts["clamp"] == {"end": "x0", "band": 0.05, "cos": 0.5}
+    assert parts["tip"]["end"] == "x1"
     g = end_loads(m.points, m.cells, "clamp", "tip", m.groups)
-    parts, _ = g.toml(mags)
-    assert parts.startswith(
-        'clamp = { group = "clamp" }\ntip = { group = "tip" }\nside-y0 = { end = "y0"'
-    )
-    assert [line.split(" =")[0] for line in parts.splitlines()[2:]] == [
-        "side-y0",
-        "side-y1",
-        "side-z0",
-        "side-z1",
-    ]
+    parts, _ = g.tables(mags)
+    assert parts["clamp"] == {"group": "clamp"} and parts["tip"] == {"group": "tip"}
+    assert list(parts)[2:] == ["side-y0", "side-y1", "side-z0", "side-z1"]
+    assert parts["side-y0"]["end"] == "y0"
     assert "group 'tip'" in g.describe() and "group 'clamp' clamped" in g.describe()
     flat = read_mesh(meshes.holed_plate(tmp_path))
     assert end_loads(flat.points, flat.cells).names == ("sag", "tip", "bridge")  # no torsion in 2-D
