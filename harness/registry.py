@@ -108,20 +108,88 @@ OPTIMIZERS = Registry(
     },
 )
 
-# ``[model] classes``: model classes an sms case scores on the same nodes (ModelClass objects,
-# harness/stages/classes/)
+# ``[model] classes`` and ``calibrate --model``: the model classes scored on the nodes of a case
+# (ModelClass objects, harness/stages/classes/); ``about``: (its model, where its constants live)
 MODEL_CLASSES = Registry(
     "model class",
     {
         "springs": "harness.stages.classes.springs:SPRINGS",
-        "springs+volume": "harness.stages.classes.springs:VOLUME_SHARED",
+        "springs+volume-shared": "harness.stages.classes.springs:VOLUME_SHARED",
         "springs+volume-element": "harness.stages.classes.springs:VOLUME_ELEMENT",
+        "springs+node-volume-shared": "harness.stages.classes.springs:NODE_VOLUME_SHARED",
+        "springs+node-volume-node": "harness.stages.classes.springs:NODE_VOLUME_NODE",
+        "springs+kn": "harness.stages.classes.springs:KN_SHARED",
+        "springs+kn-node": "harness.stages.classes.springs:KN_NODE",
         "p1": "harness.stages.classes.p1:P1",
         "mt": "harness.stages.classes.mt:MT",
-        "springs+kn": "harness.stages.classes.springs:KN_SHARED",
-        "springs+node-volume": "harness.stages.classes.springs:NODE_VOLUME_SHARED",
+    },
+    about={
+        "springs": ("springs on the model's edges", "one k per spring"),
+        "springs+volume-shared": (
+            "springs + a volume energy per tetrahedron (2-D: triangle) of the model's cells "
+            "(harness/models/volume.py)",
+            "one kv for the body",
+        ),
+        "springs+volume-element": (
+            "springs + a volume energy per tetrahedron (2-D: triangle) of the model's cells "
+            "(harness/models/volume.py)",
+            "one kv per element",
+        ),
+        "springs+node-volume-shared": (
+            "springs + a volume energy per node on its share of its elements' volume change, "
+            "no locking under clamps (harness/models/volume.py)",
+            "one kv for the body",
+        ),
+        "springs+node-volume-node": (
+            "springs + a volume energy per node on its share of its elements' volume change, "
+            "no locking under clamps (harness/models/volume.py)",
+            "one kv per node",
+        ),
+        "springs+kn": (
+            "springs + the adjustable-Poisson term of Kot & Nagahashi 2015 per node "
+            "(harness/models/kn.py)",
+            "one kn for the body",
+        ),
+        "springs+kn-node": (
+            "springs + the adjustable-Poisson term of Kot & Nagahashi 2015 per node "
+            "(harness/models/kn.py)",
+            "one kn per node",
+        ),
+        "p1": (
+            "linear finite elements on the model's cells (harness/models/p1.py)",
+            "no fitted constants",
+        ),
+        "mt": (
+            "Bourguignon & Cani's element model on the model's cells, 3-D (harness/models/mt.py)",
+            "three moduli fitted for the body",
+        ),
     },
 )
+# the classes of springs with or without one extra term: the ones calibrate --model fits
+SPRINGS_CLASSES = tuple(
+    n for n in MODEL_CLASSES if MODEL_CLASSES.module(n) == "harness.stages.classes.springs"
+)
+# spellings that could mean two classes: refused, naming both
+AMBIGUOUS_CLASSES = {
+    "springs+volume": ("springs+volume-shared", "springs+volume-element"),
+    "springs+node-volume": ("springs+node-volume-shared", "springs+node-volume-node"),
+}
+
+
+def class_doc(name: str) -> str:
+    """What model class ``name`` is: its model and where its constants live."""
+    model, constants = MODEL_CLASSES.about[name]
+    return f"{model}, {constants}"
+
+
+def ambiguous_class(name: str) -> str | None:
+    """The one-line refusal of a spelling in AMBIGUOUS_CLASSES (None for any other)."""
+    if name not in AMBIGUOUS_CLASSES:
+        return None
+    a, b = AMBIGUOUS_CLASSES[name]
+    about = MODEL_CLASSES.about
+    return f"'{name}' is ambiguous: {a} ({about[a][1]}) or {b} ({about[b][1]})"
+
 
 # ``[model] stiffness``: rule(points, springs, cells, material) -> k
 STIFFNESS_RULES = Registry(
@@ -176,7 +244,7 @@ ENGINES = Registry(
         "newton-springs": (
             "newton",
             "a springbench export (--model MODEL.json) as NVIDIA Newton particles, springs "
-            "and (springs+volume) tetrahedra",
+            "and (a volume term per element) tetrahedra",
         ),
         "newton-tets": (
             "newton",

@@ -40,7 +40,7 @@ from pathlib import Path
 
 FOLDER = Path(__file__).resolve().parent
 NUS = (0.0, 0.1, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.49)
-CLASSES = '["springs", "springs+volume", "springs+kn", "mt", "p1"]'
+CLASSES = '["springs", "springs+volume-shared", "springs+kn", "mt", "p1"]'
 STIFFNESS = (
     '["lloyd", "deussen", "vangelder", "uniform", "cauchy", "learned"]'  # every rule of the harness
 )

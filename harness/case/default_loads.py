@@ -38,6 +38,7 @@ w r / (2 G), so the linear answer is the physical one.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 
@@ -168,6 +169,25 @@ class EndLoads:
             out["torsion"] = 2 * eps * E / (2 * (1 + nu)) / s.tip_radius
         out["side"] = 2 * eps * E / (2 * (1 + nu))  # a shear traction tau = 2 G eps: eps_bc ~ eps
         return out
+
+    def toml(self, magnitudes: dict) -> tuple[str, str]:
+        """:meth:`tables` as case-file text: ([body.parts] lines, [[loads.case]] tables), the
+        form the generated suites (cases/*/_generate.py) write."""
+        parts, cases = self.tables(magnitudes)
+        inline = lambda d: "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items()) + " }"  # noqa: E731
+        text = "".join(f"{name} = {inline(p)}\n" for name, p in parts.items())
+        out = ""
+        for case in cases:
+            out += f'[[loads.case]]\nname = "{case["name"]}"\n'
+            if "gravity" in case:
+                out += f"gravity = {case['gravity']}\n"
+            for c in case["constraint"]:
+                out += f'[[loads.case.constraint]]\npart = "{c["part"]}"\ncomponents = "all"\n'
+            for t in case.get("traction", ()):
+                out += "[[loads.case.traction]]\n" + "".join(
+                    f"{k} = {json.dumps(v)}\n" for k, v in t.items()
+                )
+        return text, out
 
     def tables(self, magnitudes: dict) -> tuple[dict, list]:
         """(the case's [body.parts], its [[loads.case]] tables) of the loads with these

@@ -11,7 +11,8 @@ OPTIMIZER_METHODS = registry.OPTIMIZERS.names()  # [optimizer] method / compare
 _METHODS = OPTIMIZER_METHODS
 _COMPARE = tuple(m for m in OPTIMIZER_METHODS if m != "none")
 
-# [optimizer.select] candidates: the model capacities a validated fit chooses among;
+# [optimizer.select] candidates: the model capacities a validated fit chooses among, labels of
+# the validation, not model classes ('+volume', '+node-volume': terms sharing one kv);
 # harness/optimize/select.py's CANDIDATES must hold exactly these names (it checks at import)
 SELECT_CANDIDATES = (
     "scale",
@@ -125,15 +126,14 @@ SMS = {
         "springs, one per node or shared by the body; needs cells; not with volume",
     ),
     "classes": Field(
-        "strs",
+        "any",  # a list of names, checked here: an ambiguous spelling gets its own message
         (),
         choices=MODEL_CLASSES,
-        doc="score several model classes on the same nodes, one after the other: springs, "
-        "springs+volume (volume = 'shared'), springs+volume-element, p1 (linear FEM on the "
-        "model's cells, no free constants), mt (Bourguignon & Cani's element model on the "
-        "model's cells, 3-D), springs+kn (kn = 'shared'), springs+node-volume (volume = "
-        "'node-shared'); overrides volume and kn; rows "
-        "carry model_class",
+        check=lambda v: _classes_problem(v),
+        doc="score several model classes on the same nodes, one after the other: "
+        + ", ".join(MODEL_CLASSES)
+        + " (harness/registry.py MODEL_CLASSES: each one's model and constants); overrides "
+        "volume and kn; rows carry model_class",
     ),
     "kv": Field(
         "float",
@@ -465,4 +465,15 @@ def _compare_options_problem(v):
             return f"'{m}' is not one of {', '.join(_COMPARE)}"
         if not isinstance(o, dict):
             return f"options of '{m}' must be a table"
+    return None
+
+
+def _classes_problem(v):
+    """[model] classes: a list of model class names (an ambiguous spelling says so)."""
+    if not isinstance(v, list) or not all(isinstance(s, str) for s in v):
+        return "expected a list of model class names"
+    bad = [s for s in v if s not in MODEL_CLASSES]
+    if bad:
+        why = registry.ambiguous_class(bad[0])
+        return why or f"'{bad[0]}' is not one of {', '.join(MODEL_CLASSES)}"
     return None

@@ -72,10 +72,11 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   ``reference_error_heldout``), ``mass_residual`` and ``units``. 2-D models have unit
   thickness (k, masses per unit thickness).
   A model with an extra term adds its keys (docs/calibrate.md, "What it writes", gives each
-  energy; the JSON's ``units`` the forces): a volume term per element (``--model springs+volume``,
-  ``springs+volume-shared``; harness/models/volume.py) ``volume_*``, run in Newton as
-  tetrahedra with k_mu = 0, k_lambda = kv; one per node (``--model springs+node-volume``,
-  ``springs+node-volume-shared``, or a ``+node-volume`` choice of the validation)
+  energy; the JSON's ``units`` the forces): a volume term per element
+  (``--model springs+volume-element``, ``springs+volume-shared``; harness/models/volume.py)
+  ``volume_*``, run in Newton as tetrahedra with k_mu = 0, k_lambda = kv; one per node
+  (``--model springs+node-volume-node``, ``springs+node-volume-shared``, or a
+  ``+node-volume`` choice of the validation)
   ``node_volume_*``, run in Newton by harness/engines/newton_volume.py; Kot & Nagahashi's
   term (``--model springs+kn``, ``springs+kn-node``; harness/models/kn.py) ``kn_*``.
   ``dt_stable`` includes the term.
@@ -99,8 +100,10 @@ from harness.commands.calibrate_case import (
     PRIOR_WEIGHT,
     RULES,
     UNITS,
+    model_name,
 )
 from harness.errors import SpringbenchError
+from harness.registry import class_doc
 
 HELP = (
     "calibrate spring constants for your own mesh against FEM and export them "
@@ -125,9 +128,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               rule is exported, null without held-out loads), best_rule_heldout ({rule,
               G_heldout_mean}: the best rule on the held-out loads), opt_stop and opt_stops (the
               optimiser's whole stop message: the exported start's, and every start's),
-              mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume adds
+              mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume-* adds
               volume_indices, volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m),
-              volume_shared; a volume term per node (--model springs+node-volume, or a +node-volume
+              volume_shared; a volume term per node (--model springs+node-volume-*, a +node-volume
               choice) adds node_volume_nodes, node_volume_rest (m^3; 2-D m^2), node_volume_stiffness
               (kv, Pa; 2-D N/m), node_volume_shared, node_volume_elements, node_volume_element_rest
               (m^3; 2-D m^2); --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2),
@@ -175,14 +178,10 @@ def add_arguments(p):
     p.add_argument(
         "--model",
         choices=MODELS,
+        type=model_name,
         default="springs",
-        help="springs (default); springs+volume: plus a volume energy per tetrahedron (2-D: "
-        "triangle) "
-        "with its own fitted constant kv; springs+volume-shared: one kv for the whole body; "
-        "springs+kn: plus the adjustable-Poisson term of Kot & Nagahashi 2015, one constant kn "
-        "for the body (springs+kn-node: one per node); springs+node-volume: plus a volume "
-        "energy per node, on its share of its elements' volume change (no locking under "
-        "clamps), kv per node (springs+node-volume-shared: one kv)",
+        help="the model class (default springs): "
+        + "; ".join(f"{n}: {class_doc(n)}" for n in MODELS),
     )
     p.add_argument(
         "--prior-weight",

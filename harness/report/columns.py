@@ -231,8 +231,8 @@ FITS = [  # spring/mass models and their fits (harness/stages/sms*.py)
     Column(
         "model_class",
         "",
-        "springs, springs+volume, springs+node-volume, springs+kn, mt or p1 "
-        "(harness/stages/classes/)",
+        "the row's model class: a name of [model] classes (harness/registry.py MODEL_CLASSES, "
+        "docs/models.md)",
     ),
     Column("volume", "", "the volume term: element, shared, node or node-shared"),
     Column("n_volumes", "count", "volume terms (elements or nodes)"),

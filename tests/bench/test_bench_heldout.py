@@ -128,7 +128,7 @@ def _case(folder, mesh, normal):
     return p
 
 
-@pytest.mark.parametrize("model", ["springs", "springs+volume", "springs+kn"])
+@pytest.mark.parametrize("model", ["springs", "springs+volume-element", "springs+kn"])
 def test_network_statics_equals_springbench(bar, tmp_path, model):
     from scipy.spatial import cKDTree
 
@@ -158,7 +158,7 @@ def test_network_statics_equals_springbench(bar, tmp_path, model):
     ]
     mine = J.model_answers(data, points, groups, loads, {ld.name: 1.0 for ld in loads})
     net, _ = read_vtu(out)
-    if model == "springs+volume":  # the term as harness.models.volume saves it, from the JSON
+    if model == "springs+volume-element":  # the term as harness.models.volume saves it
         from harness.models import volume
 
         np.savez(

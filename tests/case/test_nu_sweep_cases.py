@@ -34,7 +34,7 @@ def test_case_files_are_the_generators_output_and_valid():
                 and set(case.fit_loads).isdisjoint(case.heldout)
             )
             assert list(case.section("model")["classes"]) == json.loads(gen.CLASSES)
-    assert json.loads(gen.CLASSES) == ["springs", "springs+volume", "springs+kn", "mt", "p1"]
+    assert json.loads(gen.CLASSES) == ["springs", "springs+volume-shared", "springs+kn", "mt", "p1"]
 
 
 @pytest.mark.parametrize("body", ["box", "cylinder", "plate"])

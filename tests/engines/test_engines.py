@@ -173,8 +173,8 @@ def test_newton_runs_a_springbench_export_to_its_linear_statics(packs, tmp_path)
 
 @pytest.mark.slow
 def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_path):
-    """An export with one volume term per node (calibrate --model springs+node-volume) at nu
-    = 0.45: Newton has no such term, the adapter adds its forces by Warp kernels; its
+    """An export with one volume term per node (calibrate --model springs+node-volume-node)
+    at nu = 0.45: Newton has no such term, the adapter adds its forces by Warp kernels; its
     equilibrium is the export's linear statics (K from the JSON's keys as written in
     harness/bench/heldout_judge.py) to <= 1e-3, and the term matters (the springs alone differ)."""
     pytest.importorskip("newton")
@@ -189,7 +189,7 @@ def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_pat
             (
                 ["calibrate", str(mesh), "--E", str(E), "--nu", "0.45"]
                 + ["--density", str(RHO), "--method", "rule"]
-                + ["--model", "springs+node-volume", "--quiet"]
+                + ["--model", "springs+node-volume-node", "--quiet"]
                 + ["--out", str(tmp_path / "m.vtu")]
             )
         )

@@ -141,14 +141,14 @@ def test_newton_reproduces_springbench_statics_and_the_fem(tmp_path, which):
 
 @pytest.mark.slow
 def test_newton_runs_springs_plus_volume_as_tetrahedra(tmp_path):
-    """springs + one volume term per tetrahedron (calibrate --model springs+volume): in
-    Newton the springs plus tetrahedra with k_mu = 0, k_lambda = kv reach springbench's own
+    """springs + one volume term per tetrahedron (calibrate --model springs+volume-element):
+    in Newton the springs plus tetrahedra with k_mu = 0, k_lambda = kv reach springbench's own
     linear statics of the same model (the volume term changes the answer, so a Newton
     model that ignored it would fail)."""
     from harness.models.volume import with_volume
 
     mesh = meshes.cylinder(tmp_path)
-    data, case, net = calibrated(tmp_path, mesh, "--model", "springs+volume")
+    data, case, net = calibrated(tmp_path, mesh, "--model", "springs+volume-element")
     assert (
         len(data["volume_indices"]) == len(read_mesh(mesh).cells["tetra"])
         and min(data["volume_stiffness"]) > 0

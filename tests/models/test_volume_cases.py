@@ -107,7 +107,7 @@ def test_calibrate_exports_the_volume_term(tmp_path):
         cli.main(
             (
                 ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
-                + ["--model", "springs+volume", "--method", "gauss-newton"]
+                + ["--model", "springs+volume-element", "--method", "gauss-newton"]
                 + ["--max-refine", "0", "--rule", "lloyd", "--out", str(out)]
             )
         )

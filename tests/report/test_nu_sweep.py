@@ -15,7 +15,7 @@ def rows():
     out = []
     for body, dim in (("box", 3), ("plate", 2)):
         for nu in (0.0, 0.3, 0.49):
-            for cls in ("springs", "springs+volume"):
+            for cls in ("springs", "springs+volume-shared"):
                 base = dict(
                     case=f"{body}_nu{nu:.2f}",
                     dim=dim,
@@ -57,7 +57,9 @@ def rows():
 def test_sweep_frame_takes_each_class_fitted_row_and_p1_only_row():
     f = sweep_frame(rows())
     assert len(f) == 2 * 3 * 3
-    s = f[(f["body"] == "box") & (f["model_class"] == "springs+volume") & (f["nu"] == 0.49)].iloc[0]
+    s = f[
+        (f["body"] == "box") & (f["model_class"] == "springs+volume-shared") & (f["nu"] == 0.49)
+    ].iloc[0]
     assert s["G_norm_final"] == pytest.approx(0.1 + 0.49 - 0.05) and s[
         "G_heldout"
     ] == pytest.approx(2 * 0.54)
@@ -117,10 +119,10 @@ def held(*g):
 
 def family_rows(spread=0.01, choice="springs-prior1"):
     """One body at nu 0.3: the springs rules lloyd and vangelder, the springs select row,
-    springs+volume's unfitted and fitted rows, p1's only row."""
+    springs+volume-shared's unfitted and fitted rows, p1's only row."""
     base = dict(case="cyl_nu0.30", dim=3, nu=0.3, status="ok", objective=None)
     sp = dict(base, model_class="springs")
-    sv = dict(base, model_class="springs+volume")
+    sv = dict(base, model_class="springs+volume-shared")
     return pd.DataFrame(
         [
             dict(
@@ -185,13 +187,19 @@ def test_family_frame_takes_fitted_rows_never_the_heldout_best_and_rules_as_rows
     from harness.report.nu_sweep import families_of, family_frame
 
     f = family_frame(family_rows())
-    assert list(f["model"]) == ["springs", "springs+volume", "p1", "rule: lloyd", "rule: vangelder"]
+    assert list(f["model"]) == [
+        "springs",
+        "springs+volume-shared",
+        "p1",
+        "rule: lloyd",
+        "rule: vangelder",
+    ]
     assert list(f["kind"]) == ["class"] * 3 + ["rule"] * 2
     assert list(f["fit"]) == ["select: springs-prior1", "lbfgs", "none", "none", "none"]
     assert families_of(f) == ["sag", "tip", "torsion", "bridge"]
     row = f.set_index("model")
-    # springs+volume is its fitted row (held-out mean 0.40), not its unfitted one (0.01)
-    assert row.loc["springs+volume", "G_heldout_mean"] == pytest.approx(0.40)
+    # springs+volume-shared is its fitted row (held-out mean 0.40), not its unfitted one (0.01)
+    assert row.loc["springs+volume-shared", "G_heldout_mean"] == pytest.approx(0.40)
     # tip is the mean of tip and tip2: (0.05 + 0.15) / 2 for the fit, (0.1 + 0.3) / 2 for lloyd
     assert row.loc["springs", "tip"] == pytest.approx(0.10) and row.loc[
         "rule: lloyd", "tip"

@@ -64,18 +64,18 @@ def _case(tmp_path, name, classes):
 
 
 def test_classes_share_the_model_and_springs_equals_the_plain_case(tmp_path):
-    case = _case(tmp_path, "c", 'classes = ["springs", "springs+volume", "p1"]')
+    case = _case(tmp_path, "c", 'classes = ["springs", "springs+volume-shared", "p1"]')
     rows = stage.run(case, StageContext(out_dir=tmp_path / "out"))
     plain = stage.run(_case(tmp_path, "p", ""), StageContext(out_dir=tmp_path / "plain"))
     by = {}
     for r in rows:
         by.setdefault(r["model_class"], []).append(r)
-    assert [len(by[c]) for c in ("springs", "springs+volume", "p1")] == [2, 2, 1]
+    assert [len(by[c]) for c in ("springs", "springs+volume-shared", "p1")] == [2, 2, 1]
     assert {r["n_nodes"] for r in rows} == {15} and {r["nu"] for r in rows} == {NU}
     for a, b in zip(by["springs"], plain):
         assert a["G_norm_final"] == b["G_norm_final"] and a["G_heldout"] == b["G_heldout"]
     # the volume term is there (a different model) and the P1 row has no constants
-    assert by["springs+volume"][0]["G_norm_final"] != by["springs"][0]["G_norm_final"]
+    assert by["springs+volume-shared"][0]["G_norm_final"] != by["springs"][0]["G_norm_final"]
     p1 = by["p1"][0]
     assert p1["optimizer"] == "none" and np.isnan(p1["k_spread"]) and "cauchy_misfit" not in p1
     # k_spread of the fitted springs: from the stored constants

@@ -1,7 +1,8 @@
 """Model classes of the sms stage: one object per class, one module per kind (springs,
 p1, mt), each registered by name in ``harness.registry.MODEL_CLASSES`` (the names a case's
-``[model] classes`` takes). The stage loops over the classes a case names and asks each
-(the protocol of :class:`harness.stages.classes.base.ModelClass`):
+``[model] classes`` and ``calibrate --model`` take; its ``about`` says what each is). The
+stage loops over the classes a case names and asks each (the protocol of
+:class:`harness.stages.classes.base.ModelClass`):
 
 - ``spec(spec)``: the case's [model] table as the class builds it;
 - ``skip(case, label)``: a row saying why it has no model for this case, or None;

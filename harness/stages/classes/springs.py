@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from harness import registry
 from harness.export.vtu import write_vtu
 from harness.mechanics.homogenize import case_report
 from harness.models.kn import case_kn
@@ -76,25 +77,22 @@ class Springs(ModelClass):
             save(ctx.file(f"volume-{tag}.npz"), net)
 
 
+# the instances harness/registry.py MODEL_CLASSES names (its ``about`` says what each is)
 SPRINGS = Springs("springs")
-VOLUME_SHARED = Springs("springs+volume", volume="shared")  # one volume constant per body
-VOLUME_ELEMENT = Springs("springs+volume-element", volume="element")  # one per element
-# a volume term per node, one kv
-NODE_VOLUME_SHARED = Springs("springs+node-volume", volume="node-shared")
-KN_SHARED = Springs("springs+kn", kn="shared")  # Kot & Nagahashi 2015, one kn
+VOLUME_SHARED = Springs("springs+volume-shared", volume="shared")
+VOLUME_ELEMENT = Springs("springs+volume-element", volume="element")
+NODE_VOLUME_SHARED = Springs("springs+node-volume-shared", volume="node-shared")
+NODE_VOLUME_NODE = Springs("springs+node-volume-node", volume="node")
+KN_SHARED = Springs("springs+kn", kn="shared")  # Kot & Nagahashi 2015
+KN_NODE = Springs("springs+kn-node", kn="node")
 
 
 def of_spec(spec: dict) -> Springs:
-    """The class of a case without ``[model] classes``: its own volume and kn keys."""
-    volume, kn = spec.get("volume", "none"), spec.get("kn", "none")
-    if kn != "none":
-        name = "springs+kn" if kn == "shared" else "springs+kn-node"
-    else:
-        name = {
-            "none": "springs",
-            "shared": "springs+volume",
-            "element": "springs+volume-element",
-            "node-shared": "springs+node-volume",
-            "node": "springs+node-volume-node",
-        }[volume]
-    return Springs(name, volume=volume, kn=kn)
+    """The class of a case without ``[model] classes``: the registered springs class of its
+    own volume and kn keys (both set: a class of both, which its build refuses)."""
+    keys = (spec.get("volume", "none"), spec.get("kn", "none"))
+    for name in registry.SPRINGS_CLASSES:
+        cls = registry.MODEL_CLASSES.load(name)
+        if (cls.volume, cls.kn) == keys:
+            return cls
+    return Springs(f"springs+volume-{keys[0]}+kn-{keys[1]}", volume=keys[0], kn=keys[1])
