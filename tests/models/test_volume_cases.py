@@ -143,6 +143,6 @@ def test_calibrate_exports_the_volume_term(tmp_path):
     lam, vec = np.linalg.eigh(K * w[:, None] * w[None, :])
     omega, v = np.sqrt(lam[-1]), vec[:, -1]
     zeta = v @ (C * w[:, None] * w[None, :]) @ v / (2 * omega)
-    # the term counts: >> rel
-    assert d["omega_max"] == pytest.approx(omega, rel=1e-6) and omega > 1.002 * springs_only
+    # the term counts: it moves omega_max by far more than the 1e-6 the match resolves
+    assert d["omega_max"] == pytest.approx(omega, rel=1e-6) and omega > 1.0005 * springs_only
     assert d["dt_stable"] == pytest.approx(2 / omega * (np.sqrt(1 + zeta**2) - zeta), rel=1e-6)
