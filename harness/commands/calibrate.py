@@ -333,6 +333,12 @@ def add_arguments(p):
         "--out", type=Path, required=True, metavar="MODEL.vtu", help="output network (VTU)"
     )
     p.add_argument(
+        "--wide",
+        action="store_true",
+        help="print every column of the table (MODEL.csv always has them); default: the key "
+        "columns, within 100 characters a line",
+    )
+    p.add_argument(
         "--save-case",
         dest="save_case",
         type=Path,

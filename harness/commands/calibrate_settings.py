@@ -43,6 +43,7 @@ class Settings:
     format: str | None = None
     seed: int = 0
     quiet: bool = False
+    wide: bool = False
     save_case: Path | None = None
 
     @classmethod

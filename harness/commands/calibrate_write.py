@@ -56,6 +56,33 @@ COLUMNS = (
 ).split()
 
 
+# the printed table's key columns (--wide: every column of MODEL.csv but opt_stops)
+SHORT = {
+    "model": "model",
+    "choice": "choice",
+    "exported": "out",
+    "G_heldout_mean": "held-out",
+    "G_norm_final": "fitted",
+    "ref_error_heldout": "ref-error",
+    "status": "status",
+    "dt_safe": "dt_safe",
+}
+
+
+def table(df: pd.DataFrame, wide: bool = False) -> str:
+    """The table calibrate prints: the key columns (within 100 characters a line: the model,
+    the validation's choice, '*' on the exported row, its held-out and fitted errors, the
+    FEM's own held-out error, the reference's status, the engine step), or every one."""
+    if wide:
+        return df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False)
+    short = df.reindex(columns=list(SHORT)).rename(columns=SHORT)
+    short["out"] = np.where(df["exported"].astype(bool), "*", "")
+    fitted = df.get("optimizer", pd.Series("none", index=df.index)).fillna("none")
+    # a fit the validation did not choose: its optimiser
+    short["choice"] = short["choice"].fillna(fitted.where(fitted != "none", ""))
+    return short.to_string(index=False, float_format=lambda v: f"{v:.3g}", na_rep="-")
+
+
 def metadata(s, rows, exported, net, case) -> dict:
     """The JSON's keys beyond the network's own: material, loads, errors, choice, verdict,
     the optimiser's stops and the engines' load records."""
@@ -112,7 +139,7 @@ def write(s, rows, net, case):
         exported.update(dt_stable=data["dt_stable"], dt_safe=data.get("dt_safe"))
         df = pd.DataFrame(rows).reindex(columns=cols)
         df.to_csv(csv, index=False)
-    print(df.drop(columns=["opt_stops"], errors="ignore").to_string(index=False))
+    print(table(df, s.wide))
     print(cv.heldout_sentence(exported, rules, case.heldout))
     print(cv.fitted_sentence(exported, min(rules, key=rank)))
     print(cv.reference_sentence(exported, meta, bool(case.heldout), s.max_refine))

@@ -85,7 +85,8 @@ def _documented_json_keys() -> set[str]:
 
 @pytest.mark.slow
 def test_readme_calibrate_example_runs_and_prints_what_readme_shows(tmp_path):
-    """README's command exactly (the output path aside), about 2.5 minutes on 2 cores."""
+    """README's command exactly (the output path aside): the same lines, numbers aside, and a
+    table within 100 characters a line."""
     cmd = _readme_command()
     assert cmd[:3] == ["springbench", "calibrate", "examples/lug.msh"]
     out = tmp_path / "model.vtu"
@@ -99,13 +100,12 @@ def test_readme_calibrate_example_runs_and_prints_what_readme_shows(tmp_path):
         [line.replace(readme_out, str(out)) for line in _pasted()],
     )
     assert len(got) == len(want), "README's pasted output has a different number of lines"
-    assert _numbers_masked(got[0]) == _numbers_masked(want[0])  # where it clamps and loads
-    assert got[1].split() == want[1].split()  # the table's columns
+    # every line as README shows it, numbers aside: where it clamps and loads, the table's
+    # columns, each row's model, choice and status, the sentences
+    for g, w in zip(got, want):
+        assert _numbers_masked(g) == _numbers_masked(w), (g, w)
     rows = [i for i, line in enumerate(want) if line.lstrip().startswith("sms-")]
-    for i in rows:  # model, rule, optimiser per row
-        assert got[i].split()[:3] == want[i].split()[:3]
-    for i in range(rows[-1] + 1, len(want)):  # the sentences, by what they say
-        assert got[i].split()[:2] == want[i].split()[:2]
+    assert len(rows) >= 2 and max(len(want[i]) for i in [rows[0] - 1, *rows]) <= 100
     data = json.loads(out.with_suffix(".json").read_text())
     documented = _documented_json_keys()
     assert sorted(set(data) - documented) == [], "MODEL.json keys missing from docs/calibrate.md"

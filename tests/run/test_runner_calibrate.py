@@ -41,7 +41,7 @@ def test_rule_export_matches_hand_computed_constants(tri_mesh, tmp_path, capsys)
         == 0
     )
     printed = capsys.readouterr().out
-    assert "sms-mesh[deussen]" in printed and "G_norm_initial" in printed
+    assert "sms-mesh[deussen]" in printed and "held-out" in printed
     data = json.loads(out.with_suffix(".json").read_text())
     q = np.asarray(data["particle_q"])
     springs = np.asarray(data["spring_indices"])
