@@ -79,7 +79,8 @@ def table(df: pd.DataFrame, wide: bool = False) -> str:
     short["out"] = np.where(df["exported"].astype(bool), "*", "")
     fitted = df.get("optimizer", pd.Series("none", index=df.index)).fillna("none")
     # a fit the validation did not choose: its optimiser
-    short["choice"] = short["choice"].fillna(fitted.where(fitted != "none", ""))
+    choice = short["choice"].astype(object)
+    short["choice"] = choice.where(choice.notna(), fitted.where(fitted != "none", ""))
     return short.to_string(index=False, float_format=lambda v: f"{v:.3g}", na_rep="-")
 
 
