@@ -34,21 +34,42 @@ from harness.linalg.sparse import (
 # dofs per leaf front: best measured for factor + solve (2-D 2,500: 16 vs 18 ms at 256;
 # 3-D 8,000: 1.16 vs 1.33 s)
 LEAF = 128
-FLAT_MAX = 400  # largest update block added through precomputed flat indices
 BIG_FRONT = 1000  # fronts of at least this many dofs factorise with every BLAS thread the caller
 # allows (a 104k-dof spring network of a 200k-tet mesh: 107 fronts, 95 % of the flops)
 
 
-class Symbolic:
-    """Elimination tree, fronts and assembly maps for a fixed pattern (csr, symmetric)."""
+def _row_entries(indptr: np.ndarray, V: np.ndarray):
+    """(positions of rows V's entries in a csr matrix's arrays, row of each within V)."""
+    V = np.asarray(V, np.int64)
+    first = indptr[V].astype(np.int64)
+    count = indptr[V + 1].astype(np.int64) - first
+    rows = np.repeat(np.arange(len(V), dtype=np.int64), count)
+    return np.repeat(first - (np.cumsum(count) - count), count) + np.arange(len(rows)), rows
 
-    def __init__(self, pattern: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF):
+
+def _tree(A: sp.csr_matrix, coords: np.ndarray, leaf: int, last) -> list:
+    """The dissection tree of A (:func:`dissection_tree`), with the dofs ``last`` (None: none)
+    kept out of it and eliminated after it, as one root front."""
+    if last is None or not len(last):
+        return dissection_tree(A, coords, leaf)
+    last = np.asarray(last, np.int64)
+    rest = np.setdiff1d(np.arange(A.shape[0]), last)
+    sub = dissection_tree(A[rest][:, rest], coords[rest], leaf) if len(rest) else []
+    return [(rest[V], kids) for V, kids in sub] + [(last, [len(sub) - 1] if sub else [])]
+
+
+class Symbolic:
+    """Elimination tree, fronts and assembly maps for a fixed pattern (csr, symmetric);
+    ``last``: dofs eliminated after all others, as the root front (harness/linalg/shared.py
+    keeps that front unfactored)."""
+
+    def __init__(self, pattern: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF, last=None):
         A = sp.csr_matrix(pattern)
         A.sort_indices()
         n = A.shape[0]
         self.n = n
         coords = np.asarray(coords, float)
-        nodes = dissection_tree(A, coords, leaf)  # (V, children) in postorder
+        nodes = _tree(A, coords, leaf, last)  # (V, children) in postorder
         # elimination order: postorder of the tree, each node's V contiguous
         order = np.concatenate([V for V, _ in nodes])
         rank = np.empty(n, np.int64)
@@ -61,11 +82,7 @@ class Symbolic:
                 parent[c] = t
         for t, (V, kids) in enumerate(nodes):
             top = rank[V].max(initial=-1)
-            cols = (
-                A.indices[np.concatenate([np.arange(A.indptr[v], A.indptr[v + 1]) for v in V])]
-                if len(V)
-                else np.empty(0, int)
-            )
+            cols = A.indices[_row_entries(A.indptr, V)[0]]
             cand = [cols[rank[cols] > top]] + [U_of[c][rank[U_of[c]] > top] for c in kids]
             U = np.unique(np.concatenate(cand)) if cand else np.empty(0, int)
             U = U[np.argsort(rank[U])]
@@ -76,22 +93,13 @@ class Symbolic:
             front = np.concatenate([V, U])
             nv, nf = len(V), len(front)
             pos[front] = np.arange(nf)
-            # original entries: rows V, columns in the front (V or U) -> F[:nv, :] and mirror
-            ptr = [np.arange(A.indptr[v], A.indptr[v + 1]) for v in V]
-            kidx = np.concatenate(ptr) if ptr else np.empty(0, np.int64)
-            rows = np.repeat(np.arange(nv), [len(p) for p in ptr]) if ptr else np.empty(0, np.int64)
+            # original entries of rows V into the front's lower triangle: (row, column) when
+            # the column is an earlier V dof, its mirror (column, row) when it is in U
+            kidx, rows = _row_entries(A.indptr, V)
             cl = pos[A.indices[kidx]]
-            keep = cl >= 0
+            keep = (cl >= 0) & ((cl <= rows) | (cl >= nv))
             kidx, rows, cl = kidx[keep], rows[keep], cl[keep]
-            direct = rows * nf + cl
-            upper = cl >= nv
-            mirror = cl[upper] * nf + rows[upper]
-            child_maps = [pos[U_of[c]] for c in kids]
-            # extend-add by flat indices into the front (small updates; big ones use ix_)
-            child_flat = [
-                (loc[:, None] * nf + loc[None, :]).ravel() if len(loc) <= FLAT_MAX else None
-                for loc in child_maps
-            ]
+            lower = np.where(cl >= nv, cl * nf + rows, rows * nf + cl)
             start = int(rank[V[0]]) if nv else 0
             self.nodes.append(
                 dict(
@@ -101,11 +109,8 @@ class Symbolic:
                     nf=nf,
                     kids=kids,
                     kidx=kidx,
-                    direct=direct,
-                    mirror=mirror,
-                    kidx_m=kidx[upper],
-                    child_maps=child_maps,
-                    child_flat=child_flat,
+                    lower=lower,
+                    child_maps=[pos[U_of[c]] for c in kids],
                     sl=slice(start, start + nv),
                     Ur=rank[U],
                 )
@@ -113,6 +118,7 @@ class Symbolic:
             pos[front] = -1
         self.parent = parent
         self.order = order
+        self.indptr, self.indices = A.indptr, A.indices  # the pattern the maps index
 
     def estimate(self) -> dict:
         """Work (Gflop) and peak memory (GB: the factor, plus the largest front and its
@@ -125,6 +131,18 @@ class Symbolic:
 
 
 _NOTHING = contextlib.nullcontext()
+
+
+def _csr_data(K: sp.spmatrix, sym: Symbolic) -> np.ndarray:
+    """K's values in the order of the symbolic pattern's csr arrays. A csc matrix on that
+    pattern is taken as it is: the pattern is symmetric, so its csc arrays are the csr
+    ones, and the factorisation reads K as symmetric anyway (rows of each front only)."""
+    if sp.issparse(K) and K.format in ("csr", "csc") and K.has_sorted_indices:
+        if np.array_equal(K.indptr, sym.indptr) and np.array_equal(K.indices, sym.indices):
+            return K.data
+    K = sp.csr_matrix(K)
+    K.sort_indices()
+    return K.data
 
 
 def _partial(F: np.ndarray, nv: int, potrf, trtrs, name: str):
@@ -155,33 +173,35 @@ def _partial(F: np.ndarray, nv: int, potrf, trtrs, name: str):
 
 
 class MultifrontalCholesky:
-    """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m)."""
+    """Numeric factorisation for a Symbolic pattern; ``solve`` takes (n,) or (n, m).
+    ``keep_root``: the root front is assembled but not factorised (``root``: its lower
+    triangle holds the Schur complement on the root's dofs), for callers that factorise
+    parts of it themselves (harness/linalg/shared.py); ``solve`` is then not available."""
 
-    def __init__(self, K: sp.spmatrix, sym: Symbolic, name: str = ""):
+    def __init__(self, K: sp.spmatrix, sym: Symbolic, name: str = "", keep_root: bool = False):
         threaded = not blas_limited()  # a caller that asked for one thread keeps it
+        self.root = None
         with single_thread_blas():  # many small dense ops: threads only add overhead
-            self._factor(K, sym, name, threaded)
+            self._factor(K, sym, name, threaded, keep_root)
 
-    def _factor(self, K, sym, name, threaded=False):
-        K = sp.csr_matrix(K)
-        K.sort_indices()
-        data = K.data
+    def _factor(self, K, sym, name, threaded=False, keep_root=False):
+        data = _csr_data(K, sym)
         potrf, trtrs = sla.lapack.dpotrf, sla.lapack.dtrtrs
+        scatter, extend_add = _assembly_kernels()
         self.sym = sym
         self.L11, self.L21 = [], []
         updates = {}
         for t, nd in enumerate(sym.nodes):
             nf, nv = nd["nf"], nd["nv"]
+            # the front's lower triangle (all that is read): K's entries, children's updates
             F = np.zeros(nf * nf)
-            F[nd["direct"]] = data[nd["kidx"]]
-            F[nd["mirror"]] = data[nd["kidx_m"]]
-            for c, loc, flat in zip(nd["kids"], nd["child_maps"], nd["child_flat"]):
-                Uc = updates.pop(c)
-                if flat is not None:
-                    F[flat] += Uc.ravel()
-                elif len(loc):
-                    F.reshape(nf, nf)[np.ix_(loc, loc)] += Uc
+            scatter(F, data, nd["kidx"], nd["lower"])
+            for c, loc in zip(nd["kids"], nd["child_maps"]):
+                extend_add(F, nf, loc, updates.pop(c))
             F = F.reshape(nf, nf)
+            if keep_root and t == len(sym.nodes) - 1:
+                self.root = F
+                break
             if nv:
                 with outer_blas_threads() if threaded and nf >= BIG_FRONT else _NOTHING:
                     L11, L21, updates[t] = _partial(F, nv, potrf, trtrs, name)
@@ -196,6 +216,8 @@ class MultifrontalCholesky:
         front's own dofs are a contiguous slice there). Many right-hand sides at once
         (the SA engine's batches) go through a compiled loop over the fronts with the
         inverted diagonal blocks (:func:`_subst`); ``_solve`` is the LAPACK version."""
+        if self.root is not None:
+            raise ValueError("a factorisation with its root kept (keep_root) solves by its owner")
         rhs = np.asarray(rhs, float)
         with single_thread_blas():
             many = rhs.ndim == 2 and rhs.shape[1] >= SUBST_MIN
@@ -248,6 +270,15 @@ class MultifrontalCholesky:
         order = self.sym.order
         b = rhs[order][:, None] if vec else rhs[order]
         b = np.ascontiguousarray(b)
+        self.forward(b)
+        self.backward(b)
+        out = np.empty_like(b)
+        out[order] = b
+        return out[:, 0] if vec else out
+
+    def forward(self, b: np.ndarray) -> None:
+        """L y = b in place over the factorised fronts, b (n, q) in elimination order (with
+        ``keep_root``: the root's rows receive the updates, the Schur right-hand side)."""
         trtrs = sla.lapack.dtrtrs
         for nd, L11, L21 in zip(self.sym.nodes, self.L11, self.L21):
             if nd["nv"] == 0:
@@ -257,7 +288,13 @@ class MultifrontalCholesky:
             b[sl] = y
             if len(nd["Ur"]):
                 b[nd["Ur"]] -= L21 @ y
-        for nd, L11, L21 in zip(reversed(self.sym.nodes), reversed(self.L11), reversed(self.L21)):
+
+    def backward(self, b: np.ndarray) -> None:
+        """L^T x = y in place over the factorised fronts (with ``keep_root``: the root's rows
+        of b already hold their solution)."""
+        trtrs = sla.lapack.dtrtrs
+        nodes = self.sym.nodes[: len(self.L11)]
+        for nd, L11, L21 in zip(reversed(nodes), reversed(self.L11), reversed(self.L21)):
             if nd["nv"] == 0:
                 continue
             sl = nd["sl"]
@@ -265,9 +302,6 @@ class MultifrontalCholesky:
             if len(nd["Ur"]):
                 y = y - L21.T @ b[nd["Ur"]]
             b[sl] = trtrs(L11, y, lower=1, trans=1)[0]
-        out = np.empty_like(b)
-        out[order] = b
-        return out[:, 0] if vec else out
 
 
 SUBST_MIN = 8  # right-hand sides from which inverting the diagonal blocks pays (later
@@ -324,6 +358,37 @@ def _subst(b, start, nv, nu, oL, o21, oU, Li, L21, Ur):
                     g[i, c] = b[r, c]
             y -= np.dot(L21[o21[t] : o21[t + 1]].reshape(u, k).T, g)
         b[s0 : s0 + k] = np.dot(Li[oL[t] : oL[t + 1]].reshape(k, k).T, y)
+
+
+def _scatter(F, data, kidx, at):
+    """F[at[i]] = data[kidx[i]]: a front's entries of K (compiled by numba)."""
+    for i in range(len(at)):
+        F[at[i]] = data[kidx[i]]
+
+
+def _extend_add(F, nf, loc, U):
+    """F[loc[i], loc[j]] += U[i, j] over U's lower triangle, F flat (nf * nf): a child's
+    Schur complement into its parent's front (compiled by numba)."""
+    m = len(loc)
+    for j in range(m):
+        cj = loc[j]
+        for i in range(j, m):
+            F[loc[i] * nf + cj] += U[i, j]
+
+
+_ASSEMBLY = []
+
+
+def _assembly_kernels():
+    """numba-compiled :func:`_scatter` and :func:`_extend_add`. With numpy's fancy indexing
+    the assembly took 40 % of a factorisation of the fits' 1,900-dof fronts (precomputed
+    flat indices, both triangles); compiled and on the lower triangle only, ~10 %."""
+    if not _ASSEMBLY:
+        import numba
+
+        jit = numba.njit(cache=True, nogil=True)
+        _ASSEMBLY.extend([jit(_scatter), jit(_extend_add)])
+    return _ASSEMBLY
 
 
 def _subst_kernel():

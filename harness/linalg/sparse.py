@@ -28,6 +28,7 @@ def dissection_tree(A: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF) -> lis
     A = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
     coords = np.asarray(coords, float)
     nodes: list = []
+    mark = np.zeros(A.shape[0])  # 1 on the right part of the node being split
 
     def rec(idx: np.ndarray) -> int:
         left = None
@@ -42,7 +43,10 @@ def dissection_tree(A: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF) -> lis
         if left is None:
             nodes.append((idx, []))
             return len(nodes) - 1
-        sep = left & ((A[idx][:, idx] @ (~left).astype(float)) > 0)
+        mark[idx[~left]] = 1.0
+        sep = np.zeros(len(idx), bool)
+        sep[np.flatnonzero(left)[(A[idx[left]] @ mark) > 0]] = True
+        mark[idx[~left]] = 0.0
         kids = [rec(part) for part in (idx[left & ~sep], idx[~left]) if len(part)]
         nodes.append((idx[sep], kids))
         return len(nodes) - 1
@@ -134,13 +138,36 @@ class DenseFactor:
 # --- BLAS threads ------------------------------------------------------------------------
 _ONE_THREAD = 0  # depth of nested single_thread_blas blocks
 _OUTER = 1  # BLAS threads in effect when the outermost block began
+_CONTROLLER: list = []  # [(len(sys.modules) when built, threadpoolctl.ThreadpoolController)]
+
+
+def blas_controller():
+    """The process's threadpoolctl controller, built again only when modules were imported
+    since (a new module may load a BLAS library): building one scans every shared library
+    the process has loaded (~2 ms in calibrate's process), and the fits enter a one-thread
+    block for every factorisation and solve, thousands of times."""
+    import sys
+
+    if not _CONTROLLER or _CONTROLLER[0][0] != len(sys.modules):
+        from threadpoolctl import ThreadpoolController
+
+        _CONTROLLER[:] = [(len(sys.modules), ThreadpoolController())]
+    return _CONTROLLER[0][1]
+
+
+def _blas_threads(controller) -> int:
+    """The most threads a BLAS library of ``controller`` runs now (1 without one)."""
+    return max(
+        [lib.num_threads for lib in controller.lib_controllers if lib.user_api == "blas"] or [1]
+    )
 
 
 @contextmanager
 def single_thread_blas():
     """Run the block with one BLAS thread: threads do not speed up a chain's small dense
     products, and the other core runs another chain. Nested blocks cost nothing (the
-    outer one already holds the limit; asking threadpoolctl costs ~2 ms a time)."""
+    outer one already holds the limit); an outermost one costs ~40 us (a cached
+    controller, :func:`blas_controller`)."""
     global _ONE_THREAD, _OUTER
     if _ONE_THREAD:
         _ONE_THREAD += 1
@@ -149,13 +176,9 @@ def single_thread_blas():
         finally:
             _ONE_THREAD -= 1
         return
-    from threadpoolctl import threadpool_info, threadpool_limits
-
-    _OUTER = max(
-        [int(i.get("num_threads", 1)) for i in threadpool_info() if i.get("user_api") == "blas"]
-        or [1]
-    )
-    with threadpool_limits(1):
+    controller = blas_controller()
+    _OUTER = _blas_threads(controller)
+    with controller.limit(limits=1):
         _ONE_THREAD += 1
         try:
             yield
@@ -175,7 +198,5 @@ def outer_blas_threads():
     if not _ONE_THREAD or _OUTER <= 1:
         yield
         return
-    from threadpoolctl import threadpool_limits
-
-    with threadpool_limits(_OUTER, user_api="blas"):
+    with blas_controller().limit(limits=_OUTER, user_api="blas"):
         yield

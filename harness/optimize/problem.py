@@ -23,14 +23,18 @@ import scipy.sparse as sp
 
 from harness.errors import SpringbenchError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import DenseFactor, Factor, nested_dissection
+from harness.linalg.stiffness import stiffness_map
 from harness.models.springs import incidence
 
 
 @dataclass(frozen=True)
 class LoadBlock:
     """One load case on its free dofs: B (nfree x e, csc), f, u_ref, w (nfree,), and
-    const = sum of w |u_ref|^2 over the constrained dofs."""
+    const = sum of w |u_ref|^2 over the constrained dofs; ``dofs``: the free dofs' ids in
+    the network (ascending; None: unknown), which lets load sets of one network that hold
+    different dofs share a factorisation (harness/linalg/shared.py)."""
 
     name: str
     B: sp.csc_matrix
@@ -38,6 +42,7 @@ class LoadBlock:
     u_ref: np.ndarray
     w: np.ndarray
     const: float = 0.0
+    dofs: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -55,7 +60,10 @@ class ModalTerm:
 @dataclass(frozen=True)
 class FitProblem:
     """Blocks + initial constants k0 (e,), optional groups (e,) int (grouped mode: one
-    parameter per group, k = k0 * factor[group]) and bounds (lo, hi) as factors of k0."""
+    parameter per group, k = k0 * factor[group]) and bounds (lo, hi) as factors of k0.
+    ``shared``: load sets that hold different dofs of the network are factorised together
+    where that costs fewer flops (:meth:`solve_parts`); the same solutions to rounding, so
+    a fit's path and its constants differ at rounding level from the sets apart (False)."""
 
     blocks: tuple
     k0: np.ndarray
@@ -63,6 +71,7 @@ class FitProblem:
     bounds: tuple = (1e-3, 1e3)
     modal: ModalTerm | None = None
     coords: tuple | None = None  # per block (nfree, dim) dof positions: fill-reducing ordering
+    shared: bool = False
 
     def __post_init__(self):
         k0 = np.asarray(self.k0, float)
@@ -150,7 +159,7 @@ class FitProblem:
         for name, free, f, ur in zip(names, free_masks, forces, u_ref):
             key = free.tobytes()
             if key not in cache:  # identical free sets share one B (the optimisers group on it)
-                cache[key] = (B[free].tocsc(), X[free])
+                cache[key] = (B[free].tocsc(), X[free], np.flatnonzero(free))
             fixed = ~free
             blocks.append(
                 LoadBlock(
@@ -160,6 +169,7 @@ class FitProblem:
                     ur[free].copy(),
                     w[free].copy(),
                     float(np.sum(w[fixed] * ur[fixed] ** 2)),
+                    cache[key][2],
                 )
             )
             coords.append(cache[key][1])
@@ -238,15 +248,38 @@ class FitProblem:
             object.__setattr__(self, "_sets", cached)
         return cached
 
+    def solve_parts(self) -> list[tuple[list, SharedSets | None]]:
+        """The load sets (indices into :meth:`load_sets`) in groups factorised together: with
+        ``shared``, the sets that hold different dofs of one network share one factorisation
+        (harness/linalg/shared.py) where it costs fewer flops than theirs apart; else each
+        set alone. Cached."""
+        cached = self.__dict__.get("_parts")
+        if cached is None:
+            sets = self.load_sets()
+            cached = solve_parts(sets) if self.shared else [([i], None) for i in range(len(sets))]
+            object.__setattr__(self, "_parts", cached)
+        return cached
+
+    def solvers(self, k):
+        """(load sets, solver) per group of :meth:`solve_parts` at k: the solver maps one
+        right-hand side block per set to its solution block; one fresh factorisation each."""
+        sets, k = self.load_sets(), np.asarray(k, float)
+        for idx, shared in self.solve_parts():
+            group = [sets[i] for i in idx]
+            if shared is not None:
+                yield group, shared.factor(k).solve
+            else:
+                fac = group[0].factor(k)
+                yield group, lambda rhs, fac=fac: [fac.solve(r).reshape(r.shape) for r in rhs]
+
     def solve(self, k) -> list[np.ndarray]:
         """Free-dof displacements per load by a fresh sparse factorisation (shared by
-        loads with identical free dofs)."""
-        k = np.asarray(k, float)
+        loads with identical free dofs, and by load sets of :meth:`solve_parts`)."""
         out = [None] * len(self.blocks)
-        for s in self.load_sets():
-            U = s.factor(k).solve(s.F)
-            for j, i in enumerate(s.index):
-                out[i] = U[:, j]
+        for group, solve in self.solvers(k):
+            for s, U in zip(group, solve([s.F for s in group])):
+                for j, i in enumerate(s.index):
+                    out[i] = U[:, j]
         return out
 
     def G(self, k) -> float:
@@ -282,6 +315,8 @@ class LoadSet:
     name: str
     coords: np.ndarray | None = None
     k0: np.ndarray | None = None  # the constants the ordering's pattern is built from
+    dofs: np.ndarray | None = None  # the free dofs' ids in the network (LoadBlock.dofs)
+    key: str = ""  # B's content digest
 
     @property
     def perm(self) -> np.ndarray | None:
@@ -294,7 +329,7 @@ class LoadSet:
 
     def stiffness(self, k) -> sp.csc_matrix:
         """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
-        pattern, kmap = per_matrix(self.B, "kmap", lambda: _stiffness_map(self.B))
+        pattern, kmap = per_matrix(self.B, "kmap", lambda: stiffness_map(self.B))
         K = pattern.copy()
         K.data = kmap @ np.asarray(k, float)
         return K
@@ -315,11 +350,14 @@ class LoadSet:
         # above DENSE_FACTOR_MAX: 1,680 dofs, 24
         if kind == "multifrontal" and self.coords is not None:
             # right-hand sides: factor + solve 30 ms, SuperLU (minimum degree) 99 ms
-            K = self.stiffness(k)
-            return MultifrontalCholesky(
-                K, per_matrix(self.B, "symbolic", lambda: Symbolic(K, self.coords)), self.name
-            )
+            return MultifrontalCholesky(self.stiffness(k), self.symbolic(), self.name)
         return Factor(self.stiffness(k), self.perm, self.name)
+
+    def symbolic(self) -> Symbolic:
+        """The multifrontal ordering and fronts of K's pattern (kept per matrix)."""
+        return per_matrix(
+            self.B, "symbolic", lambda: Symbolic(self.stiffness(self.k0), self.coords)
+        )
 
 
 _PER_MATRIX: dict = {}  # id(B) -> (weakref to B, {name: value})
@@ -343,31 +381,6 @@ def per_matrix(B, name: str, make):
 DENSE_FACTOR_MAX = 400
 
 
-def _stiffness_map(B: sp.csc_matrix):
-    """Pattern of B B^T (csc) and the sparse matrix P with K.data = P @ k."""
-    B = sp.csc_matrix(B)
-    B.sort_indices()
-    n, e = B.shape
-    pattern = (abs(B) @ abs(B).T).tocsc()
-    pattern.sort_indices()
-    pattern.data[:] = 0.0
-    # col*n + row
-    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
-    cnt = np.diff(B.indptr)
-    rows, cols, vals = [], [], []
-    for a in range(cnt.max(initial=0)):
-        for b in range(cnt.max(initial=0)):
-            ok = np.nonzero(cnt > max(a, b))[0]
-            ia, ib = B.indices[B.indptr[ok] + a], B.indices[B.indptr[ok] + b]
-            rows.append(np.searchsorted(keys, ib.astype(np.int64) * n + ia))
-            cols.append(ok)
-            vals.append(B.data[B.indptr[ok] + a] * B.data[B.indptr[ok] + b])
-    P = sp.csr_matrix(
-        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(len(keys), e)
-    )
-    return pattern, P
-
-
 def _key(B: sp.csc_matrix):
     h = hashlib.sha1()
     for a in (np.asarray(B.shape), B.indptr, B.indices, B.data):
@@ -384,7 +397,7 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
     for key, idx in groups.items():  # blocks built separately but equal: merge too
         merged.setdefault(_key(problem.blocks[idx[0]].B), []).extend(idx)
     out = []
-    for idx in merged.values():
+    for key, idx in merged.items():
         idx = sorted(idx)
         bl = [problem.blocks[i] for i in idx]
         B = bl[0].B.tocsc()
@@ -399,9 +412,43 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
                 "+".join(b.name for b in bl),
                 None if problem.coords is None else problem.coords[idx[0]],
                 problem.k0,
+                bl[0].dofs,
+                key,
             )
         )
     return out
+
+
+def solve_parts(sets: list[LoadSet]) -> list[tuple[list, SharedSets | None]]:
+    """:meth:`FitProblem.solve_parts` of ``sets``: among the sets above the dense size
+    whose dofs are known, the group that shares a factorisation (harness/linalg/shared.py
+    best_group; kept per matrix)."""
+    idx = [
+        i
+        for i, s in enumerate(sets)
+        if s.dofs is not None and s.coords is not None and s.B.shape[0] > DENSE_FACTOR_MAX
+    ]
+    found = None
+    if len(idx) >= 2:
+        h = hashlib.sha1()
+        for i in idx:
+            h.update(sets[i].key.encode())
+            h.update(np.ascontiguousarray(sets[i].dofs, np.int64).tobytes())
+        found = per_matrix(
+            sets[idx[0]].B,
+            f"shared:{h.hexdigest()}",
+            lambda: best_group(
+                [sets[i].B for i in idx],
+                [sets[i].dofs for i in idx],
+                [sets[i].coords for i in idx],
+                [sets[i].symbolic().estimate()["gflop"] for i in idx],
+                [sets[i].name for i in idx],
+            ),
+        )
+    if found is None:
+        return [([i], None) for i in range(len(sets))]
+    group = [idx[j] for j in found[0]]
+    return [(group, found[1])] + [([i], None) for i in range(len(sets)) if i not in group]
 
 
 def stiffness(B: sp.csc_matrix, k: np.ndarray) -> sp.csc_matrix:
@@ -418,15 +465,16 @@ def value_and_grad(
     k = np.asarray(k, float)
     G2 = 0.0
     g = np.zeros(len(k)) if grad else None
-    for s in problem.load_sets():
-        fac = s.factor(k)
-        U = fac.solve(s.F).reshape(s.F.shape)
-        D = s.Uref - U
-        R = s.W * D
-        G2 += float(np.sum(D * R)) + s.const
+    for group, solve in problem.solvers(k):
+        Us = solve([s.F for s in group])
+        Rs = []
+        for s, U in zip(group, Us):
+            D = s.Uref - U
+            Rs.append(s.W * D)
+            G2 += float(np.sum(D * Rs[-1])) + s.const
+            if tension2 is not None:
+                tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
         if grad:
-            Lam = fac.solve(R).reshape(R.shape)
-            g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
-        if tension2 is not None:
-            tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
+            for s, U, Lam in zip(group, Us, solve(Rs)):
+                g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
     return G2, g

@@ -33,6 +33,17 @@ Every training state counts alike: each load's misfit is divided by its own refe
 norm (``balanced``), so the fit and the scores see the relative error of each state, not
 the states with the largest displacements.
 
+Cost. The validation's fits solve subsets of the training states dozens of times; their
+load sets (the free-traction states' minimal constraints, each clamped face) share one
+factorisation per evaluation where that saves flops (FitProblem ``shared``,
+harness/linalg/shared.py: the same solutions to rounding, the same scores to ~1e-8). The
+final fit, whose constants are exported, factorises each load set on its own, as every
+other fit of the project does: a different rounding moves a 100-iteration fit within the
+spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
+those of the project's one solve path. The fits are independent of each other
+and run side by side in forked workers where the machine has the cores
+(harness/optimize/forkpool.py: the same numbers as one after the other).
+
 The problem holds the springs' columns first and, for the volume candidates, the volume
 terms' columns after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T): one
 per element ('+volume') and one per node ('+node-volume', the averaged nodal dilatation,
@@ -43,14 +54,26 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from harness.case.sections import SELECT_CANDIDATES, SELECT_CRITERIA
+from harness.case.sections import SELECT_CANDIDATES
+from harness.linalg.sparse import single_thread_blas
+from harness.optimize import forkpool
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.problem import FitProblem, per_matrix, value_and_grad
+from harness.optimize.select_table import (  # noqa: F401 (the table's names, here as well)
+    CLAMPED,
+    MARGIN,
+    choose,
+    make_folds,
+    ratio_to_rule,
+    summary,
+    training_score,
+)
 
 
 @dataclass(frozen=True)
@@ -99,13 +122,15 @@ class Selection:
     (``starts``, the exported one first: the lowest training objective); the validation
     table: one row per model (the rule first) with its score on each left-out family and
     the score that chose (``score``); ``stops``: the optimiser's stop message of each start
-    (as ``starts``; none for the rule)."""
+    (as ``starts``; none for the rule); ``seconds``: the wall time of the ``validation`` and
+    of the ``final`` fit (reported, never used for a choice)."""
 
     choice: str
     starts: tuple
     table: tuple
     families: tuple
     stops: tuple = ()
+    seconds: dict = dataclasses.field(default_factory=dict)
 
     @property
     def k(self) -> np.ndarray:
@@ -143,6 +168,7 @@ def subset(problem: FitProblem, keep) -> FitProblem:
         problem.bounds,
         problem.modal,
         coords,
+        problem.shared,
     )
 
 
@@ -195,7 +221,7 @@ def columns(
         top = (int(g.max()) + 1) if g is not None else n_springs
         springs = g if g is not None else np.arange(n_springs)
         g = np.concatenate([springs, np.full(e - n_springs, top)])
-    return FitProblem(blocks, k0, g, problem.bounds, None, problem.coords)
+    return FitProblem(blocks, k0, g, problem.bounds, None, problem.coords, problem.shared)
 
 
 def fit(
@@ -327,6 +353,7 @@ def select(
     volumes: dict | None = None,
     criterion: str = "ratio",
     max_seconds: float | None = None,
+    workers: int | None = None,
 ) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume terms] (k0 the rule's
@@ -336,7 +363,9 @@ def select(
     ``n_starts`` starts (seeded by ``seed``); ``features`` (springs, q): the learned rule's
     geometric features of the springs, which 'features' candidates need (None: skipped);
     ``rule_scores``: each block's own normalised G at the rule, when the caller has solved
-    them (else solved here); ``criterion``: how a candidate must beat the rule.
+    them (else solved here); ``criterion``: how a candidate must beat the rule; ``workers``:
+    processes for the fits (None: harness/optimize/forkpool.py's choice; the answer is the
+    same bit for bit with any number).
 
     The validation always runs, and every fit stops by its options' maxiter and tolerances,
     the same counts on every mesh: the choice and the constants depend on the input and the
@@ -344,138 +373,125 @@ def select(
     fit) and only aborts (harness/optimize/deadline.py); the options must not hold one."""
     if "max_seconds" in {**(options or {}), **(final or {})}:
         raise ValueError("select caps its fits together: pass max_seconds=, not in the options")
-    options = dict(options or {"maxiter": 40})
-    cap = Deadline(max_seconds, "the validated fit")
+    t0 = time.perf_counter()
     problem = balanced(problem)
-    folds = make_folds(families)
-    rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
-    # the first solve builds what the fits share (per_matrix)
-    scores = per_load(rule, rule.k0) if rule_scores is None else np.asarray(rule_scores, float)
-    table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
-    each = ((c, columns(problem, n_springs, c, kv0, groups, volumes)) for c in candidates)
-    table += validate(each, len(candidates), families, options, cap, status, features)
-    names = tuple(folds)
+    folds = make_folds(families)
+    _RUN.update(
+        problem=problem,
+        cands={
+            c.name: (c, columns(problem, n_springs, c, kv0, groups, volumes)) for c in candidates
+        },
+        families=list(families),
+        folds=folds,
+        options=dict(options or {"maxiter": 40}),
+        final=dict(final or options or {"maxiter": 40}),
+        features=features,
+        cap=Deadline(max_seconds, "the validated fit"),
+        n_springs=n_springs,
+    )
+    if workers is None:
+        n = len(candidates) * len(folds) if len(folds) > 1 else 0
+        workers = forkpool.available_workers(max(n, n_starts), problem.n_springs)
+    try:
+        with single_thread_blas(), forkpool.pool(workers) as ex:
+            rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
+            scores = per_load(rule, rule.k0) if rule_scores is None else rule_scores
+            scores = np.asarray(scores, float)
+            table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
+            table += validate(ex, [c.name for c in candidates], status)
+            best = choose(scored(table, tuple(folds)), criterion)
+            seconds = {"validation": time.perf_counter() - t0, "final": 0.0}
+            if best["model"] == "rule":
+                k = (problem.k0[:n_springs].copy(),)
+                return Selection("rule", k, tuple(table), tuple(folds), seconds=seconds)
+            fits = final_fit(ex, best["model"], n_starts, seed, status)
+    finally:
+        _RUN.clear()
+    seconds["final"] = time.perf_counter() - t0 - seconds["validation"]
+    return Selection(
+        best["model"],
+        tuple(k for _, k, _ in fits),
+        tuple(table),
+        tuple(folds),
+        stops=tuple(stop for _, _, stop in fits),
+        seconds=seconds,
+    )
+
+
+# what the fits of the running select share: set before its workers fork, so they have it
+_RUN: dict = {}
+
+
+def scored(table: list, names: tuple) -> list:
+    """The table's rows with their ``free``, ``clamped``, ``score`` (:func:`summary`) and
+    ``ratio`` to the rule (the first row)."""
     for row in table:
         row.update(summary(row, names))
     for row in table:
         row["ratio"] = ratio_to_rule(row, table[0])
-    best = choose(table, criterion)
-    if best["model"] == "rule":
-        return Selection("rule", (problem.k0[:n_springs].copy(),), tuple(table), names)
-    cand = next(c for c in candidates if c.name == best["model"])
-    cp = columns(problem, n_springs, cand, kv0, groups, volumes)
-    fits = []
-    M = basis(cp, n_springs, features) if cand.groups == "features" else None
-    for i, x0 in enumerate(starts(cp, n_starts, seed, M)):
-        where = f"{cand.name} on every training state (start {i + 1} of {n_starts})"
-        cap.phase = f"the validated fit's final fit ({where})"
-        status(f"fitting {where}")
-        r = fit_result(cp, cand, dict(final or options), x0, features, cap)
-        # the training objective, prior included
-        fits.append((r["info"]["phi"], r["k"], str(r["info"].get("stop"))))
+    return table
+
+
+def validate(ex, names: list, status) -> list:
+    """The validation table's rows of the candidates ``names`` (of the running select): each
+    fitted without each fold in turn and scored on it, in the pool ``ex``
+    (harness/optimize/forkpool.py; None: here, one after the other), fit j of n announced by
+    ``status``. No fold to leave out (one family): rows without scores."""
+    folds = _RUN["folds"]
+    tasks = [(c, f) for c in names for f in folds] if len(folds) > 1 else []
+    n = len(tasks)
+
+    def announce(j):
+        c, f = tasks[j - 1]
+        status(
+            f"validation: {c} without {f} (fit {j} of {n})"
+            if ex is None
+            else (f"validation: {j - 1} of {n} fits done (fit {j} of {n})")
+        )
+
+    scores = dict(zip(tasks, forkpool.run(ex, _validation_fit, tasks, announce)))
+    return [{"model": c, **{f: scores[c, f] for f in folds if (c, f) in scores}} for c in names]
+
+
+def _validation_fit(task) -> float:
+    """The left-out fold's mean normalised G of candidate ``task[0]`` fitted without fold
+    ``task[1]`` (a task of :func:`validate`; its position in the list names it in the cap's
+    phase)."""
+    name, f = task
+    r = _RUN
+    cand, cp = r["cands"][name]
+    out = r["folds"][f]
+    j = list(r["cands"]).index(name) * len(r["folds"]) + list(r["folds"]).index(f) + 1
+    n = len(r["cands"]) * len(r["folds"])
+    r["cap"].phase = f"the validated fit's validation ({name} without {f} (fit {j} of {n}))"
+    rest = [i for i in range(len(r["families"])) if i not in set(out)]
+    cp = dataclasses.replace(cp, shared=True)  # many fits on subsets: the sets share solves
+    k = fit(subset(cp, rest), cand, r["options"], features=r["features"], deadline=r["cap"])
+    return float(per_load(subset(cp, out), k).mean())
+
+
+def final_fit(ex, name: str, n_starts: int, seed: int, status) -> list:
+    """[(training objective, constants, stop)] of candidate ``name``'s fit on every training
+    state from each of :func:`starts`, the lowest objective first (in the pool ``ex``, as
+    :func:`validate`)."""
+    cand, cp = _RUN["cands"][name]
+    M = basis(cp, _RUN["n_springs"], _RUN["features"]) if cand.groups == "features" else None
+    tasks = [(name, i, x0, n_starts) for i, x0 in enumerate(starts(cp, n_starts, seed, M))]
+
+    def announce(j):
+        status(f"fitting {name} on every training state (start {j} of {n_starts})")
+
+    fits = forkpool.run(ex, _final_start, tasks, announce)
     fits.sort(key=lambda t: t[0])
-    return Selection(
-        cand.name,
-        tuple(k for _, k, _ in fits),
-        tuple(table),
-        tuple(names),
-        stops=tuple(stop for _, _, stop in fits),
-    )
+    return fits
 
 
-def validate(each, n_cands: int, families, options, cap, status, features) -> list:
-    """The validation table's rows of the ``n_cands`` (candidate, its problem) pairs ``each``:
-    every candidate fitted without each fold in turn and scored on it, fit j of n announced
-    by ``status`` and named in ``cap``'s phase (:func:`select`'s other arguments). No fold
-    to leave out (one family): rows without scores."""
-    folds = make_folds(families)
-    n = n_cands * len(folds) if len(folds) > 1 else 0
-    rows, j = [], 0
-    for cand, cp in each:
-        row = {"model": cand.name}
-        for f, out in folds.items() if n else ():
-            j += 1
-            where = f"{cand.name} without {f} (fit {j} of {n})"
-            cap.phase = f"the validated fit's validation ({where})"
-            status(f"validation: {where}")
-            rest = [i for i in range(len(families)) if i not in set(out)]
-            k = fit(subset(cp, rest), cand, options, features=features, deadline=cap)
-            row[f] = float(per_load(subset(cp, out), k).mean())
-        rows.append(row)
-    return rows
-
-
-CLAMPED = "clamped"  # the family of the training states that hold a face (not the linear sets')
-
-
-def make_folds(families) -> dict:
-    """{fold name: block indices left out}: each free-traction family as one fold, and
-    the clamped states together as one ('clamped'): its fit has seen no clamp at all, as
-    the final fit has never seen the clamps users put elsewhere (with one clamped state
-    out at a time the fit would learn the shared clamp from the others)."""
-    folds: dict = {}
-    for i, f in enumerate(families):
-        folds.setdefault(f, []).append(i)
-    return folds
-
-
-def summary(row: dict, folds) -> dict:
-    """A table row's ``free`` (mean over the free-traction families' folds), ``clamped``
-    (the clamped fold's) and ``score`` (their mean, or the one there)."""
-    if not all(f in row for f in folds):
-        return {"free": math.nan, "clamped": math.nan, "score": math.nan}
-    free = [row[f] for f in folds if f != CLAMPED]
-    held = [row[f] for f in folds if f == CLAMPED]
-    parts = [float(np.mean(v)) if v else math.nan for v in (free, held)]
-    return {"free": parts[0], "clamped": parts[1], "score": float(np.nanmean(parts))}
-
-
-def training_score(values, families) -> float:
-    """The score :func:`summary` gives a model that is not fitted (a rule): ``values`` each
-    training state's own normalised G, ``families`` theirs, averaged per fold first. The
-    stage starts its fits from the rule this ranks first: the pooled G would let the
-    states with the largest displacements (the clamped ones) decide alone."""
-    if not len(values):
-        return math.nan
-    folds = make_folds(families)
-    return summary(
-        {f: float(np.mean([values[i] for i in idx])) for f, idx in folds.items()}, folds
-    )["score"]
-
-
-# a candidate beats the rule by more than 1 % (of its score, or a ratio below 0.99): less is a tie
-MARGIN = 0.01
-
-
-def ratio_to_rule(row: dict, rule: dict) -> float:
-    """The geometric mean of the row's free and clamped errors each divided by the rule's
-    (the parts the table has; NaN when a part the rule has is missing or a rule error is 0)."""
-    parts = [(row[k], rule[k]) for k in ("free", "clamped") if math.isfinite(rule[k])]
-    if not parts or any(not math.isfinite(a) or b <= 0 for a, b in parts):
-        return math.nan
-    return float(np.exp(np.mean([math.log(max(a, 1e-300) / b) for a, b in parts])))
-
-
-def choose(table, criterion: str = "ratio") -> dict:
-    """The row chosen (module doc): 'ratio', the lowest ``ratio`` below 1 - MARGIN; 'score',
-    the lowest score among the candidates that beat the rule (the table's first row) on
-    the score and are no worse on the clamped states, where there are any; else the rule."""
-    if criterion not in SELECT_CRITERIA:
-        raise ValueError(f"criterion {criterion!r} is not one of {SELECT_CRITERIA}")
-    rule = table[0]
-    if criterion == "ratio":
-        ok = [r for r in table[1:] if math.isfinite(r["ratio"]) and r["ratio"] < 1.0 - MARGIN]
-        return min(ok, key=lambda r: r["ratio"]) if ok else rule
-
-    def beats(a, b):
-        return a < b - max(MARGIN * b, 1e-9)
-
-    ok = [
-        r
-        for r in table[1:]
-        if math.isfinite(r["score"])
-        and beats(r["score"], rule["score"])
-        and not (math.isfinite(rule["clamped"]) and r["clamped"] > rule["clamped"] + 1e-9)
-    ]
-    return min(ok, key=lambda r: r["score"]) if ok else rule
+def _final_start(task) -> tuple:
+    """(training objective with the prior, constants, stop) of one start of the final fit."""
+    name, i, x0, n_starts = task
+    cand, cp = _RUN["cands"][name]
+    where = f"{name} on every training state (start {i + 1} of {n_starts})"
+    _RUN["cap"].phase = f"the validated fit's final fit ({where})"
+    r = fit_result(cp, cand, _RUN["final"], x0, _RUN["features"], _RUN["cap"])
+    return r["info"]["phi"], r["k"], str(r["info"].get("stop"))

@@ -1,0 +1,91 @@
+"""Independent fits in forked worker processes: the validated fit's 24 or so validation fits
+and its final fit's starts each depend on the input alone, so they can run side by side.
+
+A worker is a fork of the caller, so it starts with everything the caller has built (the
+problem, the compiled kernels, the cached orderings) and fills its own caches as it goes;
+each task is a module-level function and small arguments, its result comes back pickled.
+Every fit runs with one BLAS thread, in a worker as in the caller, so a task's numbers are
+the same bit for bit whichever process runs it and however many there are: the pool
+changes the wall time, never the answer. Without fork (not Linux), inside a worker of
+another pool, or for small problems, the tasks run one after the other in the caller.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+
+MAX_WORKERS = 8
+# springs (columns) from which a validated fit's fits are worth a process each (a fork and
+# its first solves cost ~0.1-0.5 s; a fit of a 3,000-spring network takes seconds)
+MIN_COLUMNS = 1000
+
+
+def available_workers(n_tasks: int, n_columns: int) -> int:
+    """Processes for ``n_tasks`` fits of a problem with ``n_columns`` constants: the CPUs this
+    process may run on (at most MAX_WORKERS and the tasks), 1 where forking is unavailable
+    (not Linux), the caller is itself a pool's worker, or the problem is small."""
+    import multiprocessing as mp
+
+    if (
+        not sys.platform.startswith("linux")
+        or mp.parent_process() is not None
+        or n_columns < MIN_COLUMNS
+    ):
+        return 1
+    return max(1, min(len(os.sched_getaffinity(0)), MAX_WORKERS, n_tasks))
+
+
+def _worker_init():
+    """Worker initialiser: Ctrl-C is the caller's to handle (it stops the pool), and the
+    worker writes to fresh null streams: a fork copies the caller's stream locks as they
+    were, held perhaps by its progress line's thread, which the fork does not copy. The
+    tasks print nothing; their errors come back to the caller."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.stdout = sys.stderr = open(os.devnull, "w")
+
+
+@contextmanager
+def pool(workers: int):
+    """A pool of ``workers`` forked processes for :func:`run` (None when ``workers`` is 1:
+    :func:`run` then works in the caller). The workers are forked at the first task, so
+    they inherit what the caller built before it."""
+    if workers <= 1:
+        yield None
+        return
+    import multiprocessing as mp
+
+    ex = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init)
+    try:
+        yield ex
+    finally:  # after an error the tasks not begun are dropped, not run to no purpose
+        ex.shutdown(wait=True, cancel_futures=True)
+
+
+def run(executor, fn, tasks, announce=lambda j: None) -> list:
+    """[fn(task) for task in tasks], in the pool ``executor`` (or in the caller when None).
+    ``announce(j)``: task j (from 1) of them is next: in the caller as it begins, in a pool
+    as j - 1 tasks have finished (the pool's tasks start in their order). An error in a task
+    is raised here as it was raised there."""
+    tasks = list(tasks)
+    if not tasks:
+        return []
+    if executor is None:
+        out = []
+        for j, task in enumerate(tasks, 1):
+            announce(j)
+            out.append(fn(task))
+        return out
+    futures = {executor.submit(fn, task): j for j, task in enumerate(tasks)}
+    out, pending = [None] * len(tasks), set(futures)
+    announce(1)
+    while pending:
+        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+        for f in finished:
+            out[futures[f]] = f.result()
+        if pending:
+            announce(len(tasks) - len(pending) + 1)
+    return out

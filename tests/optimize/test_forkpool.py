@@ -1,0 +1,70 @@
+"""The validated fit's fits in forked worker processes (harness/optimize/forkpool.py): the
+same selection bit for bit as one after the other in the caller (choice, every score,
+every start's constants and stop), a cap passed inside a worker aborts in the same one
+line, and the pool's bookkeeping (results in task order, errors raised in the caller)."""
+
+import sys
+
+import numpy as np
+import pytest
+
+from harness.optimize import forkpool
+from harness.optimize import select as sel
+from tests.optimize.test_select import CANDS, FAMILIES, jumping_clock, problem
+
+pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
+
+
+def _select(prob, workers, **kw):
+    groups = np.zeros(prob.n_springs, int)
+    args = (FAMILIES, 1.0, groups, CANDS, {"maxiter": 20}, {"maxiter": 40}, 3)
+    return sel.select(prob, prob.n_springs, *args, workers=workers, **kw)
+
+
+def test_the_pool_gives_the_selection_of_the_fits_one_after_the_other():
+    prob, _, _ = problem(np.full(1, 2.0))
+    alone, pooled = _select(prob, 1), _select(prob, 2)
+    assert pooled.choice == alone.choice != "rule"
+    assert pooled.table == alone.table  # every score, bit for bit
+    assert pooled.stops == alone.stops and len(pooled.starts) == 3
+    for a, b in zip(pooled.starts, alone.starts):
+        assert np.array_equal(a, b)
+
+
+def test_a_cap_passed_in_a_worker_aborts_the_validated_fit_in_one_line(monkeypatch):
+    from harness.optimize.deadline import BudgetExceeded
+
+    prob, _, _ = problem(np.full(1, 2.0))
+    jumping_clock(monkeypatch)  # the workers are forks: their clock jumps too
+    with pytest.raises(BudgetExceeded) as err:
+        _select(prob, 2, max_seconds=60.0)
+    text = str(err.value)
+    assert "\n" not in text and "past its budget max_seconds = 60 s;" in text
+    assert "the validated fit's validation (" in text
+
+
+def _square(x):
+    return x * x
+
+
+def _fail(x):
+    if x == 3:
+        raise ValueError("three")
+    return x
+
+
+def test_run_keeps_the_task_order_and_raises_a_tasks_error():
+    announced = []
+    with forkpool.pool(2) as ex:
+        assert forkpool.run(ex, _square, range(7), announced.append) == [x * x for x in range(7)]
+        with pytest.raises(ValueError, match="three"):
+            forkpool.run(ex, _fail, range(6))
+    assert announced[0] == 1 and announced == sorted(announced) and max(announced) <= 7
+    with forkpool.pool(1) as ex:
+        assert ex is None and forkpool.run(ex, _square, [2, 3]) == [4, 9]
+
+
+def test_small_problems_and_workers_of_other_pools_stay_in_one_process():
+    assert forkpool.available_workers(24, forkpool.MIN_COLUMNS - 1) == 1
+    assert 1 <= forkpool.available_workers(24, forkpool.MIN_COLUMNS) <= forkpool.MAX_WORKERS
+    assert forkpool.available_workers(1, 10**6) == 1
