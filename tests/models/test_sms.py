@@ -295,7 +295,7 @@ def test_sms_stage_calls_the_optimiser_contract(tmp_path, monkeypatch):
         )
 
     monkeypatch.setattr(stage, "_reference", lambda case, ctx: (ClosedFormRef(case), ""))
-    monkeypatch.setattr(stage, "_optimizer", lambda: fake_optimize)
+    monkeypatch.setattr(stage, "optimize", fake_optimize)
     rows = stage.run(case, StageContext(out_dir=tmp_path / "out"))
     opt = rows[-1]
     assert opt["optimizer"] == "sa" and seen == {
