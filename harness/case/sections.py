@@ -274,7 +274,8 @@ ENGINES = {
         15.0,
         min=0,
         min_exclusive=True,
-        doc="calibrate --budget (s) of the calibrated export",
+        doc="not used: the calibrated export's fit stops by iteration counts, the same on any "
+        "machine (read so that case files setting it stay valid)",
     ),
 }
 
