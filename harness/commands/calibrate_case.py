@@ -11,7 +11,6 @@ from pathlib import Path
 from harness import registry
 from harness.errors import CaseError, SpringbenchError
 from harness.models.stiffness_rules import RULES as STIFFNESS_RULES
-from harness.stages.sms_select import FINAL_MAXITER
 
 METHODS = {
     "rule": "none",
@@ -64,6 +63,8 @@ def _optimizer(s) -> dict:
     if method in ("lbfgs", "gauss-newton") and s.init != "none":
         options["init"] = s.init
     if method == "lbfgs" and not selects(s):  # a fixed capacity: its own fit, by count
+        from harness.stages.sms_select import FINAL_MAXITER  # the stage's, loaded when run
+
         options.update(prior=prior_weight(s), maxiter=FINAL_MAXITER)
     if method != "none":
         out["options"] = options
