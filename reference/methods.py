@@ -23,9 +23,10 @@ from functools import cached_property
 
 import numpy as np
 
-from reference.adaptive.adapt import Changes, solve_adaptive
+from reference.adaptive.adapt import Stop, solve_adaptive
 from reference.adaptive.adapt import applies as adaptive_applies
 from reference.adaptive.refine import solve_refined
+from reference.adaptive.wide import Changes
 from reference.fem import Discretisation
 from reference.graded.levels import Levels, n_dofs, solve_graded
 from reference.locate import Locator
@@ -39,7 +40,10 @@ MODAL_DOFS = {2: 400_000, 3: 120_000}  # graded: the modes come from the finest 
 
 class _OnMesh:
     """What every method has on its finest mesh ``mesh``: the discretisation and the point
-    locator, made when first asked for."""
+    locator, made when first asked for; ``stop`` (why its levels ended: an adaptive
+    method's reference/adaptive/adapt.py Stop, None for the others)."""
+
+    stop = None
 
     @cached_property
     def disc(self) -> Discretisation:
@@ -100,18 +104,26 @@ class Refined(_OnMesh):
 class Adaptive(Refined):
     """The finest of adaptively refined meshes; the estimate per point comes from the
     last changes between levels and their observed order (``changes``; None after a
-    single level: then as :class:`Refined`)."""
+    single level: then as :class:`Refined`); ``stop``: why the levels ended."""
 
     name = "adaptive"
 
-    def __init__(self, case, mesh, fields: Mapping, estimates: dict, changes: Changes | None):
+    def __init__(
+        self,
+        case,
+        mesh,
+        fields: Mapping,
+        estimates: dict,
+        changes: Changes | None,
+        stop: Stop | None = None,
+    ):
         super().__init__(case, mesh, fields, estimates)
-        self.changes = changes
+        self.changes, self.stop = changes, stop
 
     @classmethod
     def solve(cls, case, status, records):
-        mesh, U, est, history, changes = solve_adaptive(case, status, records)
-        return cls(case, mesh, U, est, changes), est, history
+        mesh, U, est, history, changes, stop = solve_adaptive(case, status, records)
+        return cls(case, mesh, U, est, changes, stop), est, history
 
     def estimate(self, points, load: str) -> np.ndarray:
         if self.changes is None:
@@ -122,6 +134,7 @@ class Adaptive(Refined):
         return {
             **super().to_arrays(names),
             **(self.changes.to_arrays(names) if self.changes is not None else {}),
+            **(self.stop.to_arrays() if self.stop is not None else {}),
         }
 
     @classmethod
@@ -133,6 +146,7 @@ class Adaptive(Refined):
             {n: arrays["u"][i] for i, n in enumerate(names)},
             estimates,
             Changes.from_arrays(names, arrays),
+            Stop.from_arrays(arrays),
         )
 
 

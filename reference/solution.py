@@ -23,6 +23,7 @@ import skfem
 from harness.case.elasticity import densities, element_stiffness
 from harness.errors import ModelError
 from reference import cache as _cache
+from reference.adaptive.adapt import scored_loads
 from reference.fem import Discretisation
 from reference.locate import Locator
 from reference.methods import method_of
@@ -94,6 +95,18 @@ class ReferenceSolution:
     def changes(self):
         """The adaptive method's last changes between levels (None for the others)."""
         return getattr(self.method, "changes", None)
+
+    @property
+    def stop(self):
+        """Why the adaptive method's levels ended (reference/adaptive/adapt.py Stop; None
+        for the other methods)."""
+        return self.method.stop
+
+    @property
+    def targets(self) -> tuple[str, ...]:
+        """The loads whose estimates ``tol`` applies to: the held-out loads, or every load
+        of a case that holds none out (reference/adaptive/adapt.py ``scored_loads``)."""
+        return scored_loads(self.case)
 
     @property
     def disc(self) -> Discretisation:

@@ -23,7 +23,8 @@ from harness.stages.sms_measures import rank
 
 def run(s, mesh, tmp: Path):
     """(rows, the exported network, the case) of one calibration (settings ``s``; a mesh in
-    other units than m is handed over as a file in tmp)."""
+    other units than m is handed over as a file in tmp); the exported row carries its
+    held-out displacements as ``_heldout`` (:class:`harness.stages.sms.Heldout` or None)."""
     case = mesh_case(s, mesh, tmp)
     clock = Clock("calibrate")  # on a terminal only (and not with --quiet)
     try:
@@ -36,13 +37,14 @@ def run(s, mesh, tmp: Path):
         at = rows.index(min(rows, key=rank)) if s.rule == "best" else 0
     else:
         at = len(rows) - 1
-    exported, net = rows[at], result.networks[at]
+    exported, net, heldout = rows[at], result.networks[at], result.heldout[at]
     if result.validations[at]:  # the validated fit's table (harness/stages/sms_select.py)
         exported["_validation"] = [dict(r) for r in result.validations[at]]
     if s.k_ratio is not None:
         capped = capped_row(net, case, exported, s.k_ratio, s.damping_ratio)
         rows.append(capped)
-        net, exported = capped.pop("_net"), capped
+        net, exported, heldout = capped.pop("_net"), capped, capped.pop("_heldout")
+    exported["_heldout"] = heldout  # the picture of the fit (calibrate_picture.py)
     for r in rows:
         r["exported"] = r is exported
     return rows, net, case
@@ -55,7 +57,8 @@ KEPT += ("ref_error_max", "ref_error_heldout")
 
 def capped_row(net, case, row, ratio: float, zeta: float) -> dict:
     """The exported constants capped at ratio x their median, scored like the stage does
-    (fitted and held-out loads), with the stable step of both (what the cap gains)."""
+    (fitted and held-out loads), with the stable step of both (what the cap gains) and the
+    held-out displacements (``_heldout``)."""
 
     k = np.asarray(net.k, float)
     capped = net.with_k(np.minimum(k, ratio * np.median(k)))
@@ -73,7 +76,11 @@ def capped_row(net, case, row, ratio: float, zeta: float) -> dict:
         G_heldout=sh.G_norm if sh else math.nan,
         k_ratio=float(capped.k.max() / np.median(capped.k)),
         _net=capped,
+        _heldout=None,
     )
+    if case.heldout:
+        at = [res.names.index(n) for n in case.heldout]
+        out["_heldout"] = stage.Heldout(tuple(case.heldout), u_ref[at], res.u[at])
     if sh is not None:
         per = {f"G_heldout_{name}": float(v) for name, v in sh.per_load_norm.items()}
         out.update(G_heldout_mean=float(np.mean(list(per.values()))), **per)

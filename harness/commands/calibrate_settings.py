@@ -36,8 +36,8 @@ class Settings:
     plane: str = "stress"
     magnitude: float | None = None
     peak_strain: float = PEAK_STRAIN
-    tol: float = 1e-3
-    max_refine: int = 1
+    tol: float = 1e-2
+    max_refine: int = 100
     solver: str = "auto"
     budget: float | None = None
     format: str | None = None

@@ -32,12 +32,12 @@ def validation_sentence(row, table) -> str:
             f"(as --method rule --rule {row['stiffness']})."
         )
     if row["choice"] in ratios:
+        clamped = " and the clamped states" if "clamped" in str(fams).split() else ""
         return (
             f"Validation (each family of training states left out in turn: {fams}) chose "
             f"{row['choice']}: "
             f"{ratios[row['choice']]:.3g}x the rule {row['stiffness']}'s errors (the "
-            "geometric mean over "
-            f"the free-traction families and the clamped states)."
+            f"geometric mean over the free-traction families{clamped})."
         )
     return (
         f"Validation (each family of training states left out in turn: {fams}) chose "
@@ -128,6 +128,7 @@ def reference_sentence(exported: dict, meta: dict, heldout: bool, max_refine: in
     """The FEM reference's status (ok / ref-coarse), its own error, where it is coarse and
     what that means."""
     from harness.scoring import ref_status
+    from reference.adaptive.adapt import UNTIL_TOL
 
     status = meta["status"]
     fem, fem_held = meta["reference_error"], meta["reference_error_heldout"]
@@ -166,10 +167,29 @@ def reference_sentence(exported: dict, meta: dict, heldout: bool, max_refine: in
             "the errors "
             f"above are the model's."
         )
+    note = exported.get("ref_note") or ""
+    fix = (
+        "a finer mesh of the body makes it finer"
+        if max_refine >= UNTIL_TOL
+        else f"--max-refine {max_refine + 1} (or a finer mesh) makes it finer"
+    )
     return (
         f"Reference ref-coarse ({est}): the FEM's own error{where} is above a tenth of the "
-        "model's or missed "
-        "its tolerance, so part of those errors is the FEM's; --max-refine "
-        f"{max_refine + 1} (or a finer mesh) "
-        f"makes it finer."
+        "model's or missed its tolerance, so part of those errors is the FEM's"
+        + (f" ({note})" if note else "")
+        + f"; {fix}."
+    )
+
+
+def dropped_sentence(exported: dict) -> str:
+    """The training states the fit left out because the FEM could not resolve them ("" if
+    none)."""
+    from harness.scoring import fraction_words
+
+    dropped = str(exported.get("training_dropped") or "").split()
+    if not dropped:
+        return ""
+    return (
+        f"Training states left out of the fit ({', '.join(dropped)}): the FEM's error on them "
+        f"is above {fraction_words()} of the best rule's, so a fit would learn the FEM's error."
     )

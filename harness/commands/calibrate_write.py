@@ -1,5 +1,6 @@
 """What ``springbench calibrate`` writes and prints: MODEL.vtu, MODEL.json and MODEL.csv
-together, the table, and the verdict's sentences."""
+together (with held-out loads also MODEL-heldout.vtu and MODEL-heldout.png, the picture of
+the fit: calibrate_picture.py), the table, and the verdict's sentences."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import math
 import numpy as np
 import pandas as pd
 
+from harness.commands import calibrate_picture as picture
 from harness.commands import calibrate_verdict as cv
 from harness.commands.calibrate_case import prior_weight
 from harness.export.engine_loads import load_records, settle_recipe
@@ -52,7 +54,7 @@ COLUMNS = (
     "model stiffness optimizer exported n_nodes n_springs G_initial G_final G_norm_initial "
     "G_norm_final G_fit_score G_fit_score_bound G_heldout G_heldout_mean G_heldout_mean_spread "
     "choice ref_error_max ref_error_heldout status k_ratio dt_stable dt_safe seconds seed "
-    "opt_stop opt_stops opt_prior note"
+    "opt_stop opt_stops opt_prior training_dropped ref_note note"
 ).split()
 
 
@@ -91,13 +93,15 @@ def metadata(s, rows, exported, net, case) -> dict:
         weight = exported.get("opt_prior", math.nan)
     else:
         weight = prior_weight(s) if s.method == "lbfgs" else math.nan
+    dropped = str(exported.get("training_dropped") or "").split()
     meta = dict(
         E=s.E,
         nu=s.nu,
         density=s.density,
         damping_ratio=s.damping_ratio,
-        loads_fitted=list(case.fit_loads),
+        loads_fitted=[n for n in case.fit_loads if n not in dropped],
         loads_heldout=list(case.heldout),
+        training_dropped=dropped,
         **{key: exported.get(col, math.nan) for key, col in FROM_ROW.items()},
         G_heldout_loads={n: cv.finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
         reference_error=_worst(
@@ -128,14 +132,19 @@ def metadata(s, rows, exported, net, case) -> dict:
 
 
 def write(s, rows, net, case):
-    """Write MODEL.vtu/.json/.csv and print the table and the verdict."""
+    """Write MODEL.vtu/.json/.csv (and the picture of the fit) and print the table and the
+    verdict."""
     exported = next(r for r in rows if r["exported"])
+    heldout = exported.pop("_heldout", None)
     meta = metadata(s, rows, exported, net, case)
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
     cols = [c for c in COLUMNS if any(c in r for r in rows) or c == "dt_safe"]
-    out = s.out  # the three files appear together or not at all (disk full: none)
-    with staged([out, out.with_suffix(".json"), out.with_suffix(".csv")], "--out") as (vtu, _, csv):
+    out = s.out  # the files appear together or not at all (disk full: none)
+    files = [out, out.with_suffix(".json"), out.with_suffix(".csv")]
+    files += picture.paths(out) if heldout is not None else []
+    with staged(files, "--out") as (vtu, _, csv, *pic):
         data = export(net, vtu, meta)  # the VTU and its .json beside it
+        shown = picture.write(*pic, net, case, heldout) if pic else None
         # one step in the table, the JSON's
         exported.update(dt_stable=data["dt_stable"], dt_safe=data.get("dt_safe"))
         df = pd.DataFrame(rows).reindex(columns=cols)
@@ -144,6 +153,8 @@ def write(s, rows, net, case):
     print(cv.heldout_sentence(exported, rules, case.heldout))
     print(cv.fitted_sentence(exported, min(rules, key=rank)))
     print(cv.reference_sentence(exported, meta, bool(case.heldout), s.max_refine))
+    if cv.dropped_sentence(exported):
+        print(cv.dropped_sentence(exported))
     if "choice" in exported:
         print(cv.validation_sentence(exported, meta["validation"] or []))
     if data["dt_stable"] is not None:
@@ -157,4 +168,5 @@ def write(s, rows, net, case):
     print(
         f"-> {s.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
         f"masses {s.masses}, k {min(k):.3g}..{max(k):.3g} N/m, {step}"
+        + (picture.sentence(out, shown) if shown is not None else "")
     )

@@ -43,6 +43,7 @@ from harness.models.stiffness_rules import spring_constants
 from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
 from harness.optimize import check_method_options, optimize
 from harness.stages import sms_measures as measures
+from harness.stages import sms_training
 from harness.stages.classes.base import Setting
 from harness.stages.classes.springs import of_spec
 from harness.stages.sms_fit import case_file
@@ -75,13 +76,25 @@ def _expect(case) -> dict:
 
 
 @dataclass(frozen=True)
+class Heldout:
+    """The held-out loads' displacements at a row's nodes, (L, n, dim) each: the FEM's and
+    the model's, as they were scored (for a picture of the fit without solving again)."""
+
+    names: tuple[str, ...]
+    u_fem: np.ndarray
+    u_model: np.ndarray
+
+
+@dataclass(frozen=True)
 class Result:
     """The stage's rows and, beside each, its network (None for a row without one: a rule
-    not solved) and the validation table of a validated fit (empty for other rows)."""
+    not solved), the validation table of a validated fit (empty for other rows) and its
+    held-out displacements (:class:`Heldout`; None without held-out loads or a solve)."""
 
     rows: tuple
     networks: tuple
     validations: tuple
+    heldout: tuple
 
 
 def run(case, ctx) -> list[dict]:
@@ -112,7 +125,7 @@ def _run(case, ctx, spec, cls) -> Result:
     label = cls.label(spec, case)
     skip = cls.skip(case, label)
     if skip:
-        return Result((skip,), (None,), ((),))
+        return Result((skip,), (None,), ((),), (None,))
     n_modes = _check_modes(case, opt)
     weights = scoring.case_weights(case)
     wlabel = ":".join(f"{w:g}" for w in weights)
@@ -180,6 +193,9 @@ def _run(case, ctx, spec, cls) -> Result:
             write_vtu(ctx.file(f"model-{tag}.vtu"), net, {})
             return
         cls.save(ctx, net, res, tag)
+        if u_ref is not None and held:
+            at = [res.names.index(names[i]) for i in held]
+            shown[tag] = Heldout(tuple(case.heldout), u_ref[held], res.u[at])
         if u_ref is not None:
             arrays = {"points": net.points, "springs": net.springs}
             for i, n in enumerate(res.names):
@@ -187,7 +203,7 @@ def _run(case, ctx, spec, cls) -> Result:
                 arrays[f"u_{n}"] = res.u[i]
             np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
 
-    rows, nets, made = [], {}, {}
+    rows, nets, made, shown = [], {}, {}, {}
     for rule in rules:
         t1 = time.perf_counter()
         nets[rule] = (
@@ -208,6 +224,15 @@ def _run(case, ctx, spec, cls) -> Result:
     solved, bounds = solve_rules(
         case, nets, score, rules[0] if opt.get("start", "first") != "best" else None, ctx.status
     )
+    if u_ref is not None and held:
+        kept = sms_training.resolved(
+            case, ref, base.points, base.classes, weights, names, u_ref, solved
+        )
+        case, names, u_ref, solved = kept.case, kept.names, kept.u_ref, kept.solved
+        fit, held = [names.index(n) for n in case.fit_loads], [names.index(n) for n in case.heldout]
+        common["training_dropped"] = " ".join(kept.dropped)
+        if kept.line:
+            ctx.status(kept.line)
     for rule in rules:
         t1 = time.perf_counter()
         net = nets[rule]
@@ -303,14 +328,24 @@ def _run(case, ctx, spec, cls) -> Result:
     # every net shares base's nodes, loads and weights: one G_ref for all rows
     if u_ref is not None:
         refcols = scoring.ref_columns(
-            ref, base.points, [names[i] for i in fit], u_ref[fit], base.classes, weights
+            ref,
+            base.points,
+            [names[i] for i in fit],
+            u_ref[fit],
+            base.classes,
+            weights,
+            tol_loads=() if held else None,
         )
-        heldcols = {}
+        heldcols, held_met = {}, None
         if held:
             hc = scoring.ref_columns(
                 ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights
             )
             heldcols = {"G_ref_heldout": hc["G_ref"], "ref_error_heldout": hc["ref_error_max"]}
+            held_met = hc.get("ref_met_tol")
+            refcols["ref_met_tol"] = (
+                held_met if held_met is not None else refcols.get("ref_met_tol")
+            )
         for row in rows:
             if "G_norm_final" in row:
                 row.update(refcols, **heldcols)
@@ -319,17 +354,18 @@ def _run(case, ctx, spec, cls) -> Result:
                 )
                 if (
                     held
-                    and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], None) != "ok"
+                    and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], held_met) != "ok"
                 ):
                     row["status"] = "ref-coarse"  # the held-out score is the reference's error too
 
     freqs = measures.model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
     m = measures.error_modes(opt, n_modes)
     all_nets = {**nets, **opt_nets}
-    networks, validations = [], []
+    networks, validations, heldout = [], [], []
     for row in rows:
         tag = row.pop("_tag", row["stiffness"])
         networks.append(all_nets.get(tag))
+        heldout.append(shown.get(tag))
         validations.append(tuple(row.pop("_validation", ())))
         if tag in all_nets:
             row.update(measures.engine_columns(all_nets[tag], not cls.spring_constants))
@@ -346,7 +382,7 @@ def _run(case, ctx, spec, cls) -> Result:
                 row["freq_error_heldout"] = measures.freq_error(
                     freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted
                 )
-    return Result(tuple(rows), tuple(networks), tuple(validations))
+    return Result(tuple(rows), tuple(networks), tuple(validations), tuple(heldout))
 
 
 # -- the case's optimiser runs ---------------------------------------------------------

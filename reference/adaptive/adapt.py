@@ -4,32 +4,23 @@ represented exactly (reference/adaptive/estimator.py), mark by Dörfler's bulk c
 sum (each load's indicators normalised by its total, so every load counts alike; at
 least LEAST of the elements), bisect the marked elements (scikit-fem's longest-edge
 bisection: nested meshes, the user's vertices keep their numbers) and repeat until the
-estimate at the user's vertices is below ``reference.tol``, the steps are used up
-(``max_refine`` times dim bisection steps) or the next mesh would pass the dof budget.
-The parts are resolved on the user's mesh on every level (reference/adaptive/meshparts.py).
+estimate at the user's vertices is below ``reference.tol`` for every scored load (the
+held-out ones, or all of a case that holds none out), the steps are used up (``max_refine``
+times dim bisection steps) or the next mesh would pass the dof budget. The parts are
+resolved on the user's mesh on every level (reference/adaptive/meshparts.py).
 
-The estimate is Richardson's over the levels, with the number of dofs N in place of
-the mesh size (h = N^(-1/dim)), taken over *wide* steps: the finest level k, the last
-level i with at most 1/WIDE^2 of its dofs (else the first level) and the level j
-between them nearest their middle in log dofs (without one, j is the first level and
-there is no i). With r = h_j / h_k and the order p of the largest changes of the three
-(fitted exactly to the two changes, between 1 and the degree k: HIGHEST; 1, the most
-conservative, with two levels), the error of u_k at a point is
+From ``max_refine = UNTIL_TOL`` (calibrate's default) the levels are not counted: they run
+until tol or the dof cap TARGET_DOFS, deterministic (the same dofs every run: no clock),
+and ``Stop`` records which ended them. Measured on a 1006-tet gmsh ellipsoid 0.4 x 0.2 x
+0.14 m (nu 0.3, calibrate's end loads), each level's largest change at the user's vertices
+against the 265k-dof level fits C (N^-a - 265k^-a) with a = 0.70-0.80 for the held-out
+loads (the clamp's edge on the curved surface: about h^2.2): a true error of 0.6-1.1 % at
+265k dofs, where the estimate is 1.1-1.7 % (1.4-1.8x; 1.2-3.8x on the coarser levels),
+so its 1 % needs ~500k dofs, past the cap. tests/reference/test_loop.py checks the
+estimate against an independent finer solve (tests/independent/simplex.py).
 
-    F * max(|u_k - u_j| / (r^p - 1),  |u_j - u_i| / ((h_i^p - h_j^p) / h_k^p))
-
-(the second term: the previous step carried forward, for points where the last change
-happens to vanish), F Roache's factor of safety: 1.25 when three levels give the order,
-3 with two. Consecutive adaptive levels add only 25-40 % dofs (r ~ 1.1 in 3-D), so
-1 / (r^p - 1) would amplify their erratic pointwise changes ~10x (on the B&C tetra cube_333
-shears: 0.12-0.15 of max |u| where the true error, against an independent graded Q2
-solve, is 0.012-0.014), so the estimate is taken over wide steps: there it is 1.3-2.7x the true
-error at the worst point and above it at every vertex (tests/reference/test_adaptive.py checks a
-cube body the same way). On nested meshes a coarser level's field lies in the finest
-level's space, so both changes are kept as dof vectors of the finest mesh and the
-estimate is exact to evaluate at any point.
-
-A mesh no refinement of fits in the dof budget (a 50k-tet cylinder: 214k dofs) gets its
+The estimate is Richardson's over the levels (reference/adaptive/wide.py). A mesh no
+refinement of fits in the dof budget (a 50k-tet cylinder: 214k dofs) gets its
 levels i and j from coarser meshes of its body instead (reference/adaptive/coarse.py: a tensor
 grid of the bounding box with COARSE of its vertices, the cells whose centroid lies
 outside dropped), on which the user's own system is solved in the subspace of the
@@ -45,6 +36,7 @@ own error is not far below): 1.2-1.4x.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,9 +46,16 @@ from harness.errors import ModelError
 from reference.adaptive.coarse import galerkin_solve, grid_mesh
 from reference.adaptive.estimator import doerfler, indicators
 from reference.adaptive.meshparts import UserMeshParts
+from reference.adaptive.wide import (
+    HIGHEST,
+    WIDE,
+    Changes,
+    carry,
+    n_dofs,
+    prune,
+    wide_changes,
+)
 from reference.fem import Discretisation
-from reference.graded.extrapolate import ORDER_RANGE, SAFETY
-from reference.locate import Locator
 from reference.mesh import base_mesh
 from reference.problem import (
     body_bbox,
@@ -78,10 +77,6 @@ MAX_DOFS = {2: 400_000, 3: 200_000}  # the finest level's dofs at most, ...
 GROWTH = 1.0  # ... or the user's mesh's own if larger: a 50k-tet mesh
 # (214k dofs) is not refined (at 2x it took 18 min of AMG, against calibrate's 5-minute
 # target for such a mesh) but estimated from COARSE levels (below)
-WIDE = 4.0  # the estimate's levels are about this factor apart in dofs (when they span WIDE^2)
-SAFETY_THREE = 1.25  # Roache's factor of safety when three levels give the observed order
-EXACT = 1e-9  # a change below this share of the largest displacement is rounding
-FIT = 4  # changes the order is fitted to at most
 COARSE = (1 / (3 * WIDE**2), 1 / WIDE**2)  # a mesh no refinement of fits in the budget:
 # the estimate's levels i and j are coarser meshes of its body with about these shares of
 # its vertices (reference/adaptive/coarse.py; ~1/30 and ~1/10 of its dofs). Their Galerkin matrices
@@ -91,104 +86,60 @@ COARSE = (1 / (3 * WIDE**2), 1 / WIDE**2)  # a mesh no refinement of fits in the
 GROWTH_MIN = 1.25
 COARSE_MAX_DOFS = 25_000  # the finer coarse level has at most about these dofs (the shares shrink
 # alike: a 200k-tet body's 1/10 level, 69k dofs and 32 M nonzeros, took ~190 s of its 5 clamp sets)
-HIGHEST = {"P1": 1.0, "P2": 2.0}  # the observed order at most the degree k: point values
-# converge at k + 1 only where the solution is smooth, and a clamped or partly loaded face
-# has singular edges (B&C tetra cube_333, against the independent solve: 1.0-1.3 for the
-# shears, 2.3-2.7 for the sag between the wide levels, whose largest changes fitted 3 and
-# then under-estimated the error at 5 of 57 vertices by up to 25 %)
+UNTIL_TOL = 100  # [reference] max_refine at or above this: the levels are not counted but
+# end at tol on every scored load or at the dof cap TARGET_DOFS (calibrate's default), ...
+TARGET_DOFS = {2: 400_000, 3: 300_000}  # ... the finest level's dofs at most (or the user's
+# mesh's own if larger; calibrate on 1-1.7k-tet gmsh bodies peaked at 7-9.3 GB with finest
+# levels of 214-266k dofs), ...
+TARGET_ROOM = WIDE  # ... a mesh is refined only when the cap leaves room for this growth
+# (the estimate needs levels WIDE apart; a larger one is estimated from COARSE levels), and
+# the levels end without marking where GROWTH_MIN more dofs would pass the cap (the last
+# level's indicators: ~1 min and ~4.8 GB at 400k dofs). Marking as the counted levels: by
+# Dörfler's set of every clamped load's indicators, LEAST at least (on the ellipsoid, marking
+# by the held-out loads alone gave 8 % smaller held-out estimates at 262k dofs and 4-8x
+# larger side states; LEAST 0.02 the same true error at 222k dofs as 0.1 at 265k, 36 % slower)
 
 
 @dataclass(frozen=True)
-class Changes:
-    """The two wide changes between levels of each load (module docstring), as dof
-    vectors (ndof,) of the finest mesh (``d1`` = u_k - u_j, ``d2`` = u_j - u_i, zero
-    without a level i), and their weights ``coef`` (a1, a2), SAFETY included: the
-    per-point estimate is max(a1 |d1(x)|, a2 |d2(x)|) (a plain |d1(x)| for a field
-    represented exactly). ``uniform`` {load: bound}: the estimate is that bound at every
-    point instead (coarse levels: their pointwise changes do not follow the finest
-    mesh's error, only their largest does)."""
+class Stop:
+    """Why the levels ended: ``reason`` "tol" (every scored load's estimate below tol),
+    "cap" (the next level, ``next_dofs`` if made, would pass the dof cap ``cap``), "steps"
+    (max_refine's bisection steps used), "single" (max_refine 0: one level, no estimate),
+    "exact" (every load in closed form) or "coarse" (a mesh too large to refine, estimated
+    from coarser meshes of its body); ``n_dofs`` the finest level's dofs."""
 
-    d1: dict
-    d2: dict
-    coef: dict
-    uniform: dict | None = None
+    reason: str
+    n_dofs: int
+    cap: int
+    next_dofs: int = 0
 
-    def at(self, locator: Locator, basis, points, load: str) -> np.ndarray:
-        if self.uniform is not None and load in self.uniform:
-            return np.full(len(points), self.uniform[load])
-        a1, a2 = self.coef[load]
-        dim = points.shape[1]
-        v = locator.evaluate(
-            basis,
-            np.column_stack([self.d1[load].reshape(-1, dim), self.d2[load].reshape(-1, dim)]),
-            points,
-        )
-        e1, e2 = np.linalg.norm(v[:, :dim], axis=1), np.linalg.norm(v[:, dim:], axis=1)
-        return np.maximum(a1 * e1, a2 * e2)
+    def describe(self) -> str:
+        """The reason as a clause of a sentence."""
+        n, cap = f"{self.n_dofs:,}", f"{self.cap:,}"
+        return {
+            "tol": f"every scored load met tol at {n} dofs",
+            "cap": f"stopped at the dof cap: {n} dofs, the next level would have "
+            + (f"{self.next_dofs:,}" if self.next_dofs else f"at least {GROWTH_MIN:g}x as many")
+            + f" (cap {cap})",
+            "steps": f"max_refine's bisection steps used at {n} dofs (cap {cap})",
+            "single": "one level (max_refine 0): no estimate",
+            "exact": "every load in closed form",
+            "coarse": f"the mesh's {n} dofs are too many to refine within the cap of {cap}: "
+            "estimated from coarser meshes of its body",
+        }[self.reason]
 
-    def to_arrays(self, names) -> dict:
-        out = {
-            "d1": np.stack([self.d1[n] for n in names]),
-            "d2": np.stack([self.d2[n] for n in names]),
-            "coef": np.array([self.coef[n] for n in names], float),
+    def to_arrays(self) -> dict:
+        return {
+            "stop_reason": np.array(self.reason),
+            "stop_dofs": np.array([self.n_dofs, self.cap, self.next_dofs], np.int64),
         }
-        if self.uniform is not None:
-            out["uniform"] = np.array([self.uniform[n] for n in names], float)
-        return out
 
     @classmethod
-    def from_arrays(cls, names, arrays) -> "Changes | None":
-        if "coef" not in arrays:
+    def from_arrays(cls, arrays) -> "Stop | None":
+        if "stop_reason" not in arrays:
             return None
-        uniform = (
-            {n: float(arrays["uniform"][i]) for i, n in enumerate(names)}
-            if "uniform" in arrays
-            else None
-        )
-        return cls(
-            {n: arrays["d1"][i] for i, n in enumerate(names)},
-            {n: arrays["d2"][i] for i, n in enumerate(names)},
-            {n: tuple(arrays["coef"][i]) for i, n in enumerate(names)},
-            uniform,
-        )
-
-
-def n_dofs(mesh, order: str) -> int:
-    """Vector dofs of a P1/P2 simplex mesh (P2: vertices and edge midpoints)."""
-    dim = mesh.p.shape[0]
-    ns = mesh.p.shape[1] + (
-        0 if order == "P1" else (mesh.facets.shape[1] if dim == 2 else mesh.edges.shape[1])
-    )
-    return dim * ns
-
-
-def fitted_order(changes, dofs, dim: int, highest: float = ORDER_RANGE[1]) -> float:
-    """The order p (in h = N^(-1/dim)) of the largest changes between levels,
-    c_j ~ K (h_(j-1)^p - h_j^p), fitted in log by least squares over the last FIT
-    changes (dofs: the N of those levels and the one before), at most ``highest``;
-    ORDER_RANGE's lowest, the most conservative, from a single change."""
-    c = np.asarray(changes[-FIT:], float)
-    if len(c) < 2:
-        return ORDER_RANGE[0]
-    h = np.asarray(dofs[-len(c) - 1 :], float) ** (-1.0 / dim)
-    p = np.linspace(ORDER_RANGE[0], highest, 401)
-    res = np.log(c)[:, None] - np.log(h[:-1, None] ** p - h[1:, None] ** p)
-    res -= res.mean(axis=0)
-    return float(p[np.argmin((res**2).sum(axis=0))])
-
-
-def coefficients(p: float, dofs, dim: int) -> tuple:
-    """(a1, a2): the last and the previous change scaled to the finest level's error,
-    h_k^p / (h_(k-1)^p - h_k^p) and h_k^p / (h_(k-2)^p - h_(k-1)^p) (0 with two levels)."""
-    h = np.asarray(dofs[-3:], float) ** (-p / dim)  # h^p
-    a1 = h[-1] / (h[-2] - h[-1])
-    return a1, (h[-1] / (h[-3] - h[-2]) if len(h) == 3 else 0.0)
-
-
-def _interpolate(coarse: Discretisation, fields: np.ndarray, fine: Discretisation) -> np.ndarray:
-    """Coarse fields (ns_c, m) at the fine mesh's dof locations (ns_f, m): exact, the
-    meshes being nested and the element the same."""
-    return Locator(coarse.mesh).evaluate(coarse.basis, fields, fine.doflocs.T)
+        n, cap, nxt = (int(v) for v in arrays["stop_dofs"])
+        return cls(str(arrays["stop_reason"]), n, cap, nxt)
 
 
 def _marked(case, d: Discretisation, U: dict, loads, parts) -> np.ndarray:
@@ -216,63 +167,129 @@ def applies(case) -> bool:
     return case.body.shape == "mesh" and case.reference.cell in ("tri", "tet")
 
 
+def scored_loads(case) -> tuple[str, ...]:
+    """The loads whose estimates the levels drive below ``reference.tol``: the held-out
+    ones this case solves (what scores a model), or every load of a case that holds none
+    of them out (a sub-case of some of its loads). Training
+    states are judged against the rules' errors on them instead
+    (harness/scoring.py ``unresolved_training``)."""
+    names = tuple(l.name for l in case.loads)
+    return tuple(n for n in case.heldout if n in names) or names
+
+
+@dataclass(frozen=True)
+class Plan:
+    """How one adaptive solve refines: at most ``steps`` bisection steps and ``cap`` dofs; a
+    mesh is refined only when the cap leaves room for a growth of ``room``, else estimated
+    from coarser meshes of its body; ``ahead``: the levels end before marking when the
+    least growth of a step (GROWTH_MIN) would pass the cap."""
+
+    steps: int
+    cap: int
+    room: float
+    ahead: bool = False
+
+
+def plan(case, ndof: int) -> Plan:
+    """The Plan of ``case`` on a user's mesh of ``ndof`` dofs: max_refine below UNTIL_TOL
+    counts the levels (max_refine x dim bisection steps within MAX_DOFS); from UNTIL_TOL
+    the levels run until tol on every scored load or TARGET_DOFS (either cap, or the
+    user's mesh's own dofs if more)."""
+    dim, levels = case.dim, case.reference.max_refine
+    steps = STEPS_PER_REFINE[dim] * levels
+    if levels >= UNTIL_TOL:
+        cap = max(TARGET_DOFS[dim], int(GROWTH * ndof))
+        return Plan(steps, cap, TARGET_ROOM, ahead=True)
+    return Plan(steps, max(MAX_DOFS[dim], int(GROWTH * ndof)), GROWTH_MIN)
+
+
 def solve_adaptive(case, status=lambda msg: None, records: list | None = None):
     """(finest mesh, {load: dofs}, {load: relative estimate}, history rows, Changes or
-    None with a single level)."""
+    None with a single level, Stop): levels until every scored load's estimate is below
+    tol (:func:`scored_loads`), the steps are used up or the next level would pass the
+    dof cap (:func:`plan`)."""
     spec = case.reference
     mesh = base_mesh(case)
-    nv0, dim = mesh.p.shape[1], case.dim
-    names = [l.name for l in case.loads]
     d = Discretisation(mesh, spec.cell, spec.element)
     C0 = element_stiffness(case.material, d.centroids())
     solved = [l for l in case.loads if homogeneous_field(d, case, l, C0) is None]
     # closed forms: exact
-    est = {n: (float("nan") if any(l.name == n for l in solved) else 0.0) for n in names}
+    need = {l.name for l in solved}
+    est = {l.name: (float("nan") if l.name in need else 0.0) for l in case.loads}
     parts = UserMeshParts(case, mesh)
-    budget = max(MAX_DOFS[dim], int(GROWTH * d.ndof))
-    steps = STEPS_PER_REFINE[dim] * spec.max_refine if solved else 0
-    history = []
-    kept = []  # earlier levels: (dofs, {load: field on this level's mesh})
-    changes = None
-
-    def probe(v):
-        return np.linalg.norm(v[: nv0 * dim].reshape(nv0, dim), axis=1)
-
-    if steps and GROWTH_MIN * d.ndof > budget:  # too large to refine: coarser meshes of its body
+    how = plan(case, d.ndof)
+    if not solved:
+        how = dataclasses.replace(how, steps=0)
+    if how.steps and how.room * d.ndof > how.cap:  # too large to refine: coarser meshes of its body
         status(
             f"FEM on the mesh ({d.ndof} dofs, {d.nelems} elements; too large to refine within "
-            f"{budget} dofs: the estimate comes from coarser meshes of its body)"
+            f"{how.cap} dofs: the estimate comes from coarser meshes of its body)"
         )
-        U, kept = _with_coarse(case, d, parts, status, records)
-        if kept:
-            changes = _wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
-            changes = Changes(
-                changes.d1,
-                changes.d2,
-                changes.coef,
-                {n: est[n] * max(float(probe(U[n]).max()), 1e-300) for n in names},
-            )
-        history.append(dict(n_dofs=int(d.ndof), **est))
-        return d.mesh, U, est, history, changes
+        return _coarse_only(case, d, parts, est, how.cap, status, records)
+    return _refine_levels(case, d, solved, parts, est, how, status, records)
+
+
+def _probe(nv0: int, dim: int):
+    """|v| at the user's vertices (the first nv0 of every level) of a dof vector v."""
+    return lambda v: np.linalg.norm(v[: nv0 * dim].reshape(nv0, dim), axis=1)
+
+
+def _coarse_only(case, d: Discretisation, parts, est: dict, cap: int, status, records):
+    """solve_adaptive's answer for a mesh too large to refine: its own solve, estimated
+    from the COARSE levels (a uniform bound)."""
+    names = [l.name for l in case.loads]
+    probe = _probe(d.mesh.p.shape[1], case.dim)
+    U, kept = _with_coarse(case, d, parts, status, records)
+    changes = None
+    if kept:
+        highest = HIGHEST[case.reference.element]
+        changes = wide_changes(kept, d.ndof, U, names, case.dim, highest, probe, est)
+        changes = Changes(
+            changes.d1,
+            changes.d2,
+            changes.coef,
+            {n: est[n] * max(float(probe(U[n]).max()), 1e-300) for n in names},
+        )
+    history = [dict(n_dofs=int(d.ndof), **est)]
+    return d.mesh, U, est, history, changes, Stop("coarse", int(d.ndof), cap)
+
+
+def _refine_levels(case, d: Discretisation, solved, parts, est: dict, how: Plan, status, records):
+    """solve_adaptive's levels from the user's mesh (d), as ``how`` plans them."""
+    spec, dim = case.reference, case.dim
+    steps, cap = how.steps, how.cap
+    names = [l.name for l in case.loads]
+    nv0 = d.mesh.p.shape[1]
+    p0 = d.mesh.p.copy()
+    probe = _probe(nv0, dim)
+    targets = scored_loads(case)
+    history, kept, changes = [], [], None  # kept: earlier levels (dofs, {load: field})
     for k in range(steps + 1):
         status(f"FEM adaptive level {k} ({d.ndof} dofs, {d.nelems} elements)")
         U = solve_mesh(case, d.mesh, records=records, disc=d, parts=parts)
         if kept:
-            changes = _wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
+            changes = wide_changes(kept, d.ndof, U, names, dim, HIGHEST[spec.element], probe, est)
         history.append(dict(n_dofs=int(d.ndof), **est))
-        if k == steps or (k >= 1 and max(est.values()) < spec.tol):
-            break
+        if k >= 1 and all(est[n] < spec.tol for n in targets):
+            return d.mesh, U, est, history, changes, Stop("tol", int(d.ndof), cap)
+        if k == steps:
+            reason = "steps" if steps else ("single" if solved else "exact")
+            return d.mesh, U, est, history, changes, Stop(reason, int(d.ndof), cap)
+        if how.ahead and GROWTH_MIN * d.ndof > cap:
+            status(f"FEM: a next adaptive level would exceed {cap} dofs; stopping")
+            return d.mesh, U, est, history, changes, Stop("cap", int(d.ndof), cap)
         finer = d.mesh.refined(_marked(case, d, U, solved, parts))
-        if not np.allclose(finer.p[:, :nv0], mesh.p):
+        if not np.allclose(finer.p[:, :nv0], p0):
             raise RuntimeError("refinement renumbered the vertices")  # scikit-fem contract
-        if n_dofs(finer, spec.element) > budget:
-            status(f"FEM: the next adaptive level would exceed {budget} dofs; stopping")
-            break
-        kept = _prune(kept + [(d.ndof, U)])
+        if n_dofs(finer, spec.element) > cap:
+            status(f"FEM: the next adaptive level would exceed {cap} dofs; stopping")
+            stop = Stop("cap", int(d.ndof), cap, n_dofs(finer, spec.element))
+            return d.mesh, U, est, history, changes, stop
+        kept = prune(kept + [(d.ndof, U)])
         fd = Discretisation(finer, spec.cell, spec.element)
-        kept = _carry(kept, d, fd, names)
+        kept = carry(kept, d, fd, names)
         d = fd
-    return d.mesh, U, est, history, changes
+    raise AssertionError("unreachable: the last level returns")
 
 
 def _with_coarse(case, d: Discretisation, parts, status, records):
@@ -306,71 +323,3 @@ def _with_coarse(case, d: Discretisation, parts, status, records):
             status(f"FEM: no coarse level ({exc.message}); no estimate")
             return U, []
     return U, kept
-
-
-def _levels(dofs, k: int):
-    """(i, j) of the wide steps below level k: i the last level with dofs <= dofs[k] /
-    WIDE^2 (else the first), j the level between them nearest their middle in log dofs;
-    (None, i) when no level lies between."""
-    below = [l for l in range(k) if dofs[l] * WIDE**2 <= dofs[k]]
-    i = below[-1] if below else 0
-    if k - i < 2:
-        return None, i
-    mid = 0.5 * (np.log(dofs[i]) + np.log(dofs[k]))
-    return i, min(range(i + 1, k), key=lambda l: abs(np.log(dofs[l]) - mid))
-
-
-def _prune(kept):
-    """Drop the levels no later estimate can use (level i only moves up)."""
-    dofs = [n for n, _ in kept]
-    below = [l for l in range(len(dofs) - 1) if dofs[l] * WIDE**2 <= dofs[-1]]
-    return kept[below[-1] :] if below else kept
-
-
-def _carry(kept, d: Discretisation, fine: Discretisation, names):
-    """The kept levels' fields (on d's mesh) at the finer mesh's dofs (nested: exact)."""
-    dim = d.dim
-    cols = np.column_stack([U[n].reshape(-1, dim) for _, U in kept for n in names])
-    vals = _interpolate(d, cols, fine)
-    out, c = [], 0
-    for ndof, _ in kept:
-        out.append(
-            (
-                ndof,
-                {
-                    n: vals[:, (c + a) * dim : (c + a + 1) * dim].ravel()
-                    for a, n in enumerate(names)
-                },
-            )
-        )
-        c += len(names)
-    return out
-
-
-def _wide_changes(
-    kept, ndof: int, U: dict, names, dim: int, highest: float, probe, est: dict
-) -> Changes:
-    """The Changes of the finest level U over the wide steps (module docstring); fills
-    ``est`` ({load: largest estimate at the user's vertices / max |u| there})."""
-    dofs = [n for n, _ in kept] + [ndof]
-    levels = [f for _, f in kept] + [U]
-    i, j = _levels(dofs, len(dofs) - 1)
-    d1 = {n: U[n] - levels[j][n] for n in names}
-    d2 = {n: (levels[j][n] - levels[i][n]) if i is not None else np.zeros_like(U[n]) for n in names}
-    used = [dofs[l] for l in ([i] if i is not None else []) + [j, len(dofs) - 1]]
-    coef = {}
-    for n in names:
-        scale = max(float(probe(U[n]).max()), 1e-300)
-        e1, e2 = probe(d1[n]), probe(d2[n])
-        if e1.max() <= EXACT * scale:
-            coef[n] = (1.0, 0.0)
-        else:
-            p = (
-                fitted_order([e2.max(), e1.max()], used, dim, highest)
-                if i is not None
-                else ORDER_RANGE[0]
-            )
-            safety = SAFETY_THREE if i is not None else SAFETY
-            coef[n] = tuple(safety * a for a in coefficients(p, used, dim))
-        est[n] = float(np.maximum(coef[n][0] * e1, coef[n][1] * e2).max() / scale)
-    return Changes(d1, d2, coef)

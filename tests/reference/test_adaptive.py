@@ -229,7 +229,7 @@ def test_p2_effectivity_and_adaptive_beats_uniform(tmp_path, lshape):
     reference. The P2 effectivity stays in a band on the uniform levels, and the adaptive
     mesh ends with a smaller error than the first uniform level with as many dofs."""
     case = mesh_case(tmp_path, lshape, 2, CANTILEVER, "max_refine = 3\ntol = 1e-8\n")
-    mesh, U, est, history, _ = solve_adaptive(case)
+    mesh, U, est, history, _, _ = solve_adaptive(case)
     b, u, F = independent(mesh.refined(2))
     truth = F @ u
 
