@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from harness.engines.settle import CHECK, KE_TOL, RES_TOL, RTOL, STALL
+from harness.engines.settle import CHECK, FORCE_TOL, KE_TOL, RES_TOL, RTOL, STALL
 from harness.errors import SpringbenchError
 
 HELP = (
@@ -16,12 +16,15 @@ HELP = (
     "list the engines"
 )
 EPILOG = f"""stopping rule (harness/engines/settle.py): every {CHECK} steps, settled when the
-displacement's estimated distance still to go is at most {RTOL:g} of its largest value and
-the residual force is at most {RES_TOL:g} of the external force (or has stopped falling over
-{STALL} checks while the kinetic energy is at most {KE_TOL:g} of the load's work: float32
-trembling); velocities are damped each step by exp(-2 omega_1 dt) (about critical for the
-load's lowest mode). The table gives per load the status (settled / not-settled / diverged /
-unsupported), steps, simulated and wall time, final kinetic energy and relative residual;
+displacement's estimated distance still to go is at most {RTOL:g} of its largest value, the
+residual (the net force's work on the FEM's displacement over the external force's) is at
+most {RES_TOL:g} (or what one float32 spacing per coordinate could leave), the body moved
+along its load, and the net force is at most {FORCE_TOL:g} of the external force or has
+stopped falling over {STALL} checks while the kinetic energy is at most {KE_TOL:g} of the
+load's work (float32 trembling); a residual above its bound is never settled. Velocities are
+damped each step by exp(-2 omega_1 dt), omega_1 the lowest mode under the load's own holds.
+The table gives per load the status (settled / not-settled / diverged / unsupported), steps,
+simulated and wall time, final kinetic energy and relative residual;
 --log writes it as CSV."""
 
 

@@ -18,7 +18,14 @@ import math
 
 import numpy as np
 
-from harness.engines.settle import Answer, p1_omega_max, pack_omega, settle, unsupported
+from harness.engines.settle import (
+    Answer,
+    lowest_omegas,
+    omega_max,
+    p1_scaled_stiffness,
+    settle,
+    unsupported,
+)
 from harness.models.masses import lumped_masses
 
 DT_START = 0.2
@@ -68,6 +75,7 @@ class MujocoSim:
         # (k, 3) each vertex's joints
         self.dof = self.m.body_dofadr[bodies][:, None] + np.arange(3)[None, :]
         self.m.body_mass[bodies] = self.masses[self.free_nodes]
+        mj.mj_setConst(self.m, self.d)  # else the mass matrix keeps flexcomp's uniform masses
         self.d.xfrc_applied[bodies, :3] = ld.force[self.free_nodes]
         part = ~ld.held_components.all(axis=1)
         pos = {int(n): k for k, n in enumerate(self.free_nodes)}
@@ -118,14 +126,14 @@ def run(pack, options=None) -> dict:
         }
     tets = np.asarray(tets, int)
     masses = lumped_masses(pack.points, tets, pack.density)
-    limit = 2.0 / p1_omega_max(pack.points, tets, pack.E, pack.nu, masses)
-    omega1, out = pack_omega(pack, masses), {}
+    A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)
+    limit, omegas, out = 2.0 / omega_max(A), lowest_omegas(A, pack.loads), {}
     for ld in pack.loads:
         dt = DT_START * limit
         for _ in range(HALVINGS + 1):
             sim = MujocoSim(pack, tets, masses, dt)
             sim.load(ld)
-            ans = settle(sim, ld, masses, dt, omega1)
+            ans = settle(sim, ld, masses, dt, omegas[ld.name])
             if ans.status != "diverged":
                 break
             dt *= 0.5

@@ -30,7 +30,15 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.engines.settle import float32_resolution, p1_omega_max, pack_omega, settle, unsupported
+from harness.engines.settle import (
+    float32_resolution,
+    lowest_omegas,
+    omega_max,
+    p1_scaled_stiffness,
+    rayleigh_omega,
+    settle,
+    unsupported,
+)
 from harness.errors import SpringbenchError
 from harness.models.masses import lumped_masses
 
@@ -132,14 +140,13 @@ class NewtonSim:
         return x - self.q0, v, f
 
 
-def _solve(pack, sim, masses, dt, omega1=None) -> dict:
-    """Every load settled; damping about critical for ``omega1`` (the export's
-    settle_damping), else for the pack's lowest Rayleigh quotient (settle.pack_omega)."""
-    out, omega1 = {}, omega1 or pack_omega(pack, masses)
+def _solve(pack, sim, masses, dt, omegas: dict) -> dict:
+    """Every load settled, damped about critically for its own ``omegas[name]``."""
+    out = {}
     for ld in pack.loads:
         sim.load(ld.held_nodes, ld.held_components, ld.force)
         out[ld.name] = settle(
-            sim, ld, masses, dt, omega1, resolution=float32_resolution(pack.points)
+            sim, ld, masses, dt, omegas[ld.name], resolution=float32_resolution(pack.points)
         )
     return out
 
@@ -163,9 +170,11 @@ def run_tets(pack, options=None) -> dict:
     lam = pack.E * pack.nu / ((1 + pack.nu) * (1 - 2 * pack.nu))
     k_mu, k_lambda = 4.0 / 3.0 * mu, lam + 5.0 / 6.0 * mu
     masses = lumped_masses(pack.points, tets, pack.density)
-    dt = DT_MARGIN * 2.0 / p1_omega_max(pack.points, tets, pack.E, pack.nu, masses)
+    A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)
+    dt = DT_MARGIN * 2.0 / omega_max(A)
     tet_rows = [(*t, k_mu, k_lambda, 0.0) for t in _positive(pack.points, tets)]
-    return _solve(pack, NewtonSim(pack.points, masses, tets=tet_rows, dt=dt), masses, dt)
+    sim = NewtonSim(pack.points, masses, tets=tet_rows, dt=dt)
+    return _solve(pack, sim, masses, dt, lowest_omegas(A, pack.loads))
 
 
 def _positive(points, tets):
@@ -242,10 +251,8 @@ def run_springs(pack, options=None) -> dict:
 
             return NodeVolumeForces(len(q), data)
 
-    return _solve(
-        pack,
-        NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt, extra=extra),
-        masses,
-        dt,
-        sd.get("omega_1"),
-    )
+    # the export's own omega_1 (its network's lowest held-out mode), else each load's own
+    # Rayleigh quotient: either way a load's damping does not depend on the other loads run
+    omegas = {ld.name: sd.get("omega_1") or rayleigh_omega(ld, masses) for ld in pack.loads}
+    sim = NewtonSim(pack.points, masses, springs=springs, tets=tets, dt=dt, extra=extra)
+    return _solve(pack, sim, masses, dt, omegas)
