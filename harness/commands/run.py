@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 HELP = (
-    "run case files or folders of them (default: every case under cases/) and write tables "
-    "to runs/ "
-    "(the published results/ are the --full run: --full --results results)"
+    "run case files or folders of them and write tables to runs/ (default: the quick tier, "
+    "one case per capability, minutes; --full or a folder such as cases/ runs every case; "
+    "the published results/ are the --full run: --full --results results)"
 )
 
 
@@ -25,7 +25,11 @@ def _positive_int(text):
 
 def add_arguments(p):
     p.add_argument(
-        "paths", nargs="*", metavar="PATH", help="case files or folders (default: cases/)"
+        "paths",
+        nargs="*",
+        metavar="PATH",
+        help="case files or folders (default: the quick tier of cases/, one case per "
+        "capability; with --full every case under cases/)",
     )
     mode = p.add_mutually_exclusive_group()
     mode.add_argument(
@@ -40,7 +44,8 @@ def add_arguments(p):
         dest="mode",
         action="store_const",
         const="full",
-        help="the case's full budget: reproduces the papers",
+        help="the case's full budget: reproduces the papers (without PATH: every case "
+        "under cases/, hours)",
     )
     p.set_defaults(mode="quick")
     p.add_argument(
@@ -80,10 +85,26 @@ def add_arguments(p):
     p.add_argument(
         "--quiet",
         action="store_true",
-        help="no progress bar (cases done, ETA; never drawn when stderr is not a terminal, "
-        "where one line "
-        "per finished case goes to stdout instead) and no such lines",
+        help="no progress bar (cases done, time left; never drawn when stderr is not a "
+        "terminal, where one line per finished case and every 30 s one with the time left "
+        "go to stdout instead) and no such lines",
     )
+
+
+def default_paths(mode: str) -> list[Path]:
+    """The cases run without PATH: the quick tier (said in one line), or with --full every
+    case under cases/ (an empty list: the runner's default)."""
+    from harness.suites import QUICK, QUICK_SECONDS, quick_cases
+
+    if mode == "full":
+        return []
+    print(
+        f"springbench run: the quick tier, {len(QUICK)} cases, one per capability (about "
+        f"{QUICK_SECONDS / 60:.0f} min of CPU); every case: springbench run --full, or a folder "
+        "(springbench run cases/)",
+        flush=True,
+    )
+    return quick_cases()
 
 
 def main(args) -> int:
@@ -99,8 +120,9 @@ def main(args) -> int:
             field="--results",
             fix="drop --results (quick runs go to runs/) or add --full to republish",
         )
+    paths = args.paths or default_paths(args.mode)
     rep = run_suite(
-        args.paths,
+        paths,
         args.mode,
         results,
         jobs=args.jobs,

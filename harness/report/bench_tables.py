@@ -32,6 +32,10 @@ COLUMNS = {  # bench name -> the columns shown, in order (those present)
         + ["G_truth_ratio", "seconds", "stop", "met"]
     ),
     "dynamics": ["bench", "case", "engine", "value", "unit", "ratio", "ratio_to_cxx"],
+    "run": (
+        ["command", "cases", "wall_s", "cpu_s", "cpu_per_core_s", "runs_mb", "peak_gb"]
+        + ["cores", "load_1min", "exit", "target_wall_s", "target_mb"]
+    ),
 }
 
 

@@ -4,6 +4,7 @@ Nothing is recomputed but means over the stored rows."""
 
 from __future__ import annotations
 
+from harness.engines import EXTRA
 from harness.report.figures.engines import who
 from harness.report.numbers import fmt
 
@@ -14,9 +15,18 @@ def _engine_status(df) -> str:
     return "engine_status" if "engine_status" in df.columns else "status"
 
 
+def _cell(r, st: str) -> str:
+    """One engine's cell: its mean G_norm, and why when it found no equilibrium or is not
+    installed."""
+    if r[st] == "not-installed" or r.get("status") == "not-installed":
+        return "not installed"
+    return fmt(r["G_norm"]) if r[st] == "settled" else f"{fmt(r['G_norm']) or '-'} ({r[st]})"
+
+
 def engines_summary(df):
     """Per body, mesh and nu: each engine's (and springbench export's) mean G_norm over the
-    held-out loads; a cell says why when an engine found no equilibrium."""
+    held-out loads; a cell says why when an engine found no equilibrium or is not
+    installed."""
     import pandas as pd
 
     st = _engine_status(df)
@@ -25,42 +35,81 @@ def engines_summary(df):
     m = df[df["load"] == "mean"].copy()
     m["who"] = m["engine"] + ": " + who(m["model"])
     rows = []
-    for (body, tets, nu), g in m.groupby(["body", "n_tets", "nu"], sort=False):
-        row = {"body": body, "tets": fmt(tets), "nu": f"{nu:g}"}
+    for (body, tets, nu), g in m.groupby(["body", "n_tets", "nu"], sort=False, dropna=False):
+        row = {"body": body, "tets": fmt(tets), "nu": f"{nu:g}" if nu == nu else "-"}
         for _, r in g.iterrows():
-            row[r["who"]] = (
-                fmt(r["G_norm"]) if r[st] == "settled" else f"{fmt(r['G_norm'])} ({r[st]})"
-            )
+            row[r["who"]] = _cell(r, st)
         rows.append(row)
     return pd.DataFrame(rows).fillna("") if rows else None
+
+
+def _span(g) -> str:
+    """The range of mean G_norm of ``g`` in percent ("3-25 %", "4 %")."""
+    lo, hi = f"{100 * g['G_norm'].min():.0f}", f"{100 * g['G_norm'].max():.0f}"
+    return f"{lo} %" if lo == hi else f"{lo}-{hi} %"
+
+
+def _by_nu(g) -> str:
+    """How far ``g``'s models are from the FEM at the lowest and highest nu it has."""
+    nus = g["nu"][g["nu"].notna()] if "nu" in g else g.iloc[:0]
+    if nus.empty:
+        return f"{_span(g)} from the FEM"
+    lo, hi = float(nus.min()), float(nus.max())
+    text = f"{_span(g[g['nu'] == lo])} from the FEM at nu = {lo:g}"
+    return text if lo == hi else f"{text} and {_span(g[g['nu'] == hi])} at nu = {hi:g}"
+
+
+def _not_installed(runs, st: str) -> list[str]:
+    """The engines whose rows say their package is missing."""
+    gone = runs[st] == "not-installed"
+    if "status" in runs:
+        gone |= runs["status"] == "not-installed"
+    return sorted(map(str, runs.loc[gone, "engine"].dropna().unique()))
+
+
+def _and(names) -> str:
+    names = list(names)
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def engines_finding(df) -> str:
     """One sentence from the engine table: how far the engines' own models and
     springbench's exports are from the FEM (mean G_norm over the held-out loads) at the
-    lowest and highest nu, and how many engine runs settled."""
+    lowest and highest nu, which engines are not installed (and the extra that installs
+    them), and how many engine runs settled."""
     st = _engine_status(df)
-    m = df[(df["load"] == "mean") & df["G_norm"].notna()]
+    if not {"load", "engine", "model", "G_norm", st} <= set(df.columns):
+        return "The engine table has no engine runs."
+    m = df[(df["load"] == "mean") & _has(df["G_norm"])]
     runs = df[df["load"] != "mean"]
-    own = m[~m["model"].astype(str).str.startswith("springbench")]
-    ours = m[m["model"].astype(str).str.startswith("springbench")]
-    lo, hi = float(m["nu"].min()), float(m["nu"].max())
+    ours = m["model"].astype(str).str.startswith("springbench")
+    own, exported = m[~ours], m[ours]
+    parts = []
+    if len(own):
+        names = ", ".join(sorted(map(str, own["engine"].unique())))
+        parts.append(f"the engines' own models ({names}) are {_by_nu(own)}")
+    if len(exported):
+        nus = exported["nu"].dropna().unique()
+        every = " at every nu" if len(nus) > 1 else f" at nu = {nus[0]:g}" if len(nus) else ""
+        parts.append(f"springbench's exports run in Newton are {_span(exported)}{every}")
+    gone = _not_installed(runs, st)
+    if gone:
+        verb = "is" if len(gone) == 1 else "are"
+        parts.append(f"{_and(gone)} {verb} not installed ({EXTRA} installs the engines)")
+    ran = runs[~runs["engine"].isin(gone)]
+    if len(ran):
+        parts.append(f"{int((ran[st] == 'settled').sum())} of {len(ran)} engine runs settled")
+    if not (len(own) or len(exported)):
+        parts.insert(0, "no engine run was scored against the FEM")
+    text = "; ".join(parts)
+    return text[:1].upper() + text[1:] + "."
 
-    def span(g) -> str:
-        return (
-            f"{100 * g['G_norm'].min():.0f}-{100 * g['G_norm'].max():.0f} %"
-            if len(g)
-            else "not run"
-        )
 
-    engines = ", ".join(sorted(own["engine"].unique()))
-    return (
-        f"The engines' own models ({engines}) are {span(own[own['nu'] == lo])} from the FEM "
-        f"at nu = {lo:g} and "
-        f"{span(own[own['nu'] == hi])} at nu = {hi:g}; springbench's exports run in Newton "
-        f"are {span(ours)} at "
-        f"every nu; {int((runs[st] == 'settled').sum())} of {len(runs)} engine runs settled."
-    )
+def _has(col):
+    """Which entries of ``col`` are numbers."""
+    import pandas as pd
+
+    return pd.to_numeric(col, errors="coerce").notna()
 
 
 ENGINES_NOTE = (

@@ -7,7 +7,9 @@
 - ``memorised``: a fitted row whose held-out error is more than MEMORISED times its
   fitted G: the fit learned its training loads, not the body;
 - ``fit-worse-than-rule``: a fitted row whose held-out error is above the best stiffness
-  rule's on the same nodes and loads, by more than the spread over the fit's starts.
+  rule's on the same nodes and loads, by more than the spread over the fit's starts;
+- ``not-installed``: the row's status: an engine it needs is not installed, so the row
+  holds no numbers (never counted as ``ok``).
 
 The held-out error is the mean of each held-out load's own normalised G
 (``G_heldout_mean``) where a row has it, else the pooled ``G_heldout``.
@@ -16,6 +18,8 @@ The held-out error is the mean of each held-out load's own normalised G
 from __future__ import annotations
 
 import math
+
+from harness.engines import EXTRA
 
 MEMORISED = 3.0  # held-out G above this multiple of the fitted G: memorised
 LEGEND = {
@@ -27,7 +31,30 @@ LEGEND = {
     "fit-worse-than-rule": "the fit's held-out error is above the best stiffness rule's on "
     "the same mesh and loads "
     "(beyond the spread over its starts): the rule predicts better",
+    "not-installed": f"an engine the row needs is not installed: {EXTRA} installs the engines",
 }
+# row statuses in the order the page and the console count them
+STATUSES = ("ok", "ref-coarse", "not-installed", "error")
+
+
+def status_counts(status) -> str:
+    """'12 ok, 3 not-installed': how many rows have each of STATUSES; "" for none."""
+    import pandas as pd
+
+    s = pd.Series(status, dtype=object).astype(str)
+    return ", ".join(f"{int((s == n).sum())} {n}" for n in STATUSES if (s == n).any())
+
+
+def not_installed_note(df) -> str:
+    """The page's line for rows whose engine is not installed: how many, which engines,
+    and the command that installs them."""
+    rows = df[df["status"].astype(str) == "not-installed"]
+    names = sorted(map(str, rows["engine"].dropna().unique())) if "engine" in rows else []
+    which = f" ({', '.join(names)})" if names else ""
+    return (
+        f"{len(rows)} rows are not-installed: their engines{which} are not installed here, "
+        f"so those rows hold no numbers; {EXTRA} installs them."
+    )
 
 
 def number(v) -> float:
@@ -180,6 +207,8 @@ def case_lines(df):
             )
         elif "ref-coarse" in status:
             line["findings"] = ["ref-coarse"]
+        if "not-installed" in status:
+            line["findings"].append("not-installed")
         if "error" in status:
             line["findings"] = ["error"] + line["findings"]
         out.append(line)

@@ -18,6 +18,7 @@ from urllib.parse import quote
 from harness.report.bench_tables import bench_table, provenance_line
 from harness.report.claims import headline_findings, suite_lists
 from harness.report.columns import glossary
+from harness.report.findings import not_installed_note, status_counts
 from harness.report.frames import REF_COARSE
 from harness.report.headlines import headline_tables
 from harness.report.origin import lines
@@ -68,7 +69,7 @@ def png_size(path: Path) -> tuple[int, int] | None:
 
 def html_table(df) -> str:
     """A table of display strings; cells that look like numbers are right-aligned, rows
-    whose status is ref-coarse or error are tinted."""
+    whose status is ref-coarse, not-installed or error are tinted."""
     cols = [str(c) for c in df.columns]
     out = [
         "<table>",
@@ -79,7 +80,8 @@ def html_table(df) -> str:
         cells = ["" if v is None or v != v else str(v) for v in row]
         flag = (
             " class='flag'"
-            if "status" in cols and cells[cols.index("status")] in (REF_COARSE, "error")
+            if "status" in cols
+            and cells[cols.index("status")] in (REF_COARSE, "not-installed", "error")
             else ""
         )
         tds = []
@@ -156,11 +158,7 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
         )
         return parts
     status = df["status"].astype(str) if "status" in df else None
-    counts = ", ".join(
-        f"{int((status == s).sum())} {s}"
-        for s in ("ok", REF_COARSE, "error")
-        if status is not None and (status == s).any()
-    )
+    counts = (status_counts(status) if status is not None else "") or "no status"
     modes = sorted(set(df["mode"].dropna().astype(str))) if "mode" in df else []
     parts.append(
         f"<p class='note'>{df['case'].nunique()} cases, {len(df)} rows ({counts}); budgets: "
@@ -173,6 +171,8 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
             "<p class='warn'>Quick budgets: a smoke run, not the published numbers "
             "(those are the <code>--full</code> run in <code>results/</code>).</p>"
         )
+    if status is not None and (status == "not-installed").any():
+        parts.append(f"<p class='warn'>{_e(not_installed_note(df))}</p>")
     if status is not None and (status == "error").any():
         errs = df[status == "error"]
         msg = [e[:200] if isinstance(e, str) else "" for e in _col_or_empty(errs, "error")]

@@ -9,6 +9,7 @@ from urllib.parse import quote
 
 from harness.report.bench_tables import bench_table, provenance_line
 from harness.report.claims import headline_findings, suite_lists
+from harness.report.findings import status_counts
 from harness.report.headlines import headline_tables
 from harness.report.markdown import markdown_table
 from harness.report.origin import lines
@@ -24,12 +25,7 @@ def _suite(root: Path, suite: Path, df, sections) -> list[str]:
     out = [f"## {title}\n"]
     if text:
         out.append(text + "\n")
-    status = df["status"].astype(str) if "status" in df else None
-    counts = ", ".join(
-        f"{int((status == s).sum())} {s}"
-        for s in ("ok", "ref-coarse", "error")
-        if status is not None and (status == s).any()
-    )
+    counts = status_counts(df["status"]) if "status" in df else ""
     out.append(f"{df['case'].nunique()} cases, {len(df)} rows ({counts or 'no status'}).\n")
     for part in sections:
         out.append(part)

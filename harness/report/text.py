@@ -233,4 +233,6 @@ BENCH = {
     "reference": "the FEM reference's true error and cost against an independent solve",
     "heldout": "calibrate against every stiffness rule on held-out gmsh bodies, loads and "
     "clamps it never saw",
+    "run": "README's first command, springbench run (the quick tier): wall and CPU seconds, "
+    "what it leaves in runs/",
 }

@@ -31,8 +31,6 @@ from __future__ import annotations
 
 import os
 import queue as queue_mod
-import shutil
-import sys
 import traceback
 import uuid
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -42,12 +40,14 @@ from pathlib import Path
 
 from harness.errors import SpringbenchError
 from harness.paths import DEFAULT_RESULTS
+from harness.progress import SuiteProgress as _Progress
 from harness.provenance import collect
 from harness.report import build as report
 from harness.run.execute import DaskSink, QueueSink, _ignore_sigint, _init_worker, execute
 from harness.run.jobs import Job, JobResult, _error_row, code_unchanged, plan
 from harness.run.lock import clean_stale_scratch, run_lock
 from harness.run.store import _prune_seeds, read_result, result_path, store
+from harness.suites import quick_seconds
 
 DASK_CONNECT_TIMEOUT = "15s"
 
@@ -74,54 +74,6 @@ class RunReport:
     @property
     def ran(self) -> list[JobResult]:
         return [r for r in self.results if r.status == "ok"]
-
-
-class _Progress:
-    """One tqdm bar for the suite on a terminal; the postfix shows the latest status of
-    the running jobs. Without a terminal (CI logs, pipes) one line per finished job on
-    stdout instead. ``enabled`` None: decide by the terminal."""
-
-    def __init__(self, total: int, enabled):
-
-        from tqdm import tqdm
-
-        tty = sys.stderr.isatty() if enabled is None else bool(enabled)
-        size = shutil.get_terminal_size((0, 0))  # a pty without a size (0 x 0) hides tqdm bars
-        self.bar = tqdm(
-            total=total,
-            desc="suite",
-            unit="case",
-            file=sys.stderr,
-            disable=not tty,
-            dynamic_ncols=size.columns > 0,
-            ncols=None if size.columns > 0 else 100,
-            nrows=None if size.lines > 0 else 24,
-        )
-        self.lines = enabled is None and not tty
-        self.total, self.n = total, 0
-        self.status: dict[str, str] = {}
-
-    def set(self, label: str, msg: str):
-        self.status[label] = msg
-        self._show()
-
-    def done(self, label: str, what: str = ""):
-        self.status.pop(label, None)
-        self.n += 1
-        self.bar.update(1)
-        self._show()
-        if self.lines and what:
-            print(f"[{self.n}/{self.total}] {label}: {what}", flush=True)
-
-    def _show(self):
-        text = "; ".join(f"{k}: {v}" for k, v in list(self.status.items())[-3:])
-        self.bar.set_postfix_str(text[:120], refresh=True)
-
-    def write(self, line: str):
-        self.bar.write(line, file=sys.stderr)
-
-    def close(self):
-        self.bar.close()
 
 
 def error_line(res: JobResult) -> str:
@@ -240,7 +192,7 @@ def _run_locked(
             )
         else:
             pending.append(job)
-    bar = _Progress(len(planned) + len(failed), progress)
+    bar = _Progress(len(planned) + len(failed), progress, recorded_seconds(pending, results))
     for res in done:
         bar.done(res.job.label, "unchanged, skipped")
     all_results = list(done)
@@ -277,6 +229,27 @@ def _run_locked(
     order = {j: i for i, j in enumerate([r.job for r in failed] + planned)}
     all_results.sort(key=lambda r: order.get(r.job, 0))
     return RunReport(all_results, suites, results)
+
+
+def recorded_seconds(jobs: list[Job], results: Path) -> dict[str, float | None]:
+    """Each job's seconds as last recorded (None: never): by an earlier run of it in
+    ``results`` at the same budgets, else in the quick tier's table (harness/suites.py),
+    else in the published results/. The progress line's time left weighs the jobs by
+    them; nothing else reads them."""
+    tier = quick_seconds()
+    out = {}
+    for job in jobs:
+        own = read_result(result_path(Path(results), job)) or {}
+        published = read_result(result_path(Path(DEFAULT_RESULTS), job)) or {}
+        found = (
+            own.get("seconds") if own.get("mode") == job.mode else None,
+            tier.get((job.suite, job.case)) if job.mode == "quick" else None,
+            published.get("seconds"),
+        )
+        out[job.label] = next(
+            (float(s) for s in found if isinstance(s, (int, float)) and s > 0), None
+        )
+    return out
 
 
 def _run_pool(pending: list[Job], jobs_n: int, finish, bar):

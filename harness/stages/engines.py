@@ -14,7 +14,8 @@ Rows: one per (engine, model, load) with G_norm, max_error, G_ref (the FEM's own
 as a G_norm), engine_status (settled / not-settled / diverged / not-installed / failed),
 steps and wall_s to equilibrium, a note, and a ``mean`` row per (engine, model) (G_norm:
 the mean over the loads; wall_s: the sum). An engine that cannot represent a case says so
-in its rows; the case goes on.
+in its rows; the case goes on. Each row's ``status`` is ``not-installed`` where its engine's
+package is missing (the note names the extra that installs it), else ``ok``.
 """
 
 from __future__ import annotations
@@ -249,8 +250,25 @@ def case_rows(case, scratch: Path, spec=None, status=lambda msg: None) -> pd.Dat
     return df
 
 
+def row_status(df: pd.DataFrame) -> list[str]:
+    """Each row's ``status``: ``not-installed`` where the engine's package is missing (a
+    ``mean`` row: where every load of its engine and model is), else ``ok``; so a run
+    without the engines never reads as a run that passed."""
+    loads = df[df["load"] != "mean"]
+    gone = {
+        key
+        for key, g in loads.groupby(["engine", "model"], sort=False, dropna=False)
+        if (g["engine_status"] == "not-installed").all()
+    }
+    return [
+        "not-installed" if st == "not-installed" or (e, m) in gone else "ok"
+        for e, m, st in zip(df["engine"], df["model"], df["engine_status"])
+    ]
+
+
 def run(case, ctx) -> list[dict]:
     with tempfile.TemporaryDirectory(prefix="springbench-engines-") as tmp:
         df = case_rows(case, Path(tmp), status=ctx.status)
     df.insert(0, "case", case.name)
+    df["status"] = row_status(df)
     return df.to_dict("records")
