@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -103,126 +104,186 @@ def anneal(
     static_only(problem, "sa")
     t_start = time.perf_counter()
     cap = limit(opts, "the annealing chain")
-    grouped = problem.groups is not None
-    npar = problem.n_params
     e = problem.n_springs
-    temperatures = int(opts["temperatures"] if opts["temperatures"] is not None else 2 * e)
-    nlimit = int(opts["nlimit"] if opts["nlimit"] is not None else 2 * e)
-    glimit = int(opts["glimit"] if opts["glimit"] is not None else e)
-    max_steps = opts["max_steps"]
-    lo, hi = problem.bounds
-    use_refactor = refactor or grouped or opts["engine"] == "refactor"
-    if use_refactor:
-        eng = RefactorG(problem, problem.k0)
-    else:
-        eng = IncrementalG(
-            problem,
-            problem.k0,
-            mode=opts["engine"],
-            refactor_every=opts["refactor_every"],
-            batch=int(opts["batch"]),
-            dense_max=int(opts["dense_max"]),
-        )
+    limits = _Limits(
+        int(opts["temperatures"] if opts["temperatures"] is not None else 2 * e),
+        int(opts["nlimit"] if opts["nlimit"] is not None else 2 * e),
+        int(opts["glimit"] if opts["glimit"] is not None else e),
+        opts["max_steps"],
+    )
+    eng = _engine(problem, opts, refactor)
     t_loop = time.perf_counter()
-    x = np.ones(npar)  # factors of k0 per parameter
-    rng = np.random.default_rng(seed)
+    draws = _Draws(np.random.default_rng(seed), problem.n_params, opts["factor"])
     G0 = eng.G()
-    Gcur = G0
-    best_G, best_x = G0, x.copy()
-    T = opts["T0"] * G0
-    trace = [(0, G0)]
-    steps = accepted = uphill_total = 0
-    chunk_i = CHUNK
-    stop = None
-    for i in range(temperatures):
-        T *= opts["r"] ** i
-        good = kk = uphill = 0
-        G_start = Gcur
-        while True:
-            if chunk_i == CHUNK:
-                par = rng.integers(npar, size=CHUNK)
-                mult = np.exp(opts["factor"] * rng.uniform(-1.0, 1.0, size=CHUNK))
-                pacc = rng.random(CHUNK)
-                chunk_i = 0
-            j = int(par[chunk_i])
-            xn = min(max(x[j] * mult[chunk_i], lo), hi)
-            p = pacc[chunk_i]
-            chunk_i += 1
-            if not grouped:
-                eng.upcoming = par[chunk_i:]
-                Gn = eng.propose(j, problem.k0[j] * xn)
-            else:
-                xv = x.copy()
-                xv[j] = xn
-                Gn = eng.propose_k(problem.k_of(xv))
-            steps += 1
-            kk += 1
-            if Gn < Gcur:
-                take = True
-                good += 1
-            else:
-                take = T > 0 and p < np.exp((Gcur - Gn) / T)
-                uphill += int(take)
-            if take:
-                eng.accept()
-                x[j] = xn
-                Gcur = Gn
-                accepted += 1
-                if Gcur < best_G:
-                    best_G = Gcur
-                    best_x = x.copy()
-            else:
-                eng.reject()
-            if kk > nlimit or good > glimit:
-                break
-            if max_steps is not None and steps >= max_steps:
-                stop = "max_steps"
-                break
-            if (steps & 15) == 0:
-                cap.check()
-        uphill_total += uphill
-        trace.append((steps, Gcur))
-        if status is not None and i % 10 == 0:
-            status(f"sa T#{i + 1} of {temperatures} G={Gcur:.4g} best={best_G:.4g} steps={steps}")
-        if stop:
-            break
-        if opts["tol"] > 0 and uphill == 0 and (G_start - Gcur) <= opts["tol"] * G_start:
-            stop = "converged"
-            break
-    else:
-        stop = "temperatures"
+    chain = _Chain(np.ones(problem.n_params), G0, G0, np.ones(problem.n_params))
+    trace, stop, uphill = _cool(problem, eng, chain, draws, opts, limits, cap, status)
     loop_seconds = time.perf_counter() - t_loop
-    k_best = problem.k_of(best_x)
+    k_best = problem.k_of(chain.best_x)
     G_final = problem.G(k_best)  # independent check: a full re-solve
-    seconds = time.perf_counter() - t_start
+    steps_per_s = chain.steps / max(loop_seconds, 1e-12)
     return dict(
         k=k_best,
         G_initial=G0,
         G_final=G_final,
         trace=np.array(trace, float),
-        seconds=seconds,
-        n_steps=steps,
-        accepted=accepted,
+        seconds=time.perf_counter() - t_start,
+        n_steps=chain.steps,
+        accepted=chain.accepted,
         info=dict(
             engine=eng.mode,
             stop=stop,
             temperatures_done=len(trace) - 1,
-            temperatures=temperatures,
-            nlimit=nlimit,
-            glimit=glimit,
+            temperatures=limits.temperatures,
+            nlimit=limits.nlimit,
+            glimit=limits.glimit,
             T_abs0=opts["T0"] * G0,
-            uphill=uphill_total,
-            acceptance=accepted / max(steps, 1),
-            G_best_tracked=best_G,
+            uphill=uphill,
+            acceptance=chain.accepted / max(chain.steps, 1),
+            G_best_tracked=chain.best_G,
             seed=seed,
             rebases=eng.n_rebase,
             refactor_every=getattr(eng, "refactor_every", None),
             setup_seconds=t_loop - t_start,
             loop_seconds=loop_seconds,
-            steps_per_s=steps / max(loop_seconds, 1e-12),
-            e_squared_hours=e * e / max(steps / max(loop_seconds, 1e-12), 1e-12) / 3600,
+            steps_per_s=steps_per_s,
+            e_squared_hours=e * e / max(steps_per_s, 1e-12) / 3600,
         ),
     )
+
+
+@dataclass(frozen=True)
+class _Limits:
+    """Fig. 6's counts: temperatures, proposals (nlimit) and improvements (glimit) per
+    temperature, and the budget in proposals (None: unlimited)."""
+
+    temperatures: int
+    nlimit: int
+    glimit: int
+    max_steps: int | None
+
+
+@dataclass
+class _Chain:
+    """The chain's state: the factors x of k0 and their G, the best seen, and the counts
+    of proposals and accepts."""
+
+    x: np.ndarray
+    G: float
+    best_G: float
+    best_x: np.ndarray
+    steps: int = 0
+    accepted: int = 0
+
+
+class _Draws:
+    """The chain's random stream, drawn CHUNK proposals at a time (so it is the same for
+    every engine): each proposal's parameter j, its multiplier exp(factor U(-1, 1)) and
+    its Metropolis number U(0, 1)."""
+
+    def __init__(self, rng, npar: int, factor: float):
+        self.rng, self.npar, self.factor = rng, npar, factor
+        self.i = CHUNK
+
+    def next(self):
+        """(j, multiplier, acceptance number) of the next proposal."""
+        if self.i == CHUNK:
+            self.par = self.rng.integers(self.npar, size=CHUNK)
+            self.mult = np.exp(self.factor * self.rng.uniform(-1.0, 1.0, size=CHUNK))
+            self.pacc = self.rng.random(CHUNK)
+            self.i = 0
+        i = self.i
+        self.i += 1
+        return int(self.par[i]), self.mult[i], self.pacc[i]
+
+    def upcoming(self) -> np.ndarray:
+        """The parameters of the drawn proposals still to come (the engine batches them)."""
+        return self.par[self.i :]
+
+
+def _engine(problem: FitProblem, opts: dict, refactor: bool):
+    """G of a proposal: rank-1 updates (:class:`IncrementalG`), or full re-solves
+    (:class:`RefactorG`) for sa-refactor, grouped mode or engine = "refactor"."""
+    if refactor or problem.groups is not None or opts["engine"] == "refactor":
+        return RefactorG(problem, problem.k0)
+    return IncrementalG(
+        problem,
+        problem.k0,
+        mode=opts["engine"],
+        refactor_every=opts["refactor_every"],
+        batch=int(opts["batch"]),
+        dense_max=int(opts["dense_max"]),
+    )
+
+
+def _cool(problem, eng, chain: _Chain, draws: _Draws, opts: dict, limits: _Limits, cap, status):
+    """The temperatures T_i = T_{i-1} r^i from T0 G(k0): (trace of (steps, G) after each,
+    why the chain stopped, uphill moves taken)."""
+    T = opts["T0"] * chain.G
+    trace = [(0, chain.G)]
+    uphill_total = 0
+    for i in range(limits.temperatures):
+        T *= opts["r"] ** i
+        G_start = chain.G
+        uphill, stop = _temperature(problem, eng, chain, draws, T, limits, cap)
+        uphill_total += uphill
+        trace.append((chain.steps, chain.G))
+        if status is not None and i % 10 == 0:
+            status(
+                f"sa T#{i + 1} of {limits.temperatures} G={chain.G:.4g} best={chain.best_G:.4g} "
+                f"steps={chain.steps}"
+            )
+        if stop:
+            return trace, stop, uphill_total
+        if opts["tol"] > 0 and uphill == 0 and (G_start - chain.G) <= opts["tol"] * G_start:
+            return trace, "converged", uphill_total
+    return trace, "temperatures", uphill_total
+
+
+def _temperature(problem, eng, chain: _Chain, draws: _Draws, T: float, limits: _Limits, cap):
+    """Proposals at temperature T until more than nlimit were made or more than glimit
+    improved G, Metropolis acceptance of a worse one: (uphill moves, "max_steps" or None)."""
+    lo, hi = problem.bounds
+    grouped = problem.groups is not None
+    good = kk = uphill = 0
+    while True:
+        j, mult, p = draws.next()
+        xn = min(max(chain.x[j] * mult, lo), hi)
+        if not grouped:
+            eng.upcoming = draws.upcoming()
+            Gn = eng.propose(j, problem.k0[j] * xn)
+        else:
+            xv = chain.x.copy()
+            xv[j] = xn
+            Gn = eng.propose_k(problem.k_of(xv))
+        chain.steps += 1
+        kk += 1
+        if Gn < chain.G:
+            take = True
+            good += 1
+        else:
+            take = T > 0 and p < np.exp((chain.G - Gn) / T)
+            uphill += int(take)
+        if take:
+            _accept(eng, chain, j, xn, Gn)
+        else:
+            eng.reject()
+        if kk > limits.nlimit or good > limits.glimit:
+            return uphill, None
+        if limits.max_steps is not None and chain.steps >= limits.max_steps:
+            return uphill, "max_steps"
+        if (chain.steps & 15) == 0:
+            cap.check()
+
+
+def _accept(eng, chain: _Chain, j: int, xn: float, Gn: float) -> None:
+    """The proposal becomes the chain's state (and its best, if it is)."""
+    eng.accept()
+    chain.x[j] = xn
+    chain.G = Gn
+    chain.accepted += 1
+    if chain.G < chain.best_G:
+        chain.best_G = chain.G
+        chain.best_x = chain.x.copy()
 
 
 def _chain_worker(args):

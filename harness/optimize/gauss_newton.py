@@ -6,6 +6,7 @@ derives the products); far faster than L-BFGS-B on large networks (``springbench
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -80,97 +81,47 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
     Each CG step costs one forward and one adjoint solve per load set with the kept
     factorisation. Grouped mode sums the Jacobian columns of a group. It stops by maxiter,
     ftol (converged) or target; max_seconds only aborts (harness/optimize/deadline.py)."""
-    import scipy.sparse.linalg as spla_
-
     opts = check_options(options, GN_DEFAULTS, "gauss-newton")
     static_only(problem, "gauss-newton")
     t0 = time.perf_counter()
-    cap = limit(opts, "the gauss-newton fit")
-    lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
-    npar = problem.n_params
-    groups = problem.groups
-
-    def expand(v):
-        return v if groups is None else v[groups]
-
-    def reduce(g):
-        return g if groups is None else np.bincount(groups, weights=g, minlength=npar)
-
-    x, init_info = start_point(problem, opts["init"])
-    Jc = _Jacobian(problem, problem.k_of(np.exp(x)))
-    G0sq = Jc.G2 if opts["init"] == "none" else value_and_grad(problem, problem.k0, grad=False)[0]
-    trace = [(0, np.sqrt(G0sq))] + ([] if opts["init"] == "none" else [(0, np.sqrt(Jc.G2))])
-    if Jc.G2 > G0sq:  # a start worse than k0: fall back to k0
-        x, Jc = np.zeros(npar), _Jacobian(problem, problem.k0)
-        init_info["init_rejected"] = True
-    mu = None
-    stop, nit, n_solves, done_its = "maxiter", 0, 0, 0
+    lm = _LM(problem, opts, limit(opts, "the gauss-newton fit"), seed)
+    x, Jc, G0sq, trace, init_info = _start(problem, opts)
+    mu = mu0 = None
+    stop, n_solves, done_its = "maxiter", 0, 0
     for nit in range(1, int(opts["maxiter"]) + 1):
         if opts["target"] > 0 and Jc.G2 <= (opts["target"] ** 2) * G0sq:
             stop = "target"
             break
-        cap.check()
-        r = Jc.residual()
-        g = reduce(Jc.rmatvec(r))
-        rng = np.random.default_rng([seed, nit])
-        if opts["probes"] > 0:  # Hutchinson estimate of diag(J^T J)
-            diag = np.zeros(npar)
-            for _ in range(int(opts["probes"])):
-                diag += reduce(Jc.rmatvec(rng.choice([-1.0, 1.0], size=len(r)))) ** 2
-            diag /= opts["probes"]
-            diag = np.maximum(diag, 1e-12 * diag.max())
-        else:
-            diag = np.ones(npar)
+        lm.cap.check()
+        g = lm.reduce(Jc.rmatvec(Jc.residual()))
+        diag = lm.diagonal(Jc, nit)
         if mu is None:
             mu = mu0 = opts["mu"] * float(np.mean(diag))
-        A = spla_.LinearOperator(
-            (npar, npar),
-            dtype=float,
-            matvec=lambda v: reduce(Jc.rmatvec(Jc.matvec(expand(v)))) + mu * v,
-        )
-        Minv = spla_.LinearOperator((npar, npar), dtype=float, matvec=lambda v: v / (diag + mu))
-        rtol = float(opts["cg_rtol"])  # fixed: a loose Eisenstat-Walker forcing term did worse here
-        p, _ = spla_.cg(
-            A,
-            -g,
-            rtol=rtol,
-            maxiter=int(opts["cg_maxiter"]),
-            callback=lambda xk: cap.check(),
-            M=Minv,
-        )
+        p = lm.direction(Jc, g, diag, mu)
         # model decrease of G^2/2
-        pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(expand(p)) ** 2)))
+        pred = -(g @ p) - 0.5 * (float(np.sum(Jc.matvec(lm.expand(p)) ** 2)))
         n_solves += Jc.n_solves
-        # backtrack before giving up
-        for t in (1.0, 0.25, 1 / 16):
-            cap.check()
-            xn = np.clip(x + t * p, lo, hi)
-            Jn = _Jacobian(problem, problem.k_of(np.exp(xn)))
-            if Jn.G2 < Jc.G2:
-                break
+        xn, Jn, t = lm.backtrack(x, p, Jc)
         actual = 0.5 * (Jc.G2 - Jn.G2)
         if actual > 0:
             small = 2 * max(actual, pred) <= float(opts["ftol"]) * Jc.G2
             x, Jc = xn, Jn
-            rho = actual / max(pred, 1e-300)
-            mu *= 1 / 3 if (t == 1.0 and rho > 0.75) else (1.0 if t == 1.0 and rho > 0.25 else 4.0)
+            mu *= _damping_factor(t, actual / max(pred, 1e-300))
         else:
             mu *= 16.0
             small = mu > 1e12 * mu0
-        if small:
-            stop = "converged"
         trace.append((nit, np.sqrt(Jc.G2)))
         done_its = nit
         if status is not None:
             status(
                 f"gauss-newton it {nit} of {int(opts['maxiter'])} G/G0={np.sqrt(Jc.G2 / G0sq):.3g}"
             )
-        if stop == "converged":
+        if small:
+            stop = "converged"
             break
-    k = problem.k_of(np.exp(x))
     G_final = float(np.sqrt(Jc.G2))  # from a fresh factorisation at k (no incremental state)
     return dict(
-        k=k,
+        k=problem.k_of(np.exp(x)),
         G_initial=float(np.sqrt(G0sq)),
         G_final=G_final,
         trace=np.array(trace),
@@ -186,3 +137,90 @@ def gauss_newton(problem: FitProblem, options: dict, seed: int = 0, status=None)
             **init_info,
         ),
     )
+
+
+def _start(problem: FitProblem, opts: dict):
+    """(x, its Jacobian, G(k0)^2, the trace's first points, the start's info): the start
+    point of ``init``, or k0 when that start is worse than k0."""
+    x, init_info = start_point(problem, opts["init"])
+    Jc = _Jacobian(problem, problem.k_of(np.exp(x)))
+    G0sq = Jc.G2 if opts["init"] == "none" else value_and_grad(problem, problem.k0, grad=False)[0]
+    trace = [(0, np.sqrt(G0sq))] + ([] if opts["init"] == "none" else [(0, np.sqrt(Jc.G2))])
+    if Jc.G2 > G0sq:  # a start worse than k0: fall back to k0
+        x, Jc = np.zeros(problem.n_params), _Jacobian(problem, problem.k0)
+        init_info["init_rejected"] = True
+    return x, Jc, G0sq, trace, init_info
+
+
+def _damping_factor(t: float, rho: float) -> float:
+    """The damping's change after an accepted step of length t whose actual decrease is rho
+    times the predicted one: down on a full good step, up on a poor or shortened one."""
+    return 1 / 3 if (t == 1.0 and rho > 0.75) else (1.0 if t == 1.0 and rho > 0.25 else 4.0)
+
+
+@dataclass(frozen=True)
+class _LM:
+    """The parts of one Levenberg-Marquardt fit: the problem, its options, the wall-time
+    cap and the seed of the diagonal's probes."""
+
+    problem: FitProblem
+    opts: dict
+    cap: object
+    seed: int
+
+    def expand(self, v):
+        """Per-group values as per-spring ones."""
+        return v if self.problem.groups is None else v[self.problem.groups]
+
+    def reduce(self, g):
+        """Per-spring values summed over each group."""
+        groups, npar = self.problem.groups, self.problem.n_params
+        return g if groups is None else np.bincount(groups, weights=g, minlength=npar)
+
+    def diagonal(self, Jc: _Jacobian, nit: int) -> np.ndarray:
+        """The Jacobi preconditioner's diag(J^T J): ``probes`` Hutchinson probes, or ones."""
+        npar, probes = self.problem.n_params, self.opts["probes"]
+        if probes <= 0:
+            return np.ones(npar)
+        rng = np.random.default_rng([self.seed, nit])
+        size = Jc.residual().size
+        diag = np.zeros(npar)
+        for _ in range(int(probes)):
+            diag += self.reduce(Jc.rmatvec(rng.choice([-1.0, 1.0], size=size))) ** 2
+        diag /= probes
+        return np.maximum(diag, 1e-12 * diag.max())
+
+    def direction(self, Jc: _Jacobian, g, diag, mu: float) -> np.ndarray:
+        """The step p of (J^T J + mu I) p = -g by preconditioned CG."""
+        import scipy.sparse.linalg as spla_
+
+        npar = self.problem.n_params
+        A = spla_.LinearOperator(
+            (npar, npar),
+            dtype=float,
+            matvec=lambda v: self.reduce(Jc.rmatvec(Jc.matvec(self.expand(v)))) + mu * v,
+        )
+        Minv = spla_.LinearOperator((npar, npar), dtype=float, matvec=lambda v: v / (diag + mu))
+        rtol = float(self.opts["cg_rtol"])  # fixed: a loose Eisenstat-Walker forcing term did worse
+        p, _ = spla_.cg(
+            A,
+            -g,
+            rtol=rtol,
+            maxiter=int(self.opts["cg_maxiter"]),
+            callback=lambda xk: self.cap.check(),
+            M=Minv,
+        )
+        return p
+
+    def backtrack(self, x, p, Jc: _Jacobian):
+        """(x, Jacobian, step length) of the first of the steps 1, 1/4, 1/16 along p that
+        lowers G (the last one tried if none does)."""
+        problem = self.problem
+        lo, hi = np.log(problem.bounds[0]), np.log(problem.bounds[1])
+        for t in (1.0, 0.25, 1 / 16):
+            self.cap.check()
+            xn = np.clip(x + t * p, lo, hi)
+            Jn = _Jacobian(problem, problem.k_of(np.exp(xn)))
+            if Jn.G2 < Jc.G2:
+                break
+        return xn, Jn, t

@@ -71,6 +71,8 @@ from harness.optimize.select_table import (  # noqa: F401 (the table's names, he
     choose,
     make_folds,
     ratio_to_rule,
+    rule_row,
+    scored,
     summary,
     training_score,
 )
@@ -397,8 +399,7 @@ def select(
         with single_thread_blas(), forkpool.pool(workers) as ex:
             rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
             scores = per_load(rule, rule.k0) if rule_scores is None else rule_scores
-            scores = np.asarray(scores, float)
-            table = [dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})]
+            table = [rule_row(scores, folds)]
             table += validate(ex, [c.name for c in candidates], status)
             best = choose(scored(table, tuple(folds)), criterion)
             seconds = {"validation": time.perf_counter() - t0, "final": 0.0}
@@ -409,8 +410,14 @@ def select(
     finally:
         _RUN.clear()
     seconds["final"] = time.perf_counter() - t0 - seconds["validation"]
+    return _fitted(best["model"], fits, table, folds, seconds)
+
+
+def _fitted(name: str, fits: list, table: list, folds: dict, seconds: dict) -> Selection:
+    """The choice of candidate ``name``: its final fit's starts (:func:`final_fit`, the
+    lowest objective first), the validation table and the wall time's split."""
     return Selection(
-        best["model"],
+        name,
         tuple(k for _, k, _ in fits),
         tuple(table),
         tuple(folds),
@@ -421,16 +428,6 @@ def select(
 
 # what the fits of the running select share: set before its workers fork, so they have it
 _RUN: dict = {}
-
-
-def scored(table: list, names: tuple) -> list:
-    """The table's rows with their ``free``, ``clamped``, ``score`` (:func:`summary`) and
-    ``ratio`` to the rule (the first row)."""
-    for row in table:
-        row.update(summary(row, names))
-    for row in table:
-        row["ratio"] = ratio_to_rule(row, table[0])
-    return table
 
 
 def validate(ex, names: list, status) -> list:

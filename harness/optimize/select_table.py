@@ -24,6 +24,13 @@ def make_folds(families) -> dict:
     return folds
 
 
+def rule_row(scores, folds: dict) -> dict:
+    """The table's row of the rule: the mean of its scores (each block's own normalised G)
+    over each fold's blocks."""
+    scores = np.asarray(scores, float)
+    return dict(model="rule", **{f: float(scores[i].mean()) for f, i in folds.items()})
+
+
 def summary(row: dict, folds) -> dict:
     """A table row's ``free`` (mean over the free-traction families' folds), ``clamped``
     (the clamped fold's) and ``score`` (their mean, or the one there)."""
@@ -83,3 +90,13 @@ def choose(table, criterion: str = "ratio") -> dict:
         and not (math.isfinite(rule["clamped"]) and r["clamped"] > rule["clamped"] + 1e-9)
     ]
     return min(ok, key=lambda r: r["score"]) if ok else rule
+
+
+def scored(table: list, names: tuple) -> list:
+    """The table's rows with their ``free``, ``clamped``, ``score`` (:func:`summary`) and
+    ``ratio`` to the rule (the first row)."""
+    for row in table:
+        row.update(summary(row, names))
+    for row in table:
+        row["ratio"] = ratio_to_rule(row, table[0])
+    return table

@@ -3,9 +3,9 @@ unoptimised baseline row, then optimise the first rule's constants with each opt
 run of the case (see optimiser_runs: [optimizer] method, each of ``compare``, and the
 ``[optimizer.frequency]`` row that adds the natural frequencies to G, Deussen Section 8)
 and score each result: one row per run, all from the same initial model, reference and
-weights, so the table compares optimisers and not set-ups. With ``[optimizer.select]`` the
-springs' fit chooses its capacity by validation (harness/stages/sms_select.py). Every scored row
-carries
+weights, so the table compares optimisers and not set-ups (the rows' columns:
+harness/stages/sms_rows.py). With ``[optimizer.select]`` the springs' fit chooses its
+capacity by validation (harness/stages/sms_select.py). Every scored row carries
 ``G_ref`` (the reference's own estimated error as a normalised G at the same nodes, loads
 and weights), ``ref_error_max`` and ``ref_met_tol``; its ``status`` is "ref-coarse" when
 G_ref exceeds 10 % of its ``G_norm_final`` or the reference missed its tol
@@ -27,7 +27,9 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -43,7 +45,7 @@ from harness.models.stiffness_rules import spring_constants
 from harness.models.topology import ALIASES, STRUCTURES_2D, STRUCTURES_3D
 from harness.optimize import check_method_options, optimize
 from harness.stages import sms_measures as measures
-from harness.stages import sms_training
+from harness.stages import sms_rows, sms_training
 from harness.stages.classes.base import Setting
 from harness.stages.classes.springs import of_spec
 from harness.stages.sms_fit import case_file
@@ -119,7 +121,8 @@ def models(case, ctx) -> Result:
 
 
 def _run(case, ctx, spec, cls) -> Result:
-    """The rows of model class ``cls`` (harness/stages/classes/) on the case."""
+    """The rows of model class ``cls`` (harness/stages/classes/) on the case: each stiffness
+    rule's, each fit's, then every row's reference, frequency and engine columns."""
     opt = case.section("optimizer") or {}
     runs = cls.fit_runs(optimiser_runs(case, opt))  # case mistakes first, before any solve
     label = cls.label(spec, case)
@@ -128,23 +131,149 @@ def _run(case, ctx, spec, cls) -> Result:
         return Result((skip,), (None,), ((),), (None,))
     n_modes = _check_modes(case, opt)
     weights = scoring.case_weights(case)
-    wlabel = ":".join(f"{w:g}" for w in weights)
+    base, rules, build_seconds = _build(case, ctx, spec, cls)
+    ctx.status("reference solve")
+    ref, why = _reference(case, ctx)
+    names = tuple(l.name for l in case.loads)
+    u_ref = scoring.reference_displacements(ref, base.points, names) if ref is not None else None
+    common = _common(case, ctx, spec, cls, base, weights)
+    _write_lloyd(ctx, base.info)
+    nets, made = _rule_networks(case, base, rules)
+    solved, bounds = _solve_rules(case, ctx, opt, base, nets, rules[0], u_ref, names, weights)
+    kept, dropped = _training(case, ctx, ref, base, weights, names, u_ref, solved)
+    common = {**common, **dropped}
+    scorer = Scorer(kept.case, ctx, cls, kept.u_ref, kept.names, weights)
+    seconds = {r: build_seconds + made[r] for r in rules}
+    rows = _rule_rows(scorer, common, label, rules, nets, kept.solved, bounds, seconds, why)
+    fem_f = measures.fem_frequencies(ref, n_modes, modal_load(scorer.case).name)
+    opt_nets = {}
+    if runs and u_ref is not None:
+        setting = scorer.setting(spec, label, common, fem_f)
+        opt_nets = _fits(setting, cls, runs, rows, _start(rows, nets, base, opt), kept.solved)
+    elif runs:
+        rows[0]["note"] = rows[0].get("note") or ""
+    if u_ref is not None:
+        sms_rows.add_ref_columns(rows, ref, base, scorer)
+    all_nets = {**nets, **opt_nets}
+    freqs = measures.model_frequencies(scorer.case, ctx, fem_f, all_nets, n_modes)
+    m = measures.error_modes(opt, n_modes)
+    p1 = not cls.spring_constants
+    networks, validations, heldout = sms_rows.beside_rows(
+        rows, all_nets, scorer.shown, freqs, m, p1
+    )
+    return Result(tuple(rows), tuple(networks), tuple(validations), tuple(heldout))
+
+
+@dataclass(frozen=True)
+class Scorer:
+    """How one class's networks are scored and saved: on the case (its unresolved training
+    states dropped) against the reference displacements ``u_ref`` (loads x nodes x dim, None
+    without a reference) of the loads ``names``, with the node-class weights; each saved
+    row's held-out displacements go to ``shown`` by tag."""
+
+    case: Any
+    ctx: Any
+    cls: Any
+    u_ref: Any
+    names: tuple
+    weights: Any
+    shown: dict = field(default_factory=dict)
+
+    @property
+    def fit(self) -> list[int]:
+        """The indices of the fitted loads in ``names``."""
+        return [self.names.index(n) for n in self.case.fit_loads]
+
+    @property
+    def held(self) -> list[int]:
+        """The indices of the held-out loads in ``names``."""
+        return [self.names.index(n) for n in self.case.heldout]
+
+    def evaluate(self, net, res=None):
+        """(statics (``res``, or solved here), score on the fitted loads, score on the
+        held-out loads or None)."""
+        res = statics.solve(net, self.case) if res is None else res
+        if self.u_ref is None:
+            return res, None, None
+        sc, sh = scoring.fit_and_heldout(
+            self.u_ref,
+            res.u,
+            net.classes,
+            self.weights,
+            self.names,
+            self.case.fit_loads,
+            self.case.heldout,
+        )
+        return res, sc, sh
+
+    def setting(self, spec: dict, label: str, common: dict, fem_f) -> Setting:
+        """What the class's fits share (``fem_f``: the FEM's natural frequencies or None)."""
+        return Setting(
+            self.case,
+            self.ctx,
+            spec,
+            label,
+            common,
+            self.u_ref,
+            self.names,
+            self.fit,
+            self.weights,
+            fem_f,
+            optimize,
+            self.evaluate,
+            self.write,
+        )
+
+    def write(self, net, res, tag: str) -> None:
+        """The row's files (``res`` None: the network alone): the class's, and the
+        reference against the model as ``deformed-<tag>.npz``."""
+        if res is None:
+            write_vtu(self.ctx.file(f"model-{tag}.vtu"), net, {})
+            return
+        self.cls.save(self.ctx, net, res, tag)
+        if self.u_ref is None:
+            return
+        held = self.held
+        if held:
+            at = [res.names.index(self.names[i]) for i in held]
+            self.shown[tag] = Heldout(tuple(self.case.heldout), self.u_ref[held], res.u[at])
+        arrays = {"points": net.points, "springs": net.springs}
+        for i, n in enumerate(res.names):
+            arrays[f"u_ref_{n}"] = self.u_ref[i]
+            arrays[f"u_{n}"] = res.u[i]
+        np.savez(self.ctx.file(f"deformed-{tag}.npz"), **arrays)
+
+
+def _rule_rows(scorer, common, label, rules, nets, solved, bounds, seconds, why) -> list:
+    """The row of each stiffness rule (``nets``: their networks; ``solved``: their statics;
+    ``bounds``: the score bounds of the rules left unsolved; ``seconds``: their builds')."""
+    return [
+        sms_rows.unsolved_row(scorer, common, label, r, nets[r], bounds[r], seconds[r])
+        if r in bounds
+        else sms_rows.rule_row(scorer, common, label, r, nets[r], solved[r], seconds[r], why)
+        for r in rules
+    ]
+
+
+def _build(case, ctx, spec, cls) -> tuple:
+    """(the class's network on the case's nodes, with the first rule's constants; its
+    stiffness rules; the build's seconds)."""
     t0 = time.perf_counter()
     ctx.status(cls.building)
     base = cls.build(case, spec, seed=ctx.seed)
     rules = cls.rules(spec)
-    build_seconds = time.perf_counter() - t0
-    ctx.status("reference solve")
-    ref, why = _reference(case, ctx)
-    names = tuple(l.name for l in case.loads)
-    fit = [names.index(n) for n in case.fit_loads]
-    held = [names.index(n) for n in case.heldout]
-    u_ref = scoring.reference_displacements(ref, base.points, names) if ref is not None else None
+    return base, rules, time.perf_counter() - t0
+
+
+def _common(case, ctx, spec, cls, base, weights) -> dict:
+    """The columns every row of the class shares: the case, the network's size, the
+    weights, the seeds, the masses, the paper's values, the class's own columns, Lloyd's
+    iterations and the Cauchy lattice's report of its springs."""
     common = {
         "case": case.name,
         "n_nodes": base.n_nodes,
         "n_springs": base.n_springs,
-        "weights": wlabel,
+        "weights": ":".join(f"{w:g}" for w in weights),
         "seed": ctx.seed,
         "model_seed": base.info["seed"],
         "masses": spec["masses"],
@@ -167,43 +296,25 @@ def _run(case, ctx, spec, cls) -> Result:
             cauchy_reachable=bool(cauchy["reachable"]),
             cauchy_nu=cauchy["cauchy_nu"],
         )
-    if "lloyd_std_distance" in base.info:
-        pd.DataFrame(
-            {
-                "iteration": np.arange(len(base.info["lloyd_std_distance"])),
-                "std_distance": base.info["lloyd_std_distance"],
-                "std_area": base.info["lloyd_std_size"],
-            }
-        ).to_csv(ctx.file("lloyd.csv"), index=False)
+    return common
 
-    def evaluate(net, res=None):
-        """(statics (``res``, or solved here), score on the fitted loads, score on the
-        held-out loads or None)."""
-        res = statics.solve(net, case) if res is None else res
-        if u_ref is None:
-            return res, None, None
-        sc, sh = scoring.fit_and_heldout(
-            u_ref, res.u, net.classes, weights, names, case.fit_loads, case.heldout
-        )
-        return res, sc, sh
 
-    def write(net, res, tag):
-        """The row's files (``res`` None: the network alone)."""
-        if res is None:
-            write_vtu(ctx.file(f"model-{tag}.vtu"), net, {})
-            return
-        cls.save(ctx, net, res, tag)
-        if u_ref is not None and held:
-            at = [res.names.index(names[i]) for i in held]
-            shown[tag] = Heldout(tuple(case.heldout), u_ref[held], res.u[at])
-        if u_ref is not None:
-            arrays = {"points": net.points, "springs": net.springs}
-            for i, n in enumerate(res.names):
-                arrays[f"u_ref_{n}"] = u_ref[i]
-                arrays[f"u_{n}"] = res.u[i]
-            np.savez(ctx.file(f"deformed-{tag}.npz"), **arrays)
+def _write_lloyd(ctx, info: dict) -> None:
+    """lloyd.csv: the spread of the Lloyd iterations' spring lengths and cell sizes."""
+    if "lloyd_std_distance" not in info:
+        return
+    pd.DataFrame(
+        {
+            "iteration": np.arange(len(info["lloyd_std_distance"])),
+            "std_distance": info["lloyd_std_distance"],
+            "std_area": info["lloyd_std_size"],
+        }
+    ).to_csv(ctx.file("lloyd.csv"), index=False)
 
-    rows, nets, made, shown = [], {}, {}, {}
+
+def _rule_networks(case, base, rules) -> tuple[dict, dict]:
+    """({rule: the network with the rule's spring constants}, {rule: seconds to make it})."""
+    nets, made = {}, {}
     for rule in rules:
         t1 = time.perf_counter()
         nets[rule] = (
@@ -215,174 +326,68 @@ def _run(case, ctx, spec, cls) -> Result:
             )
         )
         made[rule] = time.perf_counter() - t1
-    # noqa: E731
-    score = (
-        None
-        if u_ref is None
-        else lambda r: fit_score_of(r, case, u_ref, names, base.classes, weights)
-    )
-    solved, bounds = solve_rules(
-        case, nets, score, rules[0] if opt.get("start", "first") != "best" else None, ctx.status
-    )
-    if u_ref is not None and held:
-        kept = sms_training.resolved(
-            case, ref, base.points, base.classes, weights, names, u_ref, solved
+    return nets, made
+
+
+def _solve_rules(case, ctx, opt, base, nets, first, u_ref, names, weights) -> tuple[dict, dict]:
+    """Every rule's statics over every load and the G_fit_score bounds of the rules a large
+    mesh leaves unsolved (harness/stages/sms_rules.py; ``first`` always solved unless the
+    fits start from the best rule)."""
+    score = None
+    if u_ref is not None:
+        score = partial(
+            fit_score_of, case=case, u_ref=u_ref, names=names, classes=base.classes, weights=weights
         )
-        case, names, u_ref, solved = kept.case, kept.names, kept.u_ref, kept.solved
-        fit, held = [names.index(n) for n in case.fit_loads], [names.index(n) for n in case.heldout]
-        common["training_dropped"] = " ".join(kept.dropped)
-        if kept.line:
-            ctx.status(kept.line)
-    for rule in rules:
-        t1 = time.perf_counter()
-        net = nets[rule]
-        if rule in bounds:
-            write(net, None, rule)
-            rows.append(
-                {
-                    **common,
-                    "model": f"{label}[{rule}]",
-                    "stiffness": rule,
-                    "optimizer": "none",
-                    "seconds": build_seconds + made[rule],
-                    "G_fit_score_bound": bounds[rule],
-                    "note": "not solved under the clamps: half its free-traction score is "
-                    "above the best rule's "
-                    "G_fit_score (large meshes, harness/stages/sms_rules.py)",
-                }
-            )
-            continue
-        res, sc, sh = evaluate(net, solved[rule])
-        write(net, res, rule)
-        row = {
-            **common,
-            "model": f"{label}[{rule}]",
-            "stiffness": rule,
-            "optimizer": "none",
-            "seconds": build_seconds + made[rule] + res.seconds + time.perf_counter() - t1,
-            **cls.constants(net),
-        }
-        if sc is not None:
-            row.update(
-                G_initial=sc.G,
-                G_final=sc.G,
-                G_norm_initial=sc.G_norm,
-                G_norm_final=sc.G_norm,
-                G_s_initial=sc.G_s,
-                G_s_final=sc.G_s,
-                **measures.per_load_columns(sc, sh),
-                **measures.fit_score(case, sc),
-                **measures.heldout_columns(sh),
+    first = first if opt.get("start", "first") != "best" else None
+    return solve_rules(case, nets, score, first, ctx.status)
+
+
+def _training(case, ctx, ref, base, weights, names, u_ref, solved) -> tuple:
+    """(:class:`sms_training.Training`: the case without the training states the reference
+    does not resolve, the rows' ``training_dropped`` column); with no reference or no
+    held-out loads the case as it is and no column."""
+    if u_ref is None or not case.heldout:
+        return sms_training.Training(case, names, u_ref, solved), {}
+    kept = sms_training.resolved(
+        case, ref, base.points, base.classes, weights, names, u_ref, solved
+    )
+    if kept.line:
+        ctx.status(kept.line)
+    return kept, {"training_dropped": " ".join(kept.dropped)}
+
+
+def _start(rows, nets, base, opt) -> tuple:
+    """(the fits' start row, its network): the first rule's, or with ``start = "best"``
+    the rule ranked first on the fitted loads (:func:`sms_measures.rank`)."""
+    if opt.get("start", "first") != "best":
+        return rows[0], base
+    row = min(rows, key=measures.rank)
+    return row, nets[row["stiffness"]]
+
+
+def _fits(setting, cls, runs, rows, start, solved) -> dict:
+    """Appends each optimiser run's row to ``rows`` (``start``: the start row and network;
+    ``solved``: the rules' statics, which a validated fit reuses), writes trace.csv and the
+    time each run took to reach the SA row's G; returns {tag: fitted network}."""
+    start_row, net0 = start
+    nets, traces = {}, []
+    for run_ in runs:
+        if run_.get("select") and cls.selects and getattr(net0, "volume", None) is None:
+            from harness.stages import sms_select
+
+            row, net, trace = sms_select.optimise(
+                setting, run_, net0, start_row, solved.get(start_row["stiffness"])
             )
         else:
-            row.update(
-                G_initial=math.nan,
-                G_final=math.nan,
-                G_norm_initial=math.nan,
-                G_norm_final=math.nan,
-                note=f"no reference ({why})",
-            )
+            row, net, trace = cls.fit(setting, run_, net0, start_row)
         rows.append(row)
-
-    fem_f = measures.fem_frequencies(ref, n_modes, modal_load(case).name)
-    opt_nets, traces = {}, []
-    start_row, start = rows[0], base
-    if opt.get("start", "first") == "best" and u_ref is not None:
-        start_row = min(rows, key=measures.rank)
-        start = nets[start_row["stiffness"]]
-    if runs and u_ref is not None:
-        setting = Setting(
-            case,
-            ctx,
-            spec,
-            label,
-            common,
-            u_ref,
-            names,
-            fit,
-            weights,
-            fem_f,
-            optimize,
-            evaluate,
-            write,
-        )
-        for run_ in runs:
-            if run_.get("select") and cls.selects and getattr(start, "volume", None) is None:
-                from harness.stages import sms_select
-
-                row, net, trace = sms_select.optimise(
-                    setting, run_, start, start_row, solved.get(start_row["stiffness"])
-                )
-            else:
-                row, net, trace = cls.fit(setting, run_, start, start_row)
-            rows.append(row)
-            opt_nets[row["_tag"]] = net
-            if trace is not None:
-                traces.append(trace)
-        if traces:
-            pd.concat(traces, ignore_index=True).to_csv(ctx.file("trace.csv"), index=False)
-        time_to_reach(rows, traces)
-    elif runs:
-        rows[0]["note"] = rows[0].get("note") or ""
-
-    # every net shares base's nodes, loads and weights: one G_ref for all rows
-    if u_ref is not None:
-        refcols = scoring.ref_columns(
-            ref,
-            base.points,
-            [names[i] for i in fit],
-            u_ref[fit],
-            base.classes,
-            weights,
-            tol_loads=() if held else None,
-        )
-        heldcols, held_met = {}, None
-        if held:
-            hc = scoring.ref_columns(
-                ref, base.points, [names[i] for i in held], u_ref[held], base.classes, weights
-            )
-            heldcols = {"G_ref_heldout": hc["G_ref"], "ref_error_heldout": hc["ref_error_max"]}
-            held_met = hc.get("ref_met_tol")
-            refcols["ref_met_tol"] = (
-                held_met if held_met is not None else refcols.get("ref_met_tol")
-            )
-        for row in rows:
-            if "G_norm_final" in row:
-                row.update(refcols, **heldcols)
-                row["status"] = scoring.ref_status(
-                    row["G_ref"], row["G_norm_final"], refcols.get("ref_met_tol")
-                )
-                if (
-                    held
-                    and scoring.ref_status(row["G_ref_heldout"], row["G_heldout"], held_met) != "ok"
-                ):
-                    row["status"] = "ref-coarse"  # the held-out score is the reference's error too
-
-    freqs = measures.model_frequencies(case, ctx, fem_f, {**nets, **opt_nets}, n_modes)
-    m = measures.error_modes(opt, n_modes)
-    all_nets = {**nets, **opt_nets}
-    networks, validations, heldout = [], [], []
-    for row in rows:
-        tag = row.pop("_tag", row["stiffness"])
-        networks.append(all_nets.get(tag))
-        heldout.append(shown.get(tag))
-        validations.append(tuple(row.pop("_validation", ())))
-        if tag in all_nets:
-            row.update(measures.engine_columns(all_nets[tag], not cls.spring_constants))
-        if tag in freqs and "fem" in freqs and freqs["fem"][0] > 0:
-            row["f1_ratio"] = float(freqs[tag][0] / freqs["fem"][0])
-            row["freq_error_final"] = measures.freq_error(freqs[tag], freqs["fem"], m)
-            start = row["stiffness"]  # the rule (an optimised row's start)
-            row["freq_error_initial"] = (
-                measures.freq_error(freqs[start], freqs["fem"], m) if start in freqs else math.nan
-            )
-            # modes the fit saw; the others are held out
-            fitted = int(row.get("freq_modes", 0) or 0)
-            if len(freqs["fem"]) > fitted:
-                row["freq_error_heldout"] = measures.freq_error(
-                    freqs[tag][fitted:], freqs["fem"][fitted:], m - fitted
-                )
-    return Result(tuple(rows), tuple(networks), tuple(validations), tuple(heldout))
+        nets[row["_tag"]] = net
+        if trace is not None:
+            traces.append(trace)
+    if traces:
+        pd.concat(traces, ignore_index=True).to_csv(setting.ctx.file("trace.csv"), index=False)
+    time_to_reach(rows, traces)
+    return nets
 
 
 # -- the case's optimiser runs ---------------------------------------------------------

@@ -48,105 +48,25 @@ def budget_label(options: dict) -> str:
 
 def optimise(setting: Setting, run_: dict, base, first: dict):
     """One optimiser run of a springs network on the fitted loads and its row."""
-    case, ctx, optimize, spec = setting.case, setting.ctx, setting.optimize, setting.spec
-    u_ref, names, fit, weights, fem_f = (
-        setting.u_ref,
-        setting.names,
-        setting.fit,
-        setting.weights,
-        setting.fem_f,
-    )
     method, objective = run_["method"], run_["objective"]
     stiff = base.info["stiffness"]
     tag = f"{stiff}-{method}" + ("-freq" if objective != "G" else "")
-    _, free, forces = statics.all_load_arrays(base, case)
-    free, forces, u_fit, names = free[fit], forces[fit], u_ref[fit], [names[i] for i in fit]
-    wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    file = case_file(case)
-    freq_kw = {}
-    if objective != "G":
-        if fem_f is None or len(fem_f) < run_["modes"]:
-            raise SpringbenchError(
-                "the frequency term needs the reference's natural frequencies",
-                file=file,
-                field="optimizer.frequency",
-                fix="use a reference with modes, or remove [optimizer.frequency]",
-            )
-        if np.any(base.masses <= 0):
-            raise ModelError(
-                f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies",
-                file=file,
-                field="optimizer.frequency",
-                fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'",
-            )
-        modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
-        freq_kw = dict(
-            masses=base.masses,
-            freq_target=np.asarray(fem_f[: run_["modes"]], float),
-            freq_weight=run_["weight"],
-            modal_free=modal_free,
-        )
-    k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
-    # springs + volume / kn: [k, kv], columns beside B
-    if getattr(base, "volume", None) is not None:
-        k0, groups, extra = (
-            base.params(),
-            base.param_groups(spec["grouped"]),
-            base.volume.columns(base.points),
-        )
-    problem = FitProblem.from_network(
-        base.points,
-        base.springs,
-        k0,
-        free,
-        forces,
-        u_fit.reshape(len(names), -1),
-        wdof,
-        list(names),
-        groups=groups,
-        extra_columns=extra,
-        **freq_kw,
-    )
+    freq_kw = frequency_terms(setting, run_, base) if objective != "G" else {}
+    problem = fit_problem(setting, base, freq_kw)
     t0 = time.perf_counter()
-    ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
+    setting.ctx.status(f"optimising ({method}{', frequencies' if freq_kw else ''})")
     seed = int(base.info["seed"])
-    try:
-        res = optimize(problem, method, dict(run_["options"]), seed, status=ctx.status)
-    except (
-        SpringbenchError
-    ) as exc:  # name the case file, and compare_options / frequency where they apply
-        if exc.file is not None:
-            raise
-        field = exc.field or "optimizer"
-        if field.startswith("optimizer.options"):
-            field = run_["where"] + field[len("optimizer.options") :]
-        # the method came from there
-        elif field == "optimizer.method" and run_["where"] != "optimizer.options":
-            field = "optimizer.frequency.method" if objective != "G" else "optimizer.compare"
-        raise type(exc)(exc.message, file=file, field=field, fix=exc.fix) from None
+    res = _optimised(setting, run_, problem, seed)
     seconds = time.perf_counter() - t0
     name = f"{stiff}+{method}" + ("+freq" if freq_kw else "")
     net = base.with_k(res.k, stiffness=name)
     sres, sc, sh = setting.evaluate(net)
     setting.write(net, sres, tag)
-    info = dict(getattr(res, "info", {}) or {})
+    timing = {"grouped": bool(setting.spec["grouped"]), "seconds": seconds}
     row = {
-        **setting.common,
-        "model": f"{setting.label}[{stiff}]",
-        "stiffness": stiff,
-        "optimizer": method,
-        "grouped": bool(spec["grouped"]),
-        "seconds": seconds,
-        "G_initial": first["G_initial"],
-        "G_norm_initial": first["G_norm_initial"],
-        "G_s_initial": first.get("G_s_initial", math.nan),
-        "G_final": sc.G,
-        "G_norm_final": sc.G_norm,
-        "G_s_final": sc.G_s,
+        **setting.row(first, stiff, method, sc, timing),
         "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-        **measures.per_load_columns(sc, sh),
-        **measures.fit_score(case, sc),
-        **measures.heldout_columns(sh, first),
+        **measures.scored_columns(setting.case, sc, sh, first),
         "objective": objective,
         "budget": budget_label(run_["options"]),
         "n_params": problem.n_params,
@@ -154,26 +74,121 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
     }
     if freq_kw:
         row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
+    row.update(optimiser_columns(res, seed))
+    row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
+    return row, net, trace_frame(getattr(res, "trace", None), name)
+
+
+def frequency_terms(setting: Setting, run_: dict, base) -> dict:
+    """FitProblem's keywords of the frequency term (Deussen Section 8): the masses, the
+    FEM's first ``modes`` frequencies as the target, the term's weight and the dofs free
+    under the modal load's constraints."""
+    case, fem_f = setting.case, setting.fem_f
+    file = case_file(case)
+    if fem_f is None or len(fem_f) < run_["modes"]:
+        raise SpringbenchError(
+            "the frequency term needs the reference's natural frequencies",
+            file=file,
+            field="optimizer.frequency",
+            fix="use a reference with modes, or remove [optimizer.frequency]",
+        )
+    if np.any(base.masses <= 0):
+        raise ModelError(
+            f"{int(np.sum(base.masses <= 0))} nodes have masses <= 0: no natural frequencies",
+            file=file,
+            field="optimizer.frequency",
+            fix="use [model] masses = 'moments-nonneg', 'voronoi' or 'uniform'",
+        )
+    modal_free = ~statics.fixed_mask(base.points, case, modal_load(case)).ravel()
+    return dict(
+        masses=base.masses,
+        freq_target=np.asarray(fem_f[: run_["modes"]], float),
+        freq_weight=run_["weight"],
+        modal_free=modal_free,
+    )
+
+
+def fit_problem(setting: Setting, base, freq_kw: dict) -> FitProblem:
+    """The fit of ``base``'s constants on the fitted loads: ks alone, or [ks, kv] with the
+    volume or kn term's columns beside B; ``freq_kw``: the frequency term, if any."""
+    fit, spec = setting.fit, setting.spec
+    _, free, forces = statics.all_load_arrays(base, setting.case)
+    names = [setting.names[i] for i in fit]
+    u_fit = setting.u_ref[fit]
+    wdof = np.repeat(node_weights(base.classes, setting.weights), base.dim)
+    k0, groups, extra = base.k, base.groups if spec["grouped"] else None, None
+    if getattr(base, "volume", None) is not None:
+        k0, groups, extra = (
+            base.params(),
+            base.param_groups(spec["grouped"]),
+            base.volume.columns(base.points),
+        )
+    return FitProblem.from_network(
+        base.points,
+        base.springs,
+        k0,
+        free[fit],
+        forces[fit],
+        u_fit.reshape(len(names), -1),
+        wdof,
+        list(names),
+        groups=groups,
+        extra_columns=extra,
+        **freq_kw,
+    )
+
+
+def _optimised(setting: Setting, run_: dict, problem: FitProblem, seed: int):
+    """The optimiser's result; its errors name the case file and the field the method and
+    options came from (compare_options, frequency)."""
+    try:
+        return setting.optimize(
+            problem,
+            run_["method"],
+            dict(run_["options"]),
+            seed,
+            status=setting.ctx.status,
+        )
+    except SpringbenchError as exc:
+        if exc.file is not None:
+            raise
+        field = exc.field or "optimizer"
+        if field.startswith("optimizer.options"):
+            field = run_["where"] + field[len("optimizer.options") :]
+        # the method came from there
+        elif field == "optimizer.method" and run_["where"] != "optimizer.options":
+            field = (
+                "optimizer.frequency.method" if run_["objective"] != "G" else "optimizer.compare"
+            )
+        raise type(exc)(
+            exc.message, file=case_file(setting.case), field=field, fix=exc.fix
+        ) from None
+
+
+def optimiser_columns(res, seed: int) -> dict:
+    """The opt_* columns: what the optimiser reports of its run (steps, stop, start,
+    prior, evaluations, iterations, linear solves) and its random stream's seed."""
+    info = dict(getattr(res, "info", {}) or {})
+    out = {}
     for key in ("n_steps", "accepted"):
         if hasattr(res, key):
-            row[f"opt_{key}"] = getattr(res, key)
-    row["opt_seed"] = seed  # the optimiser's random stream (SA); = model_seed
+            out[f"opt_{key}"] = getattr(res, key)
+    out["opt_seed"] = seed  # the optimiser's random stream (SA); = model_seed
     if "stop" in info:
-        row["opt_stop"] = str(info["stop"])
+        out["opt_stop"] = str(info["stop"])
     if info.get("init", "none") != "none":
-        row["opt_init"] = str(info["init"]) + (
+        out["opt_init"] = str(info["init"]) + (
             " (rejected: worse than k0)" if info.get("init_rejected") else ""
         )
     # lbfgs / nelder-mead: the weight of the pull towards the start (gradient.py)
     if "prior" in info:
-        row["opt_prior"] = float(info["prior"])
-    row["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
+        out["opt_prior"] = float(info["prior"])
+    out["opt_evaluations"] = int(info.get("evaluations", getattr(res, "n_steps", 0)))
     if "iterations" in info:
-        row["opt_iterations"] = int(info["iterations"])
+        out["opt_iterations"] = int(info["iterations"])
     if "solves" in info:  # gauss-newton: linear solves (one evaluation of G is one per load set)
-        row["opt_solves"] = int(info["solves"])
-    row.update(fit_diagnostics(problem, np.asarray(res.k, float)))
-    return row, net, trace_frame(getattr(res, "trace", None), name)
+        out["opt_solves"] = int(info["solves"])
+    return out
 
 
 def trace_frame(trace, name):

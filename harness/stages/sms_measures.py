@@ -25,6 +25,12 @@ def per_load_columns(sc, sh) -> dict:
     return out
 
 
+def scored_columns(case, sc, sh, first=None) -> dict:
+    """A scored row's G_<load> of every load, its G_fit_score and its held-out columns
+    (``first``: an optimised row's start row, for the ``_initial`` ones)."""
+    return {**per_load_columns(sc, sh), **fit_score(case, sc), **heldout_columns(sh, first)}
+
+
 def families(case, names) -> list[str]:
     """Each fitted load's family: the linear sets' own, 'clamped' for every other load."""
     by_name = {l.name: l for l in case.loads}

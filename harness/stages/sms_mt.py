@@ -72,18 +72,7 @@ def optimise(setting, run_, base, first):
     tag = f"mt-{METHOD}"
     s.write(net, res, tag)
     row = {
-        **s.common,
-        "model": f"{s.label}[mt]",
-        "stiffness": "mt",
-        "optimizer": METHOD,
-        "grouped": False,
-        "seconds": seconds,
-        "G_initial": first["G_initial"],
-        "G_norm_initial": first["G_norm_initial"],
-        "G_s_initial": first.get("G_s_initial", math.nan),
-        "G_final": sc.G,
-        "G_norm_final": sc.G_norm,
-        "G_s_final": sc.G_s,
+        **s.row(first, "mt", METHOD, sc, {"grouped": False, "seconds": seconds}),
         "G_final_optimizer": g1,
         "objective": "G",
         "budget": BUDGET,

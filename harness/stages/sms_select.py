@@ -38,6 +38,7 @@ from harness.models.volume import initial_kv, with_volume
 from harness.optimize import select as sel
 from harness.optimize.problem import FitProblem
 from harness.scoring import node_weights
+from harness.stages.sms_measures import families, heldout_columns, scored_columns
 
 # L-BFGS-B iterations of each start of the final fit when the case's options set none (a
 # start of calibrate's default fit of the 632-node lug: 100 iterations in ~5 s of one core)
@@ -49,18 +50,21 @@ def optimise(setting, run_, base, first, first_res=None):
     stage gives the other model classes their plain fit); ``setting``: the class's
     :class:`harness.stages.classes.base.Setting`; ``first_res``: base's statics, when the
     stage has them (the rule's validation scores and its row reuse them)."""
-    from harness.stages.sms_measures import families, fit_score, heldout_columns, per_load_columns
+    _check_method(setting.case, run_)
+    t0 = time.perf_counter()
+    s, cands = _selection(setting, run_, base, first_res)
+    seconds = time.perf_counter() - t0
+    pd.DataFrame(list(s.table)).to_csv(setting.ctx.file("validation.csv"), index=False)
+    scored = _scored_starts(setting, base, s, first_res)
+    net, res, sc, sh = scored[0]
+    tag = f"{base.info['stiffness']}-select"
+    setting.write(net, res, tag)
+    row = _row(setting, first, base, s, cands, scored, seconds)
+    return row, net, None
 
-    case, ctx, u_ref, names, fit, weights = (
-        setting.case,
-        setting.ctx,
-        setting.u_ref,
-        setting.names,
-        setting.fit,
-        setting.weights,
-    )
-    label, common, evaluate, write = setting.label, setting.common, setting.evaluate, setting.write
-    spec = run_["select"]
+
+def _check_method(case, run_) -> None:
+    """The validated fit fits by L-BFGS-B: another method is the case's mistake."""
     if run_["method"] != "lbfgs":
         raise CaseError(
             f"[optimizer.select] fits by lbfgs, not {run_['method']}",
@@ -68,43 +72,59 @@ def optimise(setting, run_, base, first, first_res=None):
             field="optimizer.method",
             fix="method = 'lbfgs'",
         )
-    t0 = time.perf_counter()
-    kv0 = initial_kv(case.material, case.dim)
-    cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
-    # the volume terms some candidate needs, after the springs
+
+
+def _volume_terms(base, cands, kv0):
+    """The volume terms some candidate needs, their columns after the springs: (terms,
+    {volume: (first column, end)})."""
     terms, volumes, at = ([], {}, base.n_springs)
     for on in dict.fromkeys(c.volume for c in cands if c.volume):
         terms.append(with_volume(base, on, kv0).volume)
         volumes[on] = (at, at + terms[-1].n_elements)
         at += terms[-1].n_elements
-    _, free, forces = statics.all_load_arrays(base, case)
-    fit_names = [names[i] for i in fit]
-    wdof = np.repeat(node_weights(base.classes, weights), base.dim)
-    problem = FitProblem.from_network(
+    return terms, volumes
+
+
+def _problem(setting, base, terms) -> FitProblem:
+    """The fit on the fitted loads of the columns [springs | every candidate's volume terms]."""
+    fit = setting.fit
+    _, free, forces = statics.all_load_arrays(base, setting.case)
+    wdof = np.repeat(node_weights(base.classes, setting.weights), base.dim)
+    return FitProblem.from_network(
         base.points,
         base.springs,
         np.concatenate([base.k] + [t.kv for t in terms]),
         free[fit],
         forces[fit],
-        u_ref[fit].reshape(len(fit), -1),
+        setting.u_ref[fit].reshape(len(fit), -1),
         wdof,
-        fit_names,
+        [setting.names[i] for i in fit],
         extra_columns=sp.hstack([t.columns(base.points) for t in terms]).tocsc() if terms else None,
     )
+
+
+def _selection(setting, run_, base, first_res):
+    """(harness/optimize/select.py's Selection, the candidates it chose among): validation
+    fits stopped by ``[optimizer.select] maxiter``, the final fit by the case's maxiter."""
+    spec = run_["select"]
+    kv0 = initial_kv(setting.case.material, setting.case.dim)
+    cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
+    terms, volumes = _volume_terms(base, cands, kv0)
+    problem = _problem(setting, base, terms)
+    fit_names = [setting.names[i] for i in setting.fit]
     d, L = spring_directions(base.points, base.springs)
-    fams = families(case, fit_names)
     # the fits stop by their counts; the budget caps the whole validated fit (it aborts)
     opts = {k: v for k, v in run_["options"].items() if k != "max_seconds"}
     val = {**opts, "maxiter": int(spec["maxiter"])}
     final = {**opts, "maxiter": int(opts.get("maxiter") or FINAL_MAXITER)}
     rule_scores = None
     if first_res is not None:
-        _, sc0, _ = evaluate(base, first_res)
+        _, sc0, _ = setting.evaluate(base, first_res)
         rule_scores = [sc0.per_load_norm[n] for n in fit_names]
     s = sel.select(
         problem,
         base.n_springs,
-        fams,
+        families(setting.case, fit_names),
         kv0,
         sel.direction_groups(d, L),
         cands,
@@ -112,7 +132,7 @@ def optimise(setting, run_, base, first, first_res=None):
         final,
         int(spec["starts"]),
         int(base.info["seed"]),
-        ctx.status,
+        setting.ctx.status,
         features=geometry(base.points, base.springs, base.cells)
         if any(c.groups == "features" for c in cands)
         else None,
@@ -121,42 +141,35 @@ def optimise(setting, run_, base, first, first_res=None):
         criterion=spec["criterion"],
         max_seconds=run_["options"].get("max_seconds"),
     )
-    seconds = time.perf_counter() - t0
-    pd.DataFrame(list(s.table)).to_csv(ctx.file("validation.csv"), index=False)
+    return s, cands
 
-    def network(k):
-        net = base.with_k(k[: base.n_springs], stiffness=f"{base.info['stiffness']}+select")
-        return with_volume(net, s.volume, k[base.n_springs :]) if s.volume else net
 
+def _scored_starts(setting, base, s, first_res) -> list:
+    """(network, statics, score, held-out score) of each start of the final fit, the
+    exported one first (the rule's own constants reuse ``first_res``)."""
+    stiffness = f"{base.info['stiffness']}+select"
     scored = []
     for k in s.starts:
-        net = network(k)
-        # the rule's own constants: solved already
+        net = base.with_k(k[: base.n_springs], stiffness=stiffness)
+        net = with_volume(net, s.volume, k[base.n_springs :]) if s.volume else net
         same = first_res is not None and s.choice == "rule"
-        scored.append((net, *evaluate(net, first_res if same else None)))
-    net, res, sc, sh = scored[0]
-    stiff = base.info["stiffness"]
-    tag = f"{stiff}-select"
-    write(net, res, tag)
+        scored.append((net, *setting.evaluate(net, first_res if same else None)))
+    return scored
+
+
+def _row(setting, first, base, s, cands, scored, seconds) -> dict:
+    """The validated fit's row (module doc) from its exported start, ``scored[0]``."""
+    net, _, sc, sh = scored[0]
     means = [heldout_columns(h).get("G_heldout_mean", math.nan) for _, _, _, h in scored]
-    row = {
-        **common,
-        "model": f"{label}[{stiff}]",
-        "stiffness": stiff,
-        "optimizer": "lbfgs",
+    timing = {
         "seconds": seconds,
         # the wall time's split: reported, never used for a choice
         "seconds_validation": s.seconds.get("validation", math.nan),
         "seconds_final": s.seconds.get("final", math.nan),
-        "G_initial": first["G_initial"],
-        "G_norm_initial": first["G_norm_initial"],
-        "G_s_initial": first.get("G_s_initial", math.nan),
-        "G_final": sc.G,
-        "G_norm_final": sc.G_norm,
-        "G_s_final": sc.G_s,
-        **per_load_columns(sc, sh),
-        **fit_score(case, sc),
-        **heldout_columns(sh, first),
+    }
+    row = {
+        **setting.row(first, base.info["stiffness"], "lbfgs", sc, timing),
+        **scored_columns(setting.case, sc, sh, first),
         "objective": "G",
         "choice": s.choice,
         "val_families": " ".join(s.families),
@@ -166,7 +179,7 @@ def optimise(setting, run_, base, first, first_res=None):
         if sh is not None
         else math.nan,
         "n_params": int(len(s.k)),
-        "_tag": tag,
+        "_tag": f"{base.info['stiffness']}-select",
         "_validation": tuple(s.table),
         "opt_prior": next((c.prior for c in cands if c.name == s.choice), math.nan),
     }
@@ -175,4 +188,4 @@ def optimise(setting, run_, base, first, first_res=None):
         row.update(opt_stop=s.stops[0], opt_stops=" | ".join(s.stops))
     if s.volume:
         row.update(volume=s.volume, n_volumes=net.volume.n_elements)
-    return row, net, None
+    return row

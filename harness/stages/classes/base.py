@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -28,6 +29,24 @@ class Setting:
     optimize: Callable
     evaluate: Callable
     write: Callable
+
+    def row(self, first: dict, stiff: str, optimizer: str, sc, timing: dict) -> dict:
+        """The columns a fitted row starts with: the shared ones, the model, its start rule
+        and optimiser, ``timing`` (its seconds), and G on the fitted loads at the start (the
+        rule's row ``first``) and after the fit (the score ``sc``)."""
+        return {
+            **self.common,
+            "model": f"{self.label}[{stiff}]",
+            "stiffness": stiff,
+            "optimizer": optimizer,
+            **timing,
+            "G_initial": first["G_initial"],
+            "G_norm_initial": first["G_norm_initial"],
+            "G_s_initial": first.get("G_s_initial", math.nan),
+            "G_final": sc.G,
+            "G_norm_final": sc.G_norm,
+            "G_s_final": sc.G_s,
+        }
 
 
 def model_label(spec, case) -> str:
