@@ -14,8 +14,8 @@ from harness.case.loadsets import stress_field, stress_tensor
 from harness.case.parts import geometric_tol, part_predicate
 from harness.errors import ModelError
 from reference.fem import Discretisation
-from reference.graded.lattice import Lattice
-from reference.graded.symmetry import Mirror, plane_dofs
+from reference.lattice import Lattice
+from reference.mirror import Mirror, plane_dofs
 from reference.solvers import linearfield, sparse, tensorpre, tensorsolve, twolevel
 from reference.solvers.plan import System, choose_plan
 from reference.solvers.record import SolveRecord

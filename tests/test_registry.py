@@ -4,8 +4,11 @@ the known ones, and a module that fails to import raises instead of being skippe
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
 import importlib.util
 import inspect
+import itertools
 
 import numpy as np
 import pytest
@@ -86,6 +89,29 @@ def test_the_case_schema_reads_its_vocabularies_from_the_registries():
     from harness.case.fields import LOADS
 
     assert LOADS["set"].choices == registry.LOAD_SETS.names()
+
+
+def test_the_solver_names_are_one_list():
+    """``[reference] solver``, ``calibrate --solver`` and the planner take registry.SOLVERS;
+    every step a plan can name is one the sparse solve knows how to try."""
+    from harness.case.fields import REFERENCE
+    from harness.commands import calibrate
+    from reference.solvers import plan, sparse
+
+    names = tuple(registry.SOLVERS)
+    assert REFERENCE["solver"].choices == names
+    p = argparse.ArgumentParser()
+    calibrate.add_arguments(p)
+    assert next(a for a in p._actions if "--solver" in a.option_strings).choices == names
+    for chain in plan._CHAINS.values():
+        assert set(chain) <= set(sparse.STEPS)
+    estimate = {"gflop": 1.0, "gbytes": 0.1}
+    for name, n, coords, aid in itertools.product(names, (10, 10**6), *[(True, False)] * 2):
+        s = plan.System(n, 3, name, coords=coords, coarse=aid, tensor=aid, nnz=10**6)
+        steps = plan.choose_plan(dataclasses.replace(s, estimate=estimate)).steps
+        assert steps and set(steps) <= set(sparse.STEPS), s
+    with pytest.raises(ValueError, match="unknown solver 'lu'"):
+        plan.choose_plan(plan.System(10, 3, "lu"))
 
 
 def test_unknown_names_and_broken_modules_are_errors(tmp_path, monkeypatch):

@@ -137,7 +137,7 @@ REFERENCE = {
         doc="further refinement levels (default 3; graded 8, "
         "within a 400k-dof system in 3-D with the default solver, 64k with a factorising one)",
     ),
-    "solver": Field("str", "auto", choices=("auto", "direct", "amg", "cg", "two-level", "tensor")),
+    "solver": Field("str", "auto", choices=tuple(registry.SOLVERS)),
     "modes": Field("int", 6, min=0, doc="natural frequencies to compute"),
     "method": Field(
         "str",

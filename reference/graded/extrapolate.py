@@ -65,7 +65,7 @@ def extrapolate(values, h, p: float):
     the pointwise norm of its difference from the previous extrapolant times
     SAFETY / ((h_old / h_new)^p - 1) (needs three levels; with two, the plain difference
     of the levels). The levels' values are averaged over a window of cells
-    (reference/graded/lattice.py), so the extrapolants converge smoothly and the GCI alone
+    (reference/lattice.py), so the extrapolants converge smoothly and the GCI alone
     bounds the truth where a point's levels converge at order p. A floor at the correction
     made to the finest level (for points where the two extrapolants happen to agree) would
     hold the estimate at the finest level's own error (4.7e-4 where the truth is 7.6e-5,

@@ -23,7 +23,6 @@ import numpy as np
 from harness.linalg.sparse import single_thread_blas
 from reference.fem import Discretisation
 from reference.graded.extrapolate import FORMAL_ORDER, extrapolate, observed_order
-from reference.graded.lattice import Lattice
 from reference.graded.meshes import (
     axis_maps,
     graded_axes,
@@ -32,7 +31,9 @@ from reference.graded.meshes import (
     q2_doflocs,
     tensor_mesh,
 )
-from reference.graded.symmetry import Mirror, lower_half, mirror_of, unfold
+from reference.graded.symmetry import lower_half, mirror_of, unfold
+from reference.lattice import Lattice
+from reference.mirror import Mirror
 from reference.problem import solve_mesh
 
 FIRST = 2  # cells per end zone at level 0 when [reference] divisions is not set
@@ -149,7 +150,7 @@ class Levels:
 
     def at(self, points, k: int, u: np.ndarray, average: np.ndarray | None = None) -> np.ndarray:
         """Level k's field u at points by cubic interpolation of its nodal values
-        (reference/graded/lattice.py: O(h^4) everywhere), averaged over a window of cells
+        (reference/lattice.py: O(h^4) everywhere), averaged over a window of cells
         along the axes ``average`` (m, dim) marks (the swing with the point's place in
         its cell then averages out, so the levels extrapolate cleanly)."""
         ev = self._evaluator(k)

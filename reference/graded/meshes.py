@@ -90,7 +90,7 @@ def zone_map(s, beta: float = GRADE_EXPONENT) -> np.ndarray:
     = beta (beta - 1) / (2 beta + 2), which makes its curvature vanish where the zone
     ends. A plain s^beta has curvature there, and at a cube's mid-plane the mirrored zone
     has the opposite: a kink in the cell sizes that the averaging window of
-    reference/graded/lattice.py straddles for points near the mid-plane, whose level values
+    reference/lattice.py straddles for points near the mid-plane, whose level values
     then swing again. Near the face it is s^beta, the grading the edges need."""
     s = np.asarray(s, float)
     c = beta * (beta - 1) / (2 * beta + 2)

@@ -17,28 +17,16 @@ box part) keeps the whole box.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from harness.case.elasticity import element_stiffness
 from harness.case.parts import parse_face_name
 from reference.fem import VOIGT
-from reference.graded.lattice import Lattice
+from reference.lattice import Lattice
+from reference.mirror import Mirror
 
 PLACES = 12  # decimals to which a user part's corners are compared
 SAMPLES = 64  # seeded points at which the material's mirror image is checked
-
-
-@dataclass(frozen=True)
-class Mirror:
-    """Mid-planes the solve is cut at: ``axes`` and per axis the parity (+1, -1)."""
-
-    axes: tuple[int, ...] = ()
-    parities: tuple[int, ...] = ()
-
-    def __bool__(self) -> bool:
-        return bool(self.axes)
 
 
 def _part_key(name: str, case, lo, hi):
@@ -138,18 +126,6 @@ def lower_half(axes: list, mirror: Mirror) -> list:
             x = x[: len(x) // 2 + 1]
         out.append(x)
     return out
-
-
-def plane_dofs(doflocs: np.ndarray, centre, mirror: Mirror, tol: float) -> np.ndarray:
-    """Interleaved vector dofs fixed on the cut planes: u_m on a symmetric cut, the
-    other components on an antisymmetric one."""
-    dim = doflocs.shape[0]
-    out = []
-    for m, p in zip(mirror.axes, mirror.parities):
-        nodes = np.flatnonzero(np.abs(doflocs[m] - centre[m]) <= tol)
-        comps = [m] if p > 0 else [c for c in range(dim) if c != m]
-        out.append((dim * nodes[:, None] + np.asarray(comps)[None, :]).ravel())
-    return np.unique(np.concatenate(out)) if out else np.zeros(0, np.int64)
 
 
 def unfold(full: Lattice, half: Lattice, u: np.ndarray, mirror: Mirror) -> np.ndarray:

@@ -1,16 +1,28 @@
 """Which solver a system gets: one pure function, :func:`choose_plan`, from what the
-system is (size, dimension, what the caller can hand the solver) to the order in which
-methods are tried. Both the problem's solve (reference/problem.py: the linear-field
-shortcut, the matrix-free CG, the P1/Q1 subspace, the preconditioner to build) and the
-sparse solve (reference/solvers/sparse.py: the attempts on the assembled matrix) ask it,
-so every crossover lives here. The measurements behind the numbers are in CHANGELOG.md
-and ``springbench bench reference`` re-measures them."""
+system is (size, dimension, what the caller can hand the solver) to the steps tried in
+turn. Both the problem's solve (reference/problem.py: the linear-field shortcut, the
+matrix-free CG, the P1/Q1 subspace, the preconditioner to build) and the sparse solve
+(reference/solvers/sparse.py: the steps on the assembled matrix) ask it, so every
+crossover lives here. The solvers a case or a command may name are
+``harness.registry.SOLVERS``; a step is one of ``reference.solvers.sparse.STEPS``.
+
+Crossovers (``springbench bench reference`` measures them in one process,
+results/bench/reference.csv; the measurements behind these numbers are in CHANGELOG.md):
+the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and always in
+2-D and on thin or nearly incompressible bodies (where AMG needs its strong setup);
+'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at 50-150k dofs,
+reused by the factorisation) and factorises when it predicts <= 300 Gflop and <= 2.5 GB,
+else starts with AMG (a 150k-dof 3-D cube: AMG, 0.9 GB). Without coordinates SuperLU is
+the direct solver, up to 15k dofs in 3-D (150k in 2-D). P2/Q2 systems handed their P1/Q1
+subspace (reference/solvers/twolevel.py) take 'two-level' where 'auto' would take AMG
+(the 50k-tet cylinder of ``bench calibrate``: 23 iterations, a third of AMG's CPU
+time)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-METHODS = ("auto", "direct", "cholesky", "superlu", "amg", "cg", "two-level", "tensor")
+from harness.registry import SOLVERS
 
 # 'auto' factorises when the Cholesky's symbolic estimate is below both of these (else
 # AMG, falling back to the Cholesky): the measured break-even with AMG is ~300 Gflop;
@@ -44,7 +56,7 @@ TWO_LEVEL_GFLOP_PER_NONZERO = 2.8e-5
 # (9 s at 203k dofs, where the Cholesky needs 1,730 Gflop)
 TWO_LEVEL_FIRST = {2: 10**12, 3: 150_000}
 
-# what each first method falls back to when it is not accepted
+# what each first step falls back to when it is not accepted
 _CHAINS = {
     "cholesky": ("cholesky",),
     "superlu": ("superlu",),
@@ -56,17 +68,18 @@ _CHAINS = {
 
 @dataclass(frozen=True)
 class System:
-    """What the choice depends on. ``n``: free dofs; ``ndof``: all dofs; ``method``: the
-    case's ``[reference] solver``; ``coords``: the free dofs' locations are known (the
-    Cholesky's nested dissection; without them SuperLU is the direct method); ``coarse``:
-    a P2/Q2 system's P1/Q1 subspace is at hand (two-level); ``tensor``: the Q2 lattice's
-    fast-diagonalisation preconditioner is at hand; ``matrix_free``: the stiffness is one
-    elastic tensor on that lattice (K need not be assembled); ``nnz``: A's nonzeros;
-    ``estimate``: the Cholesky's symbolic estimate {gflop, gbytes} once made."""
+    """What the choice depends on. ``n``: free dofs; ``ndof``: all dofs; ``solver``: the
+    case's ``[reference] solver`` (a name of SOLVERS); ``coords``: the free dofs' locations
+    are known (the Cholesky's nested dissection; without them SuperLU is the direct
+    solver); ``coarse``: a P2/Q2 system's P1/Q1 subspace is at hand (two-level);
+    ``tensor``: the Q2 lattice's fast-diagonalisation preconditioner is at hand;
+    ``matrix_free``: the stiffness is one elastic tensor on that lattice (K need not be
+    assembled); ``nnz``: A's nonzeros; ``estimate``: the Cholesky's symbolic estimate
+    {gflop, gbytes} once made."""
 
     n: int
     dim: int
-    method: str = "auto"
+    solver: str = "auto"
     ndof: int = 0
     coords: bool = True
     coarse: bool = False
@@ -78,7 +91,7 @@ class System:
 
 @dataclass(frozen=True)
 class Plan:
-    """``steps``: the methods tried on the assembled system, in turn, until one is
+    """``steps``: the steps tried on the assembled system, in turn, until one is
     accepted; ``matrix_free``: try the matrix-free CG first; ``coarse``: build the P1/Q1
     subspace; ``needs_estimate``: 'auto' decides by the Cholesky's symbolic estimate:
     make it and ask again."""
@@ -91,12 +104,12 @@ class Plan:
 
 def choose_plan(s: System) -> Plan:
     """The plan of system ``s`` (pure: the same system, the same plan)."""
-    if s.method not in METHODS:
-        raise ValueError(f"unknown solver method {s.method!r} (one of {', '.join(METHODS)})")
-    matrix_free = s.matrix_free and (s.method == "tensor" or s.n >= MATRIX_FREE_MIN[s.dim])
-    coarse = s.ndof >= TWO_LEVEL_MIN or s.method == "two-level"
+    if s.solver not in SOLVERS:
+        raise ValueError(f"unknown solver {s.solver!r} (one of {', '.join(SOLVERS)})")
+    matrix_free = s.matrix_free and (s.solver == "tensor" or s.n >= MATRIX_FREE_MIN[s.dim])
+    coarse = s.ndof >= TWO_LEVEL_MIN or s.solver == "two-level"
     two = s.coarse and s.coords
-    if s.method == "auto":
+    if s.solver == "auto":
         if s.tensor and s.n >= TENSOR_MIN[s.dim]:
             first = "tensor"
         elif not s.coords:
@@ -112,10 +125,10 @@ def choose_plan(s: System) -> Plan:
             ok = s.estimate["gflop"] <= limit and s.estimate["gbytes"] <= CHOLESKY_GBYTES
             first = "cholesky" if ok else "amg"
     else:
-        first = {"direct": "cholesky"}.get(s.method, s.method)
+        first = {"direct": "cholesky"}.get(s.solver, s.solver)
     if first == "cholesky" and not s.coords:
         first = "superlu"
-    if s.method == "auto" and first == "amg" and two:
+    if s.solver == "auto" and first == "amg" and two:
         first = "two-level"
     if first == "two-level" and not two:
         first = "amg"
@@ -129,10 +142,10 @@ def choose_plan(s: System) -> Plan:
     return Plan(steps, matrix_free, coarse)
 
 
-def choose(method: str, n: int, dim: int) -> str:
+def choose(solver: str, n: int, dim: int) -> str:
     """For callers that pass neither coordinates nor rigid-body modes to a direct solve:
     'direct' or 'amg' for 'auto' by the SuperLU crossover :data:`SUPERLU_MAX` (every
-    method falls back by itself)."""
-    if method != "auto":
-        return method
+    solver falls back by itself)."""
+    if solver != "auto":
+        return solver
     return "direct" if n <= SUPERLU_MAX[dim] else "amg"

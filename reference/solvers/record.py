@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class Fallback:
-    """An attempt that was not accepted: its method, residual, why, and its wall seconds."""
+    """A step that was not accepted: its name (``method``), residual, why, and its wall
+    seconds."""
 
     method: str
     residual: float
@@ -20,8 +21,8 @@ class Fallback:
 class SolveRecord:
     """One factorisation or iterative solve (all the loads sharing its constraints).
 
-    ``method``: what solved it ('cholesky', 'superlu', 'amg', 'amg-strong', 'cg',
-    'two-level', 'tensor', or 'linear' for a linear field found without a solve);
+    ``method``: the step that solved it (a key of ``reference.solvers.sparse.STEPS``, or
+    'linear' for a linear field found without a solve);
     ``residual``: max over the columns of ||b - A x|| / ||b||; ``rtol``: the tolerance it
     was accepted at; ``iterations`` (iterative methods); ``seconds`` (wall, the whole
     solve); ``fallbacks``: the attempts before; ``estimate``: the Cholesky's symbolic

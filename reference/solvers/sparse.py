@@ -3,33 +3,23 @@ interleaved ``dim * node + component``): the project's multifrontal sparse Chole
 pyamg smoothed aggregation with the rigid-body modes as near-null space (preconditioner
 of CG), Jacobi-preconditioned CG, or SuperLU (kept for checking).
 
-A well-posed solve always finishes. Every method works on the equilibrated system
+A well-posed solve always finishes. Every step works on the equilibrated system
 D^-1/2 A D^-1/2 (unit diagonal: nothing depends on the units of A, b or the
 coordinates) and is accepted only when the true residual ||b - A x|| <= rtol ||b|| for
 every right-hand side (rtol = RTOL, or the double-precision floor of an ill-conditioned
-system, see FLOOR); otherwise the next method is tried: ``amg`` -> ``amg-strong``
+system, see FLOOR); otherwise the plan's next step is tried: ``amg`` -> ``amg-strong``
 (energy-minimising prolongation, two smoothing sweeps, more iterations) -> ``cholesky``
-(-> ``superlu`` without coordinates). The iterative methods stop early once their
+(-> ``superlu`` without coordinates). The iterative steps stop early once their
 convergence rate cannot reach RTOL within their iteration budget. A singular or
 non-finite system is one ModelError line.
 
-Crossovers (``springbench bench reference`` measures them in one process,
-results/bench/reference.csv; the measurements behind these numbers are in CHANGELOG.md):
-the Cholesky wins up to ~300 Gflop (the 70k-dof cube: 23.5 s vs 25.9 s) and
-always in 2-D and on thin or nearly incompressible bodies (where AMG needs its strong
-setup); 'auto' therefore builds the Cholesky's symbolic factorisation (1-4 s at
-50-150k dofs, reused by the factorisation) and factorises when it predicts <= 300 Gflop
-and <= 2.5 GB, else starts with AMG (a 150k-dof 3-D cube: AMG, 0.9 GB). Without
-coordinates SuperLU is the direct method, up to 15k dofs in 3-D (150k in 2-D). P2/Q2
-systems handed their P1/Q1 subspace (reference/solvers/twolevel.py) take 'two-level' where 'auto'
-would take AMG (the 50k-tet cylinder of ``bench calibrate``: 23 iterations, a third of
-AMG's CPU time).
+Which step comes first is reference/solvers/plan.py's choice (every crossover is there).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,8 +27,10 @@ import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+from harness.registry import SOLVERS
 from reference.solvers import tensorpre
-from reference.solvers.plan import METHODS, SYMBOLIC_MAX, System, choose_plan
+from reference.solvers.dofcoords import coords_from_modes
+from reference.solvers.plan import SYMBOLIC_MAX, System, choose_plan
 from reference.solvers.record import Fallback, SolveRecord
 
 # relative residual an accepted solve reaches, ||b - A x|| <= RTOL ||b||: the direct
@@ -65,9 +57,8 @@ CG_MAXITER = 20_000
 SECONDS_PER_GFLOP = 0.1
 CHOLESKY_OVERHEAD = 1.0
 FALLBACK_GBYTES = 6.0
-TENSOR_MAXITER = (
-    2000  # fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
-)
+# fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
+TENSOR_MAXITER = 2000
 TWO_LEVEL_MAXITER = 300
 
 
@@ -91,7 +82,7 @@ def _singular() -> ModelError:
 def solve(
     A: sp.spmatrix,
     b: np.ndarray,
-    method: str = "auto",
+    solver: str = "auto",
     near_null: np.ndarray | None = None,
     *,
     coords: np.ndarray | None = None,
@@ -102,154 +93,190 @@ def solve(
     """Solve A x = b (b (n,) or (n, m), all columns share one factorisation or one AMG
     hierarchy) for symmetric positive definite A; returns x shaped like b.
 
-    ``method``: 'auto' (the plan of reference/solvers/plan.py: by the Cholesky's
-    estimated cost), 'direct' = 'cholesky' (multifrontal; needs ``coords`` (n, dim) of the
-    free dofs' locations, or recovers them from ``near_null``, else SuperLU), 'superlu',
-    'amg' (with ``near_null`` (n, 3|6) rigid-body modes of the free dofs) or 'cg'. An
-    iterative method that does not reach :data:`RTOL` falls back to a stronger AMG and
-    then to the Cholesky. ``records``, when given, gets the solve's
-    :class:`~reference.solvers.record.SolveRecord` (what solved it, the residual, the
-    tolerance it was accepted at (see :data:`FLOOR`), the attempts before it).
+    ``solver`` (a name of ``harness.registry.SOLVERS``): 'auto' (the plan of
+    reference/solvers/plan.py: by the Cholesky's estimated cost), 'direct' = 'cholesky'
+    (multifrontal; needs ``coords`` (n, dim) of the free dofs' locations, or recovers them
+    from ``near_null``, else SuperLU), 'superlu', 'amg' (with ``near_null`` (n, 3|6)
+    rigid-body modes of the free dofs) or 'cg'. An iterative step that does not reach
+    :data:`RTOL` falls back to a stronger AMG and then to the Cholesky. ``records``, when
+    given, gets the solve's :class:`~reference.solvers.record.SolveRecord` (the step that
+    solved it, the residual, the tolerance it was accepted at (see :data:`FLOOR`), the
+    steps before it).
 
     ``coarse`` (n, nc): the P1/Q1 fields of a P2/Q2 system's mesh in its free dofs
     (reference/solvers/twolevel.py ``prolongation``, rows of the free dofs); with it (and
     ``coords``) 'two-level' (CG, Gauss-Seidel and an exact P1 solve) replaces 'amg' as
-    the iterative method of 'auto' and can be asked for by name.
+    the iterative step of 'auto' and can be asked for by name.
 
     ``tensor``: z = P r, the fast-diagonalisation preconditioner of a Q2 system on a
     tensor mesh (reference/solvers/tensorpre.py); with it 'tensor' (and 'auto' from
     ``plan.TENSOR_MIN`` dofs) first tries CG with it, then falls back as 'auto' would
     without it. (A material of one elastic tensor never gets here on a tensor mesh:
     reference/solvers/tensorsolve.py solves it without assembling A.)"""
-    t0 = time.perf_counter()
-    if method not in METHODS:
-        raise ValueError(f"unknown solver method {method!r} (one of {', '.join(METHODS)})")
+    run = _Run(time.perf_counter(), records, coarse=coarse, tensor=tensor)
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown solver {solver!r} (one of {', '.join(SOLVERS)})")
     A = sp.csr_matrix(A, dtype=float)
     b = np.asarray(b, float)
     n = A.shape[0]
     b2 = b.reshape(n, -1)
-    fallbacks: list[Fallback] = []
-    estimate = None
-
-    def done(x, method, residual=0.0, rtol=RTOL, iterations=0):
-        if records is not None:
-            records.append(
-                SolveRecord(
-                    method,
-                    residual,
-                    rtol,
-                    iterations,
-                    time.perf_counter() - t0,
-                    tuple(fallbacks),
-                    estimate,
-                )
-            )
-        return x
-
     if not (np.all(np.isfinite(A.data)) and np.all(np.isfinite(b2))):
         raise _singular()
     d = A.diagonal()
     if n == 0:
-        return done(np.zeros_like(b), "cholesky")
+        return run.done(np.zeros_like(b), "cholesky")
     if not np.all(d > 0):
         raise _singular()
-    # equilibration: As = S A S, S = D^-1/2; A x = b  <=>  As y = S b, x = S y
-    s = 1.0 / np.sqrt(d)
-    As = equilibrated(A, s)
-    bs = b2 * s[:, None]
-    bnorm = np.linalg.norm(b2, axis=0)
-    live = bnorm > 0
-    x = np.zeros_like(b2)
+    eq = _Equilibrated.of(A, b2, d)
+    if not eq.live.any():
+        return run.done(np.zeros_like(b), "cholesky" if solver in ("auto", "direct") else solver)
+    steps = _steps(eq, run, solver, near_null, coords)
+    if near_null is not None:
+        run.Bs = np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
+    return _try_steps(steps, eq, run).reshape(b.shape)
 
-    normA = float(np.max(abs(A) @ np.ones(n)))  # ||A||_inf >= ||A||_2 (symmetric)
 
-    def residual(xs):
-        """(max ||b - A x|| / ||b||, the largest ratio of a column's residual to its
-        tolerance, the tolerance of the worst column) over the nonzero columns."""
-        r = np.linalg.norm(b2[:, live] - A @ xs[:, live], axis=0) / bnorm[live]
-        tol = accepted_rtol(normA, np.linalg.norm(xs[:, live], axis=0), bnorm[live])
-        if not np.all(np.isfinite(r)):
-            return np.inf, np.inf, RTOL
-        return float(r.max()), float(np.max(r / tol)), float(tol[np.argmax(r / tol)])
-
-    if not live.any():
-        return done(x.reshape(b.shape), "cholesky" if method in ("auto", "direct") else method)
-    dim = (
+def _steps(eq: _Equilibrated, run: _Run, solver: str, near_null, coords) -> tuple[str, ...]:
+    """The plan's steps (reference/solvers/plan.py), and in ``run`` what they use: the
+    dimension, the free dofs' coordinates (read off the modes if not given), the Cholesky's
+    symbolic factorisation if the plan needs its estimate."""
+    run.dim = (
         near_null.shape[1] // 3 + 1
         if near_null is not None and near_null.shape[1] in (3, 6)
         else (coords.shape[1] if coords is not None else 3)
     )
-    if coords is None and method in ("auto", "direct", "cholesky", "amg", "cg"):
-        coords = _coords_from_modes(As, near_null)
-    sym = None
+    if coords is None and solver in ("auto", "direct", "cholesky", "amg", "cg"):
+        coords = coords_from_modes(eq.As, near_null)
+    run.coords = coords
     system = System(
-        n,
-        dim,
-        method,
+        eq.A.shape[0],
+        run.dim,
+        solver,
         coords=coords is not None,
-        coarse=coarse is not None,
-        tensor=tensor is not None,
-        nnz=A.nnz,
+        coarse=run.coarse is not None,
+        tensor=run.tensor is not None,
+        nnz=eq.A.nnz,
     )
     plan = choose_plan(system)
     if plan.needs_estimate:  # the Cholesky's cost from its symbolic factorisation (reused)
-        sym = _symbolic(As, coords)
-        estimate = _estimate(sym)
-        plan = choose_plan(dataclasses.replace(system, estimate=estimate))
-    plan = list(plan.steps)
-    Bs = (
-        None
-        if near_null is None
-        else np.asarray(near_null, float).reshape(n, -1) * np.sqrt(d)[:, None]
-    )
-    spent = 0.0  # CPU seconds of the failed attempts
-    for m in plan:
+        run.sym = _symbolic(eq.As, coords)
+        run.estimate = _estimate(run.sym)
+        plan = choose_plan(replace(system, estimate=run.estimate))
+    return plan.steps
+
+
+@dataclass
+class _Equilibrated:
+    """A x = b as As y = S b with S = D^-1/2 (unit diagonal), x = S y: nothing depends on
+    the units of A, b or the coordinates. ``live``: the nonzero columns of b."""
+
+    A: sp.csr_matrix
+    b2: np.ndarray
+    s: np.ndarray
+    As: sp.csr_matrix
+    bs: np.ndarray
+    bnorm: np.ndarray
+    live: np.ndarray
+    normA: float  # ||A||_inf >= ||A||_2 (symmetric)
+
+    @classmethod
+    def of(cls, A, b2, d) -> _Equilibrated:
+        s = 1.0 / np.sqrt(d)
+        bnorm = np.linalg.norm(b2, axis=0)
+        normA = float(np.max(abs(A) @ np.ones(A.shape[0])))
+        return cls(A, b2, s, equilibrated(A, s), b2 * s[:, None], bnorm, bnorm > 0, normA)
+
+    def unscaled(self, y: np.ndarray) -> np.ndarray:
+        """x = S y on the live columns, zero on the others."""
+        xs = np.zeros_like(self.b2)
+        xs[:, self.live] = y * self.s[:, None]
+        return xs
+
+    def residual(self, xs) -> tuple[float, float, float]:
+        """(max ||b - A x|| / ||b||, the largest ratio of a column's residual to its
+        tolerance, the tolerance of the worst column) over the nonzero columns."""
+        live, bnorm = self.live, self.bnorm[self.live]
+        r = np.linalg.norm(self.b2[:, live] - self.A @ xs[:, live], axis=0) / bnorm
+        tol = accepted_rtol(self.normA, np.linalg.norm(xs[:, live], axis=0), bnorm)
+        if not np.all(np.isfinite(r)):
+            return np.inf, np.inf, RTOL
+        return float(r.max()), float(np.max(r / tol)), float(tol[np.argmax(r / tol)])
+
+
+@dataclass
+class _Run:
+    """One solve's state beside its system: when it started, where its record goes, what
+    the steps may use (the dimension, the free dofs' ``coords``, the scaled rigid-body
+    modes ``Bs``, the P1/Q1 subspace ``coarse``, the preconditioner ``tensor``), the
+    Cholesky's symbolic factorisation and estimate once made, the failed steps and their
+    CPU seconds."""
+
+    t0: float
+    records: list | None
+    dim: int = 3
+    coords: np.ndarray | None = None
+    Bs: np.ndarray | None = None
+    coarse: sp.spmatrix | None = None
+    tensor: object = None
+    sym: Symbolic | None = None
+    estimate: dict | None = None
+    fallbacks: list = field(default_factory=list)
+    spent: float = 0.0
+
+    def done(self, x, step: str, residual=0.0, rtol=RTOL, iterations=0):
+        """``x``, its SolveRecord appended to the caller's list."""
+        if self.records is not None:
+            seconds = time.perf_counter() - self.t0
+            rec = (step, residual, rtol, iterations, seconds, tuple(self.fallbacks))
+            self.records.append(SolveRecord(*rec, self.estimate))
+        return x
+
+
+def _try_steps(steps: tuple[str, ...], eq: _Equilibrated, run: _Run) -> np.ndarray:
+    """The first step whose solution is accepted (a direct one after one step of iterative
+    refinement); a failed iterative step is a Fallback of the record."""
+    for step in steps:
         t1, c1 = time.perf_counter(), time.process_time()
         budget = None
-        if m == "amg-strong" and plan[-1] == "cholesky":
-            # a stronger AMG only while it can beat the Cholesky it would fall back to
-            if sym is None and n <= SYMBOLIC_MAX[dim]:
-                sym = _symbolic(As, coords)
-                estimate = _estimate(sym)
-            if sym is not None and estimate["gbytes"] <= FALLBACK_GBYTES:
-                chol = SECONDS_PER_GFLOP * estimate["gflop"] + CHOLESKY_OVERHEAD
-                if chol < 2 * spent:
-                    continue
-                budget = chol
+        if step == "amg-strong" and steps[-1] == "cholesky":
+            skip, budget = _strong_budget(eq, run)
+            if skip:
+                continue
         try:
-            if m in ("cholesky", "superlu"):
-                if m == "cholesky" and sym is None:
-                    sym = _symbolic(As, coords)
-                f = _factor(As, m, sym)
-                y, its, why = f(bs[:, live]), 0, ""
-            elif m == "two-level":
-                y, its, why = _two_level(As, bs[:, live], s, coarse, coords, Bs, normA, bnorm[live])
-            elif m == "tensor":
-                y, its, why = tensorpre.cg(As, bs[:, live], s, tensor, _pcg, RTOL, TENSOR_MAXITER)
-            else:
-                y, its, why = _iterative(As, bs[:, live], m, Bs, budget)
+            y, its, why, f = STEPS[step](eq, run, step, budget)
         except ModelError:
             raise _singular() from None
-        xs = np.zeros_like(b2)
-        xs[:, live] = y * s[:, None]
-        res, ratio, tol = residual(xs) if np.all(np.isfinite(xs)) else (np.inf, np.inf, RTOL)
-        if m in ("cholesky", "superlu") and np.isfinite(res) and res > RTOL / 100:
+        xs = eq.unscaled(y)
+        res, ratio, tol = eq.residual(xs) if np.all(np.isfinite(xs)) else (np.inf, np.inf, RTOL)
+        direct = step in ("cholesky", "superlu")
+        if direct and np.isfinite(res) and res > RTOL / 100:
             # one step of iterative refinement with the same factor
-            xs2 = xs.copy()
-            xs2[:, live] += f((b2[:, live] - A @ xs[:, live]) * s[:, None]) * s[:, None]
-            res2 = residual(xs2)
+            xs2, live, s = xs.copy(), eq.live, eq.s[:, None]
+            xs2[:, live] += f((eq.b2[:, live] - eq.A @ xs[:, live]) * s) * s
+            res2 = eq.residual(xs2)
             if res2[0] < res:
                 xs, (res, ratio, tol) = xs2, res2
         f = None
-        if ratio <= 1 or (m in ("cholesky", "superlu") and res <= DIRECT_RTOL):
-            return done(xs.reshape(b.shape), m, res, tol, its)
-        if m in ("cholesky", "superlu"):
+        if ratio <= 1 or (direct and res <= DIRECT_RTOL):
+            return run.done(xs, step, res, tol, its)
+        if direct:
             raise _singular()
-        fallbacks.append(
-            Fallback(m, res, why or f"residual above {tol:.1e}", time.perf_counter() - t1)
-        )
-        spent += time.process_time() - c1
-    return done(x.reshape(b.shape), "none")  # not reached: the plan ends with a direct solve
+        reason = why or f"residual above {tol:.1e}"
+        run.fallbacks.append(Fallback(step, res, reason, time.perf_counter() - t1))
+        run.spent += time.process_time() - c1
+    return run.done(np.zeros_like(eq.b2), "none")  # not reached: a plan ends with a direct step
+
+
+def _strong_budget(eq: _Equilibrated, run: _Run) -> tuple[bool, float | None]:
+    """(skip, CPU seconds) of 'amg-strong' before the Cholesky it falls back to: a stronger
+    AMG only while it can beat that Cholesky (see :data:`SECONDS_PER_GFLOP`)."""
+    if run.sym is None and eq.A.shape[0] <= SYMBOLIC_MAX[run.dim]:
+        run.sym = _symbolic(eq.As, run.coords)
+        run.estimate = _estimate(run.sym)
+    if run.sym is not None and run.estimate["gbytes"] <= FALLBACK_GBYTES:
+        chol = SECONDS_PER_GFLOP * run.estimate["gflop"] + CHOLESKY_OVERHEAD
+        return chol < 2 * run.spent, chol
+    return False, None
 
 
 # -- direct ------------------------------------------------------------------------------
@@ -264,10 +291,10 @@ def _estimate(sym) -> dict:
     return sym.estimate()
 
 
-def _factor(As, method, sym):
+def _factor(As, step, sym):
     """Factorise As (Cholesky on the Symbolic ``sym``); returns the solve function for
     (n, m) right-hand sides."""
-    if method == "cholesky":
+    if step == "cholesky":
         f = MultifrontalCholesky(As, sym)
         return lambda r: f.solve(np.ascontiguousarray(r)).reshape(r.shape)
     try:
@@ -280,9 +307,8 @@ def _factor(As, method, sym):
     return lambda r: lu.solve(np.ascontiguousarray(r)).reshape(r.shape)
 
 
-INVERSE_GBYTES = (
-    6.0  # memory the shift-invert Cholesky may take (beyond it: the two-level CG below)
-)
+# memory the shift-invert Cholesky may take (beyond it: the two-level CG below)
+INVERSE_GBYTES = 6.0
 INVERSE_RTOL = 1e-11  # relative residual of each shift-invert solve by the two-level CG
 
 
@@ -327,69 +353,24 @@ def _two_level_inverse(As, coords, coarse):
     return solve
 
 
-def _coords_from_modes(A, near_null):
-    """Locations of the free dofs (up to scale and shift: enough for the nested
-    dissection) read off the rigid-body modes ``Discretisation.rigid_modes`` builds:
-    translations first (column c is 1 on the dofs of component c), then rotations, which
-    hold the coordinates (2-D: [-y, x]; 3-D: [-y, x, 0], [0, -z, y], [-z, 0, x]). A
-    coordinate a dof's modes do not carry is the mean over its graph neighbours that
-    carry it. None if the modes do not look like that."""
-    if near_null is None:
-        return None
-    R = np.asarray(near_null, float)
-    n = R.shape[0]
-    if R.ndim != 2 or R.shape[1] not in (3, 6):
-        return None
-    dim = 2 if R.shape[1] == 3 else 3
-    T = R[:, :dim]
-    if not (np.all((T == 0) | (T == 1)) and np.all(T.sum(axis=1) == 1)):
-        return None
-    comp = np.argmax(T, axis=1)
-    X = np.zeros((n, dim))
-    known = np.zeros((n, dim), bool)
-    # (mode column, component, coordinate, sign): mode value = sign * coordinate
-    table = (
-        [(2, 0, 1, -1), (2, 1, 0, 1)]
-        if dim == 2
-        else [(3, 0, 1, -1), (3, 1, 0, 1), (4, 1, 2, -1), (4, 2, 1, 1), (5, 0, 2, -1), (5, 2, 0, 1)]
-    )
-    for col, c, j, sign in table:
-        on = comp == c
-        X[on, j] = sign * R[on, col]
-        known[on, j] = True
-    G = sp.csr_matrix((np.ones(A.nnz), A.indices, A.indptr), shape=A.shape)
-    for _ in range(3):
-        if known.all():
-            break
-        num, cnt = G @ (X * known), G @ known.astype(float)
-        fill = ~known & (cnt > 0)
-        X[fill] = num[fill] / cnt[fill]
-        known |= fill
-    return X
-
-
 # -- iterative ---------------------------------------------------------------------------
 
 
-def _two_level(As, bs, s, coarse, coords, Bs, normA, bnorm):
+def _two_level(eq: _Equilibrated, run: _Run, step: str, budget):
     """reference/solvers/twolevel.py's CG on every column at once, each to the residual
     ``solve`` accepts (RTOL, or the floor of the column's solution, halved for margin)."""
     from reference.solvers import twolevel
 
+    bs, s, bnorm = eq.bs[:, eq.live], eq.s, eq.bnorm[eq.live]
     try:
-        M = twolevel.TwoLevel(As, s, coarse, coords, Bs)
+        M = twolevel.TwoLevel(eq.As, s, run.coarse, run.coords, run.Bs)
     except Exception as exc:  # noqa: BLE001 - a failed setup is a failed attempt
-        return np.full_like(bs, np.nan), 0, f"two-level setup failed: {exc}"
+        return np.full_like(bs, np.nan), 0, f"two-level setup failed: {exc}", None
 
     def target(Y):
-        xn = np.linalg.norm(Y * s[:, None], axis=0)
-        return (
-            0.5
-            * np.clip(FLOOR * np.finfo(float).eps * normA * xn / bnorm, RTOL, DIRECT_RTOL)
-            * bnorm
-        )
+        return 0.5 * accepted_rtol(eq.normA, np.linalg.norm(Y * s[:, None], axis=0), bnorm) * bnorm
 
-    return twolevel.pcg(As, bs, M, 1.0 / s, target, TWO_LEVEL_MAXITER)
+    return (*twolevel.pcg(eq.As, bs, M, 1.0 / s, target, TWO_LEVEL_MAXITER), None)
 
 
 def _hierarchy(As, Bs, strong: bool):
@@ -411,26 +392,27 @@ def _hierarchy(As, Bs, strong: bool):
     )
 
 
-def _iterative(As, bs, method, Bs, budget=None):
+def _iterative(eq: _Equilibrated, run: _Run, step: str, budget):
     """CG preconditioned by one AMG V-cycle ('amg', 'amg-strong') or Jacobi ('cg'; the
-    diagonal of As is 1) on every column; (y, most iterations, reason of a failure).
-    ``budget``: CPU seconds (setup included) after which it is not worth continuing."""
+    diagonal of As is 1) on every column. ``budget``: CPU seconds (setup included) after
+    which it is not worth continuing."""
     c0 = time.process_time()
-    if method == "cg":
+    As, bs, Bs = eq.As, eq.bs[:, eq.live], run.Bs
+    if step == "cg":
         M, maxiter = None, min(20 * As.shape[0], CG_MAXITER)
     else:
         try:
-            ml = _hierarchy(As, Bs, method == "amg-strong")
+            ml = _hierarchy(As, Bs, step == "amg-strong")
         except Exception as exc:  # noqa: BLE001 - a failed setup is a failed attempt
-            return np.full_like(bs, np.nan), 0, f"AMG setup failed: {exc}"
+            return np.full_like(bs, np.nan), 0, f"AMG setup failed: {exc}", None
         M = ml.aspreconditioner(cycle="V")
-        maxiter = AMG_MAXITER if method == "amg" else STRONG_MAXITER
+        maxiter = AMG_MAXITER if step == "amg" else STRONG_MAXITER
     Y, its, why = np.zeros_like(bs), 0, ""
     for j in range(bs.shape[1]):
         left = None if budget is None else budget - (time.process_time() - c0)
         Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, maxiter, 20 if M is not None else 200, left)
         its, why = max(its, k), why or w
-    return Y, its, why
+    return Y, its, why, None
 
 
 def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
@@ -481,3 +463,31 @@ def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
         p = z + (rz_new / rz) * p
         rz = rz_new
     return x, maxiter, f"no convergence in {maxiter} iterations"
+
+
+# -- the steps: (system, run, step, budget) -> (y, iterations, reason of a failure, the
+# factor of a direct step or None) ------------------------------------------------------
+
+
+def _direct_step(eq: _Equilibrated, run: _Run, step: str, budget):
+    if step == "cholesky" and run.sym is None:
+        run.sym = _symbolic(eq.As, run.coords)
+    f = _factor(eq.As, step, run.sym)
+    return f(eq.bs[:, eq.live]), 0, "", f
+
+
+def _tensor_step(eq: _Equilibrated, run: _Run, step: str, budget):
+    bs = eq.bs[:, eq.live]
+    return (*tensorpre.cg(eq.As, bs, eq.s, run.tensor, _pcg, RTOL, TENSOR_MAXITER), None)
+
+
+# every step a plan may name (reference/solvers/plan.py): how it is tried
+STEPS = {
+    "cholesky": _direct_step,
+    "superlu": _direct_step,
+    "amg": _iterative,
+    "amg-strong": _iterative,
+    "cg": _iterative,
+    "two-level": _two_level,
+    "tensor": _tensor_step,
+}

@@ -31,7 +31,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse.linalg as spla
 
-from reference.graded.lattice import Lattice
+from reference.lattice import Lattice
 from reference.solvers.kronecker import axis_matrices
 
 _PAIRS = {2: {(0, 1): 2}, 3: {(1, 2): 3, (0, 2): 4, (0, 1): 5}}  # Voigt index of a shear pair

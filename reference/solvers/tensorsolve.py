@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from reference.graded.lattice import Lattice
+from reference.lattice import Lattice
 from reference.solvers import sparse, tensorpre
 from reference.solvers.kronecker import KroneckerStiffness
 from reference.solvers.record import Fallback, SolveRecord

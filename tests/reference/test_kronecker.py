@@ -13,8 +13,8 @@ import skfem
 from skfem.helpers import sym_grad
 
 from harness.case.elasticity import isotropic_compliance
-from reference.graded.lattice import Lattice
 from reference.graded.meshes import graded_axes, tensor_mesh
+from reference.lattice import Lattice
 from reference.solvers.kronecker import KroneckerStiffness, axis_matrices
 from tests.reference.test_tensorpre import _orthotropic
 

@@ -77,7 +77,7 @@ def test_named_methods_and_the_problem_level_choices():
     assert choose_plan(System(10, 3, ndof=plan.TWO_LEVEL_MIN)).coarse
     assert not choose_plan(System(10, 3, ndof=plan.TWO_LEVEL_MIN - 1)).coarse
     assert choose_plan(System(10, 3, "two-level")).coarse
-    with pytest.raises(ValueError, match="unknown solver method 'lu'"):
+    with pytest.raises(ValueError, match="unknown solver 'lu'"):
         choose_plan(System(10, 3, "lu"))
 
 

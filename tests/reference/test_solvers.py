@@ -14,7 +14,7 @@ import skfem
 from harness.case.elasticity import isotropic_compliance
 from harness.errors import ModelError
 from reference.fem import Discretisation
-from reference.solvers import plan, sparse
+from reference.solvers import dofcoords, plan, sparse
 from reference.solvers.record import SolveRecord
 
 METHODS = ["auto", "direct", "cholesky", "superlu", "amg", "cg"]
@@ -117,7 +117,7 @@ def test_positional_call_without_info_or_coords(small):
 
 def test_coordinates_from_rigid_modes(small):
     A, _, R, X, d, _ = small
-    Y = sparse._coords_from_modes(A, R)
+    Y = dofcoords.coords_from_modes(A, R)
     # rigid_modes uses centred coordinates divided by their largest magnitude
     c = d.doflocs.mean(axis=1)
     s = np.abs(d.doflocs - c[:, None]).max()
@@ -125,7 +125,7 @@ def test_coordinates_from_rigid_modes(small):
     np.testing.assert_allclose(Y, (X - c) / s, atol=1.0)
     exact = np.abs(Y - (X - c) / s) < 1e-12
     assert exact.sum(axis=1).min() >= 2  # each dof carries 2 of its 3
-    assert sparse._coords_from_modes(A, np.ones((A.shape[0], 6))) is None
+    assert dofcoords.coords_from_modes(A, np.ones((A.shape[0], 6))) is None
 
 
 def test_many_right_hand_sides_share_one_setup(small, monkeypatch):

@@ -9,7 +9,8 @@ import pytest
 from harness.case.reader import load_case
 from reference.graded.levels import Levels
 from reference.graded.meshes import graded_axes, tensor_mesh
-from reference.graded.symmetry import Mirror, mirror_of
+from reference.graded.symmetry import mirror_of
+from reference.mirror import Mirror
 from reference.problem import solve_mesh
 
 USER_LOADS = """

@@ -14,8 +14,8 @@ import skfem
 
 from harness.case.elasticity import isotropic_compliance
 from reference.fem import Discretisation
-from reference.graded.lattice import Lattice
 from reference.graded.meshes import graded_axes, tensor_mesh
+from reference.lattice import Lattice
 from reference.problem import solve_system
 from reference.solvers import plan, sparse, tensorpre
 

@@ -11,8 +11,8 @@ import pytest
 
 from harness.case.elasticity import isotropic_compliance
 from reference.graded import levels
-from reference.graded.lattice import Lattice
 from reference.graded.meshes import graded_axes, q2_doflocs, tensor_mesh
+from reference.lattice import Lattice
 from reference.solvers import plan, tensorsolve
 from tests.reference.test_graded import box_case
 from tests.reference.test_kronecker import _skfem_stiffness
