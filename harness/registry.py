@@ -88,7 +88,7 @@ STAGES = Registry(
 
 # ``springbench bench NAME``: modules with run(quick) -> DataFrame
 BENCHES = _modules(
-    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines shapes"
+    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines shapes run"
 )
 
 # ``[optimizer] method``: function(problem, options, seed, status) -> FitResult fields
@@ -225,6 +225,22 @@ LOAD_SETS = Registry(
     },
 )
 
+# region spellings of --clamp / --load-region / [body.parts] facets (a group's name otherwise):
+# test(selector, points, tol) -> mask of the nodes inside; ``about``: the right spelling
+REGION_SELECTORS = Registry(
+    "region selector",
+    {
+        "nodes": "harness.case.selectors:nodes",
+        "box": "harness.case.selectors:box",
+        "sphere": "harness.case.selectors:sphere",
+    },
+    about={
+        "nodes": "nodes:FILE of node ids, 0-based, one a line or comma-separated",
+        "box": "box:XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX or in 2-D box:XMIN,YMIN,XMAX,YMAX",
+        "sphere": "sphere:X,Y,Z,R or in 2-D the circle sphere:X,Y,R",
+    },
+)
+
 # mesh formats of our own (any other name is a meshio format): reader(path) -> Mesh
 MESH_READERS = Registry(
     "mesh format",
@@ -254,6 +270,20 @@ ENGINES = Registry(
         "mujoco-flex": ("mujoco", "MuJoCo's 3-D flex with its own elasticity (young, poisson)"),
     },
 )
+
+# ``[reference] solver`` and ``calibrate --solver``: the FEM's linear solver, name -> what it
+# tries first; reference/solvers/plan.py turns a name into the steps reference/solvers/sparse.py
+# tries in turn (an iterative one falls back to a stronger one, at last to a direct solve)
+SOLVERS = {
+    "auto": "per system the cheaper of the multifrontal Cholesky and an iterative method",
+    "direct": "the multifrontal Cholesky (SuperLU where the dofs' locations are unknown)",
+    "cholesky": "the same as direct",
+    "superlu": "SuperLU",
+    "amg": "CG preconditioned by smoothed-aggregation AMG with the rigid-body modes",
+    "cg": "Jacobi-preconditioned CG",
+    "two-level": "P2/Q2: CG preconditioned by Gauss-Seidel and an exact P1/Q1 solve",
+    "tensor": "graded boxes: CG with the fast-diagonalisation preconditioner at any size",
+}
 
 # ``[dynamics] experiment`` of the bc2000 stage: function(case, ctx, model, dyn) -> rows
 EXPERIMENTS = Registry(
@@ -289,6 +319,7 @@ ALL = (
     MODEL_CLASSES,
     STIFFNESS_RULES,
     LOAD_SETS,
+    REGION_SELECTORS,
     MESH_READERS,
     ENGINES,
     EXPERIMENTS,

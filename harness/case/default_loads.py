@@ -7,7 +7,8 @@ it, the way a bar, a beam or an organ held at one end is.
 - ``tip``: a traction along ``across`` on the high end's face;
 - ``tip2`` (3-D): a traction along the third axis on the same face;
 - ``torsion`` (3-D): the twist t = w e_axis x (x - c) on the same face (c its area
-  centroid: a torque, no resultant);
+  centroid: a torque, no resultant); on a region the user chose, about its mean outward
+  normal n instead of e_axis (w its radius about n);
 - ``bridge``: the sag's body force with both ends clamped;
 - training states (fitted, never held out): ``train-tip``, ``train-tip2`` and
   ``train-torsion``, the tip loads and the twist with the ends swapped (the high end
@@ -25,10 +26,10 @@ and the clamp holds three non-collinear nodes (two in 2-D), the tip a facet. A f
 holds its whole section at 5 %: a prismatic body's ends are its flat end faces. A rounded
 end gets a cap, never a near-point clamp (a singular problem whose FEM does not converge).
 The clamp and the tip grow each on its own; the side faces the same way from SIDE_BAND.
-Either end may instead be a named group of the mesh (``calibrate --clamp`` /
-``--load-region``), used as named; a group that is nearly a point is warned about
-(:func:`near_point_warnings`). The FEM and the springs are clamped and loaded on the same
-facets (harness.case.facet_loads).
+Either end may instead be a named group of the mesh or a node file, box or sphere
+(``calibrate --clamp`` / ``--load-region``; harness.case.selectors), used as given; a
+region that is nearly a point is warned about (:func:`near_point_warnings`). The FEM and
+the springs are clamped and loaded on the same facets (harness.case.facet_loads).
 
 Magnitudes (:meth:`EndLoads.magnitudes`) give a peak strain of about ``peak_strain``
 (default 1e-3) by beam theory on the body's own section: bending strain M c / (E I) at the
@@ -45,7 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.case.moments import EXPONENTS, mesh_moments
-from harness.case.regions import centroid_normal, grow, region, warning
+from harness.case.regions import centroid_normal, grow, mean_normal, region, vector, warning
+from harness.case.selectors import check_nodes, facet_masks, kind_of, parse, require_facets
 from harness.errors import SpringbenchError
 from harness.io.end_faces import BAND, COS, facet_geometry, facet_sizes
 from harness.io.meshfile import boundary_facets
@@ -84,6 +86,8 @@ class EndLoads:
     tip_band: float | None = None  # of the tip's end face (None: band)
     tip_cos: float | None = None  # of the tip's end face (None: cos)
     regions: tuple = ()  # (clamp, tip) Regions: what each holds (harness.case.regions)
+    tip_twist: tuple | None = None  # the torsion's axis: the tip's mean normal (None: e_axis)
+    clamp_twist: tuple | None = None  # train-torsion's: the clamp's mean normal (None: -e_axis)
 
     @property
     def tip_end(self) -> tuple[float, float]:
@@ -132,12 +136,18 @@ class EndLoads:
         share of the body's mean section) and node count (the clamp's after its normal)."""
         a, b = "xyz"[self.axis], "xyz"[self.across]
         extra = (
-            f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' (a twist about {a})"
+            f", 'tip2' (along -{'xyz'[self.second]}), 'torsion' ({self._twist_words()})"
             if self.dim == 3
             else ""
         )
         clamp, tip = self.regions or (None, None)
-        where = lambda p, end: f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"  # noqa: E731
+        names = {"0": clamp, "1": tip}
+
+        def where(p, end):
+            if names[end] is not None:
+                return names[end].where
+            return f"group '{p}'" if isinstance(p, str) else f"the {a}{end} end face"
+
         info = lambda r, n: f" ({r.describe(self.axis, self.dim, n)})" if r is not None else ""  # noqa: E731
         band = (
             ""
@@ -151,6 +161,13 @@ class EndLoads:
             f"{where(self.clamp, '0')} "
             f"clamped{info(clamp, False)}{band}{self.clamp_info}"
         )
+
+    def _twist_words(self) -> str:
+        """What the torsion turns about: the axis, or the load region's mean normal."""
+        if self.tip_twist is not None:
+            return f"a twist about the load region's mean normal {vector(self.tip_twist)}"
+        every = ": the load region faces every way" if self.tip is not None else ""
+        return f"a twist about {'xyz'[self.axis]}{every}"
 
     def magnitudes(
         self, E: float, nu: float, density: float, peak_strain: float = PEAK_STRAIN
@@ -201,8 +218,13 @@ class EndLoads:
 
         def part(p, end, band, cos):
             if isinstance(p, str):
-                return {"group": p}
+                return {"facets": p} if kind_of(p) else {"group": p}
             return {"end": end, "band": float(band), "cos": float(cos)}
+
+        def twist(normal, sign):  # about the region's mean normal, or the axis
+            if normal is None:
+                return vec(self.axis, sign * m["torsion"])
+            return [float(m["torsion"] * x) for x in normal]
 
         def load(name, holds, gravity=None, on=None, **traction):
             case = {"name": name}
@@ -218,12 +240,13 @@ class EndLoads:
         cases.append(load("tip", ["clamp"], on="tip", vector=vec(b, -m["tip"])))
         if dim == 3:
             cases.append(load("tip2", ["clamp"], on="tip", vector=vec(c, -m["tip2"])))
-            cases.append(load("torsion", ["clamp"], on="tip", twist=vec(a, m["torsion"])))
+            cases.append(load("torsion", ["clamp"], on="tip", twist=twist(self.tip_twist, 1)))
         cases.append(load("bridge", ["clamp", "tip"], vec(b, -m["bridge"])))
         cases.append(load("train-tip", ["tip"], on="clamp", vector=vec(b, m["tip"])))
         if dim == 3:
             cases.append(load("train-tip2", ["tip"], on="clamp", vector=vec(c, m["tip2"])))
-            cases.append(load("train-torsion", ["tip"], on="clamp", twist=vec(a, -m["torsion"])))
+            twisted = twist(self.clamp_twist, -1)
+            cases.append(load("train-torsion", ["tip"], on="clamp", twist=twisted))
         parts = {
             "clamp": part(self.clamp, f"{ax[a]}0", self.band, self.cos),
             "tip": part(self.tip, f"{ax[a]}1", *self.tip_end),
@@ -265,10 +288,7 @@ def end_loads(
         face at ``side`` grown to SHARE; None: no end face satisfies ``ok``."""
         band = cos = None
         if name is not None:
-            g, held = groups[name], np.zeros(len(points), bool)
-            nodes = np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes])
-            held[np.unique(nodes).astype(int)] = True
-            masks, where = [held[f].all(axis=1) for f in facets], f"group '{name}'"
+            masks, where = user_masks(name, points, facets, groups, FLAGS[role])
         else:
             found = grow(points, geometry, axis, (side,), section, BAND, lambda m: ok(m[0]))
             if found is None:
@@ -281,10 +301,10 @@ def end_loads(
     held = choose(clamp, 0, holds, "clamp")
     if clamp is not None and not holds(held[0]):
         raise SpringbenchError(
-            f"group '{clamp}' cannot clamp the body (a face with {dim} nodes not on one line "
+            f"{held[3].where} cannot clamp the body (a face with {dim} nodes not on one line "
             f"needed)",
             field="--clamp",
-            fix="name a face group of the mesh",
+            fix="a face group of the mesh or a larger region",
         )
     loaded = choose(tip, 1, lambda m: any(x.any() for x in m), "load region")
     if held is None or loaded is None or not any(m.any() for m in loaded[0]):
@@ -297,28 +317,56 @@ def end_loads(
     clamp_end = None if clamp is not None else held[1:3]
     tip_end = None if tip is not None else loaded[1:3]
     band, cos = clamp_end or tip_end or (BAND, COS)
+    tip_twist, clamp_twist = (
+        (None if name is None or dim != 3 else mean_normal(geometry, r[0]))
+        for name, r in ((tip, loaded), (clamp, held))
+    )
+    tip_facets = [f[m] for f, m in zip(facets, loaded[0])]
     return EndLoads(
         axis,
         across,
         clamp,
         tip,
         band,
-        _section(points, moments, axis, [f[m] for f, m in zip(facets, loaded[0])]),
+        _section(points, moments, axis, tip_facets, tip_twist),
         dim,
         centroid_normal(geometry, held[0], held[3].nodes),
         cos,
         _sides(points, geometry, axis, holds, float(moments[0])),
         *(tip_end or (None, None)),
         (held[3], loaded[3]),
+        None if tip_twist is None else tuple(map(float, tip_twist)),
+        None if clamp_twist is None else tuple(map(float, clamp_twist)),
     )
+
+
+FLAGS = {"clamp": "--clamp", "load region": "--load-region"}
+
+
+def user_masks(name: str, points, facets, groups, flag: str):
+    """(masks per facet array, where) of a region the user named with ``flag``: a group of
+    the mesh (its facets all of whose nodes it holds) or a selector's (harness.case.selectors)."""
+
+    def bad(message, fix):
+        raise SpringbenchError(message, field=flag, fix=fix)
+
+    sel = parse(name, bad, points.shape[1])
+    if sel is None:
+        g, held = groups[name], np.zeros(len(points), bool)
+        nodes = np.concatenate([c.ravel() for c in g.cells.values()] + [g.nodes])
+        held[np.unique(nodes).astype(int)] = True
+        return [held[f].all(axis=1) for f in facets], f"group '{name}'"
+    check_nodes(sel, len(points), bad)
+    masks = facet_masks(sel, points, facets)
+    require_facets(sel, masks, points, bad)
+    return masks, sel.describe()
 
 
 def near_point_warnings(ends: EndLoads) -> list[str]:
     """One warning line per region of ``ends`` that is nearly a point (a user's group below
     SHARE of the section or of few facets; an end face no band grows to SHARE), naming the
     fix; [] when both hold a meaningful part of the body. The caller prints them."""
-    flags = {"clamp": "--clamp", "load region": "--load-region"}
-    return [warning(r, flags[r.role]) for r in ends.regions if r is not None and r.near_point]
+    return [warning(r, FLAGS[r.role]) for r in ends.regions if r is not None and r.near_point]
 
 
 def _sides(points, geometry, axis: int, holds, volume: float) -> tuple:
@@ -337,9 +385,10 @@ def _sides(points, geometry, axis: int, holds, volume: float) -> tuple:
     )
 
 
-def _section(points, m, axis: int, tip_facets) -> Section:
+def _section(points, m, axis: int, tip_facets, twist=None) -> Section:
     """The body's Section along ``axis`` (its exact volume moments m, int x^e dV for the
-    exponents e of harness.case.moments.EXPONENTS; the tip face from ``tip_facets``)."""
+    exponents e of harness.case.moments.EXPONENTS; the tip face from ``tip_facets``, its
+    radius about the ``twist`` axis through its centroid, default e_axis)."""
     dim = points.shape[1]
     V, mean = m[0], m[1 : 1 + dim] / m[0]
     square = [
@@ -354,7 +403,8 @@ def _section(points, m, axis: int, tip_facets) -> Section:
     centroid = sum(a @ points[f].mean(axis=1) for a, f in zip(areas, tip)) / tip_area
     nodes = np.unique(np.concatenate([f.ravel() for f in tip]))
     r = points[nodes] - centroid
-    r[:, axis] = 0.0
+    d = np.eye(dim)[axis] if twist is None else np.asarray(twist, float)
+    r -= np.outer(r @ d, d)  # across the twist axis
     return Section(
         L,
         float(V / L),

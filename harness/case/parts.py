@@ -3,8 +3,9 @@
 Built-in names are intersections of bounding-box faces: ``x0`` is the face x = xmin,
 ``x1`` the face x = xmax (likewise y, z); ``x0y0`` is their intersection (a corner in
 2-D, an edge in 3-D), ``x0y0z0`` a corner in 3-D. User parts are axis-aligned boxes
-declared in ``[body.parts]``, groups of the body's mesh file (harness.io.mesh_groups) or
-its end faces along an axis (harness.io.end_faces).
+declared in ``[body.parts]``, groups of the body's mesh file (harness.io.mesh_groups), its
+end faces along an axis (harness.io.end_faces) or the facets a node file, a box or a sphere
+selects (harness.case.selectors).
 A predicate takes coordinates shaped (dim, n), as scikit-fem does, and returns a
 boolean mask.
 """
@@ -16,6 +17,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from harness.case.selectors import SelectorPart, selector_predicate
 from harness.io.end_faces import EndPart, end_predicate
 from harness.io.mesh_groups import GroupPart, group_predicate
 
@@ -57,6 +59,8 @@ def part_predicate(
         return group_predicate(user_parts[name], tol)
     if user_parts and isinstance(user_parts.get(name), EndPart):
         return end_predicate(user_parts[name], tol)
+    if user_parts and isinstance(user_parts.get(name), SelectorPart):
+        return selector_predicate(user_parts[name], tol)
     if user_parts and name in user_parts:
         plo, phi = (np.asarray(b, float) for b in user_parts[name])
 

@@ -22,6 +22,7 @@ from harness.case.fields import GRADED_LEVELS, TOP
 from harness.case.loads import parse_heldout, parse_loads, with_anchors
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean
+from harness.case.selectors import SPELLINGS, case_part
 from harness.errors import CaseError, SpringbenchError, raise_all
 from harness.io.end_faces import BAND, COS, EndPart
 from harness.io.mesh_groups import GroupPart, require_group
@@ -239,10 +240,15 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         if isinstance(spec, dict) and "end" in spec:  # an end face of the mesh along an axis
             parts[name] = _end_part(spec, name, shape, dim, body, fail)
             continue
+        if isinstance(spec, dict) and set(spec) == {"facets"}:  # a group, nodes:, box: or sphere:
+            m = mesh if shape == "mesh" else None
+            parts[name] = _facets_part(spec["facets"], name, shape, m, body, path, file, fail)
+            continue
         if not isinstance(spec, dict) or set(spec) != {"box"}:
             fail(
                 f"parts.{name}",
-                'expected {box = [[lo...], [hi...]]}, {group = "name"} or {end = "x1"}',
+                'expected {box = [[lo...], [hi...]]}, {group = "name"}, {end = "x1"} or '
+                '{facets = "box:..."}',
             )
         box = spec["box"]
         ok = (
@@ -275,6 +281,21 @@ def _body(b: dict, dim: int, path: Path, file: str) -> Body:
         body.format,
         MappingProxyType(parts),
     )
+
+
+def _facets_part(value, name: str, shape: str, mesh, body, path: Path, file: str, fail):
+    """``{ facets = "nodes:FILE" | "box:..." | "sphere:..." | "group" }`` of a mesh body
+    (harness.case.selectors; a node file relative to the case file)."""
+    where = f"parts.{name}.facets"
+    if shape != "mesh":
+        fail(where, "facets need shape = 'mesh'", "elsewhere use {box = [[lo...], [hi...]]}")
+    part = case_part(value, mesh, body, path.parent, lambda msg, fix: fail(where, msg, fix))
+    if isinstance(part, str):  # a group's name
+        if part not in mesh.groups and ":" in part:
+            fail(where, f"'{part}' is neither a group of the mesh nor a selector", SPELLINGS)
+        require_group(mesh, part, file=file, field=f"body.{where}", error=CaseError)
+        return GroupPart(part, body.file, body.format)
+    return part
 
 
 def _end_part(spec: dict, name: str, shape: str, dim: int, body, fail) -> EndPart:

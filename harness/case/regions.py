@@ -27,9 +27,9 @@ a clamp whose rim lies inside a smooth surface is singular along that rim (P2 ag
 refinement: a cylinder's flat end clamped, 0.6 %; the same face inside r < 0.075 / 0.05,
 3 / 12 %), which only a finer mesh (or a flat face group) mends.
 
-A user's group is used as named; its share is its facet area over A (a bolt hole's wall
-projects to nothing on any axis), and a group below SHARE or of fewer than FEW_FACETS
-facets is warned about.
+A user's group or selected region (harness.case.selectors) is used as given; its share is
+its facet area over A (a bolt hole's wall projects to nothing on any axis), and a region
+below SHARE or of fewer than FEW_FACETS facets is warned about.
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ from harness.io.end_faces import COS, end_masks
 
 SHARE = 0.5  # a default region's area across the axis, at least this share of V / L
 FEW_FACETS = 4  # a region of fewer facets is a near-point on the mesh it is given
+NORMAL_MIN = 0.2  # a region whose mean normal is shorter faces every way: no twist axis
 
 
 @dataclass(frozen=True)
@@ -151,13 +152,27 @@ def region(points, facets, geometry, masks, axis, section, where, role, band=Non
 
 
 def centroid_normal(geometry, masks, nodes: int) -> str:
-    """': centroid (..), normal (..), N nodes' of the masked facets (area-weighted)."""
+    """': centroid (..) m, normal (..), N nodes' of the masked facets (area-weighted)."""
     area = sum(a[m].sum() for (_, _, a), m in zip(geometry, masks))
     centre = sum(a[m] @ c[m] for (c, _, a), m in zip(geometry, masks))
     normal = sum(a[m] @ n[m] for (_, n, a), m in zip(geometry, masks))
-    fmt = lambda v: ", ".join(f"{x:.3g}" for x in v)  # noqa: E731
     n = normal / max(np.linalg.norm(normal), 1e-300)
-    return f": centroid ({fmt(centre / max(area, 1e-300))}), normal ({fmt(n)}), {nodes} nodes"
+    return f": centroid {vector(centre / max(area, 1e-300))} m, normal {vector(n)}, {nodes} nodes"
+
+
+def vector(v) -> str:
+    """'(1, 0.5, 0)': a vector to three digits."""
+    return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+
+
+def mean_normal(geometry, masks):
+    """The masked facets' mean outward unit normal (area-weighted), the axis a twist of
+    them turns about; None when they face every way (its length below NORMAL_MIN of their
+    area: a bore's wall, a whole closed surface)."""
+    area = sum(a[m].sum() for (_, _, a), m in zip(geometry, masks))
+    normal = sum(a[m] @ n[m] for (_, n, a), m in zip(geometry, masks))
+    length = float(np.linalg.norm(normal))
+    return None if length < NORMAL_MIN * area else normal / length
 
 
 def warning(r: Region, flag: str) -> str:
@@ -166,5 +181,5 @@ def warning(r: Region, flag: str) -> str:
     return (
         f"warning: {name} holds {percent(r.share)} % of the section ({r.facets} facets, "
         f"{r.nodes} nodes): a near-point {r.role}, the FEM cannot converge there; "
-        f"name a larger face group with {flag}"
+        f"give {flag} a larger region (a face group, nodes:FILE, box: or sphere:)"
     )

@@ -4,6 +4,7 @@ validated by their owner when the stage runs."""
 
 from harness import registry
 from harness.case.schema import Field
+from harness.case.selectors import spelling_problem
 
 # The vocabularies of the pluggable parts are the registries' names (harness/registry.py):
 # reading a case imports none of them.
@@ -245,9 +246,16 @@ PACK_LOADS = ("sag", "tip", "tip2", "torsion", "bridge")
 ENGINES = {
     "body": Field("str", None, doc="the body's name in the table (default: the mesh file's stem)"),
     "resolution": Field("str", "", doc="the mesh's resolution label in the table, e.g. coarse"),
-    "clamp": Field("str", doc="mesh group held in every load (springbench pack --clamp)"),
+    "clamp": Field(
+        "str",
+        doc="region held in every load (springbench pack --clamp): a mesh group, nodes:FILE, "
+        "box:... or sphere:...",
+        check=spelling_problem,
+    ),
     "load_region": Field(
-        "str", doc="mesh group the tip loads and the torsion act on (pack --load-region)"
+        "str",
+        doc="region the tip loads and the torsion act on (pack --load-region): as clamp",
+        check=spelling_problem,
     ),
     "loads": Field(
         "strs", PACK_LOADS, choices=PACK_LOADS, doc="the pack's held-out loads run and scored"

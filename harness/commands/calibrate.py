@@ -36,9 +36,11 @@ force), ``tip`` and ``tip2`` (end tractions across the axis, 3-D: both direction
 ``torsion`` (3-D: a twist of the same end) with the end face at the low end of the
 longest axis clamped, and ``bridge`` (the sag with both end faces clamped); end faces are
 boundary facets, the same for the FEM and the springs (harness/case/default_loads.py;
-printed when chosen); ``--clamp`` and ``--load-region`` name mesh groups to clamp and to
-load instead. Fitted loads have stress ``--magnitude`` (default 1e-3 E), held-out loads
-a peak strain of about ``--peak-strain`` (default 1e-3): small strains.
+printed when chosen); ``--clamp`` and ``--load-region`` name a mesh group, a node file, a
+box or a sphere to clamp and to load instead (harness/case/selectors.py; the torsion then
+turns about the load region's mean outward normal). Fitted loads have stress
+``--magnitude`` (default 1e-3 E), held-out loads a peak strain of about ``--peak-strain``
+(default 1e-3): small strains.
 
 Units: lengths are the mesh's times ``--length-unit`` (m, cm or mm; exported in m), E in
 Pa, density in kg/m^3; so k is in N/m, masses in kg, damping in N s/m, time in s.
@@ -60,7 +62,8 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   float32 margin), ``dt_safe`` and ``settle_damping`` (the step and the damping an engine
   settles with), ``clamped_nodes``, ``loaded_nodes``, ``forces`` and ``gravity`` per load
   (harness/export/engine_loads.py), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
-  ``loads_fitted``, ``loads_heldout``, ``prior_weight`` (lbfgs: ``--prior-weight``),
+  ``loads_fitted``, ``loads_heldout``, ``training_dropped`` (training states the FEM cannot
+  resolve, left out of the fit), ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
   the held-out loads of each one's own relative error) and ``G_heldout_loads`` ({load: its
@@ -83,11 +86,15 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
   the rest length from the particle positions, so add the particles at ``particle_q``.
+- ``MODEL-heldout.vtu`` and ``MODEL-heldout.png`` (with held-out loads) — the picture of the
+  fit (calibrate_picture.py): per held-out load the FEM's and the model's displacement, the
+  error per node and the held and loaded nodes; the worst load drawn.
 - ``MODEL.csv`` — the table printed (with the ``seed`` and the optimiser's ``opt_stop``).
 """
 
 from __future__ import annotations
 
+import sys
 import tempfile
 from pathlib import Path
 
@@ -98,12 +105,15 @@ from harness.commands.calibrate_case import (
     METHODS,
     MODELS,
     PRIOR_WEIGHT,
+    REGION_FORMS,
     RULES,
     UNITS,
     model_name,
+    positive,
+    signed_numbers,
 )
 from harness.errors import SpringbenchError
-from harness.registry import class_doc
+from harness.registry import SOLVERS, class_doc
 
 HELP = (
     "calibrate spring constants for your own mesh against FEM and export them "
@@ -115,7 +125,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
   MODEL.json  particle_q (m), particle_mass (kg), spring_indices, spring_rest_length (m),
               spring_stiffness (N/m), spring_damping (N s/m), spring_stiffness_times_length (N),
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
-              density (kg/m^3), loads_fitted, loads_heldout, G_norm and G_norm_heldout (RMS
+              density (kg/m^3), loads_fitted, loads_heldout, training_dropped (training states
+              left out: the FEM's error on them above a third of the best rule's), G_norm and
+              G_norm_heldout (RMS
               displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out
               loads of each one's own G_norm), G_heldout_loads ({load: G_norm}), choice (rule, the
               validated capacity, or fit), validation (the table that chose: each model's score per
@@ -148,7 +160,12 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               G_heldout_mean, G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout
               (the FEM's own error), status (ok / ref-coarse), k_ratio (max/median k, with
               --k-ratio), dt_stable (s, the JSON's), dt_safe (s), seconds, seed, opt_stop, opt_stops
-              (every start's, " | " between)
+              (every start's, " | " between), training_dropped (as the JSON's), ref_note (why the
+              FEM missed its tol: the loads above it and how its levels ended)
+  MODEL-heldout.vtu  with held-out loads: per load u_fem/LOAD and u_model/LOAD (m), error/LOAD
+              (|u_model - u_fem| per node, m), held/LOAD and loaded/LOAD (0/1 per node)
+  MODEL-heldout.png  the worst held-out load: the deformed shape coloured by the error, the
+              held and loaded nodes marked
 2-D meshes: unit thickness (k and masses per unit thickness).
 the fit (lbfgs) minimises the training states' relative misfits + a mean(log(k/k_rule)^2); by
 default its capacity (the prior weight a, a volume term per node or none) is chosen by
@@ -165,9 +182,21 @@ def add_arguments(p):
         metavar="MESH",
         help="tri/quad/tet/hex mesh (any meshio format or bc2000)",
     )
-    p.add_argument("--E", dest="E", type=float, required=True, help="Young's modulus (Pa)")
+    signed_numbers(p)
+    p.add_argument(
+        "--E",
+        dest="E",
+        type=positive("E", "Pa"),
+        required=True,
+        help="Young's modulus (Pa; below 100 Pa a warning: MPa?)",
+    )
     p.add_argument("--nu", type=float, required=True, help="Poisson ratio in (-1, 0.5)")
-    p.add_argument("--density", type=float, default=1000.0, help="density (kg/m^3; default 1000)")
+    p.add_argument(
+        "--density",
+        type=positive("density", "kg/m^3"),
+        default=1000.0,
+        help="density (kg/m^3; default 1000; outside 10..30,000 a warning: g/cm^3?)",
+    )
     p.add_argument(
         "--method",
         choices=tuple(METHODS),
@@ -229,19 +258,19 @@ def add_arguments(p):
     )
     p.add_argument(
         "--clamp",
-        metavar="GROUP",
+        metavar="REGION",
         default=None,
-        help="clamp of the held-out loads: a named group of the mesh (gmsh physical group, cell or "
-        "node set; default: the end face at the low end of the longest axis)",
+        help="clamp of the held-out loads (default: the end face at the low end of the longest "
+        f"axis): {REGION_FORMS}",
     )
     p.add_argument(
         "--load-region",
         dest="load_region",
-        metavar="GROUP",
+        metavar="REGION",
         default=None,
-        help="where the held-out tip loads and torsion act: a named group of the mesh "
-        "(default: the "
-        "end face at the high end of the longest axis)",
+        help="where the held-out tip loads and torsion act (default: the end face at the high "
+        "end of the longest axis; the torsion turns about the region's mean outward normal): "
+        "as --clamp",
     )
     p.add_argument(
         "--masses",
@@ -270,7 +299,8 @@ def add_arguments(p):
         dest="length_unit",
         choices=tuple(UNITS),
         default="m",
-        help="unit of the mesh's coordinates (default m; exports are in m)",
+        help="unit of the mesh's coordinates (default m; exports are in m; a body over 10 m or "
+        "under 0.1 mm across gets a warning)",
     )
     p.add_argument(
         "--plane",
@@ -295,22 +325,24 @@ def add_arguments(p):
     p.add_argument(
         "--tol",
         type=float,
-        default=1e-3,
-        help="reference (FEM) error tolerance relative to the displacement scale (default 1e-3)",
+        default=1e-2,
+        help="reference (FEM) target: every held-out load's estimated error relative to its "
+        "largest displacement at the mesh's nodes (default 1e-2)",
     )
     p.add_argument(
         "--max-refine",
         dest="max_refine",
         type=int,
-        default=1,
-        help="reference refinements at most (default 1; tri/tet meshes: 2-3 adaptive bisection "
-        "steps each, up to 200k dofs in 3-D, a mesh too large for that estimated from "
-        "coarser meshes "
-        "of its body; quad/hex: uniform, x4-8 dofs; 0: no estimate)",
+        default=100,
+        help="reference refinements at most (default 100: not counted, tri/tet meshes are "
+        "refined adaptively until --tol on every held-out load or 300k dofs in 3-D, 400k in "
+        "2-D, a mesh too large for that estimated from coarser meshes of its body; below 100: "
+        "that many, 2-3 adaptive bisection steps each within 200k dofs; quad/hex: uniform, "
+        "x4-8 dofs; 0: no estimate)",
     )
     p.add_argument(
         "--solver",
-        choices=("auto", "direct", "amg", "cg", "two-level"),
+        choices=tuple(SOLVERS),
         default="auto",
         help="FEM linear solver (default auto: sparse Cholesky, or for large P2 systems CG with a "
         "two-level P1 preconditioner (two-level); AMG and Cholesky as fallbacks)",
@@ -365,10 +397,13 @@ def main(args) -> int:
     check(s, PRIOR_WEIGHT)
     configure(s.quiet)
     from harness.case.mesh_checks import check_mesh
+    from harness.commands.calibrate_check import unit_warnings
     from harness.io.meshfile import read_mesh
 
     mesh = read_mesh(s.mesh, s.format)
     check_mesh(mesh, str(s.mesh))  # the mesh's mistakes first, before anything is built on it
+    for line in unit_warnings(s, mesh):  # before the work: minutes on a wrong unit are lost
+        print(line, file=sys.stderr, flush=True)
     with tempfile.TemporaryDirectory(prefix="springbench-calibrate-") as tmp:
         tmp = Path(tmp)
         try:

@@ -5,6 +5,7 @@ case table; TOML text only for ``--save-case``)."""
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -27,6 +28,37 @@ PRIOR_WEIGHT = 10.0
 MASSES = ("lumped", "moments-nonneg", "moments")
 UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 CELLS = {"triangle": "tri", "quad": "quad", "tetra": "tet", "hexahedron": "hex"}
+REGION_HINT = "--clamp / --load-region take a face group, nodes:FILE, box: or sphere: instead"
+# --clamp / --load-region's help: what a region may be (harness.case.selectors)
+REGION_FORMS = (
+    "a face group of the mesh (gmsh physical group, cell or node set); "
+    + "; ".join(registry.REGION_SELECTORS.about.values())
+    + " (in the mesh's coordinates): the boundary facets all of whose nodes it holds"
+)
+
+
+def positive(name: str, unit: str):
+    """An argparse type: a positive number, else one line '--FLAG: NAME must be positive'
+    (with :func:`signed_numbers`, '-5e3' reaches it)."""
+
+    def number(text: str) -> float:
+        value = float(text) if NUMBER.fullmatch(text.strip()) else None
+        if value is None or not value > 0:
+            raise argparse.ArgumentTypeError(f"{name} must be positive ({unit}), got '{text}'")
+        return value
+
+    number.__name__ = name
+    return number
+
+
+NUMBER = re.compile(r"[-+]?((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|nan)", re.I)
+
+
+def signed_numbers(p) -> None:
+    """Let parser ``p`` read '-5e3' and '-inf' as values, not as options: argparse before
+    Python 3.13 takes only '-5' and '-.5' for negative numbers, and '--E -5e3' was 'expected
+    one argument' instead of the check that names E."""
+    p._negative_number_matcher = re.compile(r"^-((\d+\.?\d*|\.\d+)([eE][-+]?\d+)?|inf|nan)$", re.I)
 
 
 def model_name(text: str) -> str:
@@ -124,17 +156,46 @@ def case_text(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=No
     return dumps(case_table(s, dim, cell_types, mesh_file, ends))
 
 
-def check_regions(s, mesh) -> None:
-    """--clamp / --load-region: groups of the mesh, and only with held-out loads."""
-    from harness.io.mesh_groups import require_group
+def region_text(s, text: str, flag: str, mesh) -> str:
+    """--clamp / --load-region's ``text`` as the case spells it: a group of the mesh as
+    named, a selector (harness.case.selectors) with its lengths in m and its node file's
+    full path; one line naming the flag when it is neither."""
+    from harness.case.selectors import (
+        SPELLINGS,
+        check_nodes,
+        facet_masks,
+        parse,
+        require_facets,
+    )
+    from harness.io.meshfile import boundary_facets
 
-    for flag, group in (("--clamp", s.clamp), ("--load-region", s.load_region)):
-        if group is not None and s.heldout == "none":
-            raise SpringbenchError(
-                "--heldout none has no held-out loads", field=flag, fix="drop it, or --heldout ends"
-            )
-        if group is not None:
-            require_group(mesh, group, file=str(s.mesh), field=flag)
+    def bad(message, fix):
+        raise SpringbenchError(message, field=flag, fix=fix)
+
+    if s.heldout == "none":
+        bad("--heldout none has no held-out loads", "drop it, or --heldout ends")
+    sel = parse(text, bad, mesh.dim)
+    if sel is None and text not in mesh.groups:
+        have = ", ".join(sorted(mesh.groups)) or "none"
+        bad(
+            f"mesh '{Path(s.mesh).name}' has no group '{text}' (its groups: {have})",
+            f"{SPELLINGS}; coordinates in --length-unit",
+        )
+    if sel is None:
+        return text
+    check_nodes(sel, len(mesh.points), bad)
+    masks = facet_masks(sel, mesh.points, boundary_facets(mesh.cells))
+    require_facets(sel, masks, mesh.points, bad, text, s.length_unit)
+    return sel.scaled(UNITS[s.length_unit]).text
+
+
+def regions(s, mesh) -> tuple[str | None, str | None]:
+    """(clamp, load region) as the case spells them (:func:`region_text`; None: the end
+    faces)."""
+    return tuple(
+        None if text is None else region_text(s, text, flag, mesh)
+        for flag, text in (("--clamp", s.clamp), ("--load-region", s.load_region))
+    )
 
 
 def metre_mesh(s, mesh, tmp: Path) -> Path | None:
@@ -142,12 +203,14 @@ def metre_mesh(s, mesh, tmp: Path) -> Path | None:
     or its format is bc2000 (None: the user's own file is the body)."""
     import meshio
 
+    from harness.case.selectors import kind_of
     from harness.io.mesh_groups import scaled_copy
 
     if s.length_unit == "m" and s.format != "bc2000":
         return None
     scale = UNITS[s.length_unit]
-    if s.clamp or s.load_region:  # the file itself, scaled: its groups stay
+    groups = [t for t in (s.clamp, s.load_region) if t is not None and not kind_of(t)]
+    if groups:  # the file itself, scaled: its groups stay (node ids stay in either copy)
         mesh_file = scaled_copy(s.mesh, s.format, scale, tmp)
     else:
         mesh_file = tmp / "mesh.vtu"
@@ -166,17 +229,14 @@ def mesh_case(s, mesh, tmp: Path):
     from harness.case.reader import case_of
     from harness.io.toml_text import dumps
 
-    check_regions(s, mesh)
+    clamp, tip = regions(s, mesh)
     mesh_file = metre_mesh(s, mesh, tmp)
     pts = mesh.points * UNITS[s.length_unit]
     ends = None
     if s.heldout == "ends":
-        ends = end_loads(pts, mesh.cells, s.clamp, s.load_region, mesh.groups)
+        ends = end_loads(pts, mesh.cells, clamp, tip, mesh.groups)
         # on stdout, before the work: a wrong clamp is seen at once
-        print(
-            f"{ends.describe()}; --clamp GROUP clamps a named face group of the mesh instead",
-            flush=True,
-        )
+        print(f"{ends.describe()}; {REGION_HINT}", flush=True)
         for line in near_point_warnings(ends):
             print(line, flush=True)
     table = case_table(s, mesh.dim, mesh.cells, mesh_file, ends)

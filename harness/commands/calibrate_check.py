@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from harness.case.default_loads import PEAK_STRAIN
 from harness.errors import SpringbenchError
 
@@ -19,7 +21,7 @@ def check(s, prior_weight: float) -> None:
         raise SpringbenchError(msg, field=flag, fix=fix)
 
     if not (math.isfinite(s.E) and s.E > 0):
-        bad("--E", f"{s.E} is not a positive number", "Young's modulus in Pa, e.g. --E 2e5")
+        bad("--E", f"E must be positive, got {s.E:g}", "Young's modulus in Pa, e.g. --E 2e5")
     if not (-1 < s.nu < 0.5):
         bad("--nu", f"{s.nu} is out of range", "a Poisson ratio in (-1, 0.5), e.g. --nu 0.3")
     if s.nu > NU_MAX:
@@ -30,7 +32,11 @@ def check(s, prior_weight: float) -> None:
             f"--nu {NU_MAX:g} at most",
         )
     if not (math.isfinite(s.density) and s.density > 0):
-        bad("--density", f"{s.density} is not a positive number", "kg/m^3, e.g. --density 1000")
+        bad(
+            "--density",
+            f"density must be positive, got {s.density:g}",
+            "kg/m^3, e.g. --density 1000",
+        )
     if s.magnitude is not None and not (math.isfinite(s.magnitude) and s.magnitude > 0):
         bad("--magnitude", f"{s.magnitude} is not a positive number", "a traction in Pa")
     peak = s.peak_strain
@@ -112,3 +118,61 @@ def check(s, prior_weight: float) -> None:
             file=str(s.mesh),
             fix="check the path",
         )
+
+
+SOFTEST = 100.0  # Pa: no solid body is softer (gels and brain tissue: a few hundred Pa and up)
+DENSITIES = (10.0, 30_000.0)  # kg/m^3: aerogels and foams ... osmium (22,590)
+SIZES = (1e-4, 10.0)  # m: a body from a tenth of a millimetre to ten metres across
+
+
+def unit_warnings(s, mesh) -> list[str]:
+    """One warning line per value outside what SI bodies have (module constants), naming the
+    unit it looks like and the flag that fixes it: warnings, not errors (an odd body may be
+    right), printed before the work."""
+    out = []
+    if s.E < SOFTEST:
+        gpa = f", or GPa (--E {s.E * 1e9:g})" if s.E >= 1 else ""
+        out.append(
+            f"warning: --E {s.E:g} Pa is softer than any solid body (under {SOFTEST:g} Pa): "
+            f"looks like MPa: give Pa (--E {s.E * 1e6:g}){gpa}"
+        )
+    lo, hi = DENSITIES
+    if s.density < lo:
+        out.append(
+            f"warning: --density {s.density:g} kg/m^3 is lighter than any solid body (under "
+            f"{lo:g}): looks like g/cm^3: give kg/m^3 (--density {s.density * 1e3:g})"
+        )
+    if s.density > hi:
+        out.append(
+            f"warning: --density {s.density:g} kg/m^3 is denser than any material (over "
+            f"{hi:,.0f}): looks like g/m^3: give kg/m^3 (--density {s.density * 1e-3:g})"
+        )
+    return out + size_warnings(s, mesh)
+
+
+def size_warnings(s, mesh) -> list[str]:
+    """The line for a body over 10 m or under 0.1 mm across, naming --length-unit."""
+    from harness.commands.calibrate_case import UNITS
+
+    scale = UNITS[s.length_unit]
+    size = float(np.ptp(mesh.points, axis=0).max()) * scale
+    lo, hi = SIZES
+    if lo <= size <= hi:
+        return []
+    # the likeliest first: mm for a body too large, m for one too small
+    order = sorted(UNITS.items(), key=lambda uf: uf[1] if size > hi else -uf[1])
+    fits = [
+        f"--length-unit {u} ({size * f / scale:.3g} m)"
+        for u, f in order
+        if (f < scale if size > hi else f > scale) and lo <= size * f / scale <= hi
+    ]
+    likely = (
+        f"looks like {fits[0].split()[1]}: {' or '.join(fits)}"
+        if fits
+        else ("check the mesh's unit (--length-unit: m, cm or mm)")
+    )
+    what = "over 10 m" if size > hi else "under 0.1 mm"
+    return [
+        f"warning: the body is {size:.3g} m across ({what}; mesh coordinates in "
+        f"{s.length_unit}): {likely}"
+    ]

@@ -4,12 +4,14 @@ read (harness/export/pack.py: mesh.vtu, loads/<name>.npz, problem.json; SI units
 For a case file (a mesh body): every load of the case, its held-out ones marked. For a
 mesh: calibrate's load set for that mesh (the equilibrated linear stress states and the
 clamped training states as "fitted", sag, tip, tip2, torsion and bridge with an end face
-clamped as "heldout"; --clamp and --load-region name mesh groups instead), held-out loads
-sized for a peak strain of about --peak-strain."""
+clamped as "heldout"; --clamp and --load-region take a mesh group, nodes:FILE, box: or
+sphere: instead, as calibrate's do, and problem.json records them), held-out loads sized for
+a peak strain of about --peak-strain."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
@@ -24,8 +26,9 @@ HELP = (
 
 def add_arguments(p):
     from harness.case.default_loads import PEAK_STRAIN
-    from harness.commands.calibrate_case import UNITS
+    from harness.commands.calibrate_case import REGION_FORMS, UNITS, positive, signed_numbers
 
+    signed_numbers(p)
     p.add_argument(
         "source",
         type=Path,
@@ -33,11 +36,18 @@ def add_arguments(p):
         help="a case file (TOML, mesh body) or a mesh file",
     )
     p.add_argument(
-        "--E", dest="E", type=float, default=None, help="Young's modulus (Pa; meshes only)"
+        "--E",
+        dest="E",
+        type=positive("E", "Pa"),
+        default=None,
+        help="Young's modulus (Pa; meshes only)",
     )
     p.add_argument("--nu", type=float, default=None, help="Poisson ratio (meshes only)")
     p.add_argument(
-        "--density", type=float, default=1000.0, help="density (kg/m^3; meshes only; default 1000)"
+        "--density",
+        type=positive("density", "kg/m^3"),
+        default=1000.0,
+        help="density (kg/m^3; meshes only; default 1000)",
     )
     p.add_argument(
         "--length-unit",
@@ -55,22 +65,27 @@ def add_arguments(p):
         f"{PEAK_STRAIN:g})",
     )
     p.add_argument(
-        "--clamp", metavar="GROUP", default=None, help="a mesh group to clamp (meshes only)"
+        "--clamp",
+        metavar="REGION",
+        default=None,
+        help=f"the region to clamp (meshes only; default: an end face): {REGION_FORMS}",
     )
     p.add_argument(
         "--load-region",
         dest="load_region",
-        metavar="GROUP",
+        metavar="REGION",
         default=None,
-        help="a mesh group the tip loads and torsion act on (meshes only)",
+        help="the region the tip loads and torsion act on (meshes only; default: the other end "
+        "face; the torsion turns about its mean outward normal): as --clamp",
     )
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell")
     p.add_argument(
         "--max-refine",
         dest="max_refine",
         type=int,
-        default=1,
-        help="reference refinements at most (meshes only; default 1, as calibrate)",
+        default=100,
+        help="reference refinements at most (meshes only; default 100, as calibrate: until "
+        "1 %% on every held-out load or the dof cap)",
     )
     p.add_argument(
         "--full",
@@ -91,6 +106,7 @@ def _mesh_case(args, tmp: Path):
     from harness.commands import calibrate as cal
     from harness.commands import calibrate_case
     from harness.commands.calibrate_check import check as check_flags
+    from harness.commands.calibrate_check import unit_warnings
     from harness.io.meshfile import read_mesh
 
     if args.E is None or args.nu is None:
@@ -110,6 +126,8 @@ def _mesh_case(args, tmp: Path):
     check_flags(cargs, calibrate_case.prior_weight(cargs))
     mesh = read_mesh(args.source, args.format)
     check_mesh(mesh, str(args.source))
+    for line in unit_warnings(cargs, mesh):
+        print(line, file=sys.stderr, flush=True)
     return calibrate_case.mesh_case(cargs, mesh, tmp)
 
 
@@ -156,6 +174,7 @@ def main(args) -> int:
         meta = {"source": str(args.source), "springbench": __version__}
         if not is_case:
             meta["peak_strain"] = args.peak_strain
+            meta.update(regions(case))
         pack = make_pack(case, meta=meta)
     path = write_pack(pack, args.out)
     held = sum(ld.role == "heldout" for ld in pack.loads)
@@ -176,3 +195,21 @@ def main(args) -> int:
         )
     print(f"-> {path}")
     return 0
+
+
+def regions(case) -> dict:
+    """{"clamp", "load_region"}: how the case spells the held-out loads' regions (a group,
+    a selector in m, or an end face), so a pack says where it holds and loads."""
+    from harness.case.selectors import SelectorPart
+    from harness.io.end_faces import EndPart
+    from harness.io.mesh_groups import GroupPart
+
+    def spelling(part):
+        if isinstance(part, SelectorPart):
+            return part.selector.text
+        if isinstance(part, GroupPart):
+            return part.group
+        return f"end face {part.name}" if isinstance(part, EndPart) else None
+
+    parts = case.body.parts or {}
+    return {"clamp": spelling(parts.get("clamp")), "load_region": spelling(parts.get("tip"))}

@@ -139,7 +139,6 @@ def test_init_needs_a_gradient_fit(tri_mesh, tmp_path, capsys):
     "flags, expect",
     [
         (["--nu", "0.7"], "--nu: 0.7 is out of range"),
-        (["--E", "-1"], "--E: -1.0 is not a positive number"),
         (["--out", "model.txt"], "--out: 'model.txt' does not end in .vtu"),
         (["--budget", "0"], "--budget"),
     ],
