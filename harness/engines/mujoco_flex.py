@@ -56,6 +56,7 @@ class MujocoSim:
         self.mj, self.pack, self.tets, self.masses, self.dt = mujoco, pack, tets, masses, dt
 
     def load(self, ld):
+        """A fresh model at rest under this load's pins, holds and forces (settle.Sim)."""
         mj = self.mj
         full = ld.held_nodes[ld.held_components.all(axis=1)]
         previous, self.warnings = mj.get_mju_user_warning(), []

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.case.elasticity import lame
 from harness.engines.settle import (
     float32_resolution,
     lowest_omegas,
@@ -66,9 +67,10 @@ class NewtonSim:
         # forces Newton has no term for: apply(q, f)
         self.extra = None if extra is None else extra()
 
-    def load(self, held_nodes, held_components, force):
-        """A fresh model and state at rest for this load's holds and forces."""
+    def load(self, ld):
+        """A fresh model and state at rest for this load's holds and forces (settle.Sim)."""
         newton, wp = self.newton, self.wp
+        held_nodes, held_components, force = ld.held_nodes, ld.held_components, ld.force
         full = np.zeros(len(self.q0), bool)
         full[held_nodes[held_components.all(axis=1)]] = True
         b = newton.ModelBuilder(gravity=(0.0, 0.0, 0.0))
@@ -144,7 +146,7 @@ def _solve(pack, sim, masses, dt, omegas: dict) -> dict:
     """Every load settled, damped about critically for its own ``omegas[name]``."""
     out = {}
     for ld in pack.loads:
-        sim.load(ld.held_nodes, ld.held_components, ld.force)
+        sim.load(ld)
         out[ld.name] = settle(
             sim, ld, masses, dt, omegas[ld.name], resolution=float32_resolution(pack.points)
         )
@@ -166,8 +168,7 @@ def run_tets(pack, options=None) -> dict:
             ld.name: unsupported(pack, "newton-tets needs a 3-D tetrahedral mesh")
             for ld in pack.loads
         }
-    mu = pack.E / (2 * (1 + pack.nu))
-    lam = pack.E * pack.nu / ((1 + pack.nu) * (1 - 2 * pack.nu))
+    lam, mu = lame(pack.E, pack.nu)
     k_mu, k_lambda = 4.0 / 3.0 * mu, lam + 5.0 / 6.0 * mu
     masses = lumped_masses(pack.points, tets, pack.density)
     A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)

@@ -1,8 +1,9 @@
 """Static equilibrium by an engine's own dynamics, with a stated stopping rule.
 
-An adapter wraps its engine in a ``Sim`` (``advance(n)`` steps, ``measure()`` -> (u, v,
-f) with f the net force on every node at the current state: external plus internal,
-held components excluded) and calls :func:`settle`. Between steps the velocities are
+An adapter wraps its engine in a :class:`Sim` (``load(ld)`` builds it at rest for one
+pack load, ``set_damping``, ``advance(n)`` steps, ``measure()`` -> (u, v, f) with f the net
+force on every node at the current state: external plus internal, held components
+excluded) and calls :func:`settle`. Between steps the velocities are
 scaled by exp(-c dt) (mass-proportional damping c = 2 omega_1), with omega_1 a function of
 the load alone, so a load stops at the same place whatever other loads run beside it. For
 the engines' tetrahedra it is the P1 model's lowest mode under the load's own holds
@@ -43,8 +44,34 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
+
+
+class LoadLike(Protocol):
+    """What a Sim reads of a pack load (harness/export/pack.py ``PackLoad``)."""
+
+    held_nodes: np.ndarray  # (h,) node ids
+    held_components: np.ndarray  # (h, dim) bool: which components are held
+    force: np.ndarray  # (n, dim) N
+
+
+class Sim(Protocol):
+    """An engine wrapped for :func:`settle`: one model per load, stepped and measured."""
+
+    def load(self, ld: LoadLike) -> None:
+        """A fresh model at rest under ``ld``'s holds and forces."""
+
+    def set_damping(self, factor: float) -> None:
+        """Velocities are multiplied by ``factor`` after every step."""
+
+    def advance(self, n: int) -> None:
+        """``n`` steps (an average over them for :meth:`measure`)."""
+
+    def measure(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(u, v, f) at the current state (f: the net force, held components excluded)."""
+
 
 RTOL = 1e-4  # the displacement's change between checks, relative to its largest value
 # The residual's bound: a body 0.1 % of its load's work short of equilibrium fails it, u = 0

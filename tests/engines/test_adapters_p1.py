@@ -12,6 +12,7 @@ An adapter that ignores the forces, maps the material wrongly or scales it by 10
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -197,7 +198,11 @@ def _break(monkeypatch, engine: str, variant: str):
 
     if engine.startswith("newton") and variant in ("forces ignored", "forces in kN"):
         load, scale = NewtonSim.load, 0.0 if variant == "forces ignored" else 1e-3
-        monkeypatch.setattr(NewtonSim, "load", lambda self, n, c, f: load(self, n, c, scale * f))
+        monkeypatch.setattr(
+            NewtonSim,
+            "load",
+            lambda self, ld: load(self, dataclasses.replace(ld, force=scale * ld.force)),
+        )
     elif engine.startswith("newton"):
         convert = {"raw Lame": _raw_lame, "E x 1000": _times_1000}[variant]
         monkeypatch.setattr(NewtonSim, "__init__", _newton_rows(convert))
