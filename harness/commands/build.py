@@ -29,6 +29,19 @@ def add_arguments(p):
     )
 
 
+def check_stiffness(rule: str | None) -> None:
+    """--stiffness names a stiffness rule (None: the case's own)."""
+    from harness.errors import SpringbenchError
+    from harness.registry import STIFFNESS_RULES
+
+    if rule is not None and rule not in STIFFNESS_RULES:
+        raise SpringbenchError(
+            f"unknown stiffness rule '{rule}'",
+            field="--stiffness",
+            fix=f"one of {', '.join(STIFFNESS_RULES)}, e.g. --stiffness deussen",
+        )
+
+
 def main(args) -> int:
     from harness.case.reader import load_case
     from harness.errors import CaseError, SpringbenchError
@@ -38,6 +51,7 @@ def main(args) -> int:
 
     case = load_case(args.case, args.mode)
     check_out_file(args.out, "--out")
+    check_stiffness(args.stiffness)
     if args.seed < 0:
         raise SpringbenchError(
             f"{args.seed} is negative", field="--seed", fix="a seed >= 0, e.g. --seed 0"
@@ -57,7 +71,12 @@ def main(args) -> int:
 
         res = statics.solve(net, case)
         disp = dict(zip(res.names, res.u))
-    write_vtu(args.out, net, disp)
+    try:
+        write_vtu(args.out, net, disp)
+    except SpringbenchError as exc:  # the file system refused after the check: name the flag
+        raise SpringbenchError(
+            exc.message, file=exc.file, field=exc.field or "--out", fix=exc.fix
+        ) from None
     i = net.info
     print(
         f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, stiffness '{i['stiffness']}', "

@@ -118,6 +118,24 @@ def check(s, prior_weight: float) -> None:
             file=str(s.mesh),
             fix="check the path",
         )
+    check_format(s.format)
+
+
+def check_format(fmt: str | None) -> None:
+    """--format names a reader of ours or a meshio format (None: told by the file name)."""
+    if fmt is None:
+        return
+    from meshio._helpers import reader_map
+
+    from harness.registry import MESH_READERS
+
+    known = [*MESH_READERS, *sorted(reader_map)]
+    if fmt not in known:
+        raise SpringbenchError(
+            f"unknown mesh format '{fmt}'",
+            field="--format",
+            fix=f"one of {', '.join(known)}; or drop --format to tell it by the file name",
+        )
 
 
 SOFTEST = 100.0  # Pa: no solid body is softer (gels and brain tissue: a few hundred Pa and up)

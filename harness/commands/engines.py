@@ -6,6 +6,7 @@ its displacements (one (n, dim) array per load, NaN where it found none) for
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from harness.engines.settle import CHECK, FORCE_TOL, KE_TOL, RES_TOL, RTOL, STALL
@@ -25,7 +26,8 @@ load's work (float32 trembling); a residual above its bound is never settled. Ve
 damped each step by exp(-2 omega_1 dt), omega_1 the lowest mode under the load's own holds.
 The table gives per load the status (settled / not-settled / diverged / unsupported), steps,
 simulated and wall time, final kinetic energy and relative residual;
---log writes it as CSV."""
+--log writes it as CSV. U.npz is written again as each load finishes (Ctrl-C keeps the
+finished loads) and holds the pack's digest, which score checks."""
 
 
 def add_arguments(p):
@@ -55,10 +57,66 @@ def add_arguments(p):
     )
 
 
-def main(args) -> int:
+def _only(pack, loads: str | None):
+    """The pack with only the loads named by --loads (all when None)."""
+    from harness.export.pack import Pack
+
+    if loads is None:
+        return pack
+    want = [n.strip() for n in loads.split(",") if n.strip()]
+    names = [ld.name for ld in pack.loads]
+    bad = [n for n in want if n not in names]
+    if bad or not want:
+        raise SpringbenchError(
+            f"the pack has no load '{bad[0] if bad else loads}'",
+            field="--loads",
+            fix=f"some of {', '.join(names)}",
+        )
+    kept = tuple(ld for ld in pack.loads if ld.name in want)
+    return Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, kept, pack.plane, pack.meta)
+
+
+def _write_answer(out: Path, answers: dict, digest: str) -> None:
+    """The displacements so far, one array per load, and the pack's digest (atomically)."""
     import io
 
     import numpy as np
+
+    from harness.export.pack import DIGEST_KEY
+    from harness.outputs import atomic_write
+
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **{name: a.u for name, a in answers.items()}, **{DIGEST_KEY: digest})
+    atomic_write(out, buf.getvalue(), "--out")
+
+
+def run_loads(run, pack, options: dict, out: Path, digest: str) -> dict:
+    """Run the engine one load at a time, rewriting ``out`` as each finishes; on Ctrl-C
+    say how many loads ``out`` keeps and exit 130."""
+    import dataclasses
+
+    answers: dict = {}
+    written: dict = {}  # what ``out`` holds
+    try:
+        for ld in pack.loads:
+            answers.update(run(dataclasses.replace(pack, loads=(ld,)), options))
+            _write_answer(out, answers, digest)
+            written = dict(answers)
+    except KeyboardInterrupt:
+        n = len(pack.loads)
+        kept = (
+            f"{len(written)} of {n} loads kept in {out} "
+            f"({sum(a.status == 'settled' for a in written.values())} settled): "
+            f"{', '.join(written)}"
+            if written
+            else f"none of the {n} loads had finished; nothing written to {out}"
+        )
+        print(f"springbench: interrupted; {kept}", file=sys.stderr)
+        raise SystemExit(130) from None
+    return answers
+
+
+def main(args) -> int:
     import pandas as pd
 
     from harness.engines import ENGINES, adapter
@@ -81,34 +139,12 @@ def main(args) -> int:
             field="--model",
             fix="drop --model, or use newton-springs",
         )
-    from harness.export.pack import Pack, read_pack
+    from harness.export.pack import pack_digest, read_pack
 
-    pack = read_pack(args.pack)
+    full = read_pack(args.pack)
     run = adapter(args.engine)
-    if args.loads is not None:
-        want = [n.strip() for n in args.loads.split(",") if n.strip()]
-        names = [ld.name for ld in pack.loads]
-        bad = [n for n in want if n not in names]
-        if bad or not want:
-            raise SpringbenchError(
-                f"the pack has no load '{bad[0] if bad else args.loads}'",
-                field="--loads",
-                fix=f"some of {', '.join(names)}",
-            )
-        pack = Pack(
-            pack.points,
-            pack.cells,
-            pack.E,
-            pack.nu,
-            pack.density,
-            tuple(ld for ld in pack.loads if ld.name in want),
-            pack.plane,
-            pack.meta,
-        )
-    answers = run(pack, {"model": args.model})
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **{name: a.u for name, a in answers.items()})
-    atomic_write(args.out, buf.getvalue(), "--out")
+    pack, digest = _only(full, args.loads), pack_digest(full)
+    answers = run_loads(run, pack, {"model": args.model}, args.out, digest)
     rows = [
         {
             "load": name,
@@ -129,5 +165,5 @@ def main(args) -> int:
     )
     if args.log is not None:
         atomic_write(args.log, df.to_csv(index=False).encode(), "--log")
-    print(f"-> {args.out}")
+    print(f"-> {args.out} (pack digest {digest})")
     return 0 if all(a.status in ("settled", "unsupported") for a in answers.values()) else 1

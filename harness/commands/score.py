@@ -21,7 +21,9 @@ the pack form prints per load G_norm (RMS error / RMS FEM displacement), max_err
 error / largest FEM displacement), G_ref (the FEM's own error estimate as a G_norm), the gate and
 status (ok / ref-coarse / miss); exit 1 when a load misses its gate, 0 when all meet it, 2 for bad
 input. U: .npz one (n, dim) array per load name; .csv columns load,node,ux,uy[,uz]; .vtu point
-data u_<load>; at the pack's nodes, in metres."""
+data u_<load>; at the pack's nodes, in metres. The loads U has are scored, the missing ones
+named (--require-all: an error); U from `engines run` carries the pack's digest, and one made
+for another pack is refused."""
 
 
 def add_arguments(p):
@@ -58,7 +60,19 @@ def add_arguments(p):
         metavar="LOAD=X",
         help="pack form: this load's own gate (repeatable)",
     )
-    p.add_argument("--loads", default=None, metavar="A,B", help="pack form: score only these loads")
+    p.add_argument(
+        "--loads",
+        default=None,
+        metavar="A,B",
+        help="pack form: score only these loads (default: every load the answer has)",
+    )
+    p.add_argument(
+        "--require-all",
+        dest="require_all",
+        action="store_true",
+        help="pack form: an answer without every load of the pack is an error (default: "
+        "score the loads it has and name the missing ones)",
+    )
     p.add_argument(
         "--junit",
         type=Path,
@@ -127,6 +141,45 @@ def score_table(net, case, ref, weights=None):
     return pd.DataFrame(rows), sc, ref_status(g_ref, sc.G_norm, met_tol_here(ref, u_ref, e))
 
 
+def _cell_data_mismatch(path) -> tuple | None:
+    """(field, values, cells) of the first cell-data array of a VTU whose length is not
+    its cell block's, or None (meshio's VTU reader, before its own check)."""
+    from meshio.vtu._vtu import VtuReader
+
+    if Path(path).suffix.lower() != ".vtu":
+        return None
+    try:
+        r = VtuReader(str(path))
+    except Exception:  # noqa: BLE001 - not a VTU it can parse: the reader's own error stands
+        return None
+    for name, arrays in r.cell_data.items():
+        for block, data in zip(r.cells, arrays):
+            if len(data) != len(block.data):
+                return name, len(data), len(block.data), block.type
+    return None
+
+
+def read_network(path):
+    """The network of a VTU (harness.export.vtu.read_vtu); a cell-data array of the wrong
+    length is named with its field and counts."""
+    from harness.errors import SpringbenchError
+    from harness.export.vtu import read_vtu
+
+    try:
+        return read_vtu(path)[0]
+    except SpringbenchError:
+        bad = _cell_data_mismatch(path)
+        if bad is None:
+            raise
+        name, n, m, kind = bad
+        raise SpringbenchError(
+            f"{n} values for {m} '{kind}' cells" + (" (springs)" if kind == "line" else ""),
+            file=str(path),
+            field=name,
+            fix=f"one '{name}' value per cell: write the network again with springbench build",
+        ) from None
+
+
 def main(args) -> int:
     import math
 
@@ -136,6 +189,7 @@ def main(args) -> int:
         or args.max_load
         or args.junit is not None
         or args.loads is not None
+        or args.require_all
     ):
         from harness.commands.score_pack import main as pack_main
 
@@ -188,7 +242,6 @@ def main(args) -> int:
 
     from harness.case.reader import load_case
     from harness.errors import ModelError
-    from harness.export.vtu import read_vtu
     from harness.geometry import body_geometry
     from harness.models.sms import node_classes
 
@@ -197,7 +250,7 @@ def main(args) -> int:
         from harness.outputs import check_out_file
 
         check_out_file(args.out, "--out")
-    net, _ = read_vtu(args.model)
+    net = read_network(args.model)
     if net.dim != case.dim:
         raise ModelError(
             f"the network is {net.dim}-D but the case is {case.dim}-D",

@@ -4,6 +4,7 @@ parses its flags; harness/export/pack_score.py computes the table)."""
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 from harness.errors import SpringbenchError
@@ -30,6 +31,68 @@ def _gates(args, names) -> dict:
             )
         out[name] = x
     return out
+
+
+def _check_digest(answer, folder, pack) -> str:
+    """Refuse an answer `engines run` made for another pack; the note to print when the
+    answer carries no digest (an older springbench, or another writer), else ""."""
+    from harness.export.pack import pack_digest
+    from harness.export.pack_score import answer_digest
+
+    theirs, ours = answer_digest(answer), pack_digest(pack)
+    if theirs is not None and theirs != ours:
+        raise SpringbenchError(
+            f"made for the pack with digest {theirs}, but {folder} has digest {ours} "
+            "(another mesh, clamp, load or material)",
+            file=str(answer),
+            fix=f"score it against the pack it was made for, or run the engine on {folder} "
+            f"again: springbench engines run ENGINE {folder} --out U.npz",
+        )
+    return (
+        f"springbench: {answer}: no pack digest in it (not written by this springbench's "
+        "`engines run`): scored without checking it was made for this pack"
+        if theirs is None
+        else ""
+    )
+
+
+def _scored_loads(args, names: list, fields: dict) -> tuple[list, str]:
+    """The loads to score: those --loads names (each must be in the answer), else the
+    pack's loads the answer has; and the note naming the others (an error with
+    --require-all)."""
+    if args.loads is not None:
+        wanted = [n.strip() for n in args.loads.split(",") if n.strip()]
+        bad = [n for n in wanted if n not in names]
+        if bad or not wanted:
+            raise SpringbenchError(
+                f"the pack has no load '{bad[0] if bad else args.loads}'",
+                field="--loads",
+                fix=f"some of {', '.join(names)}",
+            )
+    else:
+        wanted = names
+    missing = [n for n in wanted if n not in fields]
+    if missing and (args.require_all or args.loads is not None or len(missing) == len(wanted)):
+        raise SpringbenchError(
+            f"no displacements for load {missing[0]!r} ({len(missing)} of {len(wanted)} "
+            f"missing: {', '.join(missing)})",
+            file=str(args.displacements),
+            fix=(
+                "drop them from --loads, or give them"
+                if args.loads is not None
+                else "give every load of the pack, or drop --require-all to score those given"
+                if args.require_all
+                else f"give displacements for some of the pack's loads: {', '.join(names)}"
+            ),
+        )
+    note = (
+        f"springbench: {args.displacements}: no displacements for {len(missing)} of "
+        f"{len(wanted)} loads, not scored: {', '.join(missing)} (--require-all makes this "
+        "an error)"
+        if missing
+        else ""
+    )
+    return [n for n in wanted if n in fields], note
 
 
 def main(args) -> int:
@@ -76,6 +139,7 @@ def main(args) -> int:
     names = [ld.name for ld in pack.loads]
     gates = _gates(args, names)
     fields = read_displacements(args.displacements, pack)
+    note = _check_digest(args.displacements, args.model, pack)
     unknown = [n for n in fields if n not in names]
     if unknown:
         raise SpringbenchError(
@@ -83,23 +147,7 @@ def main(args) -> int:
             file=str(args.displacements),
             fix=f"the pack's loads: {', '.join(names)}",
         )
-    wanted = (
-        names if args.loads is None else [n.strip() for n in args.loads.split(",") if n.strip()]
-    )
-    bad = [n for n in wanted if n not in names]
-    if bad or not wanted:
-        raise SpringbenchError(
-            f"the pack has no load '{bad[0] if bad else args.loads}'",
-            field="--loads",
-            fix=f"some of {', '.join(names)}",
-        )
-    missing = [n for n in wanted if n not in fields]
-    if missing:
-        raise SpringbenchError(
-            f"no displacements for load {missing[0]!r} ({len(missing)} of {len(wanted)} missing)",
-            file=str(args.displacements),
-            fix="give every load of the pack, or name the ones given with --loads",
-        )
+    wanted, missing_note = _scored_loads(args, names, fields)
     unscored = [n for n in gates if n not in wanted]
     if unscored:
         raise SpringbenchError(
@@ -108,6 +156,9 @@ def main(args) -> int:
             fix="score it, or drop its gate",
         )
     _units(args.displacements, pack, {n: fields[n] for n in wanted})
+    for line in (note, missing_note):
+        if line:
+            print(line, file=sys.stderr)
     rows = score_fields(pack, fields, wanted, gates, args.max_g_norm)
     df = pd.DataFrame(rows)
     print(

@@ -86,6 +86,27 @@ UNITS = {
 }
 
 
+DIGEST_KEY = "__pack_digest__"  # the pack's digest in an answer (.npz) of `engines run`
+
+
+def pack_digest(pack: Pack) -> str:
+    """16 hex digits of SHA-256 over the mesh, material and every load's holds and forces:
+    the same for a pack and its copies, different for another clamp, load or mesh."""
+    import hashlib
+
+    h = hashlib.sha256()
+    arrays = [pack.points, *(pack.cells[k] for k in sorted(pack.cells))]
+    for ld in sorted(pack.loads, key=lambda ld: ld.name):
+        h.update(ld.name.encode() + b"\0")
+        arrays += [ld.held_nodes, ld.held_components, ld.force]
+    h.update(repr((sorted(pack.cells), pack.E, pack.nu, pack.density, pack.plane)).encode())
+    for a in arrays:
+        a = np.asarray(a)
+        a = a.astype({"b": np.uint8, "i": np.int64, "u": np.int64}.get(a.dtype.kind, np.float64))
+        h.update(repr((a.dtype.str, a.shape)).encode() + np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
 def _bad(message: str, file, fix: str, field: str | None = None):
     raise SpringbenchError(message, file=str(file), field=field, fix=fix)
 

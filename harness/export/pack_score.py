@@ -24,6 +24,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from harness.errors import SpringbenchError
+from harness.export.pack import DIGEST_KEY
 from harness.scoring import g_arrays, g_ref_arrays, ref_status
 
 # u / u_fem near these: the engine's length unit is not m
@@ -45,7 +46,7 @@ def read_displacements(path, pack) -> dict:
     try:
         if ext == ".npz":
             with np.load(path) as z:
-                out = {k: np.asarray(z[k], float) for k in z.files}
+                out = {k: np.asarray(z[k], float) for k in z.files if k != DIGEST_KEY}
         elif ext == ".csv":
             import pandas as pd
 
@@ -100,6 +101,15 @@ def read_displacements(path, pack) -> dict:
                 "a finite displacement at every node",
             )
     return out
+
+
+def answer_digest(path) -> str | None:
+    """The pack digest `engines run` wrote into an answer (.npz), or None (none there)."""
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        return None
+    with np.load(path) as z:
+        return str(z[DIGEST_KEY]) if DIGEST_KEY in z.files else None
 
 
 def _units(path, pack, fields: dict) -> None:

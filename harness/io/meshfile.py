@@ -64,6 +64,26 @@ def looks_like_bc2000(path: Path) -> bool:
         return False
 
 
+def is_gmsh_v1(path: Path) -> bool:
+    """True if the file is gmsh's legacy v1 format (a ``$NOD`` section, no ``$MeshFormat``)."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096).decode("ascii", "replace").split()
+    except OSError:
+        return False
+    return bool(head) and head[0] in ("$NOD", "$NOE") and "$MeshFormat" not in head
+
+
+def gmsh_v1_error(path: Path) -> SpringbenchError:
+    """The one line for a gmsh v1 mesh: what it is and the command that converts it."""
+    new = path.with_name(path.stem + "-v2.msh")
+    return SpringbenchError(
+        "gmsh's legacy v1 mesh format ($NOD/$ELM sections), which meshio does not read",
+        file=str(path),
+        fix=f"convert it: gmsh {path} -save -format msh2 -o {new}; or -format msh4",
+    )
+
+
 def read_meshio(path: Path, file_format: str | None = None) -> Mesh:
 
     import meshio
@@ -165,6 +185,8 @@ def read_mesh(path, fmt: str | None = None) -> Mesh:
         raise SpringbenchError(
             "the mesh file is empty", file=str(path), fix="give a mesh with nodes and cells"
         )
+    if fmt in (None, "meshio", "gmsh") and is_gmsh_v1(path):
+        raise gmsh_v1_error(path)
     if fmt is None:
         fmt = "bc2000" if looks_like_bc2000(path) else "meshio"
     try:
