@@ -120,15 +120,14 @@ def _body(fig, x: np.ndarray, tris, err: np.ndarray, norm, cmap):
     from matplotlib.ticker import MaxNLocator
 
     if x.shape[1] == 3:
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
         ax = fig.add_subplot(projection="3d", computed_zorder=False)
         if tris is None:
             ax.scatter(*x.T, c=err, cmap=cmap, norm=norm, s=8, depthshade=False)
-        else:
-            faces = Poly3DCollection(x[tris], linewidths=0.1, edgecolors=(0, 0, 0, 0.25))
+        else:  # the facets as one surface, each its vertices' mean error
+            faces = ax.plot_trisurf(
+                *x.T, triangles=tris, linewidth=0.1, edgecolor=(0, 0, 0, 0.25), shade=False
+            )
             faces.set_facecolor(cmap(norm(err[tris].mean(axis=1))))
-            ax.add_collection3d(faces)
         lo, hi = x.min(axis=0), x.max(axis=0)
         ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]))
         ax.set_box_aspect(np.maximum(hi - lo, 1e-3 * (hi - lo).max()))

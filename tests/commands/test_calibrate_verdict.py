@@ -76,7 +76,7 @@ def test_verdict_matches_the_table(cylinder, tmp_path, capsys, method):
     assert f"normal (-1, 0, 0), {on_face} nodes" in lines[0] and "centroid (0, " in lines[0], lines[
         0
     ]
-    assert "--clamp GROUP" in lines[0]
+    assert "--clamp / --load-region" in lines[0]
     # the verdict, worked out from the CSV
     want, best, row = expected_verdict(df)
     assert data["verdict"] == want
