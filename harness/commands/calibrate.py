@@ -137,8 +137,10 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               reference_error_heldout), status (the exported row's reference status: ok, or
               ref-coarse: the FEM's own error is above a tenth of the model's or missed its tol),
               verdict (held-out loads: better, tie or fit-worse-than-rule for a fit, rule when a
-              rule is exported, null without held-out loads), best_rule_heldout ({rule,
-              G_heldout_mean}: the best rule on the held-out loads), opt_stop and opt_stops (the
+              rule is exported, null without held-out loads), flags (the row's flags as
+              springbench run gives them: ref-coarse, memorised, fit-worse-than-rule),
+              best_rule_heldout ({rule, G_heldout_mean}: the best rule on the held-out loads),
+              opt_stop and opt_stops (the
               optimiser's whole stop message: the exported start's, and every start's),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume-* adds
               volume_indices, volume_rest (m^3; 2-D m^2), volume_stiffness (kv, Pa; 2-D N/m),

@@ -113,7 +113,21 @@ def heldout_sentence(exported: dict, rules: list, names) -> str:
         f"instead (--method rule --rule {rule['stiffness']})",
     }[v]
     best = f"the best rule ({rule['stiffness']}) {pct(other)}"
-    return f"{head}the fit {pct(fit)}{spread}, {best}: {tail}."
+    return f"{head}the fit {pct(fit)}{spread}, {best}: {tail}.{memorised(exported, rules)}"
+
+
+def memorised(exported: dict, rules: list) -> str:
+    """ " Memorised: ..." when the fit's held-out error is above MEMORISED times its fitted one
+    (the flag `springbench run` gives such a row, harness/report/findings.py); "" else."""
+    from harness.report.findings import MEMORISED, flags, heldout_error
+
+    if "memorised" not in flags(exported, rules):
+        return ""
+    ratio = heldout_error(exported) / float(exported["G_norm_final"])
+    return (
+        f" Memorised: its held-out error is {ratio:.1f}x its fitted one (above {MEMORISED:g}x), "
+        "so the training states do not show how it predicts; judge it by the held-out loads."
+    )
 
 
 def fitted_sentence(exported: dict, best: dict) -> str:

@@ -15,7 +15,7 @@ from harness.commands.calibrate_case import prior_weight
 from harness.export.engine_loads import load_records, settle_recipe
 from harness.export.model_json import export
 from harness.outputs import staged
-from harness.report.findings import heldout_error
+from harness.report.findings import flags, heldout_error
 from harness.stages.sms_measures import rank
 
 
@@ -121,6 +121,7 @@ def metadata(s, rows, exported, net, case) -> dict:
     meta.update(
         status=str(exported.get("status", "ok")),
         verdict=said,
+        flags=flags(exported, rules) if case.heldout else [],
         best_rule_heldout=best,
         opt_stop=stop if isinstance(stop, str) else None,
         opt_stops=stops.split(" | ") if isinstance(stops, str) else [],

@@ -435,3 +435,16 @@ def test_the_engine_tables_finding_and_summary_say_what_a_hand_made_table_holds(
 
     [(_, suite_table, suite_note)] = engines_tables(df.rename(columns={"status": "engine_status"}))
     assert suite_table.equals(table) and text in suite_note
+
+
+def test_calibrates_verdict_says_memorised_as_run_flags_it():
+    """The liver's numbers: fitted 1.86 %, held out 16.6 % (8.9x, above MEMORISED = 3):
+    calibrate's held-out sentence says so, as `springbench run` flags the row; at 2.9x not."""
+    names = ["sag", "tip"]
+    liver = fit(0.166, fitted=0.0186, pooled=0.17)
+    said = heldout_sentence(liver, RULES, names)
+    assert "Memorised: its held-out error is 8.9x its fitted one (above 3x)" in said
+    assert "memorised" in flags(liver, RULES)
+    fine = fit(0.029, fitted=0.010, pooled=0.03)
+    assert "Memorised" not in heldout_sentence(fine, RULES, names)
+    assert "memorised" not in flags(fine, RULES)
