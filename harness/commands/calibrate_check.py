@@ -13,112 +13,138 @@ from harness.errors import SpringbenchError
 NU_MAX = 0.49999
 
 
+def _bad(flag, msg, fix):
+    raise SpringbenchError(msg, field=flag, fix=fix)
+
+
 def check(s, prior_weight: float) -> None:
     """Raise a one-line SpringbenchError naming the flag of the first bad value (before any
-    work)."""
+    work): the material, the loads, the fit, the reference, the numbers' range, the files."""
+    _material(s)
+    _loads(s)
+    _fit(s, prior_weight)
+    _reference(s)
+    _ranges(s)
+    _files(s)
+    check_format(s.format)
 
-    def bad(flag, msg, fix):
-        raise SpringbenchError(msg, field=flag, fix=fix)
 
+def _material(s) -> None:
     if not (math.isfinite(s.E) and s.E > 0):
-        bad("--E", f"E must be positive, got {s.E:g}", "Young's modulus in Pa, e.g. --E 2e5")
+        _bad("--E", f"E must be positive, got {s.E:g}", "Young's modulus in Pa, e.g. --E 2e5")
     if not (-1 < s.nu < 0.5):
-        bad("--nu", f"{s.nu} is out of range", "a Poisson ratio in (-1, 0.5), e.g. --nu 0.3")
+        _bad("--nu", f"{s.nu} is out of range", "a Poisson ratio in (-1, 0.5), e.g. --nu 0.3")
     if s.nu > NU_MAX:
-        bad(
+        _bad(
             "--nu",
             f"{s.nu} is incompressible to rounding: the FEM reference's stiffness would "
             "be singular",
             f"--nu {NU_MAX:g} at most",
         )
     if not (math.isfinite(s.density) and s.density > 0):
-        bad(
+        _bad(
             "--density",
             f"density must be positive, got {s.density:g}",
             "kg/m^3, e.g. --density 1000",
         )
+
+
+def _loads(s) -> None:
     if s.magnitude is not None and not (math.isfinite(s.magnitude) and s.magnitude > 0):
-        bad("--magnitude", f"{s.magnitude} is not a positive number", "a traction in Pa")
+        _bad("--magnitude", f"{s.magnitude} is not a positive number", "a traction in Pa")
     peak = s.peak_strain
     if not (math.isfinite(peak) and 0 < peak <= 0.1):
-        bad(
+        _bad(
             "--peak-strain",
             f"{peak} is not in (0, 0.1]",
             f"a small strain, e.g. --peak-strain {PEAK_STRAIN:g}",
         )
     if not (math.isfinite(s.damping_ratio) and 0 <= s.damping_ratio < 1):
-        bad("--damping-ratio", f"{s.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
+        _bad("--damping-ratio", f"{s.damping_ratio} is not in [0, 1)", "e.g. --damping-ratio 0.05")
+
+
+def _fit(s, prior_weight: float) -> None:
     if s.prior_weight is not None and not (math.isfinite(s.prior_weight) and s.prior_weight >= 0):
-        bad(
+        _bad(
             "--prior-weight",
             f"{s.prior_weight} is not a number >= 0",
             f"e.g. --prior-weight {prior_weight:g}, or 0 for none",
         )
     if s.prior_weight is not None and s.method != "lbfgs":
-        bad(
+        _bad(
             "--prior-weight",
             f"--method {s.method} has no prior",
             "use --prior-weight with --method lbfgs",
         )
     if s.init != "none" and s.method not in ("lbfgs", "gauss-newton"):
-        bad(
+        _bad(
             "--init",
             f"--method {s.method} has no start point to set",
             "use --init with --method lbfgs or gauss-newton",
         )
     if s.budget is not None and not (math.isfinite(s.budget) and s.budget > 0):
-        bad("--budget", f"{s.budget} is not a positive number of seconds", "e.g. --budget 600")
+        _bad("--budget", f"{s.budget} is not a positive number of seconds", "e.g. --budget 600")
+    if s.k_ratio is not None and not (math.isfinite(s.k_ratio) and s.k_ratio >= 1):
+        _bad("--k-ratio", f"{s.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
+    if s.seed < 0:
+        _bad("--seed", f"{s.seed} is negative", "a seed >= 0, e.g. --seed 0")
+
+
+def _reference(s) -> None:
     if not (math.isfinite(s.tol) and 1e-12 <= s.tol < 1):
-        bad(
+        _bad(
             "--tol",
             f"{s.tol} is not a relative error in [1e-12, 1) (below it, rounding)",
-            "e.g. --tol 1e-3",
+            "e.g. --tol 1e-2",
         )
     if s.max_refine < 0:
-        bad(
+        _bad(
             "--max-refine",
             f"{s.max_refine} is negative",
-            "e.g. --max-refine 1, or 0 for no error estimate",
+            "e.g. --max-refine 100 (until --tol), or 0 for no error estimate",
         )
-    if s.k_ratio is not None and not (math.isfinite(s.k_ratio) and s.k_ratio >= 1):
-        bad("--k-ratio", f"{s.k_ratio} is not a ratio >= 1", "e.g. --k-ratio 100")
-    if s.seed < 0:
-        bad("--seed", f"{s.seed} is negative", "a seed >= 0, e.g. --seed 0")
-    from harness.case.schema import LARGEST, SMALLEST  # what the case-file numbers may be
 
-    # E's lower end leaves room for the default traction, 1e-3 E
+
+def _ranges(s) -> None:
+    """The numbers a case file may hold (E's lower end leaves room for the default traction,
+    1e-3 E)."""
+    from harness.case.schema import LARGEST, SMALLEST
+
     for flag, v, lo in (
         ("--E", s.E, 1e3 * SMALLEST),
         ("--density", s.density, SMALLEST),
         ("--magnitude", s.magnitude, SMALLEST),
     ):
         if v is not None and not lo <= v <= LARGEST:
-            bad(
+            _bad(
                 flag,
                 f"{v:g} is too {'large' if v > LARGEST else 'small'} to compute with",
                 f"a value between {lo:g} and {LARGEST:g}: change the units",
             )
-    if s.out.suffix.lower() != ".vtu":
-        bad("--out", f"'{s.out}' does not end in .vtu", "e.g. --out model.vtu")
+
+
+def _files(s) -> None:
+    """The outputs writable and not the mesh (before the work, not after it); the mesh a file."""
     from harness.outputs import check_out_file
 
+    if s.out.suffix.lower() != ".vtu":
+        _bad("--out", f"'{s.out}' does not end in .vtu", "e.g. --out model.vtu")
     if s.save_case is not None:
         check_out_file(s.save_case, "--save-case")
     for out in (s.out, s.out.with_suffix(".json"), s.out.with_suffix(".csv")):
         if out.resolve() == s.mesh.resolve():
-            bad(
+            _bad(
                 "--out",
                 f"{out} is the mesh itself: calibrate would overwrite it",
                 "e.g. --out model.vtu",
             )
-        check_out_file(out, "--out")  # before the work, not after it
+        check_out_file(out, "--out")
     if not s.mesh.is_file():
         raise SpringbenchError(
             "is a folder, not a mesh file" if s.mesh.is_dir() else "no such mesh file",
             file=str(s.mesh),
             fix="check the path",
         )
-    check_format(s.format)
 
 
 def check_format(fmt: str | None) -> None:

@@ -180,8 +180,6 @@ def read_corpus(paths, fmt=None) -> dict[int, list]:
 
 def main(args) -> int:
     _check(args)
-    from harness.models.learned_rule import FEATURES
-
     corpus = read_corpus(args.meshes, args.format)
     last = [0.0]
 
@@ -191,44 +189,62 @@ def main(args) -> int:
             last[0] = now
             print(f"  {msg}", file=sys.stderr, flush=True)
 
-    dims, t0 = {}, time.monotonic()
-    for dim, meshes in sorted(corpus.items()):
-        samples = []
-        for path, m in meshes:
-            for nu in args.nu:
-                status(f"{dim}-D: {path.name} at nu = {nu:g}")
-                samples.append(sample(path, nu, args.plane, args.format, mesh_obj=m))
-        res = fit(samples, args.objective, args.maxiter, args.starts, args.seed, status=status)
-        table = []
-        for s in samples:
-            before, after = errors(s, np.zeros(len(res.coefficients))), errors(s, res.coefficients)
-            table.append(
-                {
-                    "mesh": s.name,
-                    "nu": s.nu,
-                    "loads": len(s.loads),
-                    "mean_error_before": float(before.mean()),
-                    "mean_error_after": float(after.mean()),
-                }
-            )
-        dims[str(dim)] = {
-            "features": list(FEATURES[dim]),
-            "coefficients": list(res.coefficients),
-            "objective_before": res.before,
-            "objective_after": res.after,
-            "iterations": res.iterations,
-            "evaluations": res.evaluations,
-            "optimizer": res.message,
-            "best_start": res.start,
-            "samples": table,
-        }
-        print(
-            f"{dim}-D: {len(meshes)} meshes x {len(args.nu)} nu, objective ({args.objective}) "
-            f"{res.before:.4g} (van Gelder, c = 0) -> {res.after:.4g}"
+    t0 = time.monotonic()
+    dims = {str(dim): _fit_dim(dim, meshes, args, status) for dim, meshes in sorted(corpus.items())}
+    data = _record(args, corpus, dims, time.monotonic() - t0)
+    from harness.outputs import atomic_write
+
+    atomic_write(args.out, (json.dumps(data, indent=1) + "\n").encode(), "--out")
+    print(f"-> {args.out}")
+    return 0
+
+
+def _fit_dim(dim: int, meshes, args, status) -> dict:
+    """The learned rule's coefficients for one dimension: fitted on every mesh at every nu,
+    with each sample's mean error before and after; printed as it is found."""
+    from harness.models.learned_rule import FEATURES
+
+    samples = []
+    for path, m in meshes:
+        for nu in args.nu:
+            status(f"{dim}-D: {path.name} at nu = {nu:g}")
+            samples.append(sample(path, nu, args.plane, args.format, mesh_obj=m))
+    res = fit(samples, args.objective, args.maxiter, args.starts, args.seed, status=status)
+    table = []
+    for s in samples:
+        before, after = errors(s, np.zeros(len(res.coefficients))), errors(s, res.coefficients)
+        table.append(
+            {
+                "mesh": s.name,
+                "nu": s.nu,
+                "loads": len(s.loads),
+                "mean_error_before": float(before.mean()),
+                "mean_error_after": float(after.mean()),
+            }
         )
-        for name, c in zip(FEATURES[dim], res.coefficients):
-            print(f"  c[{name}] = {c:+.4f}")
-    data = {
+    print(
+        f"{dim}-D: {len(meshes)} meshes x {len(args.nu)} nu, objective ({args.objective}) "
+        f"{res.before:.4g} (van Gelder, c = 0) -> {res.after:.4g}"
+    )
+    for name, c in zip(FEATURES[dim], res.coefficients):
+        print(f"  c[{name}] = {c:+.4f}")
+    return {
+        "features": list(FEATURES[dim]),
+        "coefficients": list(res.coefficients),
+        "objective_before": res.before,
+        "objective_after": res.after,
+        "iterations": res.iterations,
+        "evaluations": res.evaluations,
+        "optimizer": res.message,
+        "best_start": res.start,
+        "samples": table,
+    }
+
+
+def _record(args, corpus, dims: dict, seconds: float) -> dict:
+    """The rule file: the family, each dimension's fit, the corpus (with digests) and how
+    the fit was run."""
+    return {
         "rule": "learned",
         "family": "k = k_vangelder * exp(sum_j c_j phi_j) (harness/models/learned_rule.py)",
         "dims": dims,
@@ -255,14 +271,9 @@ def main(args) -> int:
             "starts": args.starts,
             "seed": args.seed,
             "bound": BOUND,
-            "seconds": round(time.monotonic() - t0, 1),
+            "seconds": round(seconds, 1),
         },
     }
-    from harness.outputs import atomic_write
-
-    atomic_write(args.out, (json.dumps(data, indent=1) + "\n").encode(), "--out")
-    print(f"-> {args.out}")
-    return 0
 
 
 def _command(args) -> str:
