@@ -181,8 +181,6 @@ def read_network(path):
 
 
 def main(args) -> int:
-    import math
-
     if (
         args.displacements is not None
         or args.max_g_norm is not None
@@ -201,29 +199,42 @@ def main(args) -> int:
             "needs MODEL.vtu and CASE (or --displacements U DIR for a pack)",
             fix="springbench score MODEL.vtu CASE, or springbench score --displacements U.npz DIR",
         )
+    _check_weights(args.weights)
+    _check_paths(args)
+    net, case = _inputs(args)
+    _report(args, net, case)
+    return 0
 
-    import reference
+
+def _check_weights(weights) -> None:
+    """--weights: three finite numbers >= 0, not all zero, each 0 or computable."""
+    import math
+
     from harness.case.schema import LARGEST, SMALLEST
     from harness.errors import SpringbenchError
 
-    if args.weights is not None and not (
-        all(math.isfinite(w) and w >= 0 for w in args.weights) and sum(args.weights) > 0
-    ):
+    if weights is None:
+        return
+    said = " ".join(f"{w:g}" for w in weights)
+    if not (all(math.isfinite(w) and w >= 0 for w in weights) and sum(weights) > 0):
         raise SpringbenchError(
-            f"{' '.join(f'{w:g}' for w in args.weights)} are not three finite weights >= 0, "
-            "not all zero",
+            f"{said} are not three finite weights >= 0, not all zero",
             field="--weights",
             fix="e.g. --weights 1 3 15",
         )
-    if args.weights is not None and not all(
-        w == 0 or SMALLEST <= w <= LARGEST for w in args.weights
-    ):
+    if not all(w == 0 or SMALLEST <= w <= LARGEST for w in weights):
         raise SpringbenchError(
-            f"{' '.join(f'{w:g}' for w in args.weights)}: a weight is too "
-            f"{'large' if max(args.weights) > LARGEST else 'small'} to compute with",
+            f"{said}: a weight is too {'large' if max(weights) > LARGEST else 'small'} to "
+            "compute with",
             field="--weights",
             fix=f"weights between {SMALLEST:g} and {LARGEST:g} (or 0), e.g. --weights 1 3 15",
         )
+
+
+def _check_paths(args) -> None:
+    """The inputs are files and --out is none of them."""
+    from harness.errors import SpringbenchError
+
     for what, path in (("network", args.model), ("case", args.case)):
         if Path(path).is_dir():
             raise SpringbenchError(
@@ -239,6 +250,12 @@ def main(args) -> int:
             field="--out",
             fix="give another file name, e.g. --out score.csv",
         )
+
+
+def _inputs(args):
+    """(network, case): read, --out checked writable, the dimensions matched, the node
+    classes by the case's body when it is not a mesh (whoever wrote the file)."""
+    import dataclasses
 
     from harness.case.reader import load_case
     from harness.errors import ModelError
@@ -258,16 +275,20 @@ def main(args) -> int:
             fix="score it on a case of the same dimension",
         )
     body = body_geometry(case)
-    if body.kind != "mesh":  # node classes by the case's body, whoever wrote the file
-        import dataclasses
-
+    if body.kind != "mesh":
         net = dataclasses.replace(net, classes=node_classes(net.points, body))
+    return net, case
+
+
+def _report(args, net, case) -> None:
+    """Score the network against the case's reference; print the table (and write it)."""
+    import reference
+    from harness.errors import ModelError
+
     ref = reference.solve(case)
     try:
         df, sc, status = score_table(net, case, ref, args.weights)
-    except (
-        ModelError
-    ) as exc:  # the network cannot carry the case's loads: it is the model file's fault
+    except ModelError as exc:  # the network cannot carry the case's loads: the model file's fault
         raise ModelError(exc.message, file=str(args.model), fix=exc.fix) from None
     print(
         f"{case.name}: {net.n_nodes} nodes, {net.n_springs} springs, weights "
@@ -277,8 +298,7 @@ def main(args) -> int:
     if status != "ok":
         print(
             "ref-coarse: the reference's own error (G_ref, normalised like G_norm) is above "
-            "10 % of "
-            "G_norm, or it missed its tol at these nodes; G says as much about the "
+            "10 % of G_norm, or it missed its tol at these nodes; G says as much about the "
             "reference as about the model"
         )
     if args.out:
@@ -286,4 +306,3 @@ def main(args) -> int:
 
         atomic_write(args.out, df.to_csv(index=False).encode(), "--out")
         print(f"-> {args.out}")
-    return 0

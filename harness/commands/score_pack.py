@@ -96,11 +96,41 @@ def _scored_loads(args, names: list, fields: dict) -> tuple[list, str]:
 
 
 def main(args) -> int:
-    import pandas as pd
-
     from harness.export.pack import read_pack
-    from harness.export.pack_score import _units, junit, read_displacements, score_fields
-    from harness.outputs import atomic_write, check_out_file
+    from harness.export.pack_score import _units, read_displacements
+
+    _check_flags(args)
+    pack = read_pack(args.model)
+    names = [ld.name for ld in pack.loads]
+    gates = _gates(args, names)
+    fields = read_displacements(args.displacements, pack)
+    note = _check_digest(args.displacements, args.model, pack)
+    unknown = [n for n in fields if n not in names]
+    if unknown:
+        raise SpringbenchError(
+            f"load {unknown[0]!r} is not in the pack",
+            file=str(args.displacements),
+            fix=f"the pack's loads: {', '.join(names)}",
+        )
+    wanted, missing_note = _scored_loads(args, names, fields)
+    unscored = [n for n in gates if n not in wanted]
+    if unscored:
+        raise SpringbenchError(
+            f"--max names '{unscored[0]}', which --loads leaves out",
+            field="--max",
+            fix="score it, or drop its gate",
+        )
+    _units(args.displacements, pack, {n: fields[n] for n in wanted})
+    for line in (note, missing_note):
+        if line:
+            print(line, file=sys.stderr)
+    return _report(args, pack, fields, wanted, gates)
+
+
+def _check_flags(args) -> None:
+    """The pack form's flags: one folder and an answer, no network flags, a gate >= 0, the
+    outputs writable and not the answer."""
+    from harness.outputs import check_out_file
 
     if args.displacements is None:
         raise SpringbenchError(
@@ -135,30 +165,16 @@ def main(args) -> int:
                     f"{out} is an input of the command", field=flag, fix="write it elsewhere"
                 )
             check_out_file(out, flag)
-    pack = read_pack(args.model)
-    names = [ld.name for ld in pack.loads]
-    gates = _gates(args, names)
-    fields = read_displacements(args.displacements, pack)
-    note = _check_digest(args.displacements, args.model, pack)
-    unknown = [n for n in fields if n not in names]
-    if unknown:
-        raise SpringbenchError(
-            f"load {unknown[0]!r} is not in the pack",
-            file=str(args.displacements),
-            fix=f"the pack's loads: {', '.join(names)}",
-        )
-    wanted, missing_note = _scored_loads(args, names, fields)
-    unscored = [n for n in gates if n not in wanted]
-    if unscored:
-        raise SpringbenchError(
-            f"--max names '{unscored[0]}', which --loads leaves out",
-            field="--max",
-            fix="score it, or drop its gate",
-        )
-    _units(args.displacements, pack, {n: fields[n] for n in wanted})
-    for line in (note, missing_note):
-        if line:
-            print(line, file=sys.stderr)
+
+
+def _report(args, pack, fields: dict, wanted: list, gates: dict) -> int:
+    """Score the wanted loads, print the table and the verdict, write --out and --junit;
+    1 when a load misses its gate."""
+    import pandas as pd
+
+    from harness.export.pack_score import junit, score_fields
+    from harness.outputs import atomic_write
+
     rows = score_fields(pack, fields, wanted, gates, args.max_g_norm)
     df = pd.DataFrame(rows)
     print(
