@@ -255,6 +255,7 @@ ENGINES = Registry(
         "newton-springs": "harness.engines.newton_engine:run_springs",
         "newton-tets": "harness.engines.newton_engine:run_tets",
         "mujoco-flex": "harness.engines.mujoco_flex:run",
+        "pybullet-fem": "harness.engines.pybullet_fem:run",
     },
     about={
         "newton-springs": (
@@ -268,6 +269,11 @@ ENGINES = Registry(
             "and nu)",
         ),
         "mujoco-flex": ("mujoco", "MuJoCo's 3-D flex with its own elasticity (young, poisson)"),
+        "pybullet-fem": (
+            "pybullet",
+            "Bullet's FEM soft body (Neo-Hookean, k_mu / k_lambda from E and nu; uniform node "
+            "masses; gravity loads only)",
+        ),
     },
 )
 

@@ -76,8 +76,17 @@ def _only(pack, loads: str | None):
     return Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, kept, pack.plane, pack.meta)
 
 
+def with_displacement(answers: dict) -> dict:
+    """The answers that have a displacement to score: every one but an unsupported load's
+    or a diverged run's (NaN); `score` names the others as missing."""
+    import numpy as np
+
+    return {name: a for name, a in answers.items() if np.all(np.isfinite(a.u))}
+
+
 def _write_answer(out: Path, answers: dict, digest: str) -> None:
-    """The displacements so far, one array per load, and the pack's digest (atomically)."""
+    """The displacements so far, one array per load that has one, and the pack's digest
+    (atomically)."""
     import io
 
     import numpy as np
@@ -86,7 +95,8 @@ def _write_answer(out: Path, answers: dict, digest: str) -> None:
     from harness.outputs import atomic_write
 
     buf = io.BytesIO()
-    np.savez_compressed(buf, **{name: a.u for name, a in answers.items()}, **{DIGEST_KEY: digest})
+    fields = {name: a.u for name, a in with_displacement(answers).items()}
+    np.savez_compressed(buf, **fields, **{DIGEST_KEY: digest})
     atomic_write(out, buf.getvalue(), "--out")
 
 
@@ -101,7 +111,7 @@ def run_loads(run, pack, options: dict, out: Path, digest: str) -> dict:
         for ld in pack.loads:
             answers.update(run(dataclasses.replace(pack, loads=(ld,)), options))
             _write_answer(out, answers, digest)
-            written = dict(answers)
+            written = with_displacement(answers)
     except KeyboardInterrupt:
         n = len(pack.loads)
         kept = (

@@ -5,10 +5,10 @@ benchmark pack (harness/export/pack.py) and return its displacements for
 Each adapter is one module registered in ``harness.registry.ENGINES`` (imported when
 run; its ``about`` is the package it needs and what it runs); the function takes (pack,
 options) and returns {load: settle.Answer}. Engines are
-optional extras: a missing one is one line naming the extra that installs it. Bullet
-(pybullet) installs but is not among them: its deformable bodies take no nodal forces
-(gravity only), set their own node masses, and went still 55 % away from the FEM's sag
-on a 875-tet cylinder.
+optional extras: a missing one is one line naming the extra that installs it. Bullet's
+FEM soft body (``pybullet-fem``) takes no nodal forces: it runs the gravity loads alone
+(the others are ``unsupported``, with no displacement in the answer) with its own uniform
+node masses.
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ from harness.engines import settle
 SIMS = [
     ("harness.engines.newton_engine", "NewtonSim"),
     ("harness.engines.mujoco_flex", "MujocoSim"),
+    ("harness.engines.pybullet_fem", "PybulletSim"),
 ]
 METHODS = ("load", "set_damping", "advance", "measure")
 

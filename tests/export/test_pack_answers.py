@@ -153,3 +153,31 @@ def test_engines_run_loads_keeps_the_full_packs_digest(tmp_path, engine):
     assert run_cli(["engines", "run", "mujoco", tmp_path / "p", "--loads", "tip", "--out", u]) == 0
     with np.load(u) as z:
         assert set(z.files) == {"tip", DIGEST_KEY} and str(z[DIGEST_KEY]) == pack_digest(pack)
+
+
+def test_an_unsupported_load_leaves_no_field_and_score_takes_the_others(
+    tmp_path, monkeypatch, capsys
+):
+    """An engine that cannot run a load (pybullet-fem: no nodal forces) answers it
+    `unsupported` with NaN: `engines run` writes no field for it (exit 0), and `score`
+    scores the others and names it as missing; a field of NaN would stop `score`."""
+    from harness.engines.settle import unsupported
+
+    def run(pack, options):
+        return {
+            ld.name: unsupported(pack, "no nodal forces")
+            if ld.name == "tip"
+            else Answer(ld.u_fem.copy(), "settled", steps=10)
+            for ld in pack.loads
+        }
+
+    monkeypatch.setattr(harness.engines, "adapter", lambda name: run)
+    tiny_pack(tmp_path / "p")
+    u = tmp_path / "u.npz"
+    assert run_cli(["engines", "run", "pybullet-fem", tmp_path / "p", "--out", u]) == 0
+    with np.load(u) as z:
+        assert set(z.files) == {"sxx", "syy", DIGEST_KEY}
+    capsys.readouterr()
+    assert run_cli(["score", "--displacements", u, tmp_path / "p"]) == 0
+    captured = capsys.readouterr()
+    assert "not scored: tip" in captured.err and "sxx" in captured.out
