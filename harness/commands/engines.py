@@ -9,7 +9,7 @@ import math
 import sys
 from pathlib import Path
 
-from harness.engines.settle import CHECK, FORCE_TOL, KE_TOL, RES_TOL, RTOL, STALL
+from harness.engines.settle import CHECK, FORCE_TOL, KE_TOL, RES_TOL, RTOL, STALL, UNSUPPORTED
 from harness.errors import SpringbenchError
 
 HELP = (
@@ -24,7 +24,8 @@ along its load, and the net force is at most {FORCE_TOL:g} of the external force
 stopped falling over {STALL} checks while the kinetic energy is at most {KE_TOL:g} of the
 load's work (float32 trembling); a residual above its bound is never settled. Velocities are
 damped each step by exp(-2 omega_1 dt), omega_1 the lowest mode under the load's own holds.
-The table gives per load the status (settled / not-settled / diverged / unsupported), steps,
+The table gives per load the status (settled / not-settled / diverged / unsupported /
+unsupported-load), steps,
 simulated and wall time, final kinetic energy and relative residual;
 --log writes it as CSV. U.npz is written again as each load finishes (Ctrl-C keeps the
 finished loads) and holds the pack's digest, which score checks."""
@@ -176,4 +177,4 @@ def main(args) -> int:
     if args.log is not None:
         atomic_write(args.log, df.to_csv(index=False).encode(), "--log")
     print(f"-> {args.out} (pack digest {digest})")
-    return 0 if all(a.status in ("settled", "unsupported") for a in answers.values()) else 1
+    return 0 if all(a.status in ("settled", *UNSUPPORTED) for a in answers.values()) else 1

@@ -243,7 +243,7 @@ def run(pack, options=None) -> dict:
     for ld in pack.loads:
         why = _supported(pack, tets, lumped, ld)
         if why is not None:
-            out[ld.name] = unsupported(pack, why)
+            out[ld.name] = unsupported(pack, why, "unsupported-load")
             continue
         dt = DT_OMEGA / omegas[ld.name]
         sim = PybulletSim(pack, tets, mass, dt, K)

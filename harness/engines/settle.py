@@ -88,9 +88,9 @@ MAX_STEPS = 400_000
 @dataclass(frozen=True)
 class Answer:
     """One load's equilibrium: ``u`` (n, dim) (NaN when it has none), ``status``
-    ("settled", "not-settled", "diverged", "unsupported"), the steps and simulated time
-    it took, its wall time, the final kinetic energy (J), the residual (module docstring)
-    and the net force relative to the external force."""
+    ("settled", "not-settled", "diverged", "unsupported", "unsupported-load"), the steps
+    and simulated time it took, its wall time, the final kinetic energy (J), the residual
+    (module docstring) and the net force relative to the external force."""
 
     u: np.ndarray
     status: str
@@ -108,8 +108,13 @@ def float32_resolution(points: np.ndarray) -> float:
     return float(np.spacing(np.float32(np.abs(points).max())))
 
 
-def unsupported(pack, why: str) -> Answer:
-    return Answer(np.full((pack.n_nodes, pack.dim), np.nan), "unsupported", note=why)
+UNSUPPORTED = ("unsupported", "unsupported-load")  # the body, or this load alone
+
+
+def unsupported(pack, why: str, status: str = "unsupported") -> Answer:
+    """No displacement: the engine cannot run the pack's body ("unsupported") or this load
+    of it ("unsupported-load", e.g. nodal forces an engine takes no input for)."""
+    return Answer(np.full((pack.n_nodes, pack.dim), np.nan), status, note=why)
 
 
 def rayleigh_omega(load, masses: np.ndarray) -> float:

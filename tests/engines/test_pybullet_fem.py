@@ -85,7 +85,7 @@ def test_sag_is_p1_with_uniform_masses_and_a_traction_unsupported(nu):
     assert error(sag.u, uniform_sag(body(nu), nu)) <= TOL
     assert error(sag.u, body(nu).answers["sag"]) > 10 * TOL  # the lumped masses' P1: not it
     assert "uniform" in sag.note and "kg" in sag.note
-    assert tip.status == "unsupported" and "gravity loads only" in tip.note
+    assert tip.status == "unsupported-load" and "gravity loads only" in tip.note
     assert np.isnan(tip.u).all()
 
 
