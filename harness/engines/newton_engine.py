@@ -224,6 +224,13 @@ def run_springs(pack, options=None) -> dict:
             field="--model",
             fix="calibrate the pack's own mesh (mesh.vtu in the pack), in metres",
         )
+    if data.get("kn_nodes"):  # Newton has no term for Kot & Nagahashi's nodal volumes
+        raise SpringbenchError(
+            "a springs+kn export: newton-springs has no kn term and would run its springs alone",
+            file=str(options["model"]),
+            field="kn_nodes",
+            fix="calibrate with another --model (springs, springs+node-volume-*) for Newton",
+        )
     if pack.dim != 3:
         return {ld.name: unsupported(pack, "newton-springs runs 3-D models") for ld in pack.loads}
     masses = np.asarray(data["particle_mass"], float)

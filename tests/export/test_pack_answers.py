@@ -181,3 +181,28 @@ def test_an_unsupported_load_leaves_no_field_and_score_takes_the_others(
     assert run_cli(["score", "--displacements", u, tmp_path / "p"]) == 0
     captured = capsys.readouterr()
     assert "not scored: tip" in captured.err and "sxx" in captured.out
+
+
+def test_newton_springs_refuses_a_kn_export_in_one_line(tmp_path):
+    """A springs+kn export's kn terms have no Newton counterpart: refused, not run as its
+    springs alone (which the old adapter did silently)."""
+    import json
+
+    from harness.engines.newton_engine import run_springs
+    from harness.errors import SpringbenchError
+
+    pack = tiny_pack(tmp_path / "p")
+    model = {
+        "particle_q": POINTS.tolist(),
+        "particle_mass": [1.0] * 5,
+        "spring_indices": [[0, 1], [1, 2]],
+        "spring_stiffness": [1.0, 1.0],
+        "dt_safe": 1e-3,
+        "kn_nodes": [0, 1],
+        "kn_stiffness": [1.0, 1.0],
+    }
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps(model))
+    with pytest.raises(SpringbenchError) as exc:
+        run_springs(pack, {"model": path})
+    assert exc.value.field == "kn_nodes" and "springs+kn" in exc.value.message
