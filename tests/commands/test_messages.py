@@ -20,7 +20,7 @@ pytestmark = pytest.mark.usefixtures("cache")  # the reference cache of the ``ma
 
 
 def test_gmsh_v1_is_named_with_its_conversion(made, tmp_path, capsys):
-    """Old code: 'cannot read mesh (ValueError: meshio could not read it)'."""
+    """A gmsh v1 mesh: one line naming its format and the gmsh command that converts it."""
     mesh = tmp_path / "liver.msh"
     shutil.copy(V1, mesh)
     line = one_line(
@@ -57,7 +57,7 @@ def test_gmsh_v2_and_v4_are_not_taken_for_v1(tmp_path):
 
 
 def test_score_names_a_short_stiffness_array(made, tmp_path, capsys):
-    """Old code: meshio's 'Incompatible cell data ...', no field, the generic fix."""
+    """A network whose stiffness array is short: the field, the counts and the fix."""
     meshio.write(tmp_path / "ascii.vtu", meshio.read(made / "net.vtu"), binary=False)
     text = (tmp_path / "ascii.vtu").read_text()
     start = text.index('Name="stiffness"')
@@ -76,14 +76,14 @@ def test_score_names_a_short_stiffness_array(made, tmp_path, capsys):
 
 
 def test_calibrate_names_format(made, tmp_path, capsys):
-    """Old code: 'cannot read mesh (ReadError: Unknown file format ...)', no flag."""
+    """An unknown --format: the flag, the formats there are."""
     argv = ["calibrate", made / "cube.vtu", "--E", "1e5", "--nu", "0.3"]
     argv += ["--format", "nosuch", "--out", tmp_path / "m.vtu"]
     one_line(argv, capsys, "--format", "'nosuch'", "vtu", "gmsh", "bc2000")
 
 
 def test_build_names_stiffness(made, tmp_path, capsys):
-    """Old code: 'tiny.toml: model.stiffness: unknown stiffness rule', not the flag."""
+    """An unknown --stiffness: the flag, not the case key it becomes."""
     out = tmp_path / "b.vtu"
     line = one_line(
         ["build", made / "tiny.toml", "--stiffness", "bogus", "--out", out],
@@ -97,7 +97,7 @@ def test_build_names_stiffness(made, tmp_path, capsys):
 
 def test_build_names_out_when_the_write_is_refused(made, tmp_path, capsys, monkeypatch):
     """The folder turns read-only after the early check (or is one the check cannot see,
-    e.g. /sys as root). Old code: 'FILE: read-only file system', no --out."""
+    e.g. /sys as root): the refusal names --out."""
     import harness.outputs
 
     monkeypatch.setattr(harness.outputs, "check_out_file", lambda path, field="--out": path)

@@ -75,7 +75,7 @@ def test_the_digest_tells_packs_apart(tmp_path):
 
 
 def test_engines_run_writes_the_digest_and_score_checks_it(tmp_path, engine, capsys):
-    """Old code: no digest in the answer, and the answer scored on another pack (exit 0)."""
+    """The answer carries the pack's digest; scored on another pack it is refused in one line."""
     pack = tiny_pack(tmp_path / "p")
     other = tiny_pack(tmp_path / "q", held=(0, 1))
     engine()
@@ -105,7 +105,7 @@ def test_an_answer_without_a_digest_is_scored_and_says_so(tmp_path, capsys):
 
 
 def test_score_takes_the_loads_an_answer_has(tmp_path, capsys):
-    """Old code: exit 2, 'no displacements for load' unless --loads named the given ones."""
+    """The loads an answer has are scored and the others named, without --loads."""
     pack = tiny_pack(tmp_path / "p")
     fields = {ld.name: ld.u_fem for ld in pack.loads if ld.name != "syy"}
     np.savez(tmp_path / "u.npz", **fields, **{DIGEST_KEY: pack_digest(pack)})
@@ -126,7 +126,7 @@ def test_score_takes_the_loads_an_answer_has(tmp_path, capsys):
 
 @pytest.mark.parametrize("stop_after", [2, 0])
 def test_ctrl_c_keeps_the_finished_loads(stop_after, tmp_path, engine, capsys):
-    """Old code: 'finished cases are kept' and no answer written."""
+    """Ctrl-C keeps the loads written so far and says how many, or that none were."""
     pack = tiny_pack(tmp_path / "p")
     engine(stop_after)
     u = tmp_path / "u.npz"
@@ -184,8 +184,8 @@ def test_an_unsupported_load_leaves_no_field_and_score_takes_the_others(
 
 
 def test_newton_springs_refuses_a_kn_export_in_one_line(tmp_path):
-    """A springs+kn export's kn terms have no Newton counterpart: refused, not run as its
-    springs alone (which the old adapter did silently)."""
+    """A springs+kn export's kn terms have no Newton counterpart: refused in one line, not
+    run silently as its springs alone."""
     import json
 
     from harness.engines.newton_engine import run_springs
