@@ -60,19 +60,11 @@ def add_arguments(p):
 
 def _only(pack, loads: str | None):
     """The pack with only the loads named by --loads (all when None)."""
-    from harness.export.pack import Pack
+    from harness.export.pack import Pack, named_loads
 
     if loads is None:
         return pack
-    want = [n.strip() for n in loads.split(",") if n.strip()]
-    names = [ld.name for ld in pack.loads]
-    bad = [n for n in want if n not in names]
-    if bad or not want:
-        raise SpringbenchError(
-            f"the pack has no load '{bad[0] if bad else loads}'",
-            field="--loads",
-            fix=f"some of {', '.join(names)}",
-        )
+    want = named_loads(loads, [ld.name for ld in pack.loads])
     kept = tuple(ld for ld in pack.loads if ld.name in want)
     return Pack(pack.points, pack.cells, pack.E, pack.nu, pack.density, kept, pack.plane, pack.meta)
 

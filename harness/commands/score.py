@@ -144,14 +144,17 @@ def score_table(net, case, ref, weights=None):
 def _cell_data_mismatch(path) -> tuple | None:
     """(field, values, cells) of the first cell-data array of a VTU whose length is not
     its cell block's, or None (meshio's VTU reader, before its own check)."""
+    from xml.etree.ElementTree import ParseError
+
+    from meshio import ReadError
     from meshio.vtu._vtu import VtuReader
 
     if Path(path).suffix.lower() != ".vtu":
         return None
     try:
         r = VtuReader(str(path))
-    except Exception:  # noqa: BLE001 - not a VTU it can parse: the reader's own error stands
-        return None
+    except (OSError, ReadError, ValueError, KeyError, ParseError):  # not a VTU it reads: the
+        return None  # caller's reader then raises its own one-line error
     for name, arrays in r.cell_data.items():
         for block, data in zip(r.cells, arrays):
             if len(data) != len(block.data):

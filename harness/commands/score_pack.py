@@ -60,15 +60,10 @@ def _scored_loads(args, names: list, fields: dict) -> tuple[list, str]:
     """The loads to score: those --loads names (each must be in the answer), else the
     pack's loads the answer has; and the note naming the others (an error with
     --require-all)."""
+    from harness.export.pack import named_loads
+
     if args.loads is not None:
-        wanted = [n.strip() for n in args.loads.split(",") if n.strip()]
-        bad = [n for n in wanted if n not in names]
-        if bad or not wanted:
-            raise SpringbenchError(
-                f"the pack has no load '{bad[0] if bad else args.loads}'",
-                field="--loads",
-                fix=f"some of {', '.join(names)}",
-            )
+        wanted = named_loads(args.loads, names)
     else:
         wanted = names
     missing = [n for n in wanted if n not in fields]

@@ -309,3 +309,17 @@ def read_pack(folder) -> Pack:
     cells = {c.type: np.asarray(c.data, int) for c in mesh.cells}
     meta = {k: v for k, v in man.items() if k in ("source", "springbench", "peak_strain")}
     return Pack(points, cells, E, nu, rho, tuple(loads), mat.get("plane"), meta)
+
+
+def named_loads(text: str, names) -> list[str]:
+    """The loads a ``--loads a,b`` value names, each one of the pack's ``names``; a one-line
+    error naming --loads otherwise."""
+    want = [n.strip() for n in text.split(",") if n.strip()]
+    bad = [n for n in want if n not in names]
+    if bad or not want:
+        raise SpringbenchError(
+            f"the pack has no load '{bad[0] if bad else text}'",
+            field="--loads",
+            fix=f"some of {', '.join(names)}",
+        )
+    return want
