@@ -57,6 +57,8 @@ def case_key(case) -> str:
         "material": _canon(case.material),
         "loads": _canon(case.loads),
         "reference": _canon(case.reference),
+        # the loads the adaptive levels drive to tol (reference/adaptive/adapt.py scored_loads)
+        "scored": [list(case.heldout), list(case.validation)],
         "code": code_version(),
     }
     text = json.dumps(payload, sort_keys=True, default=repr)

@@ -99,14 +99,16 @@ class Case:
     sections: Mapping[str, Mapping] = field(default_factory=dict)
     digest: str = ""
     heldout: tuple[str, ...] = ()
+    validation: tuple[str, ...] = ()  # scored to accept or refuse a fit, never fitted
 
     def section(self, name: str) -> Mapping | None:
         return self.sections.get(name)
 
     @property
     def fit_loads(self) -> tuple[str, ...]:
-        """The load cases a fit uses: every one that is not held out."""
-        return tuple(l.name for l in self.loads if l.name not in self.heldout)
+        """The load cases a fit uses: every one neither held out nor kept for validation."""
+        kept = set(self.heldout) | set(self.validation)
+        return tuple(l.name for l in self.loads if l.name not in kept)
 
     @property
     def suite(self) -> str:

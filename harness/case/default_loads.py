@@ -15,7 +15,14 @@ it, the way a bar, a beam or an organ held at one end is.
   clamped, the low end loaded); and per other axis b with faces at its ends (``sides``)
   ``train-<b>-<c>``: the low end face along b clamped, the high one sheared along c (each
   axis but b; tau = 2 G eps), so the clamps a fit is validated on are not all at one
-  place. The side faces are end faces along b, grown like the ends from SIDE_BAND.
+  place. The side faces are end faces along b, grown like the ends from SIDE_BAND;
+- validation loads (never fitted, never held out: they decide whether a fit beats every
+  rule, harness/stages/sms_select.py) on other regions than the held-out loads': per side
+  axis b ``val-<b>-<c>``, the high side face along b held and a body force along each other
+  axis c (a weight rho g h_b = tau over the held face). As the held-out loads clamp a face
+  the training states only load (the low end), these clamp the face ``train-<b>-<c>``
+  only loads: a fit that learned its training clamps is judged where it has never been
+  held (bodies without side faces have none).
 
 The ends are end faces (harness.io.end_faces) grown until they hold a meaningful part of
 the body (harness.case.regions): the boundary facets within a band of the length at each end
@@ -113,14 +120,20 @@ class EndLoads:
         ends = ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
         return ends + tuple(name for name, *_ in self._side_states())
 
-    def _side_states(self):
-        """(name, side axis b, traction axis c) of the side states."""
+    def _side_states(self, prefix: str = "train"):
+        """(name, side axis b, load axis c) of the side states (``prefix`` 'val': the
+        validation loads')."""
         return [
-            (f"train-{'xyz'[b]}-{'xyz'[c]}", b, c)
+            (f"{prefix}-{'xyz'[b]}-{'xyz'[c]}", b, c)
             for b, *_ in self.sides
             for c in range(self.dim)
             if c != b
         ]
+
+    @property
+    def validation(self) -> tuple[str, ...]:
+        """The validation loads (module doc): a body force, a high side face held."""
+        return tuple(name for name, *_ in self._side_states("val"))
 
     @property
     def second(self) -> int:
@@ -185,11 +198,13 @@ class EndLoads:
             out["tip2"] = bend(t) / (s.tip_area * s.L)
             out["torsion"] = 2 * eps * E / (2 * (1 + nu)) / s.tip_radius
         out["side"] = 2 * eps * E / (2 * (1 + nu))  # a shear traction tau = 2 G eps: eps_bc ~ eps
+        for side, *_ in self.sides:  # the weight over the side face: rho g h_b = tau
+            out[f"val-{'xyz'[side]}"] = out["side"] / (density * 2 * s.c[side])
         return out
 
     def toml(self, magnitudes: dict) -> tuple[str, str]:
-        """:meth:`tables` as case-file text: ([body.parts] lines, [[loads.case]] tables), the
-        form the generated suites (cases/*/_generate.py) write."""
+        """:meth:`tables` (no validation loads) as case-file text: ([body.parts] lines,
+        [[loads.case]] tables), the form the generated suites (cases/*/_generate.py) write."""
         parts, cases = self.tables(magnitudes)
         inline = lambda d: "{ " + ", ".join(f"{k} = {json.dumps(v)}" for k, v in d.items()) + " }"  # noqa: E731
         text = "".join(f"{name} = {inline(p)}\n" for name, p in parts.items())
@@ -206,9 +221,10 @@ class EndLoads:
                 )
         return text, out
 
-    def tables(self, magnitudes: dict) -> tuple[dict, list]:
+    def tables(self, magnitudes: dict, validation: bool = False) -> tuple[dict, list]:
         """(the case's [body.parts], its [[loads.case]] tables) of the loads with these
-        magnitudes (docs/case-files.md), for an in-memory case."""
+        magnitudes (docs/case-files.md), for an in-memory case; with ``validation`` the
+        validation loads (:attr:`validation`) too."""
         dim, m, ax = self.dim, magnitudes, "xyz"
 
         def vec(axis, value):
@@ -257,7 +273,16 @@ class EndLoads:
         for name, side, along in self._side_states():
             held, pulled = f"side-{ax[side]}0", f"side-{ax[side]}1"
             cases.append(load(name, [held], on=pulled, vector=vec(along, m["side"])))
+        if validation:
+            cases += self._validation_tables(m, vec, load)
         return parts, cases
+
+    def _validation_tables(self, m: dict, vec, load) -> list:
+        """The validation loads' [[loads.case]] tables (:attr:`validation`)."""
+        return [
+            load(name, [f"side-{'xyz'[b]}1"], vec(c, -m[f"val-{'xyz'[b]}"]))
+            for name, b, c in self._side_states("val")
+        ]
 
 
 def end_loads(

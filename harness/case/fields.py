@@ -116,6 +116,12 @@ LOADS = {
         "strs", None, doc="the load cases a fit may use (default: all that are not held out)"
     ),
     "heldout": Field("strs", None, doc="load cases scored only (G_heldout), never fitted"),
+    "validation": Field(
+        "strs",
+        None,
+        doc="load cases never fitted that decide whether a validated fit beats every rule "
+        "(G_val_mean); never held out",
+    ),
 }
 
 GRADED_LEVELS = 8  # default max_refine of the graded method: n = 2..10 cells per end zone. A cube's

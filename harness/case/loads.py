@@ -137,11 +137,9 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
     return tuple(cases), l["set"]
 
 
-def parse_heldout(l: dict, loads, file: str) -> tuple[str, ...]:
-    """The held-out load names from [loads] fit / heldout (either one, or both covering
-    every load case once)."""
-    names = [c.name for c in loads]
-    for key in ("fit", "heldout"):
+def _known(l: dict, names, file: str, keys) -> None:
+    """Every name [loads] ``keys`` list is a load case's."""
+    for key in keys:
         for n in l[key] or ():
             if n not in names:
                 raise CaseError(
@@ -150,6 +148,30 @@ def parse_heldout(l: dict, loads, file: str) -> tuple[str, ...]:
                     field=f"loads.{key}",
                     fix=f"one of {', '.join(names)}",
                 )
+
+
+def parse_validation(l: dict, loads, file: str) -> tuple[str, ...]:
+    """The validation load names from [loads] validation: never fitted, never held out."""
+    names = [c.name for c in loads]
+    _known(l, names, file, ("validation",))
+    val = set(l["validation"] or ())
+    for key in ("fit", "heldout"):
+        both = sorted(val & set(l[key] or ()))
+        if both:
+            raise CaseError(
+                f"load case '{both[0]}' is in both validation and {key}",
+                file=file,
+                field="loads.validation",
+                fix=f"a validation load is never fitted nor held out: drop it from {key}",
+            )
+    return tuple(n for n in names if n in val)
+
+
+def parse_heldout(l: dict, loads, file: str, validation=()) -> tuple[str, ...]:
+    """The held-out load names from [loads] fit / heldout (either one, or both covering
+    every load case but the ``validation`` ones once)."""
+    names = [c.name for c in loads if c.name not in set(validation)]
+    _known(l, [c.name for c in loads], file, ("fit", "heldout"))
     fit, held = l["fit"], l["heldout"]
     if fit is not None and held is not None:
         both = sorted(set(fit) & set(held))

@@ -19,7 +19,7 @@ from harness.case import sections as case_sections
 from harness.case.case import Body, Case, Fibre, Material, ReferenceSpec, Region
 from harness.case.elasticity import transversely_isotropic_compliance
 from harness.case.fields import GRADED_LEVELS, TOP
-from harness.case.loads import parse_heldout, parse_loads, with_anchors
+from harness.case.loads import parse_heldout, parse_loads, parse_validation, with_anchors
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean
 from harness.case.selectors import SPELLINGS, case_part
@@ -99,7 +99,8 @@ def case_of(
     material = _same(material, _material(d["material"], dim, file), file)
     body = with_anchors(d["loads"], body, file)
     loads, load_set = parse_loads(d["loads"], dim, body, file)
-    heldout = parse_heldout(d["loads"], loads, file)
+    validation = parse_validation(d["loads"], loads, file)
+    heldout = parse_heldout(d["loads"], loads, file, validation)
     reference = _reference(d["reference"], dim, body, file)
     return Case(
         path=path,
@@ -117,6 +118,7 @@ def case_of(
         sections=MappingProxyType(sections),
         digest=digest,
         heldout=heldout,
+        validation=validation,
     )
 
 

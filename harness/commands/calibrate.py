@@ -16,7 +16,11 @@ per element as well) is chosen by leave-one-family-out validation on the trainin
 (harness/optimize/select.py: constant, bending, torsion, shear-gradient, gravity, and the
 clamped training states together); the held-out loads never choose. A candidate must beat
 the rule on the validation score and be no worse on the clamped states; when none does,
-the rule's constants are exported (JSON ``choice`` = "rule"). The chosen fit starts from
+the rule's constants are exported (JSON ``choice`` = "rule"). The fit is exported only
+when it also beats every rule on the validation loads ``val-<b>-<c>`` (the high side face
+along b held, a body force along c; never fitted, never held out), else the rule they
+rank first is (harness/stages/sms_accept.py; ``--method rule --rule best`` exports it
+too). The chosen fit starts from
 the rule, its best global scale and a perturbed start (``G_heldout_mean_spread``: the
 spread of their held-out error). ``--prior-weight a`` fixes a per-spring fit with weight
 a instead (no validation).
@@ -62,7 +66,9 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   float32 margin), ``dt_safe`` and ``settle_damping`` (the step and the damping an engine
   settles with), ``clamped_nodes``, ``loaded_nodes``, ``forces`` and ``gravity`` per load
   (harness/export/engine_loads.py), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
-  ``loads_fitted``, ``loads_heldout``, ``training_dropped`` (training states the FEM cannot
+  ``loads_fitted``, ``loads_heldout``, ``loads_validation``, ``G_val_mean`` and
+  ``G_val_loads`` (the validation loads and the export's errors there),
+  ``validation_accepted``, ``training_dropped`` (training states the FEM cannot
   resolve, left out of the fit), ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over

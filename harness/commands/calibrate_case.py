@@ -85,6 +85,12 @@ def selects(s) -> bool:
     return METHODS[s.method] == "lbfgs" and s.prior_weight is None and s.model == "springs"
 
 
+def validates(s) -> bool:
+    """Whether the case holds validation loads (harness/stages/sms_accept.py): a validated
+    fit is judged on them, ``--method rule --rule best`` exports the rule they rank first."""
+    return selects(s) or (s.method == "rule" and s.rule == "best")
+
+
 def _optimizer(s) -> dict:
     """The case's [optimizer] table."""
     method = METHODS[s.method]
@@ -119,9 +125,12 @@ def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=N
     model = registry.MODEL_CLASSES.load(s.model)
     loads: dict = {"set": f"{s.loads}{dim}d", "magnitude": float(magnitude(s))}
     if ends is not None:
-        parts, cases = ends.tables(ends.magnitudes(s.E, s.nu, s.density, s.peak_strain))
+        magnitudes = ends.magnitudes(s.E, s.nu, s.density, s.peak_strain)
+        parts, cases = ends.tables(magnitudes, validation=validates(s))
         body["parts"] = parts
         loads.update(heldout=list(ends.names), case=cases)
+        if validates(s):
+            loads["validation"] = list(ends.validation)
     reference = {"modes": 0, "tol": float(s.tol), "max_refine": int(s.max_refine)}
     reference["solver"] = s.solver
     reference.update({"cell": CELLS[c] for c in list(cell_types)[:1] if c in CELLS})

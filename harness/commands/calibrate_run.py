@@ -18,7 +18,7 @@ from harness.progress import Clock
 from harness.scoring import case_weights, fit_and_heldout, ref_status, reference_displacements
 from harness.stages import StageContext
 from harness.stages import sms as stage
-from harness.stages.sms_measures import rank
+from harness.stages.sms_measures import validation_rank
 
 
 def run(s, mesh, tmp: Path):
@@ -34,7 +34,7 @@ def run(s, mesh, tmp: Path):
         clock.close()
     rows = list(result.rows)
     if s.method == "rule":
-        at = rows.index(min(rows, key=rank)) if s.rule == "best" else 0
+        at = rows.index(min(rows, key=validation_rank)) if s.rule == "best" else 0
     else:
         at = len(rows) - 1
     exported, net, heldout = rows[at], result.networks[at], result.heldout[at]

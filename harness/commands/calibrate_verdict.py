@@ -13,37 +13,61 @@ def pct(v) -> str:
 
 
 def validation_sentence(row, table) -> str:
-    """What the validation chose, in one sentence."""
+    """What the validation chose, in one sentence, and what the validation loads said of it."""
+    return " ".join(x for x in (_folds_sentence(row, table), _loads_sentence(row)) if x)
+
+
+def _folds_sentence(row, table) -> str:
+    """What leave-one-family-out validation chose, against the rule the fits start from."""
     by = {r["model"]: r.get("score") for r in table}
     fams = row.get("val_families", "")
+    start = row.get("start_rule") or row["stiffness"]
     ratios = {
         r["model"]: r["ratio"]
         for r in table
         if r.get("ratio") is not None and math.isfinite(r["ratio"])
     }
-    if row.get("choice") == "rule":
+    said = f"Validation (each family of training states left out in turn: {fams})"
+    chose = row.get("val_fold_choice") or row["choice"]
+    if chose == "rule":
         best = min((m for m in ratios if m != "rule"), key=ratios.get, default=None)
         near = f"; the best fit, {best}, {ratios[best]:.3g}x its errors" if best else ""
-        return (
-            f"Validation (each family of training states left out in turn: {fams}): no fit "
-            "beat the rule "
-            f"{row['stiffness']} (score {by.get('rule', math.nan):.3g}{near}), so its "
-            "constants are exported "
-            f"(as --method rule --rule {row['stiffness']})."
-        )
-    if row["choice"] in ratios:
+        return f"{said}: no fit beat the rule {start} (score {by.get('rule', math.nan):.3g}{near})."
+    if chose in ratios:
         clamped = " and the clamped states" if "clamped" in str(fams).split() else ""
         return (
-            f"Validation (each family of training states left out in turn: {fams}) chose "
-            f"{row['choice']}: "
-            f"{ratios[row['choice']]:.3g}x the rule {row['stiffness']}'s errors (the "
+            f"{said} chose {chose}: {ratios[chose]:.3g}x the rule {start}'s errors (the "
             f"geometric mean over the free-traction families{clamped})."
         )
     return (
-        f"Validation (each family of training states left out in turn: {fams}) chose "
-        f"{row['choice']}: "
-        f"score {by.get(row['choice'], math.nan):.3g} against the rule {row['stiffness']}'s "
-        f"{by.get('rule', math.nan):.3g}."
+        f"{said} chose {chose}: score {by.get(chose, math.nan):.3g} against the rule "
+        f"{start}'s {by.get('rule', math.nan):.3g}."
+    )
+
+
+def _loads_sentence(row) -> str:
+    """What the validation loads (harness/stages/sms_accept.py) said: the fit exported, or
+    the rule they rank first and why."""
+    best = row.get("val_best_rule")
+    if not isinstance(best, str) or not best:
+        if row.get("choice") == "rule":
+            return f"Its constants are exported (as --method rule --rule {row['stiffness']})."
+        return ""
+    rule = f"the best rule there, {best}, {pct(row.get('val_best_rule_score'))}"
+    if row.get("val_accepted"):
+        return (
+            f"On the validation loads (side faces held, never fitted) the fit's error "
+            f"{pct(row.get('val_fit'))} is below every rule's ({rule}): the fit is exported."
+        )
+    fit = row.get("val_fit", math.nan)
+    why = (
+        f"the fit's error {pct(fit)} is not below {rule}"
+        if isinstance(fit, float) and math.isfinite(fit)
+        else f"they rank {best} first ({pct(row.get('val_best_rule_score'))})"
+    )
+    return (
+        f"On the validation loads (side faces held, never fitted) {why}: its constants "
+        f"are exported (as --method rule --rule {best})."
     )
 
 

@@ -33,6 +33,13 @@ def _worst(*values) -> float:
     return math.nan if any(math.isnan(v) for v in values) else max(values)
 
 
+def _accepted(row) -> bool | None:
+    """The JSON's ``validation_accepted``: whether the validation loads let the fit be
+    exported (None: no validated fit judged on validation loads)."""
+    v = row.get("val_accepted")
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else bool(v)
+
+
 def positive(net) -> bool:
     """Whether every mass is positive (an explicit engine can run the network)."""
     return bool(np.all(np.asarray(net.masses) > 0))
@@ -47,12 +54,14 @@ FROM_ROW = dict(
     reference_error_heldout="ref_error_heldout",
     validation_skipped="val_skipped",
     G_heldout_mean_spread="G_heldout_mean_spread",
+    G_val_mean="G_val_mean",
     mass_residual="mass_residual",
 )
 # MODEL.csv's columns, in order (those no row has are left out, dt_safe always written)
 COLUMNS = (
     "model stiffness optimizer exported n_nodes n_springs G_initial G_final G_norm_initial "
     "G_norm_final G_fit_score G_fit_score_bound G_heldout G_heldout_mean G_heldout_mean_spread "
+    "G_val_mean val_fit val_best_rule val_accepted "
     "choice ref_error_max ref_error_heldout status k_ratio dt_stable dt_safe seconds seed "
     "opt_stop opt_stops opt_prior training_dropped ref_note note"
 ).split()
@@ -104,6 +113,9 @@ def metadata(s, rows, exported, net, case) -> dict:
         training_dropped=dropped,
         **{key: exported.get(col, math.nan) for key, col in FROM_ROW.items()},
         G_heldout_loads={n: cv.finite(exported.get(f"G_heldout_{n}")) for n in case.heldout},
+        loads_validation=list(case.validation),
+        G_val_loads={n: cv.finite(exported.get(f"G_{n}")) for n in case.validation},
+        validation_accepted=_accepted(exported),
         reference_error=_worst(
             exported.get("ref_error_max", math.nan), exported.get("ref_error_heldout", 0.0)
         ),

@@ -149,7 +149,12 @@ def _run(case, ctx, spec, cls) -> Result:
     opt_nets = {}
     if runs and u_ref is not None:
         setting = scorer.setting(spec, label, common, fem_f)
-        opt_nets = _fits(setting, cls, runs, rows, _start(rows, nets, base, opt), kept.solved)
+        solved = [
+            (r, nets[r["stiffness"]], kept.solved[r["stiffness"]])
+            for r in rows
+            if r["stiffness"] in kept.solved
+        ]
+        opt_nets = _fits(setting, cls, runs, rows, _start(rows, nets, base, opt), solved)
     elif runs:
         rows[0]["note"] = rows[0].get("note") or ""
     if u_ref is not None:
@@ -206,6 +211,19 @@ class Scorer:
         )
         return res, sc, sh
 
+    def validated(self, net, res) -> dict:
+        """The validation loads' columns of a network with statics ``res``: G_<load> of each
+        (its own normalised G) and G_val_mean, their mean; none without validation loads or
+        a reference."""
+        val = list(self.case.validation)
+        if self.u_ref is None or not val:
+            return {}
+        at = [self.names.index(n) for n in val]
+        idx = [res.names.index(n) for n in val]
+        sv = scoring.g_arrays(self.u_ref[at], res.u[idx], net.classes, self.weights, val)
+        per = {f"G_{n}": float(sv.per_load_norm[n]) for n in val}
+        return {**per, "G_val_mean": float(np.mean(list(per.values())))}
+
     def setting(self, spec: dict, label: str, common: dict, fem_f) -> Setting:
         """What the class's fits share (``fem_f``: the FEM's natural frequencies or None)."""
         return Setting(
@@ -222,6 +240,7 @@ class Scorer:
             optimize,
             self.evaluate,
             self.write,
+            self.validated,
         )
 
     def write(self, net, res, tag: str) -> None:
@@ -367,16 +386,18 @@ def _start(rows, nets, base, opt) -> tuple:
 
 def _fits(setting, cls, runs, rows, start, solved) -> dict:
     """Appends each optimiser run's row to ``rows`` (``start``: the start row and network;
-    ``solved``: the rules' statics, which a validated fit reuses), writes trace.csv and the
-    time each run took to reach the SA row's G; returns {tag: fitted network}."""
+    ``solved``: (row, network, statics) of each solved rule, which a validated fit reuses
+    and is judged against), writes trace.csv and the time each run took to reach the SA
+    row's G; returns {tag: fitted network}."""
     start_row, net0 = start
+    statics_of = {r["stiffness"]: res for r, _, res in solved}
     nets, traces = {}, []
     for run_ in runs:
         if run_.get("select") and cls.selects and getattr(net0, "volume", None) is None:
             from harness.stages import sms_select
 
             row, net, trace = sms_select.optimise(
-                setting, run_, net0, start_row, solved.get(start_row["stiffness"])
+                setting, run_, net0, start_row, statics_of.get(start_row["stiffness"]), solved
             )
         else:
             row, net, trace = cls.fit(setting, run_, net0, start_row)

@@ -53,6 +53,13 @@ def rank(row) -> tuple:
     return (score if math.isfinite(score) else math.inf, row.get("G_norm_final", math.inf))
 
 
+def validation_rank(row) -> tuple:
+    """Rules ranked by the validation loads' ``G_val_mean`` (harness/stages/sms_accept.py),
+    then as :func:`rank` (a case without validation loads: as :func:`rank` alone)."""
+    v = row.get("G_val_mean", math.nan)
+    return (v if math.isfinite(v) else math.inf, *rank(row))
+
+
 def heldout_columns(sh, first=None) -> dict:
     """On the held-out loads: G_heldout (pooled: normalised by all their displacements
     together), G_heldout_mean (the mean of each load's own normalised G, so a small load

@@ -48,6 +48,7 @@ def rule_row(scorer, common: dict, label: str, rule: str, net, res, seconds: flo
         G_s_initial=sc.G_s,
         G_s_final=sc.G_s,
         **measures.scored_columns(scorer.case, sc, sh),
+        **scorer.validated(net, res),
     )
     return row
 

@@ -1,6 +1,8 @@
 """The sms stage's validated fit (``[optimizer.select]``): the capacity of the fit chosen by
 leave-one-family-out validation on the fitted loads (harness/optimize/select.py), the
-rule when nothing beats it, the final fit from several starts.
+rule when nothing beats it, the final fit from several starts; then the validation loads
+(harness/stages/sms_accept.py) export the fit only when it beats every rule there, else
+the rule they rank first.
 
 The row is the stage's optimised row with, besides, ``choice`` (the rule, or the
 candidate chosen), ``val_<model>`` (each model's validation score), ``val_families``,
@@ -8,7 +10,10 @@ candidate chosen), ``val_<model>`` (each model's validation score), ``val_famili
 for the scripts that read it, as calibrate's JSON ``validation_skipped``, always null) and
 ``G_heldout_mean_spread`` (max - min of G_heldout_mean over the final fit's starts:
 differences inside it are ties, not rankings), ``seconds_validation`` and ``seconds_final``
-(the wall time of the validation and of the final fit, within ``seconds``). The validation
+(the wall time of the validation and of the final fit, within ``seconds``),
+``start_rule`` (the rule the fits started from), ``val_fold_choice`` (the leave-one-family-
+out choice), the validation loads' ``val_fit``, ``val_best_rule``, ``val_best_rule_score``,
+``val_accepted`` and the exported model's ``G_val_mean`` and ``G_<load>``. The validation
 table is ``validation.csv`` (one row per model, one column per left-out family and the
 score).
 
@@ -23,6 +28,7 @@ run side by side in worker processes where the machine has the cores
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -38,6 +44,7 @@ from harness.models.volume import initial_kv, with_volume
 from harness.optimize import select as sel
 from harness.optimize.problem import FitProblem
 from harness.scoring import node_weights
+from harness.stages import sms_accept as accept
 from harness.stages.sms_measures import families, heldout_columns, scored_columns
 
 # L-BFGS-B iterations of each start of the final fit when the case's options set none (a
@@ -45,22 +52,48 @@ from harness.stages.sms_measures import families, heldout_columns, scored_column
 FINAL_MAXITER = 100
 
 
-def optimise(setting, run_, base, first, first_res=None):
+def optimise(setting, run_, base, first, first_res=None, rules=()):
     """(row, network, trace) of the validated fit of ``base``, a springs-only network (the
     stage gives the other model classes their plain fit); ``setting``: the class's
     :class:`harness.stages.classes.base.Setting`; ``first_res``: base's statics, when the
-    stage has them (the rule's validation scores and its row reuse them)."""
+    stage has them (the rule's validation scores and its row reuse them); ``rules``:
+    (row, network, statics) of every solved rule, which the validation loads rank
+    (harness/stages/sms_accept.py): the fit is exported only when it beats all of them
+    there, else the rule they rank first."""
     _check_method(setting.case, run_)
     t0 = time.perf_counter()
     s, cands = _selection(setting, run_, base, first_res)
     seconds = time.perf_counter() - t0
     pd.DataFrame(list(s.table)).to_csv(setting.ctx.file("validation.csv"), index=False)
     scored = _scored_starts(setting, base, s, first_res)
+    fit = setting.validated(*scored[0][:2]).get("G_val_mean", math.nan)
+    verdict = accept.judge(
+        fit if s.choice != "rule" else math.nan,
+        {r["stiffness"]: r.get("G_val_mean", math.nan) for r, _, _ in rules},
+    )
+    start, folds_chose = first["stiffness"], s.choice
+    if verdict.best is not None and not verdict.accepted:
+        first, s, scored = _rule_export(
+            setting, s, next(t for t in rules if t[0]["stiffness"] == verdict.best)
+        )
     net, res, sc, sh = scored[0]
     tag = f"{base.info['stiffness']}-select"
     setting.write(net, res, tag)
     row = _row(setting, first, base, s, cands, scored, seconds)
+    row.update(verdict.columns, start_rule=start, val_fold_choice=folds_chose)
+    row.update(setting.validated(net, res))
     return row, net, None
+
+
+def _rule_export(setting, s, rule) -> tuple:
+    """(the rule's row, the Selection and scored starts of exporting rule ``rule``, a
+    (row, network, statics) of the stage's rule rows): its own constants, one 'start'."""
+    row, net, res = rule
+    return (
+        row,
+        dataclasses.replace(s, choice="rule", starts=(net.k,), stops=()),
+        [(net, *setting.evaluate(net, res))],
+    )
 
 
 def _check_method(case, run_) -> None:
@@ -168,7 +201,7 @@ def _row(setting, first, base, s, cands, scored, seconds) -> dict:
         "seconds_final": s.seconds.get("final", math.nan),
     }
     row = {
-        **setting.row(first, base.info["stiffness"], "lbfgs", sc, timing),
+        **setting.row(first, first["stiffness"], "lbfgs", sc, timing),
         **scored_columns(setting.case, sc, sh, first),
         "objective": "G",
         "choice": s.choice,

@@ -169,12 +169,13 @@ def applies(case) -> bool:
 
 def scored_loads(case) -> tuple[str, ...]:
     """The loads whose estimates the levels drive below ``reference.tol``: the held-out
-    ones this case solves (what scores a model), or every load of a case that holds none
-    of them out (a sub-case of some of its loads). Training
+    and validation ones this case solves (what scores a model and what accepts a fit), or
+    every load of a case that holds none of them out (a sub-case of some of its loads). Training
     states are judged against the rules' errors on them instead
     (harness/scoring.py ``unresolved_training``)."""
     names = tuple(l.name for l in case.loads)
-    return tuple(n for n in case.heldout if n in names) or names
+    scored = tuple(case.heldout) + tuple(case.validation)
+    return tuple(n for n in scored if n in names) or names
 
 
 @dataclass(frozen=True)

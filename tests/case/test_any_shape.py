@@ -233,6 +233,30 @@ def test_heldout_keys_are_checked(tmp_path, bodies):
         )
 
 
+def test_validation_loads_are_neither_fitted_nor_held_out(tmp_path, bodies):
+    """[loads] validation: named loads, never fitted, never held out, in no other list."""
+    cyl = bodies["cylinder"]
+    with pytest.raises(CaseError, match="no load case 'nope'") as e:
+        mesh_case(tmp_path, cyl, 3, loads='validation = ["nope"]\n')
+    assert e.value.field == "loads.validation"
+    with pytest.raises(CaseError, match="in both validation and heldout"):
+        mesh_case(tmp_path, cyl, 3, loads='heldout = ["sxx"]\nvalidation = ["sxx"]\n')
+    with pytest.raises(CaseError, match="in both validation and fit"):
+        mesh_case(tmp_path, cyl, 3, loads='fit = ["sxx"]\nvalidation = ["sxx"]\n')
+    case = mesh_case(tmp_path, cyl, 3, loads='fit = ["sxx"]\nvalidation = ["syy"]\n')
+    assert (case.fit_loads, case.validation) == (("sxx",), ("syy",))
+    assert "syy" not in case.heldout and "szz" in case.heldout
+    case = mesh_case(tmp_path, cyl, 3, loads='heldout = ["sxx"]\nvalidation = ["syy"]\n')
+    assert "syy" not in case.fit_loads and "szz" in case.fit_loads
+    with pytest.raises(CaseError, match="in neither"):  # fit and heldout still cover the rest
+        mesh_case(
+            tmp_path,
+            cyl,
+            3,
+            loads='fit = ["sxx"]\nheldout = ["syy"]\nvalidation = ["szz"]\n',
+        )
+
+
 def test_a_box_gets_the_homogeneous_states_as_face_tractions(tmp_path):
     """On a box the set is face tractions (the graded reference of boxes applies) with
     the stretches' corner constraints; the FEM meets the closed form to rounding."""

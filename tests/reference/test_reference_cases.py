@@ -123,6 +123,10 @@ def test_cache_roundtrip_and_key(tmp_path):
     renamed = dataclasses.replace(case, name="renamed", description="x")
     assert case_key(other) != case_key(case)
     assert case_key(renamed) == case_key(case)
+    # the loads the levels drive to tol are part of the solution asked for
+    first = case.loads[0].name
+    assert case_key(dataclasses.replace(case, heldout=(first,))) != case_key(case)
+    assert case_key(dataclasses.replace(case, validation=(first,))) != case_key(case)
     c = reference.solve(other)
     assert not c.from_cache
     np.testing.assert_allclose(

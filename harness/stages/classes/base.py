@@ -13,8 +13,8 @@ class Setting:
     class's [model] table and label, the columns every row carries, the reference
     displacements ``u_ref`` (loads x nodes x dim) of the loads ``names`` (``fit``: the
     indices of the fitted ones), the node-class weights, the FEM's natural frequencies
-    ``fem_f``, the optimiser entry, and the stage's ``evaluate(net[, res])`` and
-    ``write(net, res, tag)``."""
+    ``fem_f``, the optimiser entry, and the stage's ``evaluate(net[, res])``,
+    ``write(net, res, tag)`` and ``validated(net, res)`` (the validation loads' columns)."""
 
     case: Any
     ctx: Any
@@ -29,6 +29,7 @@ class Setting:
     optimize: Callable
     evaluate: Callable
     write: Callable
+    validated: Callable = lambda net, res: {}
 
     def row(self, first: dict, stiff: str, optimizer: str, sc, timing: dict) -> dict:
         """The columns a fitted row starts with: the shared ones, the model, its start rule
