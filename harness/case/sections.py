@@ -266,7 +266,7 @@ ENGINES = {
     "engines": Field(
         "strs",
         ("newton-tets", "mujoco-flex"),
-        choices=tuple(n for n in ENGINE_NAMES if n != "newton-springs"),
+        choices=tuple(n for n in ENGINE_NAMES if n not in registry.EXPORT_ENGINES),
         doc="engines run with their own model from E and nu (springbench engines run ENGINE)",
     ),
     "exports": Field(

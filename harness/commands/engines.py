@@ -46,8 +46,8 @@ def add_arguments(p):
         type=Path,
         default=None,
         metavar="MODEL.json",
-        help="newton-springs: the springbench export to run (springbench calibrate on the "
-        "pack's mesh)",
+        help="newton-springs, mujoco-springs: the springbench export to run (springbench "
+        "calibrate on the pack's mesh)",
     )
     r.add_argument("--loads", default=None, metavar="A,B", help="run only these loads")
     r.add_argument(
@@ -124,6 +124,7 @@ def main(args) -> int:
 
     from harness.engines import ENGINES, adapter
     from harness.outputs import atomic_write, check_out_file
+    from harness.registry import EXPORT_ENGINES
 
     if args.action == "list":
         for name, (package, what) in ENGINES.about.items():
@@ -136,11 +137,11 @@ def main(args) -> int:
     for flag, out in (("--out", args.out), ("--log", args.log)):
         if out is not None:
             check_out_file(out, flag)
-    if args.model is not None and args.engine != "newton-springs":
+    if args.model is not None and args.engine not in EXPORT_ENGINES:
         raise SpringbenchError(
             f"{args.engine} runs the pack's own material, not a model",
             field="--model",
-            fix="drop --model, or use newton-springs",
+            fix=f"drop --model, or use {' or '.join(EXPORT_ENGINES)}",
         )
     from harness.export.pack import pack_digest, read_pack
 

@@ -6,9 +6,9 @@ Each adapter is one module registered in ``harness.registry.ENGINES`` (imported 
 run; its ``about`` is the package it needs and what it runs); the function takes (pack,
 options) and returns {load: settle.Answer}. Engines are
 optional extras: a missing one is one line naming the extra that installs it. Bullet's
-FEM soft body (``pybullet-fem``) takes no nodal forces: it runs the gravity loads alone
-(the others are ``unsupported``, with no displacement in the answer) with its own uniform
-node masses.
+FEM soft body (``pybullet-fem``) and Drake's (``drake-fem``) take no nodal forces: they
+run the gravity loads alone (the others are ``unsupported``, with no displacement in the
+answer), Bullet with its own uniform node masses.
 """
 
 from __future__ import annotations

@@ -13,6 +13,8 @@ SIMS = [
     ("harness.engines.newton_engine", "NewtonSim"),
     ("harness.engines.mujoco_flex", "MujocoSim"),
     ("harness.engines.pybullet_fem", "PybulletSim"),
+    ("harness.engines.drake_fem", "DrakeSim"),
+    ("harness.engines.mujoco_springs", "MujocoSpringsSim"),
 ]
 METHODS = ("load", "set_damping", "advance", "measure")
 

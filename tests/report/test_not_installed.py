@@ -22,7 +22,7 @@ from harness.run.runner import run_suite
 from harness.stages import engines as S
 
 CASE = ROOT / "cases" / "engines" / "beam-coarse_nu0.30.toml"
-PACKAGES = ("newton", "warp", "mujoco", "pybullet")
+PACKAGES = ("newton", "warp", "mujoco", "pybullet", "pydrake")
 BAD = re.compile(r"\bnan\b|\(\)|\bNone\b", re.IGNORECASE)
 
 
