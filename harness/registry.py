@@ -256,6 +256,8 @@ ENGINES = Registry(
         "newton-tets": "harness.engines.newton_engine:run_tets",
         "mujoco-flex": "harness.engines.mujoco_flex:run",
         "pybullet-fem": "harness.engines.pybullet_fem:run",
+        "drake-fem": "harness.engines.drake_fem:run",
+        "mujoco-springs": "harness.engines.mujoco_springs:run",
     },
     about={
         "newton-springs": (
@@ -274,8 +276,47 @@ ENGINES = Registry(
             "Bullet's FEM soft body (Neo-Hookean, k_mu / k_lambda from E and nu; uniform node "
             "masses; gravity loads only)",
         ),
+        "drake-fem": (
+            "pydrake",
+            "Drake's FEM deformable body (kLinear tetrahedra, E and nu; gravity loads only)",
+        ),
+        "mujoco-springs": (
+            "mujoco",
+            "a springbench export (--model MODEL.json, springs only) as MuJoCo bodies with "
+            "slide joints and spatial tendons",
+        ),
     },
 )
+
+# the engines that run a springbench export (``--model MODEL.json``), not E and nu
+EXPORT_ENGINES = ("newton-springs", "mujoco-springs")
+# the terms each export engine runs natively, spelled as the validated fit's candidates
+# spell their volume term (harness/optimize/select.py Candidate.volume): '' springs alone,
+# 'element' a volume term per element, 'node' one per node ('kn': Kot & Nagahashi's term)
+EXPORT_TERMS = {"newton-springs": ("", "element", "node"), "mujoco-springs": ("",)}
+# why each export engine runs those terms and no others (calibrate --engine's line)
+EXPORT_TERMS_WHY = {
+    "newton-springs": "Newton runs a volume term per element as tetrahedra with k_mu = 0, one "
+    "per node by harness/engines/newton_volume.py, no kn term",
+    "mujoco-springs": "MuJoCo's tendons carry springs only",
+}
+# each term in words, as EXPORT_TERMS spells it
+TERMS = {
+    "": "springs alone",
+    "element": "a volume term per element",
+    "node": "a volume term per node",
+    "kn": "Kot & Nagahashi's kn term",
+}
+# the term each springs class of calibrate --model adds, as EXPORT_TERMS spells it
+CLASS_TERMS = {
+    "springs": "",
+    "springs+volume-shared": "element",
+    "springs+volume-element": "element",
+    "springs+node-volume-shared": "node",
+    "springs+node-volume-node": "node",
+    "springs+kn": "kn",
+    "springs+kn-node": "kn",
+}
 
 # ``[reference] solver`` and ``calibrate --solver``: the FEM's linear solver, name -> what it
 # tries first; reference/solvers/plan.py turns a name into the steps reference/solvers/sparse.py
