@@ -288,6 +288,9 @@ ENGINES = Registry(
     },
 )
 
+# the pip name of each engine package whose import name differs (as pyproject's deptry map)
+PIP_NAMES = {"pydrake": "drake", "warp": "warp-lang"}
+
 # the engines that run a springbench export (``--model MODEL.json``), not E and nu
 EXPORT_ENGINES = ("newton-springs", "mujoco-springs")
 # the terms each export engine runs natively, spelled as the validated fit's candidates

@@ -16,7 +16,7 @@ from __future__ import annotations
 import importlib.util
 
 from harness.errors import SpringbenchError
-from harness.registry import ENGINES
+from harness.registry import ENGINES, PIP_NAMES
 
 EXTRA = 'pip install -e ".[engines]"'
 
@@ -37,6 +37,6 @@ def adapter(name: str):
         raise SpringbenchError(
             f"engine '{name}' needs the package '{package}', which is not installed",
             field="ENGINE",
-            fix=f"{EXTRA} (or pip install {package})",
+            fix=f"{EXTRA} (or pip install {PIP_NAMES.get(package, package)})",
         ) from None
     return ENGINES.load(name)

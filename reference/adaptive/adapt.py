@@ -142,8 +142,8 @@ class Stop:
         return cls(str(arrays["stop_reason"]), n, cap, nxt)
 
 
-def _marked(case, d: Discretisation, U: dict, loads, parts) -> np.ndarray:
-    """Dörfler's set for the sum of the loads' indicators, each normalised by its total."""
+def _marked(case, d: Discretisation, U: dict, loads, parts) -> tuple[np.ndarray, np.ndarray]:
+    """(Dörfler's set, the sum of the loads' indicators, each normalised by its total)."""
     cent = d.centroids()
     C, rho = element_stiffness(case.material, cent), densities(case.material, cent)
     bbox = body_bbox(case, d.mesh)
@@ -157,7 +157,24 @@ def _marked(case, d: Discretisation, U: dict, loads, parts) -> np.ndarray:
     for eta2 in indicators(d, case, loads, U, C, rho, bbox, fixed, parts).values():
         if eta2.sum() > 0:
             total += eta2 / eta2.sum()
-    return doerfler(total, THETA, LEAST)
+    return doerfler(total, THETA, LEAST), total
+
+
+def _within_cap(mesh, marked: np.ndarray, total: np.ndarray, cap: int, element: str):
+    """The finest refinement of ``mesh`` within ``cap`` dofs that refines the elements of
+    ``marked`` with the largest indicators ``total`` (a prefix in their order, found by
+    bisection: refinement closes conformingly, so more marked elements never give fewer
+    dofs); None when none adds GROWTH_MIN of the dofs (the levels then end at the cap)."""
+    order = marked[np.argsort(-total[marked], kind="stable")]
+    lo, hi, best = 1, len(order) - 1, None
+    while lo <= hi:
+        m = (lo + hi) // 2
+        finer = mesh.refined(order[:m])
+        if n_dofs(finer, element) <= cap:
+            best, lo = finer, m + 1
+        else:
+            hi = m - 1
+    return best
 
 
 def applies(case) -> bool:
@@ -279,7 +296,12 @@ def _refine_levels(case, d: Discretisation, solved, parts, est: dict, how: Plan,
         if how.ahead and GROWTH_MIN * d.ndof > cap:
             status(f"FEM: a next adaptive level would exceed {cap} dofs; stopping")
             return d.mesh, U, est, history, changes, Stop("cap", int(d.ndof), cap)
-        finer = d.mesh.refined(_marked(case, d, U, solved, parts))
+        marked, total = _marked(case, d, U, solved, parts)
+        finer = d.mesh.refined(marked)
+        if how.ahead and n_dofs(finer, spec.element) > cap:  # the largest indicators that fit
+            part = _within_cap(d.mesh, marked, total, cap, spec.element)
+            if part is not None and n_dofs(part, spec.element) >= GROWTH_MIN * d.ndof:
+                finer = part
         if not np.allclose(finer.p[:, :nv0], p0):
             raise RuntimeError("refinement renumbered the vertices")  # scikit-fem contract
         if n_dofs(finer, spec.element) > cap:
