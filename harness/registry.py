@@ -121,6 +121,7 @@ MODEL_CLASSES = Registry(
         "springs+kn": "harness.stages.classes.springs:KN_SHARED",
         "springs+kn-node": "harness.stages.classes.springs:KN_NODE",
         "p1": "harness.stages.classes.p1:P1",
+        "p1-global": "harness.stages.classes.p1_global:P1_GLOBAL",
         "mt": "harness.stages.classes.mt:MT",
     },
     about={
@@ -159,6 +160,11 @@ MODEL_CLASSES = Registry(
             "linear finite elements on the model's cells (harness/models/p1.py)",
             "no fitted constants",
         ),
+        "p1-global": (
+            "linear finite elements on the model's cells with one effective isotropic material, "
+            "the (E, nu) to give an engine's tetrahedra (harness/stages/classes/p1_global.py)",
+            "one E and one nu fitted for the body",
+        ),
         "mt": (
             "Bourguignon & Cani's element model on the model's cells, 3-D (harness/models/mt.py)",
             "three moduli fitted for the body",
@@ -169,6 +175,8 @@ MODEL_CLASSES = Registry(
 SPRINGS_CLASSES = tuple(
     n for n in MODEL_CLASSES if MODEL_CLASSES.module(n) == "harness.stages.classes.springs"
 )
+# calibrate --model: the springs classes and the classes of one fitted material
+CALIBRATE_CLASSES = SPRINGS_CLASSES + ("p1-global",)
 # spellings that could mean two classes: refused, naming both
 AMBIGUOUS_CLASSES = {
     "springs+volume": ("springs+volume-shared", "springs+volume-element"),

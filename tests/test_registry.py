@@ -91,6 +91,27 @@ def test_the_case_schema_reads_its_vocabularies_from_the_registries():
     assert LOADS["set"].choices == registry.LOAD_SETS.names()
 
 
+def test_the_export_engines_terms_are_the_classes_and_candidates_terms():
+    """EXPORT_TERMS names each export engine's terms as the validated fit's candidates
+    (Candidate.volume) and the springs classes (CLASS_TERMS: their volume / kn keys) do, and
+    every export engine runs springs alone (calibrate --engine always has candidates)."""
+    from harness.optimize.select import CANDIDATES
+
+    engines = tuple(registry.EXPORT_TERMS)
+    assert engines == registry.EXPORT_ENGINES == tuple(registry.EXPORT_TERMS_WHY)
+    assert all("" in terms for terms in registry.EXPORT_TERMS.values())
+    used = {t for terms in registry.EXPORT_TERMS.values() for t in terms}
+    assert used | {c.volume for c in CANDIDATES} | set(registry.CLASS_TERMS.values()) <= set(
+        registry.TERMS
+    )
+    assert tuple(registry.CLASS_TERMS) == registry.SPRINGS_CLASSES
+    own = {"none": "", "shared": "element", "element": "element"}
+    own.update({"node-shared": "node", "node": "node"})
+    for name, cls in registry.MODEL_CLASSES.items():
+        if name in registry.CLASS_TERMS:
+            assert registry.CLASS_TERMS[name] == ("kn" if cls.kn != "none" else own[cls.volume])
+
+
 def test_the_solver_names_are_one_list():
     """``[reference] solver``, ``calibrate --solver`` and the planner take registry.SOLVERS;
     every step a plan can name is one the sparse solve knows how to try."""

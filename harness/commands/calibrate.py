@@ -16,14 +16,14 @@ per element as well) is chosen by leave-one-family-out validation on the trainin
 (harness/optimize/select.py: constant, bending, torsion, shear-gradient, gravity, and the
 clamped training states together); the held-out loads never choose. A candidate must beat
 the rule on the validation score and be no worse on the clamped states; when none does,
-the rule's constants are exported (JSON ``choice`` = "rule"). The fit is exported only
-when it also beats every rule on the validation loads ``val-<b>-<c>`` (the high side face
-along b held, a body force along c; never fitted, never held out), else the rule they
-rank first is (harness/stages/sms_accept.py; ``--method rule --rule best`` exports it
-too). The chosen fit starts from
+the rule's constants are exported (JSON ``choice`` = "rule"). The chosen fit starts from
 the rule, its best global scale and a perturbed start (``G_heldout_mean_spread``: the
 spread of their held-out error). ``--prior-weight a`` fixes a per-spring fit with weight
-a instead (no validation).
+a instead (no validation). ``--engine ENGINE`` (harness/commands/calibrate_engine.py; an
+export engine: newton-springs, mujoco-springs) exports only what that engine runs natively
+(harness/registry.py EXPORT_TERMS): the validation chooses among the candidates whose volume
+term it runs (mujoco-springs: springs only), a ``--model`` with a term it cannot run is
+refused, and the first line printed says what was restricted.
 
 Loads (docs/design.md, "Load sets"). Fitted (``--loads linear``, the default): the equilibrated
 linear
@@ -66,9 +66,11 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   float32 margin), ``dt_safe`` and ``settle_damping`` (the step and the damping an engine
   settles with), ``clamped_nodes``, ``loaded_nodes``, ``forces`` and ``gravity`` per load
   (harness/export/engine_loads.py), ``omega_max`` (rad/s), ``E`` (Pa), ``nu``, ``density`` (kg/m^3),
+  ``engine`` (``--engine``, or null) and ``candidates`` (the names the validation chose
+  among, or null without a validated fit),
   ``loads_fitted``, ``loads_heldout``, ``loads_validation``, ``G_val_mean`` and
-  ``G_val_loads`` (the validation loads and the export's errors there),
-  ``validation_accepted``, ``training_dropped`` (training states the FEM cannot
+  ``G_val_loads`` (the validation loads of ``--model p1-global`` and the export's errors
+  there), ``validation_accepted``, ``training_dropped`` (training states the FEM cannot
   resolve, left out of the fit), ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
   error relative to the FEM's, fitted / held-out loads), ``G_heldout_mean`` (the mean over
@@ -88,6 +90,10 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   ``+node-volume`` choice of the validation)
   ``node_volume_*``, run in Newton by harness/engines/newton_volume.py; Kot & Nagahashi's
   term (``--model springs+kn``, ``springs+kn-node``; harness/models/kn.py) ``kn_*``.
+  ``--model p1-global`` (linear tetrahedra with one fitted pair E', nu' for engines with one
+  material per body; harness/stages/classes/p1_global.py) writes ``E_effective``,
+  ``nu_effective`` and per tetrahedron ``tet_indices``, ``tet_E``, ``tet_nu``, ``tet_k_mu`` and
+  ``tet_k_lambda`` (Newton's inputs: 4/3 mu, lambda + 5/6 mu) instead of springs.
   ``dt_stable`` includes the term.
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
@@ -119,7 +125,7 @@ from harness.commands.calibrate_case import (
     signed_numbers,
 )
 from harness.errors import SpringbenchError
-from harness.registry import SOLVERS, class_doc
+from harness.registry import EXPORT_ENGINES, EXPORT_TERMS, SOLVERS, TERMS, class_doc
 
 HELP = (
     "calibrate spring constants for your own mesh against FEM and export them "
@@ -131,13 +137,19 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
   MODEL.json  particle_q (m), particle_mass (kg), spring_indices, spring_rest_length (m),
               spring_stiffness (N/m), spring_damping (N s/m), spring_stiffness_times_length (N),
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
-              density (kg/m^3), loads_fitted, loads_heldout, training_dropped (training states
+              density (kg/m^3), loads_fitted, loads_heldout, loads_validation (never fitted nor
+              held out; --model p1-global: its fit is exported only when it beats the plain P1
+              there), G_val_mean and G_val_loads (the export's errors on them),
+              validation_accepted (whether they let the fit be exported; null: not judged on
+              them), training_dropped (training states
               left out: the FEM's error on them above a third of the best rule's), G_norm and
               G_norm_heldout (RMS
               displacement error / RMS FEM displacement), G_heldout_mean (mean over the held-out
               loads of each one's own G_norm), G_heldout_loads ({load: G_norm}), choice (rule, the
               validated capacity, or fit), validation (the table that chose: each model's score per
               left-out family), validation_skipped (always null: the validation always runs),
+              engine (--engine, or null), candidates (the names the validation chose among:
+              --engine keeps those whose volume term it runs; null without a validated fit),
               G_heldout_mean_spread (over the final fit's starts),
               reference_error (FEM's own, relative; the worst of reference_error_fitted and
               reference_error_heldout), status (the exported row's reference status: ok, or
@@ -154,7 +166,10 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               choice) adds node_volume_nodes, node_volume_rest (m^3; 2-D m^2), node_volume_stiffness
               (kv, Pa; 2-D N/m), node_volume_shared, node_volume_elements, node_volume_element_rest
               (m^3; 2-D m^2); --model springs+kn adds kn_nodes, kn_node_volume (m^3; 2-D m^2),
-              kn_spring_count, kn_stiffness (kn, Pa; 2-D N/m), kn_shared; for engines: dt_safe (s:
+              kn_spring_count, kn_stiffness (kn, Pa; 2-D N/m), kn_shared; --model p1-global
+              (linear tetrahedra, one fitted E', nu') adds E_effective (Pa), nu_effective and per
+              tetrahedron tet_indices, tet_E (Pa), tet_nu, tet_k_mu and tet_k_lambda (Newton's
+              inputs, Pa); for engines: dt_safe (s:
               the step to use, 0.8 dt_stable, measured in NVIDIA Newton in float32), settle_damping
               ({c, omega_1, load, velocity_factor}: after every step v *= velocity_factor, mass
               damping c = 2 omega_1 about critical for the lowest mode), and per load clamped_nodes
@@ -165,7 +180,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each
               family's and of the clamped states' own G_norm; ranks the rules), G_heldout,
-              G_heldout_mean, G_heldout_mean_spread, choice, ref_error_max and ref_error_heldout
+              G_heldout_mean, G_heldout_mean_spread, G_val_mean, val_fit, val_best_rule and
+              val_accepted (the validation loads: each row's error, the fit's, the rule they rank
+              first, whether the fit is exported), choice, ref_error_max and ref_error_heldout
               (the FEM's own error), status (ok / ref-coarse), k_ratio (max/median k, with
               --k-ratio), dt_stable (s, the JSON's), dt_safe (s), seconds, seed, opt_stop, opt_stops
               (every start's, " | " between), training_dropped (as the JSON's), ref_note (why the
@@ -219,6 +236,15 @@ def add_arguments(p):
         default="springs",
         help="the model class (default springs): "
         + "; ".join(f"{n}: {class_doc(n)}" for n in MODELS),
+    )
+    p.add_argument(
+        "--engine",
+        choices=EXPORT_ENGINES,
+        default=None,
+        help="the engine that will run the export: the validated fit chooses only among "
+        "candidates whose volume term it runs natively ("
+        + "; ".join(f"{e}: {', '.join(TERMS[t] for t in EXPORT_TERMS[e])}" for e in EXPORT_ENGINES)
+        + "), and a --model with a term it cannot run is refused (default: every candidate)",
     )
     p.add_argument(
         "--prior-weight",
@@ -404,6 +430,11 @@ def main(args) -> int:
     s = Settings.of(args)
     check(s, PRIOR_WEIGHT)
     configure(s.quiet)
+    from harness.commands.calibrate_case import selects
+    from harness.commands.calibrate_engine import engine_line
+
+    if s.engine is not None:  # first: what the engine restricts, before the work
+        print(engine_line(s, selects(s)), flush=True)
     from harness.case.mesh_checks import check_mesh
     from harness.commands.calibrate_check import unit_warnings
     from harness.io.meshfile import read_mesh

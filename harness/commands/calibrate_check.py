@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from harness.case.default_loads import PEAK_STRAIN
+from harness.commands import calibrate_engine as engine
 from harness.errors import SpringbenchError
 
 # closer to 0.5, lambda / mu > 5e4: the displacement FEM's stiffness is singular to rounding
@@ -23,6 +24,7 @@ def check(s, prior_weight: float) -> None:
     _material(s)
     _loads(s)
     _fit(s, prior_weight)
+    engine.check(s)
     _reference(s)
     _ranges(s)
     _files(s)

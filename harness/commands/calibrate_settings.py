@@ -22,6 +22,7 @@ class Settings:
     density: float = 1000.0
     method: str = "lbfgs"
     model: str = "springs"
+    engine: str | None = None
     prior_weight: float | None = None
     init: str = "none"
     rule: str = "best"

@@ -19,6 +19,8 @@ def validation_sentence(row, table) -> str:
 
 def _folds_sentence(row, table) -> str:
     """What leave-one-family-out validation chose, against the rule the fits start from."""
+    if not table:  # no folds ran (a class of one fitted material, p1-global)
+        return ""
     by = {r["model"]: r.get("score") for r in table}
     fams = row.get("val_families", "")
     start = row.get("start_rule") or row["stiffness"]

@@ -40,6 +40,13 @@ def _accepted(row) -> bool | None:
     return None if v is None or (isinstance(v, float) and math.isnan(v)) else bool(v)
 
 
+def _candidates(case) -> list[str] | None:
+    """The JSON's ``candidates``: the names the validated fit chose among (``--engine``
+    restricts them), None without a validated fit."""
+    select = (case.section("optimizer") or {}).get("select")
+    return list(select["candidates"]) if select else None
+
+
 def positive(net) -> bool:
     """Whether every mass is positive (an explicit engine can run the network)."""
     return bool(np.all(np.asarray(net.masses) > 0))
@@ -63,7 +70,7 @@ COLUMNS = (
     "G_norm_final G_fit_score G_fit_score_bound G_heldout G_heldout_mean G_heldout_mean_spread "
     "G_val_mean val_fit val_best_rule val_accepted "
     "choice ref_error_max ref_error_heldout status k_ratio dt_stable dt_safe seconds seed "
-    "opt_stop opt_stops opt_prior training_dropped ref_note note"
+    "opt_stop opt_stops opt_prior training_dropped E_effective nu_effective ref_note note"
 ).split()
 
 
@@ -123,6 +130,8 @@ def metadata(s, rows, exported, net, case) -> dict:
         validation=cv.records(exported.pop("_validation", None)),
         masses=s.masses,
         prior_weight=weight,
+        engine=s.engine,
+        candidates=_candidates(case),
     )
     rules = [r for r in rows if r.get("optimizer", "none") == "none"]
     said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)
@@ -178,8 +187,10 @@ def write(s, rows, net, case):
     else:
         step = data.get("warning", "")
     k = data["spring_stiffness"]
+    stiff = f"{net.n_springs} springs, masses {s.masses}, k {min(k):.3g}..{max(k):.3g} N/m"
+    if "tet_E" in data:  # one material for the engines' tetrahedra (model class p1-global)
+        stiff = f"masses {s.masses}, E {data['E_effective']:.4g} Pa, nu {data['nu_effective']:.4g}"
     print(
-        f"-> {s.out} (+ .json, .csv): {net.n_nodes} nodes, {net.n_springs} springs, "
-        f"masses {s.masses}, k {min(k):.3g}..{max(k):.3g} N/m, {step}"
+        f"-> {s.out} (+ .json, .csv): {net.n_nodes} nodes, {stiff}, {step}"
         + (picture.sentence(out, shown) if shown is not None else "")
     )

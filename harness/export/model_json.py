@@ -10,11 +10,29 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.case.elasticity import lame
 from harness.export.engine import spring_damping, stable_step
 from harness.export.engine_loads import DT_SAFE
 from harness.export.vtu import write_vtu
 from harness.models.kn import KNTerm
+from harness.models.p1 import P1Term
 from harness.models.volume import NodeVolumeTerm
+
+
+def _tets(net) -> dict:
+    """The keys of a P1 model's one material (its ``info``'s E_effective, nu_effective):
+    tet_indices (2-D: triangles), per element E, nu and Newton's k_mu and k_lambda
+    (harness/engines/newton_engine.py run_tets)."""
+    E, nu = (float(net.info.get(k, math.nan)) for k in ("E_effective", "nu_effective"))
+    m = len(net.volume.elements)
+    lam, mu = lame(E, nu) if math.isfinite(E + nu) else (math.nan, math.nan)
+    per = {"tet_E": E, "tet_nu": nu, "tet_k_mu": 4 / 3 * mu, "tet_k_lambda": lam + 5 / 6 * mu}
+    out = {"tet_indices": np.asarray(net.volume.elements, int).tolist()}
+    out.update({k: [v if math.isfinite(v) else None] * m for k, v in per.items()})
+    out.update(
+        {k: v if math.isfinite(v) else None for k, v in (("E_effective", E), ("nu_effective", nu))}
+    )
+    return out
 
 
 def export(net, out: Path, meta: dict | None = None) -> dict:
@@ -110,6 +128,14 @@ def export(net, out: Path, meta: dict | None = None) -> dict:
             node_volume_elements=vol.elements.tolist(),
             node_volume_element_rest=vol.V0.tolist(),
         )
+    elif isinstance(vol, P1Term):  # linear simplices of one material (model class p1-global)
+        data["units"].update(
+            E_effective="Pa",
+            tet_E="Pa",
+            tet_k_mu="Pa (NVIDIA Newton's k_mu = 4/3 mu)",
+            tet_k_lambda="Pa (NVIDIA Newton's k_lambda = lambda + 5/6 mu)",
+        )
+        data.update(_tets(net))
     elif vol is not None:  # springs + volume (harness/models/volume.py)
         data["units"].update(
             volume_rest="m^3 (2-D: m^2, unit thickness)",

@@ -54,11 +54,12 @@ def _model_option():
     return next(a for a in _parser()._actions if "--model" in a.option_strings)
 
 
-def test_calibrate_offers_the_registrys_springs_classes():
+def test_calibrate_offers_the_registrys_springs_classes_and_p1_global():
     springs = tuple(n for n, c in registry.MODEL_CLASSES.items() if isinstance(c, Springs))
     option = _model_option()
-    assert tuple(option.choices) == springs == registry.SPRINGS_CLASSES
-    assert all(f"{n}: {registry.class_doc(n)}" in option.help for n in springs)
+    assert springs == registry.SPRINGS_CLASSES
+    assert tuple(option.choices) == registry.CALIBRATE_CLASSES == springs + ("p1-global",)
+    assert all(f"{n}: {registry.class_doc(n)}" in option.help for n in option.choices)
 
 
 def test_the_case_schema_takes_the_registrys_names():
@@ -145,6 +146,6 @@ def test_the_docs_model_lists_name_registry_classes(page):
         assert name in registry.MODEL_CLASSES or (name in AMBIGUOUS and "ambiguous" in sentence), (
             f"{page}: {name} in {sentence!r}"
         )
-    listed = set(re.findall(r"`(springs(?:\+[a-z-]+)?|p1|mt)`", text))
-    want = registry.SPRINGS_CLASSES if page == "calibrate.md" else registry.MODEL_CLASSES
+    listed = set(re.findall(r"`(springs(?:\+[a-z-]+)?|p1(?:-global)?|mt)`", text))
+    want = registry.CALIBRATE_CLASSES if page == "calibrate.md" else registry.MODEL_CLASSES
     assert set(want) <= listed, f"{page}: {set(want) - listed} not named"
