@@ -7,7 +7,9 @@ load average when the work started.
 it in every result file it writes and each suite folder's ``provenance.json`` gathers
 those of its cases (harness/report/build.py); ``springbench bench`` adds it to every row
 of its CSV as the columns of FIELDS. ``describe()`` is the one line the report shows; a
-value that was never recorded (results older than this) reads "not recorded".
+value that was never recorded (results older than this) reads "not recorded". A result
+the engines stage made also records ENGINE_VERSIONS, the installed version of every engine
+package (``with_engines``; None where not installed): an engine's numbers are its package's.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 
 from harness import __version__
 from harness.paths import ROOT
+from harness.registry import ENGINES, PIP_NAMES
 
 FORMAT_VERSION = 1  # of result files, summaries and bench CSVs; raise it when their meaning changes
 LIBRARIES = {
@@ -39,6 +42,7 @@ FIELDS = (
     "cpu_cores",
     "load_average",
 )
+ENGINE_VERSIONS = "engine_versions"  # {pip name: version or None} of the engine packages
 NOT_RECORDED = "not recorded"
 # what a dirty tree means: changed code or cases, not the outputs of runs (results/, runs/)
 OUTPUTS = ("results", "runs")
@@ -56,16 +60,33 @@ def collect(root: Path | None = None) -> dict:
         "python_version": platform.python_version(),
     }
     for key, dist in LIBRARIES.items():
-        try:
-            out[key] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[key] = None
+        out[key] = version(dist)
     try:
         load = round(os.getloadavg()[0], 2)
     except OSError:  # pragma: no cover - no load average on this system
         load = None
     out.update(cpu_model=cpu_model(), cpu_cores=os.cpu_count(), load_average=load)
     return out
+
+
+def version(dist: str) -> str | None:
+    """The installed version of the distribution ``dist`` (None when not installed)."""
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return None
+
+
+def engine_packages() -> tuple[str, ...]:
+    """The pip names of the engine packages: each engine's (registry ENGINES.about) and
+    those PIP_NAMES names besides (warp, which Newton runs on)."""
+    imports = dict.fromkeys([about[0] for about in ENGINES.about.values()] + list(PIP_NAMES))
+    return tuple(PIP_NAMES.get(name, name) for name in imports)
+
+
+def with_engines(p: dict) -> dict:
+    """``p`` and ENGINE_VERSIONS: the installed version of every engine package."""
+    return {**p, ENGINE_VERSIONS: {dist: version(dist) for dist in engine_packages()}}
 
 
 def git_state(root: Path) -> tuple[str | None, bool | None]:
@@ -100,8 +121,8 @@ def cpu_model() -> str | None:
 
 
 def describe(p: dict | None) -> str:
-    """One line: commit (clean / dirty), library versions, CPU, cores, load at start;
-    "not recorded" for what is missing."""
+    """One line: commit (clean / dirty), library versions, CPU, cores, load at start and
+    the engine packages' versions where recorded; "not recorded" for what is missing."""
     p = p or {}
 
     def get(key):
@@ -130,7 +151,16 @@ def describe(p: dict | None) -> str:
         f"{str(commit)[:12]}{state}; Python {get('python_version')}, {libs}; CPU "
         f"{get('cpu_model')}, "
         f"{get('cpu_cores')} cores, load average {get('load_average')} at start"
+        f"{engines_part(p.get(ENGINE_VERSIONS))}"
     )
+
+
+def engines_part(versions) -> str:
+    """The report line's engine part: "; engines newton 1.8.0, drake not installed, ..."
+    ('' when not recorded)."""
+    if not isinstance(versions, dict):
+        return ""
+    return "; engines " + ", ".join(f"{d} {v or 'not installed'}" for d, v in versions.items())
 
 
 def columns(p: dict) -> dict:

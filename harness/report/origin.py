@@ -9,15 +9,15 @@ import json
 from pathlib import Path
 
 from harness.outputs import write_changed
-from harness.provenance import FIELDS, NOT_RECORDED, describe
+from harness.provenance import ENGINE_VERSIONS, FIELDS, NOT_RECORDED, describe
 
 FILE = "provenance.json"
 
 
 def gather(manifests) -> dict:
     """{"runs": [{"provenance": {...}, "cases": [...]}, ...], "not_recorded": [cases]}: each
-    distinct provenance with the cases (and seeds) it made, most cases first; sorted, so the
-    same results give the same file."""
+    distinct provenance (FIELDS, and ENGINE_VERSIONS where recorded) with the cases (and
+    seeds) it made, most cases first; sorted, so the same results give the same file."""
     runs: dict[str, dict] = {}
     missing = []
     for m in manifests:
@@ -26,7 +26,9 @@ def gather(manifests) -> dict:
         if not isinstance(p, dict):
             missing.append(label)
             continue
-        p = {k: p.get(k) for k in FIELDS}
+        p = {k: p.get(k) for k in FIELDS} | (
+            {ENGINE_VERSIONS: p[ENGINE_VERSIONS]} if ENGINE_VERSIONS in p else {}
+        )
         runs.setdefault(json.dumps(p, sort_keys=True), {"provenance": p, "cases": []})[
             "cases"
         ].append(label)

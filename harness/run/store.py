@@ -8,7 +8,9 @@ import re
 from pathlib import Path
 
 from harness.outputs import atomic_write as write
+from harness.provenance import with_engines
 from harness.run.jobs import Job, JobResult
+from harness.stages.engines import NAME as ENGINES_STAGE
 
 RESULT_PREFIX = "result-seed"
 
@@ -44,7 +46,8 @@ def read_result(path: Path) -> dict | None:
 
 def store(results: Path, res: JobResult, provenance: dict | None = None) -> Path:
     """Write a job's data files, then its result file (the 'finished' marker), which
-    records the run's ``provenance`` (harness/provenance.py)."""
+    records the run's ``provenance`` (harness/provenance.py; with the engine packages'
+    versions when the engines stage made a row)."""
     job = res.job
     out = data_dir(results, job)
     root = out.resolve()
@@ -85,7 +88,8 @@ def store(results: Path, res: JobResult, provenance: dict | None = None) -> Path
         "rows": res.rows,
     }
     if provenance is not None:
-        manifest["provenance"] = provenance
+        engines = any(r.get("stage") == ENGINES_STAGE for r in res.rows)
+        manifest["provenance"] = with_engines(provenance) if engines else provenance
     path = result_path(results, job)
     atomic_write(path, json.dumps(manifest, indent=1, allow_nan=True).encode())
     return path
