@@ -49,6 +49,8 @@ class Clock:
     once :meth:`bound` says about how long the rest will take, a bar and that ETA. Ticks
     once a second on its own (a long FEM solve says nothing for minutes)."""
 
+    tick = 1.0  # seconds between redraws of the line
+
     def __init__(self, desc: str):
         self.desc, self.phase, self.detail = desc, "", ""
         self.t0, self.end = time.monotonic(), None

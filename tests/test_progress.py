@@ -67,6 +67,7 @@ def test_clock_shows_the_phase_and_then_an_eta(monkeypatch):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("quiet", [False, True])
+@pytest.mark.filterwarnings("error::pytest.PytestUnhandledThreadExceptionWarning")  # the ticker
 def test_calibrate_on_a_terminal(monkeypatch, tmp_path, quiet):
     from tests import meshes
 

@@ -37,10 +37,10 @@ def case(tmp_path_factory):
 
     tmp = tmp_path_factory.mktemp("p1g")
     mesh = meshes.cylinder(tmp)
-    s = Settings(mesh, E, NU, tmp / "m.vtu", rule="lloyd", max_refine=0)
+    s = Settings(mesh, E, NU, tmp / "m.vtu", rule="lloyd", max_refine=0, model="p1-global")
     m = read_mesh(mesh)
     table = case_table(s, 3, m.cells, mesh, end_loads(m.points, m.cells, *regions(s, m), m.groups))
-    table["model"]["classes"] = ["p1-global"]
+    assert table["model"]["classes"] == ["p1-global"] and table["loads"]["validation"]
     return case_of(table, mesh, material=isotropic(E, NU, 1000.0, "stress"))
 
 
