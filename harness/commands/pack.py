@@ -6,7 +6,9 @@ mesh: calibrate's load set for that mesh (the equilibrated linear stress states 
 clamped training states as "fitted", sag, tip, tip2, torsion and bridge with an end face
 clamped as "heldout"; --clamp and --load-region take a mesh group, nodes:FILE, box: or
 sphere: instead, as calibrate's do, and problem.json records them), held-out loads sized for
-a peak strain of about --peak-strain."""
+a peak strain of about --peak-strain. A mesh's pack holds by default only the loads that
+judge an engine (--loads judged: held out, FEM error estimate <= 1 % or not estimated; each
+one left out is named); --loads all keeps every load. problem.json's load_set says which."""
 
 from __future__ import annotations
 
@@ -23,6 +25,22 @@ HELP = (
     "forces (N) and the "
     "FEM displacement with its error estimate at every node, and problem.json (SI units)"
 )
+
+
+LOAD_SETS = ("judged", "all")
+
+
+def add_load_set(p):
+    """--loads: which of the case's loads the pack holds (mesh packs judge engines by default)."""
+    p.add_argument(
+        "--loads",
+        dest="load_set",
+        choices=LOAD_SETS,
+        default=None,
+        help="judged: the held-out loads whose FEM error estimate is <= 1 %% (kept when not "
+        "estimated), what judges an engine; all: every load, the fitted ones too (default: "
+        "judged for a mesh, all for a case file)",
+    )
 
 
 def add_arguments(p):
@@ -79,6 +97,7 @@ def add_arguments(p):
         help="the region the tip loads and torsion act on (meshes only; default: the other end "
         "face; the torsion turns about its mean outward normal): as --clamp",
     )
+    add_load_set(p)
     p.add_argument("--format", default=None, help="mesh format if the file name does not tell")
     p.add_argument(
         "--max-refine",
@@ -138,7 +157,7 @@ def _mesh_case(args, tmp: Path):
 def main(args) -> int:
     from harness import __version__
     from harness.export.pack import write_pack
-    from harness.export.pack_make import make_pack
+    from harness.export.pack_make import judged, make_pack
     from harness.outputs import check_out_dir
 
     if not args.source.is_file():
@@ -175,11 +194,18 @@ def main(args) -> int:
                         exc.message, file=str(args.source), field=exc.field, fix=exc.fix
                     ) from None
                 raise
-        meta = {"source": str(args.source), "springbench": __version__}
+        load_set = args.load_set or ("all" if is_case else "judged")
+        meta = {"source": str(args.source), "springbench": __version__, "load_set": load_set}
         if not is_case:
             meta["peak_strain"] = args.peak_strain
             meta.update(regions(case))
+        if load_set == "judged":
+            case = heldout_case(case)
         pack = make_pack(case, meta=meta)
+        if load_set == "judged":
+            pack, notes = judged(pack)
+            for line in notes:
+                print(f"{args.source}: {line}", file=sys.stderr, flush=True)
     path = write_pack(pack, args.out)
     held = sum(ld.role == "heldout" for ld in pack.loads)
     print(
@@ -199,6 +225,20 @@ def main(args) -> int:
         )
     print(f"-> {path}")
     return 0
+
+
+def heldout_case(case):
+    """The case with only its held-out loads (the fitted ones judge no engine: no FEM solve
+    for them); an error naming --loads if it holds none out."""
+    kept = tuple(ld for ld in case.loads if ld.name in case.heldout)
+    if not kept:
+        raise SpringbenchError(
+            "the case holds no load out: no load judges an engine",
+            file=str(case.path) if case.path else None,
+            field="--loads",
+            fix="--loads all",
+        )
+    return dataclasses.replace(case, loads=kept)
 
 
 def regions(case) -> dict:

@@ -8,7 +8,8 @@ Folder layout (SI units throughout: m, N, kg, Pa, s):
   ``material`` ({E, nu, density, plane}), ``loads`` (a list, one entry per load: ``name``,
   ``role`` "fitted" or "heldout", ``kind``, ``gravity`` (m/s^2 vector or null), ``file``
   (its arrays), ``n_held``, ``force_total`` (N), ``u_fem_max`` (m), ``u_fem_error_max``
-  (m)), and where it came from (``source``, ``springbench`` version).
+  (m)), ``load_set`` ("judged": the held-out loads that judge an engine, or "all") and
+  where it came from (``source``, ``springbench`` version).
 - ``mesh.vtu`` - the mesh the loads live on: points (m) and volume cells; node ids are
   row numbers of ``points``.
 - ``loads/<name>.npz`` - per load: ``held_nodes`` (h,) int, ``held_components`` (h, dim)
@@ -307,7 +308,9 @@ def read_pack(folder) -> Pack:
             )
         )
     cells = {c.type: np.asarray(c.data, int) for c in mesh.cells}
-    meta = {k: v for k, v in man.items() if k in ("source", "springbench", "peak_strain")}
+    meta = {
+        k: v for k, v in man.items() if k in ("source", "springbench", "peak_strain", "load_set")
+    }
     return Pack(points, cells, E, nu, rho, tuple(loads), mat.get("plane"), meta)
 
 

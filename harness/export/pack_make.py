@@ -12,6 +12,7 @@ The held components are the ones the FEM holds at those nodes (the same parts).
 
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
@@ -20,6 +21,8 @@ from harness.errors import SpringbenchError
 from harness.export.pack import Pack, PackLoad
 from harness.mechanics import statics
 from harness.scoring import reference_displacements, reference_error
+
+JUDGED_TOL = 0.01  # a held-out load judges an engine when its FEM error estimate is below this
 
 
 def _kind(load) -> str:
@@ -87,3 +90,41 @@ def make_pack(case, status=lambda msg: None, meta: dict | None = None) -> Pack:
         plane,
         dict(meta or {}),
     )
+
+
+def relative_error(ld: PackLoad) -> float:
+    """A load's FEM relative error estimate: its largest nodal estimate over its largest |u|
+    (the measure the reference's tol bounds); NaN when the FEM gives no estimate."""
+    err = np.asarray(ld.u_fem_error, float)
+    if not np.isfinite(err).any():
+        return float("nan")
+    emax = float(np.nanmax(err))
+    umax = float(np.linalg.norm(ld.u_fem, axis=1).max())
+    return 0.0 if emax == 0.0 else (emax / umax if umax > 0.0 else float("inf"))
+
+
+def judged(pack: Pack, tol: float = JUDGED_TOL) -> tuple[Pack, list[str]]:
+    """The pack with only the loads that judge an engine: held out, with a FEM error estimate
+    <= tol or none (kept: nothing says it is coarse), and one note per load left out or
+    kept unestimated; an error naming --loads if none is left."""
+    kept, notes = [], []
+    for ld in pack.loads:
+        if ld.role != "heldout":
+            continue
+        rel = relative_error(ld)
+        if rel != rel:
+            notes.append(f"kept {ld.name}: its FEM error is not estimated (--max-refine 0?)")
+        elif rel > tol:
+            notes.append(
+                f"left out {ld.name}: FEM error estimate {100 * rel:.3g} % > {100 * tol:g} % "
+                "(--loads all keeps it)"
+            )
+            continue
+        kept.append(ld)
+    if not kept:
+        raise SpringbenchError(
+            f"no held-out load has a FEM error estimate <= {100 * tol:g} %",
+            field="--loads",
+            fix="--loads all, or a larger --max-refine",
+        )
+    return dataclasses.replace(pack, loads=tuple(kept)), notes

@@ -167,6 +167,8 @@ def study(
         *groups,
         "--peak-strain",
         repr(float(spec["peak_strain"])),
+        "--loads",
+        "all",  # the case names the loads it scores: each is packed, its FEM error reported
         "--out",
         scratch / "pack",
     )

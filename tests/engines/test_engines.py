@@ -28,7 +28,7 @@ def pack_of(folder, size):
     assert (
         cli.main(
             (
-                ["pack", str(mesh), "--E", str(E), "--nu", str(NU)]
+                ["pack", str(mesh), "--E", str(E), "--nu", str(NU), "--loads", "all"]
                 + ["--density", str(RHO), "--out", str(out)]
             )
         )

@@ -27,7 +27,7 @@ def packed(tmp_path_factory):
     assert (
         cli.main(
             (
-                ["pack", str(mesh), "--E", str(E), "--nu", str(NU)]
+                ["pack", str(mesh), "--E", str(E), "--nu", str(NU), "--loads", "all"]
                 + ["--density", str(RHO), "--out", str(d / "p")]
             )
         )
@@ -232,6 +232,7 @@ def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, cap
     assert cli.main(["pack", str(case_file), "--out", str(tmp_path / "p")]) == 0
     pack = read_pack(tmp_path / "p")
     assert [ld.name for ld in pack.loads] == [ld.name for ld in case.loads]
+    assert pack.meta["load_set"] == "all"  # a case's loads are the user's choice
     assert {ld.name for ld in pack.loads if ld.role == "heldout"} == set(case.heldout)
     assert (pack.E, pack.nu) == (case.material.E, case.material.nu)
     capsys.readouterr()
