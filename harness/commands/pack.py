@@ -121,8 +121,7 @@ def add_arguments(p):
 
 
 def _mesh_case(args, tmp: Path):
-    """calibrate's in-memory case for the mesh (its loads but the validation loads, which
-    judge calibrate's fits and no engine; no optimiser)."""
+    """calibrate's in-memory case for the mesh (its loads, no optimiser)."""
     from harness.case.mesh_checks import check_mesh
     from harness.commands import calibrate as cal
     from harness.commands import calibrate_case
@@ -149,9 +148,7 @@ def _mesh_case(args, tmp: Path):
     check_mesh(mesh, str(args.source))
     for line in unit_warnings(cargs, mesh):
         print(line, file=sys.stderr, flush=True)
-    case = calibrate_case.mesh_case(cargs, mesh, tmp)
-    kept = tuple(ld for ld in case.loads if ld.name not in case.validation)
-    return dataclasses.replace(case, loads=kept, validation=())
+    return calibrate_case.mesh_case(cargs, mesh, tmp)
 
 
 def main(args) -> int:

@@ -25,8 +25,17 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from harness.engines.pybullet_fem import gravity_of, positive, write_vtk
-from harness.engines.settle import lowest_omegas, p1_scaled_stiffness, settle, unsupported
+from harness.engines.pybullet_fem import positive, write_vtk
+from harness.engines.settle import (
+    gravity_of,
+    gravity_only,
+    lowest_omegas,
+    not_tetrahedra,
+    p1_scaled_stiffness,
+    settle,
+    tetrahedra,
+    unsupported,
+)
 from harness.models.masses import lumped_masses
 
 DT_OMEGA = 0.5  # the implicit step times the load's omega_1
@@ -209,38 +218,26 @@ class DrakeSim:
         self.simulator = None
 
 
-def _supported(masses, ld):
-    """Why Drake cannot run the load, or None."""
-    if gravity_of(ld, masses) is None:
-        return "drake-fem takes no nodal forces: gravity loads only"
-    if not ld.held_components.all(axis=1).all():
-        return "drake-fem fixes whole nodes: no partly held nodes"
-    return None
-
-
 def run(pack, options=None) -> dict:
     """{load: Answer} of Drake's FEM deformable body on the pack's tetrahedra (gravity
     loads)."""
-    tets = pack.cells.get("tetra")
-    if pack.dim != 3 or tets is None or not len(tets):
-        return {
-            ld.name: unsupported(pack, "drake-fem needs a 3-D tetrahedral mesh")
-            for ld in pack.loads
-        }
+    tets = tetrahedra(pack)
+    if tets is None:
+        return not_tetrahedra(pack, "drake-fem")
     why = broken_wheel()
     if why is not None:
         return {ld.name: unsupported(pack, why) for ld in pack.loads}
-    tets = positive(pack.points, np.asarray(tets, int))
+    tets = positive(pack.points, tets)
     lumped = lumped_masses(pack.points, tets, pack.density)
     A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, lumped)
     M = drake_mass(pack.points, tets, pack.density)
-    runnable = [ld for ld in pack.loads if _supported(lumped, ld) is None]
+    why = {ld.name: gravity_only(ld, lumped, "drake-fem", "fixes") for ld in pack.loads}
+    runnable = [ld for ld in pack.loads if why[ld.name] is None]
     omegas = lowest_omegas(A, runnable)
     out = {}
     for ld in pack.loads:
-        why = _supported(lumped, ld)
-        if why is not None:
-            out[ld.name] = unsupported(pack, why, "unsupported-load")
+        if why[ld.name] is not None:
+            out[ld.name] = unsupported(pack, why[ld.name], "unsupported-load")
             continue
         dt = DT_OMEGA / omegas[ld.name]
         sim = DrakeSim(pack, tets, dt, M)

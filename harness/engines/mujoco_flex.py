@@ -21,10 +21,11 @@ import numpy as np
 from harness.engines.settle import (
     Answer,
     lowest_omegas,
+    not_tetrahedra,
     omega_max,
     p1_scaled_stiffness,
     settle,
-    unsupported,
+    tetrahedra,
 )
 from harness.models.masses import lumped_masses
 
@@ -119,13 +120,9 @@ class MujocoSim:
 
 def run(pack, options=None) -> dict:
     """{load: Answer} of MuJoCo's flex on the pack's tetrahedra."""
-    tets = pack.cells.get("tetra")
-    if pack.dim != 3 or tets is None or not len(tets):
-        return {
-            ld.name: unsupported(pack, "mujoco-flex needs a 3-D tetrahedral mesh")
-            for ld in pack.loads
-        }
-    tets = np.asarray(tets, int)
+    tets = tetrahedra(pack)
+    if tets is None:
+        return not_tetrahedra(pack, "mujoco-flex")
     masses = lumped_masses(pack.points, tets, pack.density)
     A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)
     limit, omegas, out = 2.0 / omega_max(A), lowest_omegas(A, pack.loads), {}

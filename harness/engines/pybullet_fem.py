@@ -27,16 +27,19 @@ import numpy as np
 
 from harness.case.elasticity import lame
 from harness.engines.settle import (
+    gravity_of,
+    gravity_only,
     lowest_omegas,
+    not_tetrahedra,
     p1_scaled_stiffness,
     settle,
+    tetrahedra,
     unsupported,
 )
 from harness.models.masses import lumped_masses
 
 DT_OMEGA = 0.5  # the implicit step times the load's omega_1
 CHECK = 50  # steps between the stopping rule's checks
-GRAVITY_RTOL = 1e-6  # a body-force load's forces are the lumped masses times its gravity
 
 
 def neo_hookean(E: float, nu: float) -> tuple[float, float]:
@@ -64,17 +67,6 @@ def positive(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     out = tets.copy()
     out[neg, 1], out[neg, 2] = tets[neg, 2], tets[neg, 1]
     return out
-
-
-def gravity_of(ld, masses: np.ndarray) -> np.ndarray | None:
-    """The load's gravity (3,) m/s^2 when its forces are the lumped masses times it, else
-    None (a traction or a point force: Bullet cannot apply it)."""
-    if ld.gravity is None:
-        return None
-    g = np.asarray(ld.gravity, float)
-    body = masses[:, None] * g[None, :]
-    scale = max(float(np.abs(body).max()), 1e-300)
-    return g if float(np.abs(ld.force - body).max()) <= GRAVITY_RTOL * scale else None
 
 
 @contextlib.contextmanager
@@ -213,37 +205,25 @@ class PybulletSim:
             self.client = None
 
 
-def _supported(pack, tets, masses, ld):
-    """Why Bullet cannot run the load, or None."""
-    if gravity_of(ld, masses) is None:
-        return "pybullet-fem takes no nodal forces: gravity loads only"
-    if not ld.held_components.all(axis=1).all():
-        return "pybullet-fem anchors whole nodes: no partly held nodes"
-    return None
-
-
 def run(pack, options=None) -> dict:
     """{load: Answer} of Bullet's FEM soft body on the pack's tetrahedra (gravity loads)."""
-    tets = pack.cells.get("tetra")
-    if pack.dim != 3 or tets is None or not len(tets):
-        return {
-            ld.name: unsupported(pack, "pybullet-fem needs a 3-D tetrahedral mesh")
-            for ld in pack.loads
-        }
-    tets = positive(pack.points, np.asarray(tets, int))
+    tets = tetrahedra(pack)
+    if tets is None:
+        return not_tetrahedra(pack, "pybullet-fem")
+    tets = positive(pack.points, tets)
     lumped = lumped_masses(pack.points, tets, pack.density)
     mass = float(lumped.sum())
     uniform = np.full(pack.n_nodes, mass / pack.n_nodes)
     A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, uniform)
     K = (uniform[0] * A).tocsr()  # the P1 stiffness: uniform masses scale it evenly
-    runnable = [ld for ld in pack.loads if _supported(pack, tets, lumped, ld) is None]
+    why = {ld.name: gravity_only(ld, lumped, "pybullet-fem", "anchors") for ld in pack.loads}
+    runnable = [ld for ld in pack.loads if why[ld.name] is None]
     omegas = lowest_omegas(A, runnable)
     note = f"Bullet's node masses uniform, {mass / pack.n_nodes:.4g} kg each (rho V / n)"
     out = {}
     for ld in pack.loads:
-        why = _supported(pack, tets, lumped, ld)
-        if why is not None:
-            out[ld.name] = unsupported(pack, why, "unsupported-load")
+        if why[ld.name] is not None:
+            out[ld.name] = unsupported(pack, why[ld.name], "unsupported-load")
             continue
         dt = DT_OMEGA / omegas[ld.name]
         sim = PybulletSim(pack, tets, mass, dt, K)

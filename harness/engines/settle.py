@@ -117,6 +117,45 @@ def unsupported(pack, why: str, status: str = "unsupported") -> Answer:
     return Answer(np.full((pack.n_nodes, pack.dim), np.nan), status, note=why)
 
 
+def tetrahedra(pack) -> np.ndarray | None:
+    """The pack's tetrahedra (m, 4), or None when its body is not a 3-D tetrahedral mesh."""
+    tets = pack.cells.get("tetra")
+    if pack.dim != 3 or tets is None or not len(tets):
+        return None
+    return np.asarray(tets, int)
+
+
+def not_tetrahedra(pack, engine: str) -> dict:
+    """Every load ``unsupported``: ``engine`` runs 3-D tetrahedral meshes only."""
+    return {
+        ld.name: unsupported(pack, f"{engine} needs a 3-D tetrahedral mesh") for ld in pack.loads
+    }
+
+
+GRAVITY_RTOL = 1e-6  # a body-force load's forces are the lumped masses times its gravity
+
+
+def gravity_of(ld, masses: np.ndarray) -> np.ndarray | None:
+    """The load's gravity (3,) m/s^2 when its forces are the lumped masses times it, else
+    None (a traction or a point force: an engine without nodal forces cannot apply it)."""
+    if ld.gravity is None:
+        return None
+    g = np.asarray(ld.gravity, float)
+    body = masses[:, None] * g[None, :]
+    scale = max(float(np.abs(body).max()), 1e-300)
+    return g if float(np.abs(ld.force - body).max()) <= GRAVITY_RTOL * scale else None
+
+
+def gravity_only(ld, masses: np.ndarray, engine: str, holds: str) -> str | None:
+    """Why ``engine`` (no nodal forces; it ``holds`` whole nodes) cannot run the load, or
+    None: a gravity load on whole held nodes."""
+    if gravity_of(ld, masses) is None:
+        return f"{engine} takes no nodal forces: gravity loads only"
+    if not ld.held_components.all(axis=1).all():
+        return f"{engine} {holds} whole nodes: no partly held nodes"
+    return None
+
+
 def rayleigh_omega(load, masses: np.ndarray) -> float:
     """omega (rad/s) of the load's static shape: omega^2 = f . u / (u . M u), close above
     the lowest mode the load excites (the FEM's u_fem and the pack's forces)."""
