@@ -88,7 +88,9 @@ STAGES = Registry(
 
 # ``springbench bench NAME``: modules with run(quick) -> DataFrame
 BENCHES = _modules(
-    "benchmark", "harness.bench", "reference sa fit dynamics calibrate heldout engines shapes run"
+    "benchmark",
+    "harness.bench",
+    "reference sa fit dynamics calibrate heldout tets engines shapes run",
 )
 
 # ``[optimizer] method``: function(problem, options, seed, status) -> FitResult fields
@@ -120,7 +122,7 @@ MODEL_CLASSES = Registry(
         "springs+node-volume-node": "harness.stages.classes.springs:NODE_VOLUME_NODE",
         "springs+kn": "harness.stages.classes.springs:KN_SHARED",
         "springs+kn-node": "harness.stages.classes.springs:KN_NODE",
-        "p1": "harness.stages.classes.p1:P1",
+        "p1": "harness.stages.classes.p1_element:P1",
         "p1-global": "harness.stages.classes.p1_global:P1_GLOBAL",
         "mt": "harness.stages.classes.mt:MT",
     },
@@ -157,8 +159,9 @@ MODEL_CLASSES = Registry(
             "one kn per node",
         ),
         "p1": (
-            "linear finite elements on the model's cells (harness/models/p1.py)",
-            "no fitted constants",
+            "linear finite elements on the model's cells (harness/models/p1.py), a material "
+            "per element for an engine's tetrahedra (harness/stages/classes/p1_element.py)",
+            "one E and one nu per element, with a prior toward the case's",
         ),
         "p1-global": (
             "linear finite elements on the model's cells with one effective isotropic material, "
@@ -175,8 +178,8 @@ MODEL_CLASSES = Registry(
 SPRINGS_CLASSES = tuple(
     n for n in MODEL_CLASSES if MODEL_CLASSES.module(n) == "harness.stages.classes.springs"
 )
-# calibrate --model: the springs classes and the classes of one fitted material
-CALIBRATE_CLASSES = SPRINGS_CLASSES + ("p1-global",)
+# calibrate --model: the springs classes and the classes of a fitted material
+CALIBRATE_CLASSES = SPRINGS_CLASSES + ("p1-global", "p1")
 # spellings that could mean two classes: refused, naming both
 AMBIGUOUS_CLASSES = {
     "springs+volume": ("springs+volume-shared", "springs+volume-element"),
@@ -301,6 +304,43 @@ PIP_NAMES = {"pydrake": "drake", "warp": "warp-lang"}
 
 # the engines that run a springbench export (``--model MODEL.json``), not E and nu
 EXPORT_ENGINES = ("newton-springs", "mujoco-springs")
+# the engines whose own tetrahedra run a calibrated material (engines run --model: a
+# p1 or p1-global export; mujoco-flex one material per body)
+MATERIAL_ENGINES = ("newton-tets", "mujoco-flex")
+
+
+# ``[model] exports`` of an engines case: springbench's models of the mesh, each made by
+# ``springbench calibrate`` with ``flags`` and run by ``engines`` (engines run ENGINE --model)
+@dataclass(frozen=True)
+class EngineExport:
+    flags: tuple
+    engines: tuple
+    about: str
+
+
+ENGINE_EXPORTS = {
+    "rule": EngineExport(
+        ("--method", "rule"),
+        ("newton-springs", "mujoco-springs"),
+        "the best stiffness rule (calibrate --method rule)",
+    ),
+    "calibrated": EngineExport((), ("newton-springs",), "calibrate's default (its validated fit)"),
+    "calibrated-mujoco": EngineExport(
+        ("--engine", "mujoco-springs"),
+        ("mujoco-springs",),
+        "the validated fit among what MuJoCo's tendons run (calibrate --engine mujoco-springs)",
+    ),
+    "p1-global": EngineExport(
+        ("--model", "p1-global"),
+        ("mujoco-flex", "newton-tets"),
+        "one fitted (E', nu') for the engines' tetrahedra (calibrate --model p1-global)",
+    ),
+    "p1": EngineExport(
+        ("--model", "p1"),
+        ("newton-tets",),
+        "a fitted material per tetrahedron (calibrate --model p1)",
+    ),
+}
 # the terms each export engine runs natively, spelled as the validated fit's candidates
 # spell their volume term (harness/optimize/select.py Candidate.volume): '' springs alone,
 # 'element' a volume term per element, 'node' one per node ('kn': Kot & Nagahashi's term)

@@ -17,9 +17,11 @@ seed 0) with the physical surfaces ``clamp`` and ``load``:
 Material: E = 1e5 Pa, density 1000 kg/m^3, nu in NUS. Each case runs the ``engines``
 stage (harness/stages/engines.py): ``springbench pack`` of the mesh (held-out loads sag,
 tip, tip2, torsion, bridge at a peak strain of about 1e-3, the FEM the reference's P2 with
-its error estimate), each engine's own model from E and nu, and springbench's exports of
-the same mesh (the best stiffness rule; calibrate's model) run in Newton, every answer
-scored against the pack's FEM. Quick runs export the rule only.
+its error estimate), each engine's own model from E and nu (PyBullet's and Drake's FEM
+bodies on the gravity loads), and springbench's exports of the same mesh (the best
+stiffness rule and calibrate's springs in Newton and MuJoCo; calibrated materials for the
+tetrahedra, one pair in MuJoCo's flex and Newton, one per tetrahedron in Newton), every
+answer scored against the pack's FEM. Quick runs export the rule only.
 """
 
 from __future__ import annotations
@@ -63,10 +65,11 @@ resolution = "{resolution}"
 clamp = "clamp"                             # mesh group held in every load
 load_region = "load"                        # mesh group the tip loads and the torsion act on
 loads = ["sag", "tip", "tip2", "torsion", "bridge"]
-engines = ["newton-tets", "mujoco-flex"]    # the engines' own models from E and nu
-exports = ["rule", "calibrated"]            # springbench's models of the mesh, run by \
-newton-springs
-budget = 15.0                               # calibrate --budget (s)
+# the engines' own models from E and nu (pybullet-fem, drake-fem: the gravity loads)
+engines = ["newton-tets", "mujoco-flex", "pybullet-fem", "drake-fem"]
+# springbench's models of the mesh, each run by the engines that take it (registry.py
+# ENGINE_EXPORTS): springs in newton-springs and mujoco-springs, materials in the tetrahedra
+exports = ["rule", "calibrated", "calibrated-mujoco", "p1-global", "p1"]
 
 [quick.model]
 exports = ["rule"]

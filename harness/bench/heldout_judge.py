@@ -1,6 +1,7 @@
 """The held-out study's judge, independent of springbench's FEM and statics: the study's
 loads, the truth (P2 on the body's mesh with scikit-fem) and the exported JSON's linear
-statics assembled here (springs, volume terms, kn terms)."""
+statics assembled here (springs, volume terms, kn terms; bench tets: linear tetrahedra with
+an export's per-tet E, nu or the plain material)."""
 
 from __future__ import annotations
 
@@ -241,3 +242,116 @@ def model_answers(data: dict, points, groups, loads, scale: dict) -> dict:
         f_model[order] = f
         out[load.name] = scale[load.name] * model_solve(K, held, f_model)[order]
     return out
+
+
+# -- linear tetrahedra (an export's tet_indices, tet_E, tet_nu; or the plain material) -----
+
+
+def tet_stiffness(points, tets, E, nu) -> sp.csr_matrix:
+    """K (3n, 3n) of linear tetrahedra, each with its own isotropic (E, nu):
+    K_e[(a,i),(b,j)] = V (lambda g_ai g_bj + mu g_aj g_bi + mu delta_ij g_a . g_b), g_a the
+    constant gradient of corner a's shape function (Lame form, not springbench's Voigt B^T D B)."""
+    x = points[tets]
+    A = x[:, 1:] - x[:, :1]  # rows: edges from corner 0; A @ [g_1 g_2 g_3] = I
+    g = np.empty((len(tets), 4, 3))
+    g[:, 1:] = np.transpose(np.linalg.inv(A), (0, 2, 1))
+    g[:, 0] = -g[:, 1:].sum(axis=1)
+    V = np.abs(np.linalg.det(A)) / 6
+    E, nu = np.broadcast_to(E, V.shape), np.broadcast_to(nu, V.shape)
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    Ke = (
+        lam[:, None, None, None, None] * np.einsum("mai,mbj->maibj", g, g)
+        + mu[:, None, None, None, None] * np.einsum("maj,mbi->maibj", g, g)
+        + (mu[:, None, None] * np.einsum("mak,mbk->mab", g, g))[:, :, None, :, None]
+        * np.eye(3)[None, None, :, None, :]
+    ) * V[:, None, None, None, None]
+    dofs = (3 * tets[:, :, None] + np.arange(3)).reshape(len(tets), 12)
+    n = 3 * len(points)
+    return sp.csr_matrix(
+        (
+            Ke.reshape(len(tets), 12, 12).ravel(),
+            (np.repeat(dofs, 12, axis=1).ravel(), np.tile(dofs, (1, 12)).ravel()),
+        ),
+        shape=(n, n),
+    )
+
+
+def tet_gravity(points, tets, gravity, rho=RHO) -> np.ndarray:
+    """(n, 3) nodal gravity forces: rho V_e / 4 g at each corner of every tetrahedron (the
+    lumped P1 mass a tet engine uses; for a constant g also the consistent P1 load)."""
+    x = points[tets]
+    V = np.abs(np.linalg.det(x[:, 1:] - x[:, :1])) / 6
+    m = np.zeros(len(points))
+    np.add.at(m, tets.ravel(), np.repeat(rho * V / 4, 4))
+    return m[:, None] * np.asarray(gravity, float)[None]
+
+
+def tet_solve(points, tets, groups, loads, scale: dict, E, nu, rho=RHO) -> dict:
+    """{load: u (n, 3)} of linear tetrahedra with per-tet (E, nu) under the study's loads
+    (times scale[load]): P1-consistent tractions on the load group's facets, lumped gravity
+    (tet_gravity), the held groups' nodes fixed, one sparse LU per support."""
+    K = tet_stiffness(points, tets, E, nu).tocsc()
+    n = len(points)
+    out, lus = {}, {}
+    for load in loads:
+        if load.held not in lus:
+            fixed = np.zeros((n, 3), bool)
+            fixed[np.unique(np.concatenate([groups[g].ravel() for g in load.held]))] = True
+            free = np.flatnonzero(~fixed.ravel())
+            lus[load.held] = (free, spla.splu(K[free][:, free].tocsc()))
+        free, lu = lus[load.held]
+        if load.traction is not None:
+            f = traction_forces(points, groups["load"], load.traction)
+        else:
+            f = tet_gravity(points, tets, load.gravity, rho)
+        u = np.zeros(3 * n)
+        u[free] = lu.solve(f.ravel()[free])
+        out[load.name] = scale[load.name] * u.reshape(n, 3)
+    return out
+
+
+def export_materials(data: dict, points, tets, source: str = "the export"):
+    """(E (m,), nu (m,)) of an export's tetrahedra in the order of the body's ``tets``: its
+    particles are matched to the vertices and its tet_indices rows (any order, any corner
+    order) to the body's tetrahedra, which they must be exactly; else ValueError."""
+    from scipy.spatial import cKDTree
+
+    where = f"{source}: "
+    for key in ("particle_q", "tet_indices", "tet_E", "tet_nu"):
+        if data.get(key) is None:
+            raise ValueError(f"{where}no {key}; export a tetrahedral model (--model p1-global, p1)")
+    q = np.asarray(data["particle_q"], float)
+    dist, order = cKDTree(q).query(points)
+    if (
+        len(q) != len(points)
+        or len(np.unique(order)) != len(q)
+        or np.max(dist) > 1e-9 * np.ptp(points, 0).max()
+    ):
+        raise ValueError(f"{where}particle_q are not the mesh's vertices; calibrate this mesh")
+    vertex = np.empty(len(q), int)
+    vertex[order] = np.arange(len(q))  # particle -> vertex
+    t = np.asarray(data["tet_indices"])
+    if t.ndim != 2 or t.shape[1] != 4 or t.min() < 0 or t.max() >= len(q):
+        raise ValueError(f"{where}tet_indices must be (m, 4) indices into particle_q")
+    both = np.sort(np.vstack([tets, vertex[t]]), axis=1)
+    ids = np.unique(both, axis=0, return_inverse=True)[1].ravel()  # one id per distinct tet
+    mine, theirs = ids[: len(tets)], ids[len(tets) :]
+    if len(t) != len(tets) or not np.array_equal(np.sort(mine), np.sort(theirs)):
+        raise ValueError(
+            f"{where}tet_indices ({len(t)} rows) are not the mesh's {len(tets)} tetrahedra "
+            "(each once); calibrate this mesh with its own cells"
+        )
+    row = np.empty(ids.max() + 1, int)
+    row[theirs] = np.arange(len(t))  # a distinct tet's row in the export
+    out = []
+    for key in ("tet_E", "tet_nu"):
+        v = np.asarray([np.nan if a is None else a for a in data[key]], float)
+        if v.shape != (len(t),) or not np.isfinite(v).all():
+            raise ValueError(
+                f"{where}{key} must hold one finite value per tet_indices row ({len(t)})"
+            )
+        out.append(v[row[mine]])
+    E, nu = out
+    if (E <= 0).any() or (nu <= -1).any() or (nu >= 0.5).any():
+        raise ValueError(f"{where}tet_E must be > 0 and tet_nu in (-1, 0.5)")
+    return E, nu

@@ -241,7 +241,7 @@ DYNAMICS = {
 
 # [model] kind = "engines": engines' deformable bodies against the FEM (harness/stages/engines.py)
 ENGINE_NAMES = registry.ENGINES.names()
-EXPORTS = ("rule", "calibrated")
+EXPORTS = ("rule", "calibrated")  # the default of [model] exports
 PACK_LOADS = ("sag", "tip", "tip2", "torsion", "bridge")
 ENGINES = {
     "body": Field("str", None, doc="the body's name in the table (default: the mesh file's stem)"),
@@ -272,10 +272,11 @@ ENGINES = {
     "exports": Field(
         "strs",
         EXPORTS,
-        choices=EXPORTS,
-        doc="springbench's models of the mesh run by newton-springs: rule (calibrate "
-        "--method rule, "
-        "the best stiffness rule), calibrated (calibrate's default)",
+        choices=tuple(registry.ENGINE_EXPORTS),
+        doc="springbench's models of the mesh, each run by the engines that take it: "
+        + "; ".join(
+            f"{n} ({e.about}; {', '.join(e.engines)})" for n, e in registry.ENGINE_EXPORTS.items()
+        ),
     ),
     "budget": Field(
         "float",

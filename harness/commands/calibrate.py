@@ -69,7 +69,7 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   ``engine`` (``--engine``, or null) and ``candidates`` (the names the validation chose
   among, or null without a validated fit),
   ``loads_fitted``, ``loads_heldout``, ``loads_validation``, ``G_val_mean`` and
-  ``G_val_loads`` (the validation loads of ``--model p1-global`` and the export's errors
+  ``G_val_loads`` (the validation loads of ``--model p1-global`` / ``p1`` and the export's errors
   there), ``validation_accepted``, ``training_dropped`` (training states the FEM cannot
   resolve, left out of the fit), ``prior_weight`` (lbfgs: ``--prior-weight``),
   ``G_norm`` and ``G_norm_heldout`` (RMS displacement
@@ -93,7 +93,10 @@ reference's status and, for a validated fit, what the validation chose. Writes:
   ``--model p1-global`` (linear tetrahedra with one fitted pair E', nu' for engines with one
   material per body; harness/stages/classes/p1_global.py) writes ``E_effective``,
   ``nu_effective`` and per tetrahedron ``tet_indices``, ``tet_E``, ``tet_nu``, ``tet_k_mu`` and
-  ``tet_k_lambda`` (Newton's inputs: 4/3 mu, lambda + 5/6 mu) instead of springs.
+  ``tet_k_lambda`` (Newton's inputs: 4/3 mu, lambda + 5/6 mu) instead of springs;
+  ``--model p1`` (a fitted E, nu per tetrahedron with a prior toward ``--E``, ``--nu``;
+  harness/stages/classes/p1_element.py) the same keys, ``tet_*`` per tetrahedron and
+  ``E_effective``, ``nu_effective`` null unless every tetrahedron shares one pair.
   ``dt_stable`` includes the term.
   Newton traps: ``add_particle(pos, vel, mass, radius)`` radius only matters for contacts
   (give a small one, or the particles collide with each other); ``add_spring`` recomputes
@@ -138,8 +141,8 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               spring_stiffness (N/m), spring_damping (N s/m), spring_stiffness_times_length (N),
               damping_ratio, dt_stable and dt_stable_float32 (s), omega_max (rad/s), E (Pa), nu,
               density (kg/m^3), loads_fitted, loads_heldout, loads_validation (never fitted nor
-              held out; --model p1-global: its fit is exported only when it beats the plain P1
-              there), G_val_mean and G_val_loads (the export's errors on them),
+              held out; --model p1-global, p1: its fit is exported only when it beats the plain
+              P1 there), G_val_mean and G_val_loads (the export's errors on them),
               validation_accepted (whether they let the fit be exported; null: not judged on
               them), training_dropped (training states
               left out: the FEM's error on them above a third of the best rule's), G_norm and
@@ -169,13 +172,14 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               kn_spring_count, kn_stiffness (kn, Pa; 2-D N/m), kn_shared; --model p1-global
               (linear tetrahedra, one fitted E', nu') adds E_effective (Pa), nu_effective and per
               tetrahedron tet_indices, tet_E (Pa), tet_nu, tet_k_mu and tet_k_lambda (Newton's
-              inputs, Pa); for engines: dt_safe (s:
-              the step to use, 0.8 dt_stable, measured in NVIDIA Newton in float32), settle_damping
-              ({c, omega_1, load, velocity_factor}: after every step v *= velocity_factor, mass
-              damping c = 2 omega_1 about critical for the lowest mode), and per load clamped_nodes
-              ({nodes, components}: the held node ids and components), loaded_nodes and forces (N,
-              one row per loaded node) and gravity (m/s^2, already inside forces; null without a
-              body force)
+              inputs, Pa); --model p1 (a fitted E, nu per tetrahedron) the same keys, E_effective
+              and nu_effective null unless every tetrahedron shares one pair; for engines: dt_safe
+              (s: the step to use, 0.8 dt_stable, measured in NVIDIA Newton in float32),
+              settle_damping ({c, omega_1, load, velocity_factor}: after every step v *=
+              velocity_factor, mass damping c = 2 omega_1 about critical for the lowest mode), and
+              per load clamped_nodes ({nodes, components}: the held node ids and components),
+              loaded_nodes and forces (N, one row per loaded node) and gravity (m/s^2, already
+              inside forces; null without a body force)
   MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each

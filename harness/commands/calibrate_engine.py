@@ -15,13 +15,14 @@ def check(s) -> None:
     if s.engine is None:
         return
     runs = registry.EXPORT_TERMS[s.engine]
-    if s.model not in registry.CLASS_TERMS:  # one fitted material (p1-global): no springs
+    if s.model not in registry.CLASS_TERMS:  # a fitted material (p1-global, p1): no springs
         own = [e for e in registry.ENGINES if e not in registry.EXPORT_ENGINES]
+        keys = "E_effective and nu_effective" if s.model == "p1-global" else "tet_E and tet_nu"
         raise SpringbenchError(
-            f"{s.engine} runs a springs export; --model {s.model} exports one material "
-            "(E_effective, nu_effective) for an engine's own elements",
+            f"{s.engine} runs a springs export; --model {s.model} exports a material "
+            f"({keys}) for an engine's own elements",
             field="--engine",
-            fix=f"drop --engine; give the JSON's E_effective and nu_effective to {', '.join(own)}",
+            fix=f"drop --engine; give the JSON's {keys} to {', '.join(own)}",
         )
     term = registry.CLASS_TERMS[s.model]
     if term in runs:

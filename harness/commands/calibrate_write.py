@@ -153,6 +153,14 @@ def metadata(s, rows, exported, net, case) -> dict:
     return meta
 
 
+def _material(data) -> str:
+    """The tetrahedra's material as printed: the pair they share, else the range of each."""
+    if data["E_effective"] is not None:
+        return f"E {data['E_effective']:.4g} Pa, nu {data['nu_effective']:.4g}"
+    E, nu = ([v for v in data[k] if v is not None] or [math.nan] for k in ("tet_E", "tet_nu"))
+    return f"E {min(E):.4g}..{max(E):.4g} Pa, nu {min(nu):.4g}..{max(nu):.4g} per tetrahedron"
+
+
 def write(s, rows, net, case):
     """Write MODEL.vtu/.json/.csv (and the picture of the fit) and print the table and the
     verdict."""
@@ -188,8 +196,8 @@ def write(s, rows, net, case):
         step = data.get("warning", "")
     k = data["spring_stiffness"]
     stiff = f"{net.n_springs} springs, masses {s.masses}, k {min(k):.3g}..{max(k):.3g} N/m"
-    if "tet_E" in data:  # one material for the engines' tetrahedra (model class p1-global)
-        stiff = f"masses {s.masses}, E {data['E_effective']:.4g} Pa, nu {data['nu_effective']:.4g}"
+    if "tet_E" in data:  # the engines' tetrahedra's material (model classes p1-global, p1)
+        stiff = f"masses {s.masses}, " + _material(data)
     print(
         f"-> {s.out} (+ .json, .csv): {net.n_nodes} nodes, {stiff}, {step}"
         + (picture.sentence(out, shown) if shown is not None else "")

@@ -28,7 +28,8 @@ The table gives per load the status (settled / not-settled / diverged / unsuppor
 unsupported-load), steps,
 simulated and wall time, final kinetic energy and relative residual;
 --log writes it as CSV. U.npz is written again as each load finishes (Ctrl-C keeps the
-finished loads) and holds the pack's digest, which score checks."""
+finished loads) and holds the pack's digest, which score checks, and with --model which
+model ran (its path, SHA-256 and E_effective, nu_effective), which score prints."""
 
 
 def add_arguments(p):
@@ -46,8 +47,11 @@ def add_arguments(p):
         type=Path,
         default=None,
         metavar="MODEL.json",
-        help="newton-springs, mujoco-springs: the springbench export to run (springbench "
-        "calibrate on the pack's mesh)",
+        help="the calibrated model to run, from springbench calibrate on the pack's mesh: "
+        "newton-springs, mujoco-springs: a springs export; newton-tets: a p1 or p1-global "
+        "export (tet_k_mu, tet_k_lambda per tetrahedron); mujoco-flex: a p1-global export "
+        "(E_effective, nu_effective as the flex's young, poisson); masses stay each "
+        "engine's own (newton-tets, mujoco-flex: the pack's lumped rho V / 4)",
     )
     r.add_argument("--loads", default=None, metavar="A,B", help="run only these loads")
     r.add_argument(
@@ -77,23 +81,50 @@ def with_displacement(answers: dict) -> dict:
     return {name: a for name, a in answers.items() if np.all(np.isfinite(a.u))}
 
 
-def _write_answer(out: Path, answers: dict, digest: str) -> None:
-    """The displacements so far, one array per load that has one, and the pack's digest
-    (atomically)."""
+def _write_answer(out: Path, answers: dict, digest: str, record: dict | None = None) -> None:
+    """The displacements so far, one array per load that has one, the pack's digest and
+    the record of the model run, if any (atomically)."""
     import io
+    import json
 
     import numpy as np
 
+    from harness.engines.tet_material import MODEL_KEY
     from harness.export.pack import DIGEST_KEY
     from harness.outputs import atomic_write
 
     buf = io.BytesIO()
     fields = {name: a.u for name, a in with_displacement(answers).items()}
-    np.savez_compressed(buf, **fields, **{DIGEST_KEY: digest})
+    extra = {} if record is None else {MODEL_KEY: json.dumps(record)}
+    np.savez_compressed(buf, **fields, **{DIGEST_KEY: digest}, **extra)
     atomic_write(out, buf.getvalue(), "--out")
 
 
-def run_loads(run, pack, options: dict, out: Path, digest: str) -> dict:
+def _record(args) -> dict | None:
+    """Which model ``--model`` runs and whose masses (module EPILOG), or None."""
+    from harness.engines.tet_material import model_record
+    from harness.registry import EXPORT_ENGINES
+
+    if args.model is None:
+        return None
+    masses = (
+        "the export's particle_mass"
+        if args.engine in EXPORT_ENGINES
+        else "the pack's density, lumped rho V / 4 (as without --model)"
+    )
+    return {**model_record(args.model), "masses": masses}
+
+
+def _check_model(args) -> None:
+    """One line when ``--model`` goes to an engine that takes none."""
+    from harness.engines.settle import no_model
+    from harness.registry import ENGINES, EXPORT_ENGINES, MATERIAL_ENGINES
+
+    if args.engine in ENGINES and args.engine not in EXPORT_ENGINES + MATERIAL_ENGINES:
+        no_model({"model": args.model}, args.engine)
+
+
+def run_loads(run, pack, options: dict, out: Path, digest: str, record=None) -> dict:
     """Run the engine one load at a time, rewriting ``out`` as each finishes; on Ctrl-C
     say how many loads ``out`` keeps and exit 130."""
     import dataclasses
@@ -103,7 +134,7 @@ def run_loads(run, pack, options: dict, out: Path, digest: str) -> dict:
     try:
         for ld in pack.loads:
             answers.update(run(dataclasses.replace(pack, loads=(ld,)), options))
-            _write_answer(out, answers, digest)
+            _write_answer(out, answers, digest, record)
             written = with_displacement(answers)
     except KeyboardInterrupt:
         n = len(pack.loads)
@@ -124,7 +155,6 @@ def main(args) -> int:
 
     from harness.engines import ENGINES, adapter
     from harness.outputs import atomic_write, check_out_file
-    from harness.registry import EXPORT_ENGINES
 
     if args.action == "list":
         for name, (package, what) in ENGINES.about.items():
@@ -137,18 +167,16 @@ def main(args) -> int:
     for flag, out in (("--out", args.out), ("--log", args.log)):
         if out is not None:
             check_out_file(out, flag)
-    if args.model is not None and args.engine not in EXPORT_ENGINES:
-        raise SpringbenchError(
-            f"{args.engine} runs the pack's own material, not a model",
-            field="--model",
-            fix=f"drop --model, or use {' or '.join(EXPORT_ENGINES)}",
-        )
+    if args.model is not None:
+        _check_model(args)
+    from harness.engines.tet_material import describe
     from harness.export.pack import pack_digest, read_pack
 
     full = read_pack(args.pack)
     run = adapter(args.engine)
+    record = _record(args)
     pack, digest = _only(full, args.loads), pack_digest(full)
-    answers = run_loads(run, pack, {"model": args.model}, args.out, digest)
+    answers = run_loads(run, pack, {"model": args.model}, args.out, digest, record)
     rows = [
         {
             "load": name,
@@ -164,10 +192,15 @@ def main(args) -> int:
     ]
     df = pd.DataFrame(rows)
     print(f"{args.engine} on {args.pack} ({pack.n_nodes} nodes, {len(pack.loads)} loads)")
+    if record is not None:
+        print(f"{describe(record)}; masses: {record['masses']}")
     print(
         df.to_string(index=False, float_format=lambda x: f"{x:.3g}" if math.isfinite(x) else "nan")
     )
     if args.log is not None:
-        atomic_write(args.log, df.to_csv(index=False).encode(), "--log")
+        log = (
+            df if record is None else df.assign(model=record["file"], model_sha256=record["sha256"])
+        )
+        atomic_write(args.log, log.to_csv(index=False).encode(), "--log")
     print(f"-> {args.out} (pack digest {digest})")
     return 0 if all(a.status in ("settled", *UNSUPPORTED) for a in answers.values()) else 1

@@ -56,6 +56,20 @@ def _check_digest(answer, folder, pack) -> str:
     )
 
 
+def model_run(answer) -> dict | None:
+    """The record of the model `engines run --model` ran, from an answer (.npz), or None."""
+    import json
+
+    import numpy as np
+
+    from harness.engines.tet_material import MODEL_KEY
+
+    if Path(answer).suffix.lower() != ".npz":
+        return None
+    with np.load(answer) as z:
+        return json.loads(str(z[MODEL_KEY])) if MODEL_KEY in z.files else None
+
+
 def _scored_loads(args, names: list, fields: dict) -> tuple[list, str]:
     """The loads to score: those --loads names (each must be in the answer), else the
     pack's loads the answer has; and the note naming the others (an error with
@@ -167,6 +181,7 @@ def _report(args, pack, fields: dict, wanted: list, gates: dict) -> int:
     1 when a load misses its gate."""
     import pandas as pd
 
+    from harness.engines.tet_material import describe
     from harness.export.pack_score import junit, score_fields
     from harness.outputs import atomic_write
 
@@ -176,6 +191,9 @@ def _report(args, pack, fields: dict, wanted: list, gates: dict) -> int:
         f"{args.model}: {pack.n_nodes} nodes, {len(wanted)} loads scored against the FEM "
         f"(E {pack.E:g} Pa, nu {pack.nu:g}); {args.displacements}"
     )
+    ran = model_run(args.displacements)
+    if ran is not None:
+        print(f"the engine ran {describe(ran)}; masses: {ran.get('masses')}")
     print(
         df.drop(columns=[c for c in ("G_norm_mean",) if c in df]).to_string(
             index=False, float_format=lambda x: f"{x:.4g}"
@@ -194,7 +212,8 @@ def _report(args, pack, fields: dict, wanted: list, gates: dict) -> int:
         )
     )
     if args.out is not None:
-        atomic_write(args.out, df.to_csv(index=False).encode(), "--out")
+        csv = df if ran is None else df.assign(model=ran["file"], model_sha256=ran["sha256"])
+        atomic_write(args.out, csv.to_csv(index=False).encode(), "--out")
         print(f"-> {args.out}")
     if args.junit is not None:
         atomic_write(

@@ -30,6 +30,7 @@ from harness.engines.settle import (
     gravity_of,
     gravity_only,
     lowest_omegas,
+    no_model,
     not_tetrahedra,
     p1_scaled_stiffness,
     settle,
@@ -221,6 +222,7 @@ class DrakeSim:
 def run(pack, options=None) -> dict:
     """{load: Answer} of Drake's FEM deformable body on the pack's tetrahedra (gravity
     loads)."""
+    no_model(options, "drake-fem")
     tets = tetrahedra(pack)
     if tets is None:
         return not_tetrahedra(pack, "drake-fem")

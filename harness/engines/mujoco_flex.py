@@ -10,6 +10,11 @@ mass rho V / 4 and the joint damping c m (mass-proportional, implicit in MuJoCo'
 MuJoCo 4 integrates flex elasticity explicitly (its implicit integrators refuse it): the
 step starts at DT_START of the P1 model's limit 2 / omega_max and halves whenever MuJoCo
 reports an unstable step (measured on gmsh cylinders: 0.2 of it stable, 0.4 not).
+
+With a calibrated material (``--model``: a p1-global export, harness/engines/tet_material.py)
+the flex's young and poisson are its ``E_effective``, ``nu_effective`` (a flex has one
+material; a per-tetrahedron export whose elements differ is refused); the masses stay the
+pack's lumped rho V / 4.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from harness.engines.settle import (
     settle,
     tetrahedra,
 )
+from harness.engines.tet_material import material, one_pair, tet_export
 from harness.models.masses import lumped_masses
 
 DT_START = 0.2
@@ -51,10 +57,13 @@ def _xml(points, tets, held_full, E, nu) -> str:
 class MujocoSim:
     """One MuJoCo model per load (its pins), ``advance`` / ``measure`` for settle."""
 
-    def __init__(self, pack, tets, masses, dt):
+    def __init__(self, pack, tets, masses, dt, E=None, nu=None):
         import mujoco
 
         self.mj, self.pack, self.tets, self.masses, self.dt = mujoco, pack, tets, masses, dt
+        # the flex's material: the pack's unless a calibrated one is given
+        self.E = pack.E if E is None else E
+        self.nu = pack.nu if nu is None else nu
 
     def load(self, ld):
         """A fresh model at rest under this load's pins, holds and forces (settle.Sim)."""
@@ -65,7 +74,7 @@ class MujocoSim:
         mj.set_mju_user_warning(self.warnings.append)
         try:
             self.m = mj.MjModel.from_xml_string(
-                _xml(self.pack.points, self.tets, full, self.pack.E, self.pack.nu)
+                _xml(self.pack.points, self.tets, full, self.E, self.nu)
             )
         finally:
             mj.set_mju_user_warning(previous)
@@ -118,18 +127,31 @@ class MujocoSim:
         return u, v, f
 
 
+def _material(pack, tets, model, data) -> tuple[float, float]:
+    """(E, nu) of the flex: ``model``'s one calibrated pair (``data`` its JSON), else the
+    pack's."""
+    if model is None:
+        return pack.E, pack.nu
+    return one_pair(material(data, model, pack.points, tets), "mujoco-flex")
+
+
 def run(pack, options=None) -> dict:
-    """{load: Answer} of MuJoCo's flex on the pack's tetrahedra."""
+    """{load: Answer} of MuJoCo's flex on the pack's tetrahedra, of the pack's material or
+    (``options['model']``) a calibrated one."""
+    model = (options or {}).get("model")
+    # a springs export is refused on any pack
+    data = None if model is None else tet_export(model, "mujoco-flex")
     tets = tetrahedra(pack)
     if tets is None:
         return not_tetrahedra(pack, "mujoco-flex")
+    E, nu = _material(pack, tets, model, data)
     masses = lumped_masses(pack.points, tets, pack.density)
-    A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)
+    A = p1_scaled_stiffness(pack.points, tets, E, nu, masses)
     limit, omegas, out = 2.0 / omega_max(A), lowest_omegas(A, pack.loads), {}
     for ld in pack.loads:
         dt = DT_START * limit
         for _ in range(HALVINGS + 1):
-            sim = MujocoSim(pack, tets, masses, dt)
+            sim = MujocoSim(pack, tets, masses, dt, E, nu)
             sim.load(ld)
             ans = settle(sim, ld, masses, dt, omegas[ld.name])
             if ans.status != "diverged":

@@ -15,6 +15,9 @@ Newton's own tetrahedral FEM (``newton-tets``) run to static equilibrium with
   linear elasticity with Lame mu = 3/4 k_mu and lambda = k_lambda - 5/8 k_mu, so the
   adapter sets k_mu = 4/3 mu and k_lambda = lambda + 5/6 mu of the pack's E and nu (the
   Lame values themselves would make the body 4/3 as stiff in shear). Lumped masses rho V / 4.
+  With a calibrated material (``--model``: a p1 or p1-global export, harness/engines/
+  tet_material.py) each tetrahedron takes the JSON's ``tet_k_mu``, ``tet_k_lambda`` instead;
+  the masses stay the pack's lumped rho V / 4.
 
 Nodes held in every component get mass 0 (Newton keeps them fixed); partly held ones (the
 free-traction states' minimal constraints) have their held components reset each step.
@@ -34,12 +37,15 @@ from harness.case.elasticity import lame
 from harness.engines.settle import (
     float32_resolution,
     lowest_omegas,
+    not_tetrahedra,
     omega_max,
     p1_scaled_stiffness,
     rayleigh_omega,
     settle,
+    tetrahedra,
     unsupported,
 )
+from harness.engines.tet_material import material, tet_export
 from harness.errors import SpringbenchError
 from harness.models.masses import lumped_masses
 
@@ -153,27 +159,33 @@ def _solve(pack, sim, masses, dt, omegas: dict) -> dict:
     return out
 
 
-def _tets(pack):
-    tets = pack.cells.get("tetra")
-    if pack.dim != 3 or tets is None or not len(tets):
-        return None
-    return np.asarray(tets, int)
+def _materials(pack, tets, model, data) -> tuple:
+    """(E, nu, k_mu, k_lambda), each (m,) per tetrahedron: the calibrated material ``data``
+    of ``model`` (a MODEL.json path), else the pack's own E and nu in Newton's terms."""
+    if model is not None:
+        mat = material(data, model, pack.points, tets)
+        return mat.E, mat.nu, mat.k_mu, mat.k_lambda
+    lam, mu = lame(pack.E, pack.nu)
+    one = np.ones(len(tets))
+    return pack.E * one, pack.nu * one, 4.0 / 3.0 * mu * one, (lam + 5.0 / 6.0 * mu) * one
 
 
 def run_tets(pack, options=None) -> dict:
-    """{load: Answer} of Newton's tetrahedral FEM on the pack's tetrahedra."""
-    tets = _tets(pack)
+    """{load: Answer} of Newton's tetrahedral FEM on the pack's tetrahedra, of the pack's
+    material or (``options['model']``) a calibrated one per tetrahedron."""
+    model = (options or {}).get("model")
+    # a springs export is refused on any pack
+    data = None if model is None else tet_export(model, "newton-tets")
+    tets = tetrahedra(pack)
     if tets is None:
-        return {
-            ld.name: unsupported(pack, "newton-tets needs a 3-D tetrahedral mesh")
-            for ld in pack.loads
-        }
-    lam, mu = lame(pack.E, pack.nu)
-    k_mu, k_lambda = 4.0 / 3.0 * mu, lam + 5.0 / 6.0 * mu
+        return not_tetrahedra(pack, "newton-tets")
+    E, nu, k_mu, k_lambda = _materials(pack, tets, model, data)
     masses = lumped_masses(pack.points, tets, pack.density)
-    A = p1_scaled_stiffness(pack.points, tets, pack.E, pack.nu, masses)
+    A = p1_scaled_stiffness(pack.points, tets, E, nu, masses)
     dt = DT_MARGIN * 2.0 / omega_max(A)
-    tet_rows = [(*t, k_mu, k_lambda, 0.0) for t in _positive(pack.points, tets)]
+    tet_rows = [
+        (*t, km, kl, 0.0) for t, km, kl in zip(_positive(pack.points, tets), k_mu, k_lambda)
+    ]
     sim = NewtonSim(pack.points, masses, tets=tet_rows, dt=dt)
     return _solve(pack, sim, masses, dt, lowest_omegas(A, pack.loads))
 
@@ -188,11 +200,14 @@ def _positive(points, tets):
 
 
 def read_model(path) -> dict:
-    """A springbench export's JSON (calibrate's MODEL.json), checked enough to run."""
+    """A springbench springs export's JSON (calibrate's MODEL.json), checked enough to run;
+    a material export for the engines' tetrahedra is refused in one line."""
     path = Path(path)
     try:
         data = json.loads(path.read_text())
-        for key in ("particle_q", "particle_mass", "spring_indices", "spring_stiffness"):
+        tets = isinstance(data, dict) and "tet_indices" in data
+        keys = ("particle_q", "particle_mass", "spring_indices", "spring_stiffness")
+        for key in () if tets else keys:
             data[key]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise SpringbenchError(
@@ -201,6 +216,14 @@ def read_model(path) -> dict:
             field="--model",
             fix="give the MODEL.json `springbench calibrate` wrote",
         ) from None
+    if tets:
+        raise SpringbenchError(
+            "a material export for the engines' own tetrahedra (calibrate --model p1-global "
+            "or p1), not springs",
+            file=str(path),
+            field="tet_indices",
+            fix="run it with newton-tets (or mujoco-flex for p1-global)",
+        )
     return data
 
 

@@ -30,6 +30,7 @@ from harness.engines.settle import (
     gravity_of,
     gravity_only,
     lowest_omegas,
+    no_model,
     not_tetrahedra,
     p1_scaled_stiffness,
     settle,
@@ -207,6 +208,7 @@ class PybulletSim:
 
 def run(pack, options=None) -> dict:
     """{load: Answer} of Bullet's FEM soft body on the pack's tetrahedra (gravity loads)."""
+    no_model(options, "pybullet-fem")
     tets = tetrahedra(pack)
     if tets is None:
         return not_tetrahedra(pack, "pybullet-fem")

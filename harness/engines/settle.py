@@ -48,6 +48,9 @@ from typing import Protocol
 
 import numpy as np
 
+from harness.errors import SpringbenchError
+from harness.registry import EXPORT_ENGINES, MATERIAL_ENGINES
+
 
 class LoadLike(Protocol):
     """What a Sim reads of a pack load (harness/export/pack.py ``PackLoad``)."""
@@ -117,6 +120,18 @@ def unsupported(pack, why: str, status: str = "unsupported") -> Answer:
     return Answer(np.full((pack.n_nodes, pack.dim), np.nan), status, note=why)
 
 
+def no_model(options, engine: str) -> None:
+    """One line when ``options`` names a model: ``engine`` runs the pack's own material."""
+    if (options or {}).get("model") is None:
+        return
+    raise SpringbenchError(
+        f"{engine} runs the pack's own material (E, nu) and takes no model",
+        file=str(options["model"]),
+        field="--model",
+        fix=f"drop --model, or use {', '.join(EXPORT_ENGINES + MATERIAL_ENGINES)}",
+    )
+
+
 def tetrahedra(pack) -> np.ndarray | None:
     """The pack's tetrahedra (m, 4), or None when its body is not a 3-D tetrahedral mesh."""
     tets = pack.cells.get("tetra")
@@ -165,16 +180,28 @@ def rayleigh_omega(load, masses: np.ndarray) -> float:
     return math.sqrt(num / den) if den > 0 and num > 0 else math.nan
 
 
-def p1_scaled_stiffness(points: np.ndarray, tets: np.ndarray, E: float, nu: float, masses):
+def p1_scaled_stiffness(points: np.ndarray, tets: np.ndarray, E, nu, masses):
     """M^-1/2 K M^-1/2 (csr, node-major dofs) of the P1 (linear tetrahedra) model with
-    lumped masses: its eigenvalues are the squared angular frequencies of the free body."""
+    lumped masses: its eigenvalues are the squared angular frequencies of the free body.
+    ``E``, ``nu``: one material, or one per tetrahedron (arrays (m,))."""
     import scipy.sparse as sp
     import skfem
+    from skfem.helpers import ddot, div, sym_grad
     from skfem.models.elasticity import lame_parameters, linear_elasticity
 
     mesh = skfem.MeshTet(np.ascontiguousarray(points.T), np.ascontiguousarray(tets.T))
     basis = skfem.Basis(mesh, skfem.ElementVector(skfem.ElementTetP1()))
-    K = skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis).tocsr()
+    if np.ndim(E) == 0 and np.ndim(nu) == 0:
+        K = skfem.asm(linear_elasticity(*lame_parameters(E, nu)), basis).tocsr()
+    else:  # a Lame pair per element: P0 fields
+
+        @skfem.BilinearForm
+        def form(u, v, w):
+            return 2.0 * w.mu * ddot(sym_grad(u), sym_grad(v)) + w.lam * div(u) * div(v)
+
+        lam, mu = lame_parameters(*np.broadcast_arrays(np.asarray(E, float), nu))
+        p0 = basis.with_element(skfem.ElementTetP0())
+        K = skfem.asm(form, basis, lam=p0.interpolate(lam), mu=p0.interpolate(mu)).tocsr()
     s = sp.diags(1.0 / np.sqrt(np.repeat(masses, 3)))  # skfem's interleaved dofs: node-major
     return (s @ K @ s).tocsr()
 

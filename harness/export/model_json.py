@@ -20,17 +20,20 @@ from harness.models.volume import NodeVolumeTerm
 
 
 def _tets(net) -> dict:
-    """The keys of a P1 model's one material (its ``info``'s E_effective, nu_effective):
-    tet_indices (2-D: triangles), per element E, nu and Newton's k_mu and k_lambda
-    (harness/engines/newton_engine.py run_tets)."""
-    E, nu = (float(net.info.get(k, math.nan)) for k in ("E_effective", "nu_effective"))
+    """The keys of a P1 model's material: tet_indices (2-D: triangles), per element E, nu
+    (``info``'s E_elements, nu_elements; else its one E_effective, nu_effective on every
+    element) and Newton's k_mu and k_lambda of them (harness/engines/newton_engine.py
+    run_tets); E_effective and nu_effective: the pair every element shares, else null."""
     m = len(net.volume.elements)
-    lam, mu = lame(E, nu) if math.isfinite(E + nu) else (math.nan, math.nan)
+    pair = [float(net.info.get(k, math.nan)) for k in ("E_effective", "nu_effective")]
+    E = np.broadcast_to(np.asarray(net.info.get("E_elements", pair[0]), float), (m,))
+    nu = np.broadcast_to(np.asarray(net.info.get("nu_elements", pair[1]), float), (m,))
+    lam, mu = lame(E, nu)
     per = {"tet_E": E, "tet_nu": nu, "tet_k_mu": 4 / 3 * mu, "tet_k_lambda": lam + 5 / 6 * mu}
     out = {"tet_indices": np.asarray(net.volume.elements, int).tolist()}
-    out.update({k: [v if math.isfinite(v) else None] * m for k, v in per.items()})
+    out.update({k: [x if math.isfinite(x) else None for x in v.tolist()] for k, v in per.items()})
     out.update(
-        {k: v if math.isfinite(v) else None for k, v in (("E_effective", E), ("nu_effective", nu))}
+        {k: v if math.isfinite(v) else None for k, v in zip(("E_effective", "nu_effective"), pair)}
     )
     return out
 

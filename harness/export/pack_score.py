@@ -46,7 +46,8 @@ def read_displacements(path, pack) -> dict:
     try:
         if ext == ".npz":
             with np.load(path) as z:
-                out = {k: np.asarray(z[k], float) for k in z.files if k != DIGEST_KEY}
+                # "__" keys are records (DIGEST_KEY, the model run), not loads
+                out = {k: np.asarray(z[k], float) for k in z.files if not k.startswith("__")}
         elif ext == ".csv":
             import pandas as pd
 

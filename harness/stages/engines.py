@@ -5,10 +5,12 @@ user does at the command line, each command in its own process: ``springbench pa
 the mesh (``--clamp``, ``--load-region``: the FEM is the reference's P2 with its error
 estimate), ``springbench engines run ENGINE`` for every engine of ``[model] engines`` (the
 engine's own model from E and nu) and for springbench's exports of the same mesh
-(``[model] exports``: ``calibrate --method rule``, the best stiffness rule; ``calibrate``,
-the calibrated model), run by ``newton-springs`` at their ``dt_safe`` with their
-``settle_damping``; every answer scored against the pack's FEM as ``springbench score``
-does (G_norm = RMS displacement error / RMS FEM displacement over the nodes).
+(``[model] exports``, harness/registry.py ENGINE_EXPORTS: ``calibrate --method rule``, the
+best stiffness rule; ``calibrate``, the calibrated springs; ``--engine mujoco-springs``;
+``--model p1-global`` and ``--model p1``, calibrated materials for the engines' own
+tetrahedra), each run by every engine that takes it (``engines run ENGINE --model``);
+every answer scored against the pack's FEM as ``springbench score`` does (G_norm = RMS
+displacement error / RMS FEM displacement over the nodes).
 
 Rows: one per (engine, model, load) with G_norm, max_error, G_ref (the FEM's own error
 as a G_norm), engine_status (settled / not-settled / diverged / not-installed / failed),
@@ -35,11 +37,10 @@ from harness.errors import SpringbenchError
 from harness.export.pack import read_pack
 from harness.export.pack_score import read_displacements, score_fields
 from harness.io.meshfile import read_mesh
-from harness.registry import ENGINES
+from harness.registry import ENGINE_EXPORTS, ENGINES
 
 NAME = "engines"
 OWN = "own (E, nu)"
-EXPORT_ENGINE = "newton-springs"
 COLUMNS = (
     ["body", "resolution", "n_tets", "nu", "engine", "model", "load"]
     + ["G_norm", "max_error", "G_ref", "engine_status", "steps", "wall_s"]
@@ -136,21 +137,27 @@ def engine_rows(
 
 
 def export(mesh: Path, material: tuple, groups: tuple, label: str, folder: Path):
-    """(model label, JSON path or the reason there is none) of one springbench export: its
-    fit stops by iteration counts (no wall-time budget: the same export on any machine)."""
+    """(model label, JSON path or the reason there is none) of one springbench export made
+    with ENGINE_EXPORTS[label]'s flags: its fit stops by iteration counts (no wall-time
+    budget: the same export on any machine)."""
     out = folder / f"{label}.vtu"
-    extra = ("--method", "rule") if label == "rule" else ()
-    proc = cli("calibrate", mesh, *material, *groups, "--out", out, *extra)
+    proc = cli("calibrate", mesh, *material, *groups, "--out", out, *ENGINE_EXPORTS[label].flags)
     if proc.returncode != 0 or not out.with_suffix(".json").exists():
         return f"springbench {label}", f"calibrate {label}: {_why(proc)}"
     data = json.loads(out.with_suffix(".json").read_text())
     row = pd.read_csv(out.with_suffix(".csv")).query("exported").iloc[0]
-    choice = data.get("choice") if label == "calibrated" else None
-    return (
-        f"springbench {label}: "
-        + (choice if choice and choice != "rule" else f"rule {row.stiffness}"),
-        out.with_suffix(".json"),
-    )
+    return f"springbench {label}: {exported(data, row, label)}", out.with_suffix(".json")
+
+
+def exported(data: dict, row, label: str) -> str:
+    """What an export holds, in words: its rule, its fitted choice, its fitted pair."""
+    choice = None if label == "rule" else data.get("choice")
+    if not choice or choice == "rule":
+        return f"rule {row.stiffness}"
+    E, nu = data.get("E_effective"), data.get("nu_effective")
+    if label == "p1-global" and E is not None and nu is not None:
+        return f"E {E:.3g} Pa, nu {nu:.3f}"
+    return "a material per tetrahedron" if label == "p1" else str(choice)
 
 
 def study(
@@ -182,12 +189,13 @@ def study(
     pack = read_pack(scratch / "pack")
     runs = [(engine, OWN, None) for engine in spec["engines"]]
     for label in spec["exports"]:
-        if not _installed(EXPORT_ENGINE):  # its rows say so; no export to make
-            runs.append((EXPORT_ENGINE, f"springbench {label}", None))
+        engines = ENGINE_EXPORTS[label].engines
+        if not any(map(_installed, engines)):  # their rows say so; no export to make
+            runs += [(engine, f"springbench {label}", None) for engine in engines]
             continue
         status(f"calibrate {label}")
         model, source = export(mesh, material, groups, label, scratch / "exports")
-        runs.append((EXPORT_ENGINE, model, source))
+        runs += [(engine, model, source) for engine in engines]
     rows = []
     for i, (engine, model, source) in enumerate(runs):
         status(f"{engine} {model}")

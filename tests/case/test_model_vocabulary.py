@@ -58,7 +58,7 @@ def test_calibrate_offers_the_registrys_springs_classes_and_p1_global():
     springs = tuple(n for n, c in registry.MODEL_CLASSES.items() if isinstance(c, Springs))
     option = _model_option()
     assert springs == registry.SPRINGS_CLASSES
-    assert tuple(option.choices) == registry.CALIBRATE_CLASSES == springs + ("p1-global",)
+    assert tuple(option.choices) == registry.CALIBRATE_CLASSES == springs + ("p1-global", "p1")
     assert all(f"{n}: {registry.class_doc(n)}" in option.help for n in option.choices)
 
 

@@ -46,17 +46,18 @@ def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_pa
     pytest.importorskip("mujoco")
     assert STAGES.target("engines") == "harness.stages.engines"
     case = load_case(FOLDER / "beam-coarse_nu0.30.toml", "full")
-    spec = dict(case.section("model"), budget=2.0)
+    spec = dict(case.section("model"), engines=("newton-tets", "mujoco-flex"), exports=("rule",))
     df = S.case_rows(case, tmp_path, spec)
     loads = df[df.load != "mean"]
-    assert set(loads.engine) == {"newton-tets", "mujoco-flex", "newton-springs"}
+    assert set(loads.engine) == {"newton-tets", "mujoco-flex", "newton-springs", "mujoco-springs"}
     assert (loads.engine_status == "settled").all(), loads[
         ["engine", "model", "load", "engine_status", "note"]
     ]
     own = loads[loads.model == S.OWN].pivot(index="load", columns="engine", values="G_norm")
     # the same P1, two engines
     assert np.allclose(own["newton-tets"], own["mujoco-flex"], rtol=0.02), own
-    rule = loads[loads.model.str.startswith("springbench rule")].set_index("load").G_norm
+    rules = loads[loads.model.str.startswith("springbench rule")]
+    rule = rules.pivot(index="load", columns="engine", values="G_norm")
     from harness.export.pack import read_pack
     from harness.export.vtu import read_vtu
     from harness.models.springs import incidence, stiffness_matrix
@@ -68,7 +69,10 @@ def test_one_case_runs_every_engine_and_scores_it_as_an_independent_solve(tmp_pa
         ld = pack.load(name)
         u = held_solve(K, ld, pack.points.shape)
         g = np.linalg.norm(u - ld.u_fem) / np.linalg.norm(ld.u_fem)
-        assert rule[name] == pytest.approx(g, rel=0.02, abs=6 * pack.meta["peak_strain"] * g), name
+        for engine in ("newton-springs", "mujoco-springs"):  # the rule export in both
+            assert rule[engine][name] == pytest.approx(
+                g, rel=0.02, abs=6 * pack.meta["peak_strain"] * g
+            ), (engine, name)
     means = df[df.load == "mean"].set_index(["engine", "model"]).G_norm
     for (engine, model), g in loads.groupby(["engine", "model"]).G_norm:
         assert means[(engine, model)] == pytest.approx(g.mean())
@@ -88,7 +92,10 @@ def test_an_engine_not_installed_leaves_rows_naming_the_extra(monkeypatch, tmp_p
     assert [(r["engine"], r["engine_status"]) for r in rows] == [
         ("newton-tets", "not-installed"),
         ("mujoco-flex", "not-installed"),
-        ("newton-springs", "not-installed"),
+        ("pybullet-fem", "not-installed"),
+        ("drake-fem", "not-installed"),
+        ("newton-springs", "not-installed"),  # the rule export, in each engine that runs it
+        ("mujoco-springs", "not-installed"),
     ]
     rows = S.engine_rows(None, tmp_path, "mujoco-flex", ["tip", "sag"], tmp_path / "run")
     assert [r["load"] for r in rows] == ["tip", "sag"]
