@@ -26,7 +26,7 @@ C diag(theta) C^T like the volume and P1 terms and the optimisers of harness/opt
 (which assume that form) cannot fit it: an adjoint gradient would need one solve with
 K^T per load, -2 lambda^T K_j u per constant. With three constants the sms stage fits
 theta by least squares in log theta (harness/stages/bc2000_linear.fit, the B&C suite's
-own fit; harness/stages/sms_mt.py). 2-D: B&C 2000 define no 2-D element (their
+own fit; harness/stages/classes/mt.py). 2-D: B&C 2000 define no 2-D element (their
 conclusion leaves surfaces to future work): :func:`unsupported` says so and the stage
 writes a skipped row.
 """

@@ -225,18 +225,23 @@ def test_newton_runs_a_volume_term_per_node_to_its_linear_statics(packs, tmp_pat
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("engine", ["newton-tets", "mujoco-flex", "newton-springs"])
+@pytest.mark.parametrize(
+    "engine", ["newton-tets", "mujoco-flex", "newton-springs", "mujoco-springs", "pybullet-fem"]
+)
 def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engine):
     """From a pack of a gmsh mesh no other test shares, one command runs the engine and one
-    scores it; the gate exits 0 above the engine's error and 1 below it; the JUnit file
-    parses and holds one test case per load."""
+    scores it; the gate exits 0 above the engine's error and 1 below it (and at 1e-9); the
+    JUnit file parses and holds one test case per load. PyBullet takes gravity loads only."""
     from xml.etree import ElementTree
 
-    pytest.importorskip("mujoco" if engine == "mujoco-flex" else "newton")
+    from harness.registry import ENGINES
+
+    pytest.importorskip(ENGINES.about[engine][0])
     folder, by_size = packs
     mesh, out, _ = by_size[0.06]
+    loads = "sag,bridge" if engine == "pybullet-fem" else "tip,sag"
     extra = []
-    if engine == "newton-springs":
+    if engine in ("newton-springs", "mujoco-springs"):  # the rule's export: springs alone
         assert (
             cli.main(
                 (
@@ -250,15 +255,13 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
         extra = ["--model", str(tmp_path / "m.json")]
     u, table, report = tmp_path / "u.npz", tmp_path / "g.csv", tmp_path / "junit.xml"
     assert (
-        cli.main(
-            ["engines", "run", engine, str(out), "--loads", "tip,sag", "--out", str(u), *extra]
-        )
+        cli.main(["engines", "run", engine, str(out), "--loads", loads, "--out", str(u), *extra])
         == 0
     )
     assert (
         cli.main(
             (
-                ["score", "--displacements", str(u), str(out), "--loads", "tip,sag"]
+                ["score", "--displacements", str(u), str(out), "--loads", loads]
                 + ["--out", str(table)]
             )
         )
@@ -268,12 +271,13 @@ def test_one_command_per_engine_from_pack_to_score(packs, tmp_path, capsys, engi
 
     g = pd.read_csv(table).set_index("load").G_norm
     worst = float(g.drop("total").max())
-    gate = ["score", "--displacements", str(u), str(out), "--loads", "tip,sag"]
+    gate = ["score", "--displacements", str(u), str(out), "--loads", loads]
     gate += ["--junit", str(report)]
     assert cli.main([*gate, "--max-g-norm", str(1.5 * worst)]) == 0
     assert cli.main([*gate, "--max-g-norm", str(0.5 * worst)]) == 1
+    assert cli.main([*gate, "--max-g-norm", "1e-9"]) == 1
     cases = ElementTree.parse(report).getroot().iter("testcase")
-    assert sorted(c.get("name") for c in cases) == ["sag", "tip"]
+    assert sorted(c.get("name") for c in cases) == sorted(loads.split(","))
 
 
 def test_a_missing_engine_is_one_line_naming_the_extra(monkeypatch, tmp_path, capsys):

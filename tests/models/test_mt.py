@@ -21,7 +21,7 @@ from harness.paths import ROOT
 from harness.registry import MODEL_CLASSES
 from harness.stages import StageContext
 from harness.stages import sms as stage
-from harness.stages.sms_mt import fit_theta
+from harness.stages.classes.mt import fit_theta
 
 SWEEP = ROOT / "cases" / "nu_sweep"
 
