@@ -83,7 +83,7 @@ def engines_finding(df) -> str:
     m = df[(df["load"] == "mean") & _has(df["G_norm"])]
     runs = df[df["load"] != "mean"]
     ours = m["model"].astype(str).str.startswith("springbench")
-    own, exported = m[~ours], m[ours]
+    own, exported = m[~ours], m[ours & ~_materials(m["model"])]
     parts = []
     if len(own):
         names = ", ".join(sorted(map(str, own["engine"].unique())))
@@ -91,7 +91,9 @@ def engines_finding(df) -> str:
     if len(exported):
         nus = exported["nu"].dropna().unique()
         every = " at every nu" if len(nus) > 1 else f" at nu = {nus[0]:g}" if len(nus) else ""
-        parts.append(f"springbench's exports run in Newton are {_span(exported)}{every}")
+        engines = _and(sorted(map(str, exported["engine"].unique())))
+        parts.append(f"springbench's spring exports ({engines}) are {_span(exported)}{every}")
+    parts += material_findings(df)
     gone = _not_installed(runs, st)
     if gone:
         verb = "is" if len(gone) == 1 else "are"
@@ -105,6 +107,45 @@ def engines_finding(df) -> str:
     return text[:1].upper() + text[1:] + "."
 
 
+def _materials(model_column):
+    """Which rows are calibrated materials for the engines' tetrahedra (p1-global, p1)."""
+    return model_column.astype(str).str.match(r"springbench (p1-global|p1):")
+
+
+def material_findings(df) -> list[str]:
+    """Per engine and calibrated material (p1-global, p1), per load: the geometric mean over
+    the bodies, meshes and nu of its G_norm over the engine's own (E, nu) G_norm on the same
+    case and load, and where it helps (< 1) and where it hurts (> 1)."""
+    import numpy as np
+
+    keys = [k for k in ("body", "resolution", "n_tets", "nu") if k in df.columns]
+    runs = df[(df["load"] != "mean") & _has(df["G_norm"])].copy()
+    runs["G_norm"] = runs["G_norm"].astype(float)
+    own = runs[runs["model"] == "own (E, nu)"].set_index([*keys, "engine", "load"])["G_norm"]
+    mats = runs[_materials(runs["model"])]
+    out = []
+    for (engine, label), g in mats.groupby(["engine", who(mats["model"])], sort=True):
+        plain = own.reindex(_index(g, [*keys, "engine", "load"])).to_numpy()
+        ok = np.isfinite(plain) & (plain > 0)
+        if not ok.any():
+            continue
+        ratio = g["G_norm"].to_numpy()[ok] / plain[ok]
+        per = g[ok].assign(r=np.log(ratio)).groupby("load", sort=False)["r"].mean().apply(np.exp)
+        loads = ", ".join(f"{name} x{r:.2g}" for name, r in per.items())
+        hurts = [name for name, r in per.items() if r > 1]
+        tail = f"; it hurts on {_and(hurts)}" if hurts else "; it helps on every load"
+        what = label.replace("springbench ", "")
+        out.append(f"{what} in {engine} against its own (E, nu): {loads}{tail}")
+    return out
+
+
+def _index(g, keys):
+    """The MultiIndex of ``g``'s ``keys`` columns."""
+    import pandas as pd
+
+    return pd.MultiIndex.from_frame(g[keys])
+
+
 def _has(col):
     """Which entries of ``col`` are numbers."""
     import pandas as pd
@@ -116,8 +157,9 @@ ENGINES_NOTE = (
     "Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the "
     "mean over "
     "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
-    "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated model) run in "
-    "Newton. "
+    "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated springs) run in "
+    "Newton and MuJoCo, its calibrated materials (p1-global: one pair; p1: one per "
+    "tetrahedron) in the engines' own tetrahedra; PyBullet and Drake on the gravity loads. "
 )
 
 

@@ -448,3 +448,50 @@ def test_calibrates_verdict_says_memorised_as_run_flags_it():
     fine = fit(0.029, fitted=0.010, pooled=0.03)
     assert "Memorised" not in heldout_sentence(fine, RULES, names)
     assert "memorised" not in flags(fine, RULES)
+
+
+def test_the_engine_findings_say_per_load_where_a_calibrated_material_helps_and_hurts():
+    """A hand-made table: one fitted pair in mujoco-flex at two nu (sag 0.5x and 0.8x the
+    engine's own error: geometric mean 0.63x; torsion 1.5x at both: it hurts there), and a
+    per-tetrahedron material in newton-tets that helps on both loads."""
+    import pandas as pd
+
+    from harness.report.engines import engines_finding, material_findings
+
+    rows = []
+    own = {"sag": 0.4, "torsion": 0.2}
+    fitted = {
+        ("mujoco-flex", "springbench p1-global: E 9e+04 Pa, nu 0.400"): {
+            0.3: {"sag": 0.2, "torsion": 0.3},
+            0.45: {"sag": 0.32, "torsion": 0.3},
+        },
+        ("newton-tets", "springbench p1: a material per tetrahedron"): {
+            0.3: {"sag": 0.1, "torsion": 0.1},
+            0.45: {"sag": 0.1, "torsion": 0.1},
+        },
+    }
+    for nu in (0.3, 0.45):
+        for engine in ("mujoco-flex", "newton-tets"):
+            rows += [
+                dict(
+                    body="b", n_tets=9, nu=nu, engine=engine, model="own (E, nu)", load=n, G_norm=g
+                )
+                for n, g in own.items()
+            ]
+        for (engine, model), by_nu in fitted.items():
+            rows += [
+                dict(body="b", n_tets=9, nu=nu, engine=engine, model=model, load=n, G_norm=g)
+                for n, g in by_nu[nu].items()
+            ]
+    df = pd.DataFrame(rows).assign(engine_status="settled")
+    mujoco, newton = material_findings(df)
+    assert mujoco == (
+        "p1-global in mujoco-flex against its own (E, nu): sag x0.63, torsion x1.5; "
+        "it hurts on torsion"
+    )
+    assert newton.startswith("p1 in newton-tets") and "sag x0.25, torsion x0.5" in newton
+    assert newton.endswith("it helps on every load")
+    means = [dict(r, load="mean") for r in rows]  # the finding reads the load rows
+    assert mujoco in engines_finding(
+        pd.concat([df, pd.DataFrame(means).assign(engine_status="settled")])
+    )

@@ -16,7 +16,7 @@ NEED = {"body", "resolution", "n_tets", "nu", "engine", "model", "load", "G_norm
 def who(model_column):
     """'engine: model' labels with the export's detail dropped ('springbench rule: rule
     learned' -> 'springbench rule')."""
-    return model_column.str.replace(r"springbench (\w+):.*", r"springbench \1", regex=True)
+    return model_column.str.replace(r"springbench ([\w-]+):.*", r"springbench \1", regex=True)
 
 
 def draw(df, out: Path) -> list[Path]:
