@@ -111,6 +111,7 @@ from __future__ import annotations
 
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 from harness.case.default_loads import PEAK_STRAIN
@@ -426,6 +427,7 @@ def add_arguments(p):
 
 def main(args) -> int:
     from harness.commands.calibrate_check import check
+    from harness.commands.calibrate_progress import split
     from harness.commands.calibrate_run import run
     from harness.commands.calibrate_settings import Settings
     from harness.commands.calibrate_write import write
@@ -447,14 +449,17 @@ def main(args) -> int:
     check_mesh(mesh, str(s.mesh))  # the mesh's mistakes first, before anything is built on it
     for line in unit_warnings(s, mesh):  # before the work: minutes on a wrong unit are lost
         print(line, file=sys.stderr, flush=True)
+    t0, spent = time.monotonic(), {}
     with tempfile.TemporaryDirectory(prefix="springbench-calibrate-") as tmp:
         tmp = Path(tmp)
         try:
-            rows, net, case = run(s, mesh, tmp)
+            rows, net, case = run(s, mesh, tmp, spent)
             write(s, rows, net, case)
         except SpringbenchError as exc:  # name the user's mesh and flags, never our temporary files
             field = "--budget" if exc.field == "optimizer.options.max_seconds" else exc.field
             if exc.file is None or str(tmp) in str(exc.file) or field != exc.field:
                 raise type(exc)(exc.message, file=str(s.mesh), field=field, fix=exc.fix) from None
             raise
+    if not s.quiet:  # where the time went (reported, never used for a choice)
+        print(split(spent, time.monotonic() - t0), file=sys.stderr, flush=True)
     return 0

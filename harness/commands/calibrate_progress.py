@@ -4,7 +4,9 @@ and the phase's ETA from its work. The fits stop by counts fixed before the run,
 work ahead is known and the messages say where it stands: "validation: ... (fit k of n)",
 "fitting ... (start i of n)" as unit k (or i) begins, "lbfgs it k of n", "gauss-newton it
 k of n", "sa T#k of n" once unit k is done. The time left is the phase's elapsed time per
-unit done times the units left; --budget plays no part (it only aborts a fit)."""
+unit done times the units left; --budget plays no part (it only aborts a fit). The wall
+time of each phase is kept for calibrate's closing line (:func:`split`): it is reported,
+never used for a choice."""
 
 from __future__ import annotations
 
@@ -27,15 +29,36 @@ def left(msg: str, begun: bool, elapsed: float) -> float | None:
     return elapsed * (n - done) / done
 
 
-def tracker(clock, *_):
+# the phases of the split, in the order they run, as calibrate's closing line names them
+PHASES = {
+    "building": "building",
+    "fem": "FEM reference",
+    "rules": "rules",
+    "validation": "validation",
+    "final": "final fit",
+    "fit": "fit",
+}
+
+
+def tracker(clock, *_, spent: dict | None = None):
     """The stage's ``status(msg)`` callback driving ``clock`` (``clock.set(phase, detail)``,
     ``clock.bound(seconds or None)``). Further arguments (the budget, whether the fit is
-    validated) are not needed: the work says how much is left."""
+    validated) are not needed: the work says how much is left. ``spent`` (phase -> wall
+    seconds) gets each phase's time as the next one begins."""
     state = {"phase": "", "t0": time.monotonic(), "fits": 0}
+    spent = {} if spent is None else spent
+
+    def stop():
+        """The current phase's time into ``spent``; no phase runs after it."""
+        now = time.monotonic()
+        if state["phase"]:
+            spent[state["phase"]] = spent.get(state["phase"], 0.0) + now - state["t0"]
+        state.update(phase="", t0=now)
 
     def enter(phase: str):
         if state["phase"] != phase:
-            state.update(phase=phase, t0=time.monotonic())
+            stop()
+            state["phase"] = phase
             clock.bound(None)
 
     def estimate(msg: str, begun: bool):
@@ -62,7 +85,10 @@ def tracker(clock, *_):
             enter("final")
             clock.set("final fit", msg.removeprefix("fitting "))
             estimate(msg, begun=True)
-        elif msg.startswith("optimising"):
+        elif msg.startswith("statics of"):
+            enter("rules")
+            clock.set("rules", msg)
+        elif msg.startswith("optimising") or ": fitting " in msg:
             enter("fit")
             clock.set("fit", msg)
         else:
@@ -70,4 +96,13 @@ def tracker(clock, *_):
             if state["phase"] == "fit":
                 estimate(msg, begun=False)
 
+    status.stop = stop  # at the stage's end: the last phase's time into ``spent``
     return status
+
+
+def split(spent: dict, total: float) -> str:
+    """calibrate's closing line: the wall time of each phase that ran and of the rest
+    (reading the mesh, scoring, writing), in seconds."""
+    parts = [f"{PHASES[k]} {spent[k]:.0f} s" for k in PHASES if spent.get(k, 0.0) > 0]
+    rest = max(total - sum(spent.values()), 0.0)
+    return f"wall time: {', '.join(parts + [f'the rest {rest:.0f} s'])} ({total:.0f} s)"

@@ -21,16 +21,19 @@ from harness.stages import sms as stage
 from harness.stages.sms_measures import validation_rank
 
 
-def run(s, mesh, tmp: Path):
+def run(s, mesh, tmp: Path, spent: dict | None = None):
     """(rows, the exported network, the case) of one calibration (settings ``s``; a mesh in
     other units than m is handed over as a file in tmp); the exported row carries its
-    held-out displacements as ``_heldout`` (:class:`harness.stages.sms.Heldout` or None)."""
+    held-out displacements as ``_heldout`` (:class:`harness.stages.sms.Heldout` or None).
+    ``spent`` gets the wall seconds of the stage's phases (calibrate_progress.tracker)."""
     case = mesh_case(s, mesh, tmp)
     clock = Clock("calibrate")  # on a terminal only (and not with --quiet)
+    status = tracker(clock, spent=spent)
     try:
-        ctx = StageContext(out_dir=tmp / "out", seed=s.seed, status=tracker(clock))
+        ctx = StageContext(out_dir=tmp / "out", seed=s.seed, status=status)
         result = stage.models(case, ctx)
     finally:
+        status.stop()
         clock.close()
     rows = list(result.rows)
     if s.method == "rule":

@@ -74,3 +74,23 @@ def test_left_reads_k_of_n():
     assert cp.left("it 3 of 3", False, 9.0) == 0.0
     assert cp.left("no count here", False, 9.0) is None
     assert cp.left("it 5 of 3", False, 9.0) is None  # not a count of this work
+
+
+def test_the_closing_line_splits_the_wall_time_by_phase(monkeypatch):
+    """By hand from MESSAGES (+ rules at 8 s, the end at 95 s of 100): building 5 s, FEM
+    reference 3 s, rules 2 s, validation 40 s, final fit 45 s, the rest 5 s."""
+    now = [0.0]
+    monkeypatch.setattr(cp.time, "monotonic", lambda: now[0])
+    spent = {}
+    status = cp.tracker(Record(), spent=spent)
+    messages = sorted(MESSAGES + [(8.0, "statics of the 6 stiffness rules")])
+    for t, msg in messages:
+        now[0] = t
+        status(msg)
+    now[0] = 95.0
+    status.stop()
+    assert spent == {"building": 5, "fem": 3, "rules": 2, "validation": 40, "final": 45}
+    assert cp.split(spent, 100.0) == (
+        "wall time: building 5 s, FEM reference 3 s, rules 2 s, validation 40 s, "
+        "final fit 45 s, the rest 5 s (100 s)"
+    )
