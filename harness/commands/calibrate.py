@@ -162,6 +162,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               rule is exported, null without held-out loads), flags (the row's flags as
               springbench run gives them: ref-coarse, memorised, fit-worse-than-rule),
               best_rule_heldout ({rule, G_heldout_mean}: the best rule on the held-out loads),
+              G_heldout_mean_tets (the plain linear tetrahedra with --E, --nu on the mesh: your
+              engine's own body, never a candidate; null without held-out loads, with --model
+              p1-global / p1 or on a mesh not all tetrahedra / triangles),
               opt_stop and opt_stops (the
               optimiser's whole stop message: the exported start's, and every start's),
               mass_residual, masses, prior_weight (lbfgs), units; --model springs+volume-* adds
@@ -181,7 +184,9 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               per load clamped_nodes ({nodes, components}: the held node ids and components),
               loaded_nodes and forces (N, one row per loaded node) and gravity (m/s^2, already
               inside forces; null without a body force)
-  MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written),
+  MODEL.csv   the printed table: model, stiffness (rule), optimizer, exported (the row written;
+              the row tets[E, nu], stiffness p1, optimizer not-a-candidate: the plain linear
+              tetrahedra with --E, --nu, never exported nor ranked),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
               G_norm_final (fitted loads, pooled), G_fit_score (fitted loads: the mean of each
               family's and of the clamped states' own G_norm; ranks the rules), G_heldout,

@@ -156,6 +156,18 @@ def memorised(exported: dict, rules: list) -> str:
     )
 
 
+def tets_sentence(tets: dict, dim: int = 3) -> str:
+    """The plain linear tetrahedra's (2-D: triangles') held-out error
+    (calibrate_run.plain_tets_row), in one sentence: what the engine's own elements with the
+    user's material would do."""
+    return (
+        f"Your engine's own linear {'triangles' if dim == 2 else 'tetrahedra'} with (E, nu) "
+        f"at this mesh: "
+        f"{pct(tets.get('G_heldout_mean'))} held-out error (not a candidate; --model "
+        "p1-global / p1 fits their material)."
+    )
+
+
 def fitted_sentence(exported: dict, best: dict) -> str:
     """The fitted loads' error beside the best rule's there (the rule the fit started from)."""
     return (

@@ -12,6 +12,7 @@ import pandas as pd
 from harness.commands import calibrate_picture as picture
 from harness.commands import calibrate_verdict as cv
 from harness.commands.calibrate_case import prior_weight
+from harness.commands.calibrate_run import tets_row
 from harness.export.engine_loads import load_records, settle_recipe
 from harness.export.model_json import export
 from harness.outputs import staged
@@ -45,6 +46,12 @@ def _candidates(case) -> list[str] | None:
     restricts them), None without a validated fit."""
     select = (case.section("optimizer") or {}).get("select")
     return list(select["candidates"]) if select else None
+
+
+def rule_rows(rows) -> list[dict]:
+    """The stiffness rules' rows: the unfitted rows a verdict or a choice compares with (never
+    the plain tetrahedra's row, calibrate_run.TETS)."""
+    return [r for r in rows if r.get("optimizer", "none") == "none" and r is not tets_row(rows)]
 
 
 def positive(net) -> bool:
@@ -133,7 +140,7 @@ def metadata(s, rows, exported, net, case) -> dict:
         engine=s.engine,
         candidates=_candidates(case),
     )
-    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    rules = rule_rows(rows)
     said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)
     best = None
     if rule is not None:
@@ -144,6 +151,7 @@ def metadata(s, rows, exported, net, case) -> dict:
         verdict=said,
         flags=flags(exported, rules) if case.heldout else [],
         best_rule_heldout=best,
+        G_heldout_mean_tets=cv.finite((tets_row(rows) or {}).get("G_heldout_mean")),
         opt_stop=stop if isinstance(stop, str) else None,
         opt_stops=stops.split(" | ") if isinstance(stops, str) else [],
     )
@@ -167,7 +175,7 @@ def write(s, rows, net, case):
     exported = next(r for r in rows if r["exported"])
     heldout = exported.pop("_heldout", None)
     meta = metadata(s, rows, exported, net, case)
-    rules = [r for r in rows if r.get("optimizer", "none") == "none"]
+    rules = rule_rows(rows)
     cols = [c for c in COLUMNS if any(c in r for r in rows) or c == "dt_safe"]
     out = s.out  # the files appear together or not at all (disk full: none)
     files = [out, out.with_suffix(".json"), out.with_suffix(".csv")]
@@ -181,6 +189,8 @@ def write(s, rows, net, case):
         df.to_csv(csv, index=False)
     print(table(df, s.wide))
     print(cv.heldout_sentence(exported, rules, case.heldout))
+    if case.heldout and tets_row(rows) is not None:
+        print(cv.tets_sentence(tets_row(rows), case.dim))
     print(cv.fitted_sentence(exported, min(rules, key=rank)))
     print(cv.reference_sentence(exported, meta, bool(case.heldout), s.max_refine))
     if cv.dropped_sentence(exported):

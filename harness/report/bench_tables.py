@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from harness.provenance import FIELDS, describe
-from harness.report.engines import ENGINES_NOTE, engines_finding, engines_summary
+from harness.report.engines import engines_finding, engines_note, engines_summary
 from harness.report.numbers import fmt
 
 MAX_ROWS = 40
@@ -80,7 +80,7 @@ def bench_table(name: str, df):
     if name == "engines":
         t = engines_summary(df)
         if t is not None:
-            return t, ENGINES_NOTE + engines_finding(
+            return t, engines_note(df) + engines_finding(
                 df
             ) + " Every load, step count and wall time is in engines.csv."
     if name == "heldout":

@@ -65,6 +65,14 @@ CORE = [  # every suite: the runner's and the reference's columns
         page=True,
     ),
     Column("seconds", "s", "wall time of the row's work (for a case-level row: the case's)"),
+    Column(
+        "seconds_validation",
+        "s",
+        "a validated fit: the wall time of its leave-one-family-out validation (within seconds)",
+    ),
+    Column(
+        "seconds_final", "s", "a validated fit: the wall time of its final fit (within seconds)"
+    ),
     Column("note", "", "why a row failed, was skipped or what an engine reported"),
     Column("dim", "", "the case's dimension, 2 or 3"),
     Column("nu", "", "the material's Poisson ratio"),
@@ -166,6 +174,12 @@ SCORES = [  # the G criteria (harness/scoring.py)
         "G_final_optimizer",
         "m",
         "the G the optimiser reported at its end (equals G_final up to rounding; a check)",
+    ),
+    Column(
+        "G_initial_optimizer",
+        "",
+        "p1, p1-global: the fit's balanced misfit at its start (sqrt of the sum over the "
+        "fitted loads of each load's squared normalised G; its end is G_final_optimizer)",
     ),
     Column(
         "G_fit_score",

@@ -153,14 +153,28 @@ def _has(col):
     return pd.to_numeric(col, errors="coerce").notna()
 
 
-ENGINES_NOTE = (
-    "Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the "
-    "mean over "
-    "the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS displacement error relative "
-    "to the FEM's (G_norm); springbench's exports (the best rule, the calibrated springs) run in "
-    "Newton and MuJoCo, its calibrated materials (p1-global: one pair; p1: one per "
-    "tetrahedron) in the engines' own tetrahedra; PyBullet and Drake on the gravity loads. "
-)
+def engines_note(df) -> str:
+    """What the engine table holds, from its rows: the loads, the metric, which engines ran
+    springbench's spring exports and whether its calibrated materials and the gravity-only
+    engines are in it."""
+    models = df["model"].astype(str) if "model" in df else df.iloc[:0, :0]
+    springs = df.loc[models.str.startswith("springbench") & ~_materials(models), "engine"]
+    runs = ", ".join(sorted(map(str, springs.dropna().unique()))) or "Newton"
+    text = (
+        "Each engine's deformable body against the FEM on gmsh bodies at two resolutions: the "
+        "mean over the held-out loads (sag, tip, tip2, torsion, bridge) of the RMS "
+        "displacement error relative to the FEM's (G_norm); springbench's exports (the best "
+        f"rule, the calibrated springs) run in {runs}"
+    )
+    if _materials(models).any():
+        text += (
+            "; its calibrated materials (p1-global: one pair; p1: one per tetrahedron) in "
+            "the engines' own tetrahedra"
+        )
+    gravity = sorted(set(map(str, df.get("engine", []))) & {"pybullet-fem", "drake-fem"})
+    if gravity:
+        text += f"; {_and(gravity)} on the gravity loads (sag, bridge)"
+    return text + ". "
 
 
 def engines_tables(df) -> list:
@@ -172,7 +186,7 @@ def engines_tables(df) -> list:
         (
             "Each engine's deformable body against the FEM",
             t,
-            ENGINES_NOTE
+            engines_note(df)
             + engines_finding(df)
             + " Every load, step count and wall time is in summary.csv.",
         )

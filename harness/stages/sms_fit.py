@@ -62,16 +62,20 @@ def optimise(setting: Setting, run_: dict, base, first: dict):
     net = base.with_k(res.k, stiffness=name)
     sres, sc, sh = setting.evaluate(net)
     setting.write(net, sres, tag)
-    timing = {"grouped": bool(setting.spec["grouped"]), "seconds": seconds}
-    row = {
-        **setting.row(first, stiff, method, sc, timing),
-        "G_final_optimizer": float(getattr(res, "G_final", math.nan)),
-        **measures.scored_columns(setting.case, sc, sh, first),
-        "objective": objective,
-        "budget": budget_label(run_["options"]),
-        "n_params": problem.n_params,
-        "_tag": tag,
-    }
+    columns = setting.fit_columns(
+        first,
+        stiff,
+        method,
+        sc,
+        grouped=bool(setting.spec["grouped"]),
+        seconds=seconds,
+        G_final_optimizer=float(getattr(res, "G_final", math.nan)),
+        objective=objective,
+        budget=budget_label(run_["options"]),
+        n_params=problem.n_params,
+    )
+    row = columns.row(setting.common, scored=measures.scored_columns(setting.case, sc, sh, first))
+    row["_tag"] = tag
     if freq_kw:
         row.update(freq_modes=run_["modes"], freq_weight=run_["weight"])
     row.update(optimiser_columns(res, seed))

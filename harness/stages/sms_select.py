@@ -194,16 +194,19 @@ def _row(setting, first, base, s, cands, scored, seconds) -> dict:
     """The validated fit's row (module doc) from its exported start, ``scored[0]``."""
     net, _, sc, sh = scored[0]
     means = [heldout_columns(h).get("G_heldout_mean", math.nan) for _, _, _, h in scored]
-    timing = {
-        "seconds": seconds,
+    columns = setting.fit_columns(
+        first,
+        first["stiffness"],
+        "lbfgs",
+        sc,
+        seconds=seconds,
         # the wall time's split: reported, never used for a choice
-        "seconds_validation": s.seconds.get("validation", math.nan),
-        "seconds_final": s.seconds.get("final", math.nan),
-    }
-    row = {
-        **setting.row(first, first["stiffness"], "lbfgs", sc, timing),
-        **scored_columns(setting.case, sc, sh, first),
-        "objective": "G",
+        seconds_validation=s.seconds.get("validation", math.nan),
+        seconds_final=s.seconds.get("final", math.nan),
+        objective="G",
+        n_params=int(len(s.k)),
+    )
+    chosen = {
         "choice": s.choice,
         "val_families": " ".join(s.families),
         "n_starts": len(s.starts),
@@ -211,11 +214,15 @@ def _row(setting, first, base, s, cands, scored, seconds) -> dict:
         "G_heldout_mean_spread": float(np.nanmax(means) - np.nanmin(means))
         if sh is not None
         else math.nan,
-        "n_params": int(len(s.k)),
-        "_tag": f"{base.info['stiffness']}-select",
-        "_validation": tuple(s.table),
-        "opt_prior": next((c.prior for c in cands if c.name == s.choice), math.nan),
     }
+    row = columns.row(
+        setting.common, scored=scored_columns(setting.case, sc, sh, first), chosen=chosen
+    )
+    row.update(
+        _tag=f"{base.info['stiffness']}-select",
+        _validation=tuple(s.table),
+        opt_prior=next((c.prior for c in cands if c.name == s.choice), math.nan),
+    )
     row.update({f"val_{r['model']}": r["score"] for r in s.table})
     if s.stops:  # the exported start's stop, and every start's (" | " between them)
         row.update(opt_stop=s.stops[0], opt_stops=" | ".join(s.stops))

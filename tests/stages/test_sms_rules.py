@@ -18,7 +18,8 @@ def rows(mesh, out, *argv):
     args = ["calibrate", str(mesh), "--E", "1e5", "--nu", "0.45", "--method", "rule"]
     assert cli.main([*args, "--max-refine", "0", "--out", str(out), *argv]) == 0
     table = pd.read_csv(out.with_suffix(".csv")).set_index("stiffness")
-    return table, out.with_suffix(".json").read_text()
+    rules = table[table.optimizer == "none"]  # not the plain tets row calibrate adds
+    return rules, out.with_suffix(".json").read_text()
 
 
 @pytest.mark.slow
@@ -45,7 +46,8 @@ def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, 
     part, part_json = rows(mesh, tmp_path / "part.vtu")
     skipped = part.index[part.G_fit_score.isna()]
     assert len(skipped) >= 1
-    # free states, then each rule
+    # free states, then each rule (the plain tets row's solve of every load is not a rule's)
+    solved = [x for x in solved if x[1] is not None]
     assert solved[0] == (len(part), 24) and len(solved) - 1 == len(part) - len(skipped)
     best = full.G_fit_score.min()
     for r in skipped:

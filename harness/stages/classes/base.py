@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Callable
+
+from harness.stages.rows import FitColumns
 
 
 @dataclass(frozen=True)
@@ -31,23 +32,12 @@ class Setting:
     write: Callable
     validated: Callable = lambda net, res: {}
 
-    def row(self, first: dict, stiff: str, optimizer: str, sc, timing: dict) -> dict:
-        """The columns a fitted row starts with: the shared ones, the model, its start rule
-        and optimiser, ``timing`` (its seconds), and G on the fitted loads at the start (the
-        rule's row ``first``) and after the fit (the score ``sc``)."""
-        return {
-            **self.common,
-            "model": f"{self.label}[{stiff}]",
-            "stiffness": stiff,
-            "optimizer": optimizer,
-            **timing,
-            "G_initial": first["G_initial"],
-            "G_norm_initial": first["G_norm_initial"],
-            "G_s_initial": first.get("G_s_initial", math.nan),
-            "G_final": sc.G,
-            "G_norm_final": sc.G_norm,
-            "G_s_final": sc.G_s,
-        }
+    def fit_columns(self, first: dict, stiffness: str, optimizer: str, sc, **fit) -> FitColumns:
+        """The shared columns of a fit of this class from rule ``stiffness`` (its row
+        ``first``: G at the start) by ``optimizer``, scored ``sc`` after it; ``fit``: the
+        other fields of :class:`harness.stages.rows.FitColumns`. Its ``row(self.common,
+        ...)`` is the fitted row."""
+        return FitColumns.of(self.label, stiffness, optimizer, first, sc, **fit)
 
 
 def model_label(spec, case) -> str:

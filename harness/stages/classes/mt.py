@@ -76,14 +76,19 @@ def optimise(setting, run_, base, first):
     res, sc, sh = s.evaluate(net)
     tag = f"mt-{METHOD}"
     s.write(net, res, tag)
-    row = {
-        **s.row(first, "mt", METHOD, sc, {"grouped": False, "seconds": seconds}),
-        "G_final_optimizer": g1,
-        "objective": "G",
-        "budget": BUDGET,
-        "n_params": len(theta),
-        "_tag": tag,
-    }
+    columns = s.fit_columns(
+        first,
+        "mt",
+        METHOD,
+        sc,
+        grouped=False,
+        seconds=seconds,
+        G_final_optimizer=g1,
+        objective="G",
+        budget=BUDGET,
+        n_params=len(theta),
+    )
+    row = {**columns.row(s.common), "_tag": tag}
     row.update({f"G_{k}": v for k, v in sc.per_load.items()})
     if sh is not None:
         row.update(

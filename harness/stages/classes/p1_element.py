@@ -232,13 +232,21 @@ def optimise(setting, run_, base, first):
         res, sc, sh = s.evaluate(net)
     tag = f"p1-{METHOD}"
     s.write(net, res, tag)
+    columns = s.fit_columns(
+        first,
+        "p1",
+        METHOD,
+        sc,
+        grouped=False,
+        seconds=seconds,
+        G_final_optimizer=fit.misfit_final,
+        G_initial_optimizer=fit.misfit_initial,
+        objective="G",
+        budget=f"maxiter={MAXITER}",
+        n_params=2 * len(fit.E),
+    )
     row = {
-        **s.row(first, "p1", METHOD, sc, {"grouped": False, "seconds": seconds}),
-        "G_final_optimizer": fit.misfit_final,
-        "G_initial_optimizer": fit.misfit_initial,
-        "objective": "G",
-        "budget": f"maxiter={MAXITER}",
-        "n_params": 2 * len(fit.E),
+        **columns.row(s.common),
         "opt_nit": fit.nit,
         "opt_nfev": fit.nfev,
         "opt_stop": fit.stop,

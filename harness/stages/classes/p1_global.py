@@ -235,13 +235,21 @@ def optimise(setting, run_, base, first):
         res, sc, sh = s.evaluate(net)
     tag = f"p1-global-{METHOD}"
     s.write(net, res, tag)
+    columns = s.fit_columns(
+        first,
+        "p1",
+        METHOD,
+        sc,
+        grouped=False,
+        seconds=seconds,
+        G_final_optimizer=fit.misfit_final,
+        G_initial_optimizer=fit.misfit_initial,
+        objective="G",
+        budget=f"max_nfev={MAX_NFEV}",
+        n_params=2,
+    )
     row = {
-        **s.row(first, "p1", METHOD, sc, {"grouped": False, "seconds": seconds}),
-        "G_final_optimizer": fit.misfit_final,
-        "G_initial_optimizer": fit.misfit_initial,
-        "objective": "G",
-        "budget": f"max_nfev={MAX_NFEV}",
-        "n_params": 2,
+        **columns.row(s.common),
         "opt_nfev": fit.nfev,
         "opt_stop": fit.stop,
         "choice": choice,
