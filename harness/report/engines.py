@@ -20,6 +20,9 @@ def _cell(r, st: str) -> str:
     installed."""
     if r[st] == "not-installed" or r.get("status") == "not-installed":
         return "not installed"
+    note = str(r.get("note") or "")
+    if r[st] == "settled" and note.startswith("the mean over "):  # the loads it takes
+        return f"{fmt(r['G_norm'])} ({note.removeprefix('the mean over ')})"
     return fmt(r["G_norm"]) if r[st] == "settled" else f"{fmt(r['G_norm']) or '-'} ({r[st]})"
 
 
@@ -98,9 +101,14 @@ def engines_finding(df) -> str:
     if gone:
         verb = "is" if len(gone) == 1 else "are"
         parts.append(f"{_and(gone)} {verb} not installed ({EXTRA} installs the engines)")
-    ran = runs[~runs["engine"].isin(gone)]
+    ran = runs[~runs["engine"].isin(gone) & (runs[st] != "unsupported-load")]
     if len(ran):
         parts.append(f"{int((ran[st] == 'settled').sum())} of {len(ran)} engine runs settled")
+    untaken = runs[runs[st] == "unsupported-load"]
+    if len(untaken):
+        names = sorted(map(str, untaken["engine"].unique()))
+        verb = "takes" if len(names) == 1 else "take"
+        parts.append(f"{_and(names)} {verb} the gravity loads only ({len(untaken)} not run)")
     if not (len(own) or len(exported)):
         parts.insert(0, "no engine run was scored against the FEM")
     text = "; ".join(parts)

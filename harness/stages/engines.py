@@ -41,6 +41,7 @@ from harness.registry import ENGINE_EXPORTS, ENGINES
 
 NAME = "engines"
 OWN = "own (E, nu)"
+UNSUPPORTED = "unsupported-load"  # a load an engine does not take (its rows say why)
 COLUMNS = (
     ["body", "resolution", "n_tets", "nu", "engine", "model", "load"]
     + ["G_norm", "max_error", "G_ref", "engine_status", "steps", "wall_s"]
@@ -212,12 +213,16 @@ def with_means(
     keys=("body", "resolution", "n_tets", "nu", "engine", "model"),
     status: str = "engine_status",
 ) -> pd.DataFrame:
-    """The per-load rows plus a ``mean`` row per ``keys`` (G_norm: the mean over the loads;
-    max_error, G_ref: the largest; steps, wall_s: the sums)."""
+    """The per-load rows plus a ``mean`` row per ``keys`` (G_norm: the mean over the loads
+    the engine takes, its note naming them when it takes fewer than all; max_error, G_ref:
+    the largest; steps, wall_s: the sums)."""
     keys = [k for k in keys if k in df.columns]
     out = []
     for key, g in df.groupby(keys, sort=False, dropna=False):
         out.append(g)
+        took = g[g[status] != UNSUPPORTED]
+        note = "" if len(took) == len(g) else f"the mean over {', '.join(took.load)}"
+        g = took if len(took) else g
         settled = bool((g[status] == "settled").all())
         out.append(
             pd.DataFrame(
@@ -231,7 +236,7 @@ def with_means(
                         **{status: "settled" if settled else "see loads"},
                         steps=float(g.steps.sum()),
                         wall_s=float(g.wall_s.sum()),
-                        note="",
+                        note=note,
                     )
                 ]
             )

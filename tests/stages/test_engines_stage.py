@@ -148,3 +148,30 @@ def test_the_bench_is_the_suite_with_the_engine_status_as_status(monkeypatch):
     df = B.run(quick=True)
     assert seen == [("beam-coarse_nu0.30", seen[0][1])] and seen[0][1]["budget"] == B.QUICK_BUDGET
     assert list(df.columns) == B.COLUMNS and df.status.tolist() == ["settled"]
+
+
+def test_an_engine_that_takes_only_some_loads_has_their_mean_and_says_which():
+    """Gravity-only engines: the mean row is the mean over the loads they ran (sag 0.4 and
+    bridge 0.2: 0.3), settled when those settled, its note naming them; the engine table's
+    cell shows them and the finding does not count the loads not run as unsettled."""
+    from harness.report.engines import engines_finding, engines_summary
+
+    rows = [
+        dict(engine="pybullet-fem", model=S.OWN, load=n, G_norm=g, engine_status=st)
+        for n, g, st in (
+            ("sag", 0.4, "settled"),
+            ("tip", float("nan"), "unsupported-load"),
+            ("bridge", 0.2, "settled"),
+        )
+    ]
+    base = dict(body="b", resolution="coarse", n_tets=9, nu=0.3, max_error=0.1, G_ref=0.01)
+    df = S.with_means(pd.DataFrame([dict(base, steps=1, wall_s=1.0, note="", **r) for r in rows]))
+    mean = df[df.load == "mean"].iloc[0]
+    assert mean.G_norm == pytest.approx(0.3) and mean.engine_status == "settled"
+    assert mean.note == "the mean over sag, bridge"
+    cell = engines_summary(df).iloc[0]["pybullet-fem: own (E, nu)"]
+    assert cell == "0.300 (sag, bridge)"
+    text = engines_finding(df)
+    assert (
+        "2 of 2 engine runs settled" in text and "takes the gravity loads only (1 not run)" in text
+    )
