@@ -39,6 +39,33 @@ COLUMNS = {  # bench name -> the columns shown, in order (those present)
 }
 
 
+def tets_summary(df):
+    """Per body, mesh and nu (and overall): the geometric mean over the loads of the plain
+    tetrahedra's error and, for each calibrated material, its error, its ratio to the
+    plain's (below 1: it helps) and its pair (p1-global)."""
+    import pandas as pd
+
+    need = {"body", "nu", "model", "load", "err", "ratio_to_plain"}
+    if not need <= set(df.columns):
+        return None
+    geo = df[df["load"] == "geomean"]
+    rows = []
+    for (body, nu), at in geo.groupby(["body", "nu"], sort=False, dropna=False):
+        at = at.set_index("model")
+        row = {"body": body, "tets": fmt(at["n_tets"].iloc[0]) if "n_tets" in at else ""}
+        row["nu"] = f"{nu:g}" if nu == nu else ""
+        row["plain error"] = fmt(at.loc["plain", "err"]) if "plain" in at.index else ""
+        for m in ("p1-global", "p1"):
+            if m in at.index:
+                row[f"{m} error"] = fmt(at.loc[m, "err"])
+                row[f"{m} / plain"] = fmt(at.loc[m, "ratio_to_plain"])
+        if "p1-global" in at.index and "E_effective" in at:
+            E, nu_ = at.loc["p1-global", "E_effective"], at.loc["p1-global", "nu_effective"]
+            row["p1-global (E', nu')"] = f"{fmt(E)} Pa, {nu_:.3f}" if E == E else ""
+        rows.append(row)
+    return pd.DataFrame(rows).fillna("") if rows else None
+
+
 def _display(df, cols):
     t = df[[c for c in cols if c in df]].head(MAX_ROWS).copy()
     for c in t.columns:
@@ -92,6 +119,16 @@ def bench_table(name: str, df):
                 "the geometric mean over the loads of calibrate's error / the best rule's "
                 "(below 1: calibrate "
                 "predicts better). Every load and rule is in heldout.csv."
+            )
+    if name == "tets":
+        t = tets_summary(df)
+        if t is not None:
+            return t, (
+                "Calibrated materials for linear tetrahedra (calibrate --model p1-global: one "
+                "pair; --model p1: one per tetrahedron) against the same tetrahedra with the "
+                "plain (E, nu), on the held-out gmsh bodies with their own loads and clamps, "
+                "an independent P2 truth: per body and nu the geometric mean over the loads "
+                "of each error. Every load is in tets.csv."
             )
     cols = COLUMNS.get(name) or [c for c in df.columns if not c.endswith("_version")][:8]
     more = f" (first {MAX_ROWS} of {len(df)} rows)" if len(df) > MAX_ROWS else ""

@@ -209,3 +209,39 @@ def test_summarise_and_verdict_by_hand():
 
 def test_registered():
     assert BENCHES.target("tets") == "harness.bench.tets"
+
+
+def test_the_published_table_is_one_row_per_body_and_nu_and_one_overall():
+    """bench_table('tets'): the geomean rows as they are stored (the overall row's nu is
+    empty), one row each, the ratios and the fitted pair as stored."""
+    import pandas as pd
+
+    from harness.report.bench_tables import bench_table
+
+    nan = float("nan")
+    rows = [
+        dict(
+            body="b", n_tets=9, nu=0.3, model="plain", load="geomean", err=0.2, ratio_to_plain=1.0
+        ),
+        dict(
+            body="b",
+            n_tets=9,
+            nu=0.3,
+            model="p1-global",
+            load="geomean",
+            err=0.1,
+            ratio_to_plain=0.5,
+            E_effective=9e4,
+            nu_effective=0.29,
+        ),
+        dict(body="b", n_tets=9, nu=0.3, model="p1", load="geomean", err=0.04, ratio_to_plain=0.2),
+        dict(body="b", n_tets=9, nu=0.3, model="p1", load="twist", err=0.05, ratio_to_plain=0.25),
+    ] + [
+        dict(body="all", n_tets=nan, nu=nan, model=m, load="geomean", err=e, ratio_to_plain=r)
+        for m, e, r in (("plain", 0.2, 1.0), ("p1-global", 0.1, 0.5), ("p1", 0.04, 0.2))
+    ]
+    table, note = bench_table("tets", pd.DataFrame(rows))
+    assert list(table.body) == ["b", "all"] and "tets.csv" in note
+    first = table.iloc[0]
+    assert (first["p1-global / plain"], first["p1 / plain"]) == ("0.500", "0.200")
+    assert first["p1-global (E', nu')"] == "90,000 Pa, 0.290" and table.iloc[1]["nu"] == ""
