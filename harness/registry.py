@@ -313,6 +313,8 @@ MATERIAL_ENGINES = ("newton-tets", "mujoco-flex")
 # ``springbench calibrate`` with ``flags`` and run by ``engines`` (engines run ENGINE --model)
 @dataclass(frozen=True)
 class EngineExport:
+    """calibrate's flags that make the export, the engines that run it, what it is."""
+
     flags: tuple
     engines: tuple
     about: str
