@@ -47,6 +47,7 @@ best_rule, ratio_to_best_rule, seconds (that calibrate's wall time), truth_secon
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import math
 import os
@@ -227,28 +228,34 @@ def verdict(df: pd.DataFrame) -> str:
     )
 
 
-def run(quick: bool = False) -> pd.DataFrame:
-    try:
-        import gmsh  # noqa: F401
-    except ImportError:
-        return pd.DataFrame(
-            [
-                dict(
-                    body="all",
-                    note="skipped: gmsh not installed (pip install 'springbench[bench]')",
-                )
-            ]
-        )
+def over_bodies(quick: bool, name: str, study) -> pd.DataFrame | None:
+    """The rows of ``study(body, mesh, nu, folder)`` over the study's bodies (each meshed
+    once into a temporary folder) and Poisson ratios (``quick``: the first body, nu and
+    fewer tets); None without gmsh."""
+    if importlib.util.find_spec("gmsh") is None:
+        return None
     bodies, nus, n_tets = (BODIES[:1], NUS[:1], QUICK_TETS) if quick else (BODIES, NUS, FULL_TETS)
     rows = []
-    with tempfile.TemporaryDirectory(prefix="springbench-heldout-") as tmp:
+    with tempfile.TemporaryDirectory(prefix=f"springbench-{name}-") as tmp:
         tmp = Path(tmp)
-        for body in steps(bodies, "bench heldout", "body"):
+        for body in steps(bodies, f"bench {name}", "body"):
             mesh = tmp / f"{body.name}.msh"
             make_body(body, mesh, n_tets)
             for nu in nus:
-                rows += study_one(body, mesh, nu, tmp)
-    df = summarise(pd.DataFrame(rows))
+                rows += study(body, mesh, nu, tmp)
+    return pd.DataFrame(rows)
+
+
+NO_GMSH = pd.DataFrame(
+    [dict(body="all", note="skipped: gmsh not installed (pip install 'springbench[bench]')")]
+)
+
+
+def run(quick: bool = False) -> pd.DataFrame:
+    rows = over_bodies(quick, "heldout", study_one)
+    if rows is None:
+        return NO_GMSH
+    df = summarise(rows)
     print(summary_table(df).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     print(verdict(df))
     return df

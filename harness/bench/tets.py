@@ -43,19 +43,16 @@ E, nu).
 
 from __future__ import annotations
 
-import importlib.util
 import math
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from harness.bench.heldout import FULL_TETS, NUS, PEAK_STRAIN, QUICK_TETS, calibrate, geomean
-from harness.bench.heldout_bodies import BODIES, Body, make_body, read_body
+from harness.bench.heldout import NO_GMSH, PEAK_STRAIN, calibrate, geomean, over_bodies
+from harness.bench.heldout_bodies import Body, read_body
 from harness.bench.heldout_judge import E, export_materials, study_loads, tet_solve, truth
-from harness.progress import steps
 
 MODELS = (("p1-global", ("--model", "p1-global")), ("p1", ("--model", "p1")))
 TARGETS = {"p1-global": 0.7, "p1": 0.5}  # overall ratio to plain; every (body, nu) <= 1
@@ -178,25 +175,10 @@ def verdict(df: pd.DataFrame) -> str:
 
 
 def run(quick: bool = False) -> pd.DataFrame:
-    if importlib.util.find_spec("gmsh") is None:
-        return pd.DataFrame(
-            [
-                dict(
-                    body="all",
-                    note="skipped: gmsh not installed (pip install 'springbench[bench]')",
-                )
-            ]
-        )
-    bodies, nus, n_tets = (BODIES[:1], NUS[:1], QUICK_TETS) if quick else (BODIES, NUS, FULL_TETS)
-    rows = []
-    with tempfile.TemporaryDirectory(prefix="springbench-tets-") as tmp:
-        tmp = Path(tmp)
-        for body in steps(bodies, "bench tets", "body"):
-            mesh = tmp / f"{body.name}.msh"
-            make_body(body, mesh, n_tets)
-            for nu in nus:
-                rows += study_one(body, mesh, nu, tmp)
-    df = summarise(pd.DataFrame(rows))
+    rows = over_bodies(quick, "tets", study_one)
+    if rows is None:
+        return NO_GMSH
+    df = summarise(rows)
     print(summary_table(df).to_string(index=False, float_format=lambda v: f"{v:.3g}"))
     print(verdict(df))
     return df

@@ -46,10 +46,11 @@ from harness.stages.classes.p1_global import (
     Training,
     coefficients,
     constants,
+    judged,
+    material_fit_runs,
     training,
     unit_tensors,
 )
-from harness.stages.sms_accept import judge
 from harness.stages.sms_measures import scored_columns
 
 METHOD = "l-bfgs-b"
@@ -223,15 +224,8 @@ def optimise(setting, run_, base, first):
     fit = fit_elements(split, training(s, base), mat.E, mat.nu, PRIOR_WEIGHT)
     seconds = time.perf_counter() - t0
     net = with_elements(base, fit.E, fit.nu, mat.plane)
-    res, sc, sh = s.evaluate(net)
-    val = s.validated(net, res).get("G_val_mean", math.nan)
-    verdict = judge(val, {"p1": first.get("G_val_mean", math.nan)})
-    choice, g_fit = "fit", sc.G_norm
-    if verdict.best is not None and not verdict.accepted:
-        net, choice = base, "rule"
-        res, sc, sh = s.evaluate(net)
     tag = f"p1-{METHOD}"
-    s.write(net, res, tag)
+    net, res, sc, sh, choice, g_fit, verdict = judged(s, base, net, first, tag)
     columns = s.fit_columns(
         first,
         "p1",
@@ -271,9 +265,7 @@ class P1ElementClass(P1Class):
     G (whatever its method), with a material fitted per element."""
 
     def fit_runs(self, runs: list[dict]) -> list[dict]:
-        if not any(r["objective"] == "G" and r["method"] != "none" for r in runs):
-            return []
-        return [dict(method=METHOD, options={}, objective="G", where="optimizer.method")]
+        return material_fit_runs(runs, METHOD)
 
     def fit(self, setting, run: dict, start, first: dict):
         return optimise(setting, run, start, first)

@@ -226,15 +226,8 @@ def optimise(setting, run_, base, first):
     fit = fit_pair(split, training(s, base), m.E, m.nu)
     seconds = time.perf_counter() - t0
     net = with_pair(base, fit.E, fit.nu, m.plane)
-    res, sc, sh = s.evaluate(net)
-    val = s.validated(net, res).get("G_val_mean", math.nan)
-    verdict = judge(val, {"p1": first.get("G_val_mean", math.nan)})
-    choice, g_fit = "fit", sc.G_norm
-    if verdict.best is not None and not verdict.accepted:
-        net, choice = base, "rule"
-        res, sc, sh = s.evaluate(net)
     tag = f"p1-global-{METHOD}"
-    s.write(net, res, tag)
+    net, res, sc, sh, choice, g_fit, verdict = judged(s, base, net, first, tag)
     columns = s.fit_columns(
         first,
         "p1",
@@ -264,6 +257,29 @@ def optimise(setting, run_, base, first):
     return row, net, None
 
 
+def judged(s, base, net, first, tag: str) -> tuple:
+    """(network, statics, fitted score, held-out score, choice, the fit's G_norm, verdict):
+    the fitted material ``net`` where the validation loads accept it over the plain P1
+    ``base`` (its row ``first``), else ``base`` ("rule"); the exported one written as
+    ``tag``."""
+    res, sc, sh = s.evaluate(net)
+    val = s.validated(net, res).get("G_val_mean", math.nan)
+    verdict = judge(val, {"p1": first.get("G_val_mean", math.nan)})
+    choice, g_fit = "fit", sc.G_norm
+    if verdict.best is not None and not verdict.accepted:
+        net, choice = base, "rule"
+        res, sc, sh = s.evaluate(net)
+    s.write(net, res, tag)
+    return net, res, sc, sh, choice, g_fit, verdict
+
+
+def material_fit_runs(runs: list[dict], method: str) -> list[dict]:
+    """A fitted material's one fit run (``method``) when the case fits G at all."""
+    if not any(r["objective"] == "G" and r["method"] != "none" for r in runs):
+        return []
+    return [dict(method=method, options={}, objective="G", where="optimizer.method")]
+
+
 def constants(net) -> dict:
     """E_effective (Pa) and nu_effective of a network (NaN: not one isotropic pair)."""
     return {
@@ -287,9 +303,7 @@ class P1GlobalClass(P1Class):
         return ["p1"]
 
     def fit_runs(self, runs: list[dict]) -> list[dict]:
-        if not any(r["objective"] == "G" and r["method"] != "none" for r in runs):
-            return []
-        return [dict(method=METHOD, options={}, objective="G", where="optimizer.method")]
+        return material_fit_runs(runs, METHOD)
 
     def fit(self, setting, run: dict, start, first: dict):
         return optimise(setting, run, start, first)
