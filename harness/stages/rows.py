@@ -1,9 +1,10 @@
-"""The columns every fitted row of the sms stage shares, built by one typed helper.
+"""The columns every row of the sms stage shares, built by typed helpers: a fitted row's
+(:class:`FitColumns`) and a stiffness rule's (:class:`RuleColumns`).
 
-Each field of :class:`FitColumns` is a column documented in harness/report/columns.py
-under its own name (tests/stages/test_row_columns.py checks it), so a fit names no shared
-column itself: it fills the fields and adds only its own columns. The fields are in the
-order a row holds them; ``None`` leaves a column out (a fit without it)."""
+Each field is a column documented in harness/report/columns.py under its own name
+(tests/stages/test_row_columns.py checks it), so a stage names no shared column itself: it
+fills the fields and adds only its own columns. The fields are in the order a row holds
+them; ``None`` leaves a column out (a row without it)."""
 
 from __future__ import annotations
 
@@ -72,3 +73,88 @@ class FitColumns:
 
 
 FIT_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(FitColumns))
+
+
+@dataclass(frozen=True, kw_only=True)
+class RuleColumns:
+    """One stiffness rule's shared columns: its model and rule (no fit: ``optimizer`` none),
+    its build's and score's wall time (``seconds``), G of its network, at once the start's
+    and the end's, and for a rule left unsolved under the clamps its G_fit_score's lower
+    bound; ``note``: why a row has no G."""
+
+    model: str
+    stiffness: str
+    optimizer: str = "none"
+    seconds: float
+    G_initial: float | None = None
+    G_final: float | None = None
+    G_norm_initial: float | None = None
+    G_norm_final: float | None = None
+    G_s_initial: float | None = None
+    G_s_final: float | None = None
+    G_fit_score_bound: float | None = None
+    note: str | None = None
+
+    @classmethod
+    def scored(cls, label: str, rule: str, seconds: float, sc) -> RuleColumns:
+        """Rule ``rule`` of the model ``label`` scored ``sc``: G, G_norm, G_s at the start and
+        the end (a rule is not fitted)."""
+        return cls(
+            model=f"{label}[{rule}]",
+            stiffness=rule,
+            seconds=seconds,
+            G_initial=sc.G,
+            G_final=sc.G,
+            G_norm_initial=sc.G_norm,
+            G_norm_final=sc.G_norm,
+            G_s_initial=sc.G_s,
+            G_s_final=sc.G_s,
+        )
+
+    @classmethod
+    def unscored(cls, label: str, rule: str, seconds: float, note: str) -> RuleColumns:
+        """Rule ``rule`` without a reference to score it: G and G_norm NaN, ``note`` why."""
+        nan = math.nan
+        return cls(
+            model=f"{label}[{rule}]",
+            stiffness=rule,
+            seconds=seconds,
+            G_initial=nan,
+            G_final=nan,
+            G_norm_initial=nan,
+            G_norm_final=nan,
+            note=note,
+        )
+
+    @classmethod
+    def unsolved(
+        cls, label: str, rule: str, seconds: float, bound: float, note: str
+    ) -> RuleColumns:
+        """Rule ``rule`` left unsolved under the clamps: no G, its G_fit_score's lower
+        ``bound`` and ``note`` why."""
+        return cls(
+            model=f"{label}[{rule}]",
+            stiffness=rule,
+            seconds=seconds,
+            G_fit_score_bound=bound,
+            note=note,
+        )
+
+    def row(self, common: dict, constants: dict | None = None, scored: dict | None = None) -> dict:
+        """The row: ``common`` (the class's shared columns), then the fields in order, with
+        ``constants`` (the network's own constants) just after ``seconds`` and ``scored``
+        (the score columns) just after ``G_s_final``; a later key overrides an earlier
+        one's value in place."""
+        out = dict(common)
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is not None:
+                out[f.name] = value
+            if f.name == "seconds":
+                out.update(constants or {})
+            if f.name == "G_s_final":
+                out.update(scored or {})
+        return out
+
+
+RULE_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(RuleColumns))

@@ -10,6 +10,7 @@ import time
 
 from harness import scoring
 from harness.stages import sms_measures as measures
+from harness.stages.rows import RuleColumns
 
 UNSOLVED = (
     "not solved under the clamps: half its free-traction score is above the best rule's "
@@ -23,49 +24,20 @@ def rule_row(scorer, common: dict, label: str, rule: str, net, res, seconds: flo
     t1 = time.perf_counter()
     res, sc, sh = scorer.evaluate(net, res)
     scorer.write(net, res, rule)
-    row = {
-        **common,
-        "model": f"{label}[{rule}]",
-        "stiffness": rule,
-        "optimizer": "none",
-        "seconds": seconds + res.seconds + time.perf_counter() - t1,
-        **scorer.cls.constants(net),
-    }
+    seconds = seconds + res.seconds + time.perf_counter() - t1
+    constants = scorer.cls.constants(net)
     if sc is None:
-        row.update(
-            G_initial=math.nan,
-            G_final=math.nan,
-            G_norm_initial=math.nan,
-            G_norm_final=math.nan,
-            note=f"no reference ({why})",
-        )
-        return row
-    row.update(
-        G_initial=sc.G,
-        G_final=sc.G,
-        G_norm_initial=sc.G_norm,
-        G_norm_final=sc.G_norm,
-        G_s_initial=sc.G_s,
-        G_s_final=sc.G_s,
-        **measures.scored_columns(scorer.case, sc, sh),
-        **scorer.validated(net, res),
-    )
-    return row
+        cols = RuleColumns.unscored(label, rule, seconds, f"no reference ({why})")
+        return cols.row(common, constants)
+    scored = {**measures.scored_columns(scorer.case, sc, sh), **scorer.validated(net, res)}
+    return RuleColumns.scored(label, rule, seconds, sc).row(common, constants, scored)
 
 
 def unsolved_row(scorer, common: dict, label: str, rule: str, net, bound: float, seconds: float):
     """The row of a rule left unsolved under the clamps (harness/stages/sms_rules.py): its
     G_fit_score's lower bound ``bound``; its network saved alone."""
     scorer.write(net, None, rule)
-    return {
-        **common,
-        "model": f"{label}[{rule}]",
-        "stiffness": rule,
-        "optimizer": "none",
-        "seconds": seconds,
-        "G_fit_score_bound": bound,
-        "note": UNSOLVED,
-    }
+    return RuleColumns.unsolved(label, rule, seconds, bound, UNSOLVED).row(common)
 
 
 def add_ref_columns(rows: list, ref, base, scorer) -> None:

@@ -14,17 +14,9 @@ from harness.bench import heldout as H
 from harness.bench import heldout_bodies as B
 from harness.bench import heldout_judge as J
 from harness.registry import BENCHES
+from tests.bench.bodies import BAR, L
 
 pytest.importorskip("gmsh")
-L, A = 0.5, 0.1  # the test bar: [0, L] x [0, A] x [0, A]
-BAR = B.Body(
-    "bar",
-    lambda occ: occ.addBox(0, 0, 0, L, A, A),
-    B._near(0, A / 2, A / 2),
-    B._near(L, A / 2, A / 2),
-    ((0, -1, 0), (0, 0, 1)),
-    (0, 0, -1),
-)
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
-"""Fitted rows are built by one typed helper (harness/stages/rows.py FitColumns) whose
-fields are columns documented in harness/report/columns.py, and no fit writes one of those
-columns itself."""
+"""Fitted rows and stiffness rules' rows are built by typed helpers (harness/stages/rows.py
+FitColumns, RuleColumns) whose fields are columns documented in harness/report/columns.py,
+and no fit or rule row writes one of those columns itself."""
 
 import ast
 import dataclasses
@@ -9,9 +9,9 @@ import math
 from types import SimpleNamespace
 
 from harness.report.columns import COLUMNS
-from harness.stages import sms_fit, sms_select
+from harness.stages import sms_fit, sms_rows, sms_select
 from harness.stages.classes import base, mt, p1_element, p1_global
-from harness.stages.rows import FIT_COLUMNS, FitColumns
+from harness.stages.rows import FIT_COLUMNS, RULE_COLUMNS, FitColumns, RuleColumns
 
 FITS = (sms_fit, sms_select, p1_global, p1_element, mt)
 # every row carries these, rule and skip rows too: only a skip row may write them itself
@@ -128,3 +128,79 @@ def test_the_setting_labels_its_fits():
     sc = SimpleNamespace(G=1.0, G_norm=0.1, G_s=1.5)
     c = s.fit_columns(first, "p1", "l-bfgs-b", sc, seconds=1.0, objective="G", n_params=2)
     assert c.model == "p1-sms-mesh[p1]" and c.G_s_initial == 2.5 and c.grouped is None
+
+
+# the rule rows as the stage writes them: the names and order written out here, not read
+# from the helper
+SCORED = ["G_initial", "G_final", "G_norm_initial", "G_norm_final", "G_s_initial", "G_s_final"]
+LABELS_SECONDS = ["model", "stiffness", "optimizer", "seconds"]
+
+
+def _scorer(sc, monkeypatch):
+    """A stand-in for the stage's Scorer: ``sc`` its score of every network (None: no
+    reference), one constant column, one validation column; the score columns stubbed."""
+    monkeypatch.setattr(
+        sms_rows.measures,
+        "scored_columns",
+        lambda case, sc, sh: {"G_pull": 4.0, "G_fit_score": 5.0},
+    )
+    written = []
+    return SimpleNamespace(
+        evaluate=lambda net, res: (SimpleNamespace(seconds=0.5), sc, None),
+        write=lambda net, res, rule: written.append((rule, res)),
+        cls=SimpleNamespace(constants=lambda net: {"E_effective": 7.0}),
+        validated=lambda net, res: {"G_val_mean": 6.0},
+        case=None,
+        written=written,
+    )
+
+
+def test_every_field_of_the_rule_helper_is_a_documented_column():
+    assert undocumented(RuleColumns) == []
+    assert RULE_COLUMNS == tuple(f.name for f in dataclasses.fields(RuleColumns))
+    assert literal_columns(inspect.getsource(sms_rows), RULE_COLUMNS) == []
+
+
+def test_a_scored_rule_row_holds_the_helpers_columns_in_order(monkeypatch):
+    sc = SimpleNamespace(G=1.0, G_norm=0.1, G_s=1.5)
+    scorer = _scorer(sc, monkeypatch)
+    common = {"case": "c", "mode": "quick"}
+    row = sms_rows.rule_row(scorer, common, "sms", "lloyd", None, None, 2.0, "")
+    assert list(row) == [
+        "case",
+        "mode",
+        *LABELS_SECONDS,
+        "E_effective",
+        *SCORED,
+        "G_pull",
+        "G_fit_score",
+        "G_val_mean",
+    ]
+    assert [k for k in row if k in RULE_COLUMNS] == [c for c in RULE_COLUMNS if c in row]
+    assert (row["model"], row["stiffness"], row["optimizer"]) == ("sms[lloyd]", "lloyd", "none")
+    assert [row[k] for k in SCORED] == [1.0, 1.0, 0.1, 0.1, 1.5, 1.5]
+    assert row["seconds"] >= 2.5 and row["E_effective"] == 7.0 and row["G_val_mean"] == 6.0
+    assert common == {"case": "c", "mode": "quick"} and scorer.written[-1][0] == "lloyd"
+    # a common column the helper also fills keeps its place and takes the helper's value
+    row = sms_rows.rule_row(scorer, {"seconds": -1.0}, "sms", "lloyd", None, None, 2.0, "")
+    assert list(row)[:2] == ["seconds", "model"] and row["seconds"] >= 2.5
+
+
+def test_an_unscored_and_an_unsolved_rule_row_hold_the_helpers_columns(monkeypatch):
+    scorer = _scorer(None, monkeypatch)
+    row = sms_rows.rule_row(scorer, {"case": "c"}, "sms", "cauchy", None, None, 2.0, "no FEM")
+    assert list(row) == ["case", *LABELS_SECONDS, "E_effective", *SCORED[:4], "note"]
+    assert all(math.isnan(row[k]) for k in SCORED[:4])
+    assert row["note"] == "no reference (no FEM)"
+    row = sms_rows.unsolved_row(scorer, {"case": "c"}, "sms", "uniform", None, 0.25, 3.0)
+    assert row == {
+        "case": "c",
+        "model": "sms[uniform]",
+        "stiffness": "uniform",
+        "optimizer": "none",
+        "seconds": 3.0,
+        "G_fit_score_bound": 0.25,
+        "note": sms_rows.UNSOLVED,
+    }
+    assert list(row)[1:] == [c for c in RULE_COLUMNS if c in row]
+    assert scorer.written[-1] == ("uniform", None)
