@@ -32,6 +32,8 @@ SELECT_CANDIDATES = (
 )
 # how a candidate must beat the rule (harness/optimize/select.py choose)
 SELECT_CRITERIA = ("ratio", "score")
+# the validated fit's counts: within a budget from the mesh, or as set (select_counts.py)
+SELECT_WORK = ("budget", "fixed")
 SELECT_DEFAULT = (
     "springs-prior1",
     "springs-prior0.1",
@@ -356,6 +358,15 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                     max=10,
                     doc="starts of the final fit (the rule, its best global "
                     "scale, perturbed ones): the spread is reported",
+                ),
+                "work": Field(
+                    "str",
+                    "budget",
+                    choices=SELECT_WORK,
+                    doc="budget: the counts above while their predicted factorisation work "
+                    "fits twice the rules' statics (or 3,000 Gflop), else fewer candidates, "
+                    "folds, iterations and starts, chosen from the mesh before the fit "
+                    "(harness/optimize/select_counts.py); fixed: the counts above at any size",
                 ),
                 "criterion": Field(
                     "str",

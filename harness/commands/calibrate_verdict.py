@@ -30,6 +30,12 @@ def _folds_sentence(row, table) -> str:
         if r.get("ratio") is not None and math.isfinite(r["ratio"])
     }
     said = f"Validation (each family of training states left out in turn: {fams})"
+    level = row.get("fit_level")
+    if isinstance(level, (int, float)) and level > 0:  # a large mesh: fewer fits
+        said = (
+            f"Validation at level {int(level)} of the fit's counts for a mesh this size "
+            f"(JSON fit_counts; left out in turn: {fams})"
+        )
     chose = row.get("val_fold_choice") or row["choice"]
     if chose == "rule":
         best = min((m for m in ratios if m != "rule"), key=ratios.get, default=None)

@@ -48,6 +48,28 @@ def _candidates(case) -> list[str] | None:
     return list(select["candidates"]) if select else None
 
 
+# the JSON's fit_counts: its key -> the exported row's column (harness/stages/sms_select.py)
+FIT_COUNTS = dict(
+    level="fit_level",
+    candidates="fit_candidates",
+    folds="fit_folds",
+    maxiter="fit_maxiter",
+    starts="fit_starts",
+    final_maxiter="fit_final_maxiter",
+    work_gflop="fit_work_gflop",
+    budget_gflop="fit_budget_gflop",
+)
+
+
+def _fit_counts(row) -> dict | None:
+    """The JSON's ``fit_counts``: the counts the validated fit ran, None without one."""
+    if "fit_level" not in row:
+        return None
+    out = {key: row[col] for key, col in FIT_COUNTS.items()}
+    out["candidates"] = str(out["candidates"]).split()
+    return {k: v.item() if hasattr(v, "item") else v for k, v in out.items()}
+
+
 def rule_rows(rows) -> list[dict]:
     """The stiffness rules' rows: the unfitted rows a verdict or a choice compares with (never
     the plain tetrahedra's row, calibrate_run.TETS)."""
@@ -139,6 +161,7 @@ def metadata(s, rows, exported, net, case) -> dict:
         prior_weight=weight,
         engine=s.engine,
         candidates=_candidates(case),
+        fit_counts=_fit_counts(exported),
     )
     rules = rule_rows(rows)
     said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)

@@ -75,6 +75,7 @@ from harness.optimize.select_table import (  # noqa: F401 (the table's names, he
     scored,
     summary,
     training_score,
+    two_folds,
 )
 
 
@@ -356,6 +357,8 @@ def select(
     criterion: str = "ratio",
     max_seconds: float | None = None,
     workers: int | None = None,
+    folds: str = "families",
+    shared_final: bool = False,
 ) -> Selection:
     """Leave-one-family-out choice among ``candidates`` and the rule (module doc, :func:`choose`).
     ``problem``: the training states, columns [springs | volume terms] (k0 the rule's
@@ -367,7 +370,8 @@ def select(
     ``rule_scores``: each block's own normalised G at the rule, when the caller has solved
     them (else solved here); ``criterion``: how a candidate must beat the rule; ``workers``:
     processes for the fits (None: harness/optimize/forkpool.py's choice; the answer is the
-    same bit for bit with any number).
+    same bit for bit with any number); ``folds`` and ``shared_final``: as a level of
+    harness/optimize/select_counts.py (its Counts) says.
 
     The validation always runs, and every fit stops by its options' maxiter and tolerances,
     the same counts on every mesh: the choice and the constants depend on the input and the
@@ -378,7 +382,7 @@ def select(
     t0 = time.perf_counter()
     problem = balanced(problem)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
-    folds = make_folds(families)
+    folds = two_folds(families) if folds == "two" else make_folds(families)
     _RUN.update(
         problem=problem,
         cands={
@@ -391,6 +395,7 @@ def select(
         features=features,
         cap=Deadline(max_seconds, "the validated fit"),
         n_springs=n_springs,
+        shared_final=shared_final,
     )
     if workers is None:
         n = len(candidates) * len(folds) if len(folds) > 1 else 0
@@ -488,6 +493,7 @@ def _final_start(task) -> tuple:
     """(training objective with the prior, constants, stop) of one start of the final fit."""
     name, i, x0, n_starts = task
     cand, cp = _RUN["cands"][name]
+    cp = dataclasses.replace(cp, shared=True) if _RUN["shared_final"] else cp
     where = f"{name} on every training state (start {i + 1} of {n_starts})"
     _RUN["cap"].phase = f"the validated fit's final fit ({where})"
     r = fit_result(cp, cand, _RUN["final"], x0, _RUN["features"], _RUN["cap"])

@@ -24,6 +24,19 @@ def make_folds(families) -> dict:
     return folds
 
 
+FREE = "free"  # the fold of every free-traction family together (two_folds)
+
+
+def two_folds(families) -> dict:
+    """{fold: block indices}: the free-traction families together ('free') and the clamped
+    states ('clamped'): two fits per candidate instead of one per family, for the cheaper
+    levels of harness/optimize/select_counts.py; a fold that is empty is left out."""
+    folds: dict = {}
+    for i, f in enumerate(families):
+        folds.setdefault(CLAMPED if f == CLAMPED else FREE, []).append(i)
+    return folds
+
+
 def rule_row(scores, folds: dict) -> dict:
     """The table's row of the rule: the mean of its scores (each block's own normalised G)
     over each fold's blocks."""

@@ -188,6 +188,12 @@ SCORES = [  # the G criteria (harness/scoring.py)
         "normalised G averaged per family (linear states, clamped), families alike",
     ),
     Column(
+        "G_fit_score_bound",
+        "",
+        "a rule left unsolved under the clamps: a lower bound of its G_fit_score (half its "
+        "free-traction score), above the best rule's",
+    ),
+    Column(
         "G_heldout",
         "",
         "normalised G on the held-out loads, which no fit ever used, pooled over them",
@@ -279,6 +285,27 @@ FITS = [  # spring/mass models and their fits (harness/stages/sms*.py)
         page=True,
     ),
     Column("n_starts", "count", "starts of a validated fit's final fit"),
+    Column(
+        "fit_level",
+        "",
+        "the validated fit's counts: 0 the case's, 1-3 fewer fits on a large network "
+        "(harness/optimize/select_counts.py), chosen before the fit from flop counts",
+    ),
+    Column("fit_candidates", "", "the candidates the validation fitted at that level"),
+    Column("fit_folds", "", "families: a fold per family; two: free-traction and clamped"),
+    Column("fit_maxiter", "count", "L-BFGS-B iterations of each validation fit"),
+    Column("fit_starts", "count", "starts of the final fit at that level"),
+    Column("fit_final_maxiter", "count", "L-BFGS-B iterations of each start of the final fit"),
+    Column(
+        "fit_work_gflop",
+        "Gflop",
+        "the level's predicted factorisation work (its evaluations' symbolic flop counts)",
+    ),
+    Column(
+        "fit_budget_gflop",
+        "Gflop",
+        "the work allowed: twice the rules' statics' factorisations, at least 3,000 Gflop",
+    ),
     Column(
         "choice",
         "",

@@ -42,6 +42,7 @@ from harness.models.learned_rule import geometry
 from harness.models.springs import spring_directions
 from harness.models.volume import initial_kv, with_volume
 from harness.optimize import select as sel
+from harness.optimize import select_counts
 from harness.optimize.problem import FitProblem
 from harness.scoring import node_weights
 from harness.stages import sms_accept as accept
@@ -62,7 +63,7 @@ def optimise(setting, run_, base, first, first_res=None, rules=()):
     there, else the rule they rank first."""
     _check_method(setting.case, run_)
     t0 = time.perf_counter()
-    s, cands = _selection(setting, run_, base, first_res)
+    s, cands, counts = _selection(setting, run_, base, first_res, len(rules))
     seconds = time.perf_counter() - t0
     pd.DataFrame(list(s.table)).to_csv(setting.ctx.file("validation.csv"), index=False)
     scored = _scored_starts(setting, base, s, first_res)
@@ -80,9 +81,25 @@ def optimise(setting, run_, base, first, first_res=None, rules=()):
     tag = f"{base.info['stiffness']}-select"
     setting.write(net, res, tag)
     row = _row(setting, first, base, s, cands, scored, seconds)
+    row.update(fit_counts(counts))
     row.update(verdict.columns, start_rule=start, val_fold_choice=folds_chose)
     row.update(setting.validated(net, res))
     return row, net, None
+
+
+def fit_counts(counts) -> dict:
+    """The row's record of the counts the validated fit ran (harness/optimize/select_counts.py):
+    its level, candidates, folds, iterations, starts and the predicted work and budget."""
+    return {
+        "fit_level": counts.level,
+        "fit_candidates": " ".join(counts.candidates),
+        "fit_folds": counts.folds,
+        "fit_maxiter": counts.maxiter,
+        "fit_starts": counts.starts,
+        "fit_final_maxiter": counts.final_maxiter,
+        "fit_work_gflop": counts.work_gflop,
+        "fit_budget_gflop": counts.budget_gflop,
+    }
 
 
 def _rule_export(setting, s, rule) -> tuple:
@@ -136,34 +153,46 @@ def _problem(setting, base, terms) -> FitProblem:
     )
 
 
-def _selection(setting, run_, base, first_res):
-    """(harness/optimize/select.py's Selection, the candidates it chose among): validation
-    fits stopped by ``[optimizer.select] maxiter``, the final fit by the case's maxiter."""
+def _selection(setting, run_, base, first_res, n_rules: int = 0):
+    """(harness/optimize/select.py's Selection, the candidates it chose among, the counts it
+    ran: harness/optimize/select_counts.py's level for this network and ``n_rules`` solved
+    rules): validation fits stopped by ``[optimizer.select] maxiter``, the final fit by the
+    case's maxiter, either lowered on a large network."""
     spec = run_["select"]
     kv0 = initial_kv(setting.case.material, setting.case.dim)
     cands = [c for c in sel.CANDIDATES if c.name in spec["candidates"]]
     terms, volumes = _volume_terms(base, cands, kv0)
     problem = _problem(setting, base, terms)
     fit_names = [setting.names[i] for i in setting.fit]
-    d, L = spring_directions(base.points, base.springs)
+    fams = families(setting.case, fit_names)
     # the fits stop by their counts; the budget caps the whole validated fit (it aborts)
     opts = {k: v for k, v in run_["options"].items() if k != "max_seconds"}
-    val = {**opts, "maxiter": int(spec["maxiter"])}
-    final = {**opts, "maxiter": int(opts.get("maxiter") or FINAL_MAXITER)}
+    counts = select_counts.choose(
+        problem,
+        fams,
+        n_rules,
+        [c.name for c in cands],
+        int(spec["maxiter"]),
+        int(spec["starts"]),
+        int(opts.get("maxiter") or FINAL_MAXITER),
+        fixed=spec.get("work", "budget") == "fixed",
+    )
+    cands = [c for c in sel.CANDIDATES if c.name in counts.candidates]
     rule_scores = None
     if first_res is not None:
         _, sc0, _ = setting.evaluate(base, first_res)
         rule_scores = [sc0.per_load_norm[n] for n in fit_names]
+    d, L = spring_directions(base.points, base.springs)
     s = sel.select(
         problem,
         base.n_springs,
-        families(setting.case, fit_names),
+        fams,
         kv0,
         sel.direction_groups(d, L),
         cands,
-        val,
-        final,
-        int(spec["starts"]),
+        {**opts, "maxiter": counts.maxiter},
+        {**opts, "maxiter": counts.final_maxiter},
+        counts.starts,
         int(base.info["seed"]),
         setting.ctx.status,
         features=geometry(base.points, base.springs, base.cells)
@@ -173,8 +202,10 @@ def _selection(setting, run_, base, first_res):
         volumes=volumes,
         criterion=spec["criterion"],
         max_seconds=run_["options"].get("max_seconds"),
+        folds=counts.folds,
+        shared_final=counts.shared_final,
     )
-    return s, cands
+    return s, cands, counts
 
 
 def _scored_starts(setting, base, s, first_res) -> list:

@@ -1,0 +1,132 @@
+"""How much a validated fit fits, chosen before it runs from the network's size.
+
+The counts a case sets (``[optimizer.select]`` candidates x the families' folds x maxiter
+iterations, then starts x the final maxiter) cost ~1 min of one core on calibrate's 2k-node
+lug, but each evaluation factorises the training states' stiffness, ~n^2 flops in 3-D: on a
+50k-tet mesh (27k dofs) the same counts are ~50 min of CPU, ten times its rule-only path
+(the reference and the rules' statics). So the counts are a ladder of levels, each cheaper
+than the one before, and a fit takes the first level whose predicted work fits its budget:
+
+- work: the Gflop of the factorisations its evaluations need, from the symbolic
+  factorisation (harness/linalg/multifrontal.py ``Symbolic.estimate``): EVALS_PER_ITER
+  evaluations per L-BFGS-B iteration, each factorising the training states' load sets
+  (shared by the sets, harness/linalg/shared.py, where the validation fits and the cheaper
+  levels' final fit do so);
+- budget: BUDGET x the rules' statics (every solved rule factorises each set once) or
+  FLOOR_GFLOP, whichever is larger, so the meshes of up to a few thousand tetrahedra keep
+  the case's counts exactly.
+
+The choice is a function of the mesh and the case alone (flop counts, not seconds): the
+same counts, and the same export, on any machine under any load. ``work = "fixed"`` in
+``[optimizer.select]`` keeps the case's counts at any size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from harness.optimize.problem import DENSE_FACTOR_MAX, FitProblem
+
+EVALS_PER_ITER = 1.2  # L-BFGS-B's evaluations per iteration on the fits (~1.1-1.3 measured)
+BUDGET = 2.0  # the fit's work at most this many times the rules' statics' ...
+FLOOR_GFLOP = 3000.0  # ... or this (~8 min of one core's factorisations), whichever is larger
+
+
+@dataclass(frozen=True)
+class Counts:
+    """One level of the ladder: the candidates (None: the case's), the folds ('families':
+    one per family as harness/optimize/select_table.py make_folds, 'two': the free-traction
+    families together and the clamped states), each validation fit's maxiter, the final
+    fit's starts and maxiter (None: the case's), whether the final fit shares the sets'
+    factorisation; ``work_gflop`` and ``budget_gflop`` once predicted."""
+
+    level: int
+    candidates: tuple | None
+    folds: str
+    maxiter: int | None
+    starts: int | None
+    final_maxiter: int | None
+    shared_final: bool
+    work_gflop: float = math.nan
+    budget_gflop: float = math.nan
+
+
+LADDER = (
+    Counts(0, None, "families", None, None, None, False),
+    Counts(1, None, "families", 10, 1, 40, True),
+    Counts(2, ("springs-prior1", "springs-prior1+node-volume"), "two", 5, 1, 20, True),
+    Counts(3, ("scale", "scale+node-volume"), "two", 4, 1, 8, True),
+)
+
+
+def resolved(level: Counts, case_candidates, maxiter: int, starts: int, final_maxiter: int):
+    """``level`` with the case's counts where it keeps them; its candidates those whose volume
+    term the case's candidates have (an engine that runs no volume term keeps none)."""
+    volumes = {_volume(c) for c in case_candidates}
+    cands = tuple(case_candidates) if level.candidates is None else level.candidates
+    return replace(
+        level,
+        candidates=tuple(c for c in cands if _volume(c) in volumes),
+        maxiter=maxiter if level.maxiter is None else level.maxiter,
+        starts=starts if level.starts is None else level.starts,
+        final_maxiter=final_maxiter if level.final_maxiter is None else level.final_maxiter,
+    )
+
+
+def _volume(name: str) -> str:
+    return name.split("+", 1)[1] if "+" in name else ""
+
+
+def n_folds(counts: Counts, families) -> int:
+    return 2 if counts.folds == "two" else len(set(families))
+
+
+def gflop(problem: FitProblem, shared: bool) -> float:
+    """One evaluation's factorisations (Gflop): each group of the problem's solve parts."""
+    p = replace(problem, shared=shared)
+    sets = p.load_sets()
+    total = 0.0
+    for idx, group in p.solve_parts():
+        s = sets[idx[0]]
+        if group is not None:
+            total += group.estimate()
+        elif s.B.shape[0] > DENSE_FACTOR_MAX:
+            total += s.symbolic().estimate()["gflop"]
+        else:
+            total += s.B.shape[0] ** 3 / 3e9  # a dense Cholesky
+    return total
+
+
+def work(counts: Counts, families, per_eval_shared: float, per_eval_sets: float) -> float:
+    """The level's predicted Gflop: its validation fits' and its final fit's evaluations."""
+    val = len(counts.candidates) * n_folds(counts, families) * counts.maxiter
+    final = counts.starts * counts.final_maxiter
+    per_final = per_eval_shared if counts.shared_final else per_eval_sets
+    return EVALS_PER_ITER * (val * per_eval_shared + final * per_final)
+
+
+def choose(
+    problem: FitProblem,
+    families,
+    n_rules: int,
+    case_candidates,
+    maxiter: int,
+    starts: int,
+    final_maxiter: int,
+    fixed: bool = False,
+) -> Counts:
+    """The first level of LADDER whose work fits the budget (module doc), or the last; with
+    ``fixed`` the case's own counts (level 0)."""
+    shared, apart = gflop(problem, True), gflop(problem, False)
+    budget = max(FLOOR_GFLOP, BUDGET * max(n_rules, 1) * apart)
+    levels = LADDER[:1] if fixed else LADDER
+    for level in levels:
+        c = resolved(level, case_candidates, maxiter, starts, final_maxiter)
+        if not c.candidates:
+            continue
+        w = work(c, families, shared, apart)
+        c = replace(c, work_gflop=w, budget_gflop=budget)
+        if w <= budget or level is levels[-1]:
+            return c
+    return c
