@@ -9,11 +9,14 @@ the benchmark writes one row saying so.
 Targets: the 50k-tet mesh calibrated in <= 3 min with <= 4 GB, a 200k-tet mesh in <= 10
 min with <= 12 GB (2 cores).
 Columns: mesh size, seconds (the default calibration) and rule_seconds (the rule alone),
-peak memory (the largest run so far: sizes run in increasing order), the choice the
-validation made (validation_skipped: always empty, the validation always runs), the start
+peak memory of each run (peak_gb, rule_peak_gb: its largest process), the choice the
+validation made and the level of the fit's counts it ran (fit_level, with its predicted
+work and budget in Gflop: harness/optimize/select_counts.py; validation_skipped: always
+empty, the validation always runs), the start
 rule's G_fit_score, the exported model's G_heldout_mean beside the best
 rule's in hindsight, the reference's own error on the fitted and held-out loads, and the
-ratios of seconds to the 1k mesh's and to the rule alone. The reference's error: meshes
+ratios of seconds to the 1k mesh's and to the rule alone, and fit_ratio: the fit's time
+(seconds - rule_seconds) over the rule alone's (target: at most 1). The reference's error: meshes
 up to ~10k tets are refined adaptively (up to 200k dofs); larger ones are estimated from
 coarse levels of their body (reference/adaptive/coarse.py, their own system solved in the coarse
 levels' subspaces), the solve on the mesh itself by the two-level method
@@ -24,7 +27,6 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import signal
 import subprocess
 import sys
@@ -78,30 +80,41 @@ def cylinder(path: Path, n_tets: int) -> int:
     return tets
 
 
-def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess]:
-    """(seconds, process) of one cold ``springbench calibrate``: its own process and an
-    empty reference cache."""
+def measured(cmd: list, env: dict, logs: tuple) -> tuple[float, subprocess.CompletedProcess, float]:
+    """(seconds, process, peak GB) of ``cmd`` run to its end, its output in ``logs`` (stdout,
+    stderr files); the peak is the largest resident set of the process or of any child it
+    waited for (its fit workers): os.wait4's rusage of this run alone."""
+    t0 = time.perf_counter()
+    with open(logs[0], "w") as fo, open(logs[1], "w") as fe:
+        child = subprocess.Popen(cmd, stdout=fo, stderr=fe, text=True, env=env)
+        _, status, usage = os.wait4(child.pid, 0)
+    seconds = time.perf_counter() - t0
+    code = os.waitstatus_to_exitcode(status)
+    out, err = (Path(f).read_text() for f in logs)
+    return seconds, subprocess.CompletedProcess(cmd, code, out, err), usage.ru_maxrss / 1e6
+
+
+def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess, float]:
+    """:func:`measured` of one cold ``springbench calibrate``: its own process and an empty
+    reference cache."""
     cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
     cmd += ["--out", str(out), *extra]
     env = dict(os.environ, SPRINGBENCH_CACHE=str(out.parent / f"cache-{out.stem}"))
-    t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    return time.perf_counter() - t0, proc
+    return measured(cmd, env, tuple(out.with_name(f"{out.stem}.{s}.txt") for s in ("out", "err")))
 
 
 def _one(mesh: Path, out: Path) -> dict:
     """The rule alone (``--method rule``), then the default calibration, on one mesh."""
     rule_out = out.with_name(out.stem + "-rule.vtu")
-    rule_seconds, rule = _calibrate(mesh, rule_out, "--method", "rule", "--rule", RULE)
-    seconds, proc = _calibrate(mesh, out)
-    # GB: the largest run so far
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6
+    rule_seconds, rule, rule_peak = _calibrate(mesh, rule_out, "--method", "rule", "--rule", RULE)
+    seconds, proc, peak = _calibrate(mesh, out)
     failed = next((p for p in (rule, proc) if p.returncode != 0), None)
     if failed is not None:
         return dict(
             seconds=seconds,
             rule_seconds=rule_seconds,
             peak_gb=peak,
+            rule_peak_gb=rule_peak,
             note=(failed.stderr.strip().splitlines() or ["failed"])[-1],
         )
     df = pd.read_csv(out.with_suffix(".csv"))
@@ -113,9 +126,13 @@ def _one(mesh: Path, out: Path) -> dict:
         seconds=seconds,
         rule_seconds=rule_seconds,
         peak_gb=peak,
+        rule_peak_gb=rule_peak,
         n_nodes=int(fit.n_nodes),
         n_springs=int(fit.n_springs),
         choice=data.get("choice"),
+        fit_level=(data.get("fit_counts") or {}).get("level"),
+        fit_work_gflop=(data.get("fit_counts") or {}).get("work_gflop"),
+        fit_budget_gflop=(data.get("fit_counts") or {}).get("budget_gflop"),
         validation_skipped=data.get("validation_skipped"),
         start_rule=fit.stiffness,
         G_fit_score=float(fit.G_fit_score),
@@ -151,4 +168,6 @@ def run(quick: bool = False) -> pd.DataFrame:
     df = pd.DataFrame(rows)
     df["ratio"] = df["seconds"] / df["seconds"].iloc[0]
     df["ratio_to_rule"] = df["seconds"] / df["rule_seconds"]
+    # the fit's time: everything beyond the rule-only path (each run solves its own reference)
+    df["fit_ratio"] = (df["seconds"] - df["rule_seconds"]) / df["rule_seconds"]
     return df
