@@ -25,7 +25,7 @@ from harness.errors import SpringbenchError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import DenseFactor, Factor, nested_dissection
-from harness.linalg.stiffness import stiffness_map
+from harness.linalg.stiffness import stiffness_map, stiffness_pattern
 from harness.models.springs import incidence
 
 
@@ -354,9 +354,10 @@ class LoadSet:
         return Factor(self.stiffness(k), self.perm, self.name)
 
     def symbolic(self) -> Symbolic:
-        """The multifrontal ordering and fronts of K's pattern (kept per matrix)."""
+        """The multifrontal ordering and fronts of K's pattern (kept per matrix; from the
+        pattern alone, so a set only estimated never builds its map k -> K)."""
         return per_matrix(
-            self.B, "symbolic", lambda: Symbolic(self.stiffness(self.k0), self.coords)
+            self.B, "symbolic", lambda: Symbolic(stiffness_pattern(self.B), self.coords)
         )
 
 
