@@ -351,3 +351,33 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     shared = part.load_sets()[0].B
     # built once, shared
     assert shared is prob.load_sets()[0].B and "kmap" in pr._PER_MATRIX[id(shared)][1]
+
+
+def test_the_symbolic_factorisation_needs_the_pattern_alone():
+    """A load set's ordering and fronts come from B B^T's pattern (stiffness_pattern) without
+    building the map k -> K: the same pattern as the map's, the same symbolic factorisation
+    as from K itself, and the same solution bit for bit; the map is built only to factorise."""
+    from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+    from harness.linalg.stiffness import stiffness_map, stiffness_pattern
+    from harness.optimize import problem as pr
+
+    prob, _ = recoverable_problem((6, 6, 6))
+    s = dataclasses.replace(prob.load_sets()[0])
+    s.B = s.B.copy()  # a matrix nothing has factorised yet
+    assert s.B.shape[0] > pr.DENSE_FACTOR_MAX
+    pattern, _ = stiffness_map(s.B)
+    alone = stiffness_pattern(s.B)
+    assert np.array_equal(alone.indptr, pattern.indptr)
+    assert np.array_equal(alone.indices, pattern.indices)
+    sym = s.symbolic()
+    assert "kmap" not in pr._PER_MATRIX[id(s.B)][1]  # no map for a symbolic alone
+    k = prob.k0 * np.random.default_rng(1).uniform(0.5, 2, prob.n_springs)
+    from_k = Symbolic(s.stiffness(prob.k0), s.coords)
+    assert np.array_equal(sym.order, from_k.order)
+    assert [len(n["U"]) for n in sym.nodes] == [len(n["U"]) for n in from_k.nodes]
+    K = s.stiffness(k)
+    a = MultifrontalCholesky(K, sym).solve(s.F)
+    b = MultifrontalCholesky(K, from_k).solve(s.F)
+    assert np.array_equal(a, b)
+    dense = np.linalg.solve(K.toarray(), s.F)  # an independent solve
+    assert np.allclose(a.reshape(dense.shape), dense, rtol=1e-9, atol=1e-12 * abs(dense).max())
