@@ -28,12 +28,22 @@ FREE = "free"  # the fold of every free-traction family together (two_folds)
 
 
 def two_folds(families) -> dict:
-    """{fold: block indices}: the free-traction families together ('free') and the clamped
-    states ('clamped'): two fits per candidate instead of one per family, for the cheaper
-    levels of harness/optimize/select_counts.py; a fold that is empty is left out."""
+    """{fold: block indices}, two folds for the cheaper levels of
+    harness/optimize/select_counts.py (two fits per candidate instead of one per family):
+    the free-traction families together ('free') and the clamped states ('clamped'); with
+    no clamped state (every one dropped: the FEM's error on them too large), the free
+    families alternately into 'free-a' and 'free-b', in the order they come; with a single
+    family, its one fold (no validation: the rule is kept)."""
+    free = list(dict.fromkeys(f for f in families if f != CLAMPED))
+    if CLAMPED in families:
+        name = {f: FREE for f in free}
+    elif len(free) >= 2:
+        name = {f: f"{FREE}-{'ab'[i % 2]}" for i, f in enumerate(free)}
+    else:
+        return make_folds(families)
     folds: dict = {}
     for i, f in enumerate(families):
-        folds.setdefault(CLAMPED if f == CLAMPED else FREE, []).append(i)
+        folds.setdefault(CLAMPED if f == CLAMPED else name[f], []).append(i)
     return folds
 
 

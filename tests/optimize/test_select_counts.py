@@ -83,6 +83,24 @@ def test_a_small_network_keeps_the_case_counts_and_a_large_one_climbs(monkeypatc
 
 def test_two_folds_hold_the_free_families_together():
     assert sel.two_folds(FAMILIES) == {"free": [0, 1, 2, 3], "clamped": [4, 5]}
+    # every clamped state dropped (an L-bracket's: the FEM's error on them too large): the
+    # free families alternately in two folds, so the validation still runs
+    free = ["constant", "constant", "bending", "torsion", "gravity", "gravity"]
+    assert sel.two_folds(free) == {"free-a": [0, 1, 3], "free-b": [2, 4, 5]}
+    assert sel.two_folds(["constant", "constant"]) == {"constant": [0, 1]}
+
+
+def test_a_cheaper_level_without_clamped_states_still_validates():
+    prob, _, _ = problem(np.full(1, 2.0))
+    free = ["constant", "constant", "bending", "bending", "torsion", "torsion"]
+    cands = [c for c in sel.CANDIDATES if c.name == "scale"]
+    groups = np.zeros(prob.n_springs, int)
+    s = sel.select(
+        prob, prob.n_springs, free, 1.0, groups, cands, {"maxiter": 4}, {}, 1, folds="two"
+    )
+    assert s.families == ("free-a", "free-b")
+    assert all(math.isfinite(r["free-a"]) and math.isfinite(r["free-b"]) for r in s.table)
+    assert s.choice == "scale"
 
 
 def test_a_cheaper_level_still_recovers_a_wrong_rule(monkeypatch):
