@@ -83,7 +83,8 @@ def cylinder(path: Path, n_tets: int) -> int:
 def measured(cmd: list, env: dict, logs: tuple) -> tuple[float, subprocess.CompletedProcess, float]:
     """(seconds, process, peak GB) of ``cmd`` run to its end, its output in ``logs`` (stdout,
     stderr files); the peak is the largest resident set of the process or of any child it
-    waited for (its fit workers): os.wait4's rusage of this run alone."""
+    waited for (its fit workers): os.wait4's rusage of this run alone (at least this
+    process's own: Linux hands a spawned process its parent's high-water mark)."""
     t0 = time.perf_counter()
     with open(logs[0], "w") as fo, open(logs[1], "w") as fe:
         child = subprocess.Popen(cmd, stdout=fo, stderr=fe, text=True, env=env)
