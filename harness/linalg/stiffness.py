@@ -28,15 +28,34 @@ def stiffness_map(B: sp.csc_matrix):
     pattern = stiffness_pattern(B)
     # col*n + row
     keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
-    # every pair (a, b) of nonzeros of each column j adds B[a, j] B[b, j] k_j to K[b, a]
+    # every pair (a, b) of nonzeros of each column j adds B[a, j] B[b, j] k_j to K[b, a];
+    # built over blocks of columns (the same entries in the same order as all at once): the
+    # index arithmetic's temporaries stay a block's, not ~10 arrays of every pair's
     cnt = np.diff(B.indptr).astype(np.int64)
     sq = cnt * cnt
-    col = np.repeat(np.arange(e, dtype=np.int64), sq)
+    ends = np.cumsum(sq)
+    cuts = np.searchsorted(ends, np.arange(PAIRS_PER_BLOCK, ends[-1] if e else 0, PAIRS_PER_BLOCK))
+    bounds = np.unique(np.concatenate([[0], cuts, [e]]))
+    rows = np.empty(int(ends[-1]) if e else 0, np.int64)
+    data = np.empty(len(rows))
+    for j0, j1 in zip(bounds[:-1], bounds[1:]):
+        at = slice(int(ends[j0] - sq[j0]), int(ends[j1 - 1]))
+        rows[at], data[at] = _pairs(B, keys, n, cnt[j0:j1], sq[j0:j1], j0)
+    # the pairs come column by column: P's csc arrays as they are, then its rows
+    indptr = np.concatenate([[0], ends]) if e else np.zeros(1, np.int64)
+    P = sp.csc_matrix((data, rows, indptr), shape=(len(keys), e)).tocsr()
+    return pattern, P
+
+
+PAIRS_PER_BLOCK = 2_000_000
+
+
+def _pairs(B, keys, n, cnt, sq, j0):
+    """(row of K.data, B[a, j] B[b, j]) of every pair of nonzeros of columns j0, j0 + 1, ..."""
+    col = np.repeat(np.arange(len(cnt), dtype=np.int64), sq)
     t = np.arange(len(col), dtype=np.int64) - np.repeat(np.cumsum(sq) - sq, sq)
     c = cnt[col]
-    first = B.indptr[col].astype(np.int64)
+    first = B.indptr[j0 + col].astype(np.int64)
     pa, pb = first + t // c, first + t % c
     ia, ib = B.indices[pa].astype(np.int64), B.indices[pb].astype(np.int64)
-    rows = np.searchsorted(keys, ib * n + ia)
-    P = sp.csr_matrix((B.data[pa] * B.data[pb], (rows, col)), shape=(len(keys), e))
-    return pattern, P
+    return np.searchsorted(keys, ib * n + ia), B.data[pa] * B.data[pb]

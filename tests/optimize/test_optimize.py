@@ -5,6 +5,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from harness.errors import SpringbenchError
 from harness.linalg.sparse import Factor, nested_dissection, single_thread_blas
@@ -381,3 +382,26 @@ def test_the_symbolic_factorisation_needs_the_pattern_alone():
     assert np.array_equal(a, b)
     dense = np.linalg.solve(K.toarray(), s.F)  # an independent solve
     assert np.allclose(a.reshape(dense.shape), dense, rtol=1e-9, atol=1e-12 * abs(dense).max())
+
+
+@pytest.mark.parametrize("block", [1, 50, 10**9])
+def test_the_stiffness_map_built_in_blocks_is_the_same_map(block, monkeypatch):
+    """K.data = P k built over blocks of columns (bounded temporaries): the same P bit for
+    bit whatever the block, and K = B diag(k) B^T against a dense product."""
+    from harness.linalg import stiffness as st
+
+    rng = np.random.default_rng(3)
+    n, e = 60, 400
+    rows = np.concatenate([rng.choice(n, 2 + j % 9, replace=False) for j in range(e)])
+    cols = np.repeat(np.arange(e), [2 + j % 9 for j in range(e)])
+    B = sp.csc_matrix((rng.standard_normal(len(rows)), (rows, cols)), shape=(n, e))
+    _, whole = st.stiffness_map(B)
+    monkeypatch.setattr(st, "PAIRS_PER_BLOCK", block)
+    pattern, P = st.stiffness_map(B)
+    for a in ("data", "indices", "indptr"):
+        assert np.array_equal(getattr(P, a), getattr(whole, a))
+    k = rng.uniform(0.5, 2.0, e)
+    K = pattern.copy()
+    K.data = P @ k
+    dense = B.toarray() @ np.diag(k) @ B.toarray().T
+    assert np.allclose(K.toarray(), dense, rtol=1e-13, atol=1e-13 * abs(dense).max())
