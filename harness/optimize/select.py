@@ -374,7 +374,7 @@ def select(
     harness/optimize/select_counts.py (its Counts) says.
 
     The validation always runs, and every fit stops by its options' maxiter and tolerances,
-    the same counts on every mesh: the choice and the constants depend on the input and the
+    counts given before the run: the choice and the constants depend on the input and the
     seed alone. ``max_seconds`` caps the wall time of the whole call (validation and final
     fit) and only aborts (harness/optimize/deadline.py); the options must not hold one."""
     if "max_seconds" in {**(options or {}), **(final or {})}:

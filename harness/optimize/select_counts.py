@@ -35,7 +35,8 @@ FLOOR_GFLOP = 3000.0  # ... or this (~8 min of one core's factorisations), which
 
 @dataclass(frozen=True)
 class Counts:
-    """One level of the ladder: the candidates (None: the case's), the folds ('families':
+    """One level of the ladder: the candidates (None: the case's; else base capacities, each
+    with and without every volume term the case's candidates have), the folds ('families':
     one per family as harness/optimize/select_table.py make_folds, 'two': the free-traction
     families together and the clamped states), each validation fit's maxiter, the final
     fit's starts and maxiter (None: the case's), whether the final fit shares the sets'
@@ -55,19 +56,23 @@ class Counts:
 LADDER = (
     Counts(0, None, "families", None, None, None, False),
     Counts(1, None, "families", 10, 1, 40, True),
-    Counts(2, ("springs-prior1", "springs-prior1+node-volume"), "two", 5, 1, 20, True),
-    Counts(3, ("scale", "scale+node-volume"), "two", 4, 1, 8, True),
+    Counts(2, ("springs-prior1",), "two", 5, 1, 20, True),
+    Counts(3, ("scale",), "two", 4, 1, 8, True),
 )
+VOLUMES = ("", "volume", "node-volume")  # a candidate's volume term: its name's suffix
 
 
 def resolved(level: Counts, case_candidates, maxiter: int, starts: int, final_maxiter: int):
-    """``level`` with the case's counts where it keeps them; its candidates those whose volume
-    term the case's candidates have (an engine that runs no volume term keeps none)."""
-    volumes = {_volume(c) for c in case_candidates}
-    cands = tuple(case_candidates) if level.candidates is None else level.candidates
+    """``level`` with the case's counts where it keeps them; its base capacities each with
+    the volume terms the case's candidates have (none for an engine that runs none)."""
+    have = {_volume(c) for c in case_candidates}
+    cands = tuple(case_candidates)
+    if level.candidates is not None:
+        terms = [v for v in VOLUMES if v in have]
+        cands = tuple(b + (f"+{v}" if v else "") for b in level.candidates for v in terms)
     return replace(
         level,
-        candidates=tuple(c for c in cands if _volume(c) in volumes),
+        candidates=cands,
         maxiter=maxiter if level.maxiter is None else level.maxiter,
         starts=starts if level.starts is None else level.starts,
         final_maxiter=final_maxiter if level.final_maxiter is None else level.final_maxiter,

@@ -19,7 +19,8 @@ score).
 
 Every fit stops by counts fixed before the run: the validation fits by
 ``[optimizer.select] maxiter``, the final fit's starts by the case's ``[optimizer]
-options`` maxiter (FINAL_MAXITER without one), the same on every mesh; the case's
+options`` maxiter (FINAL_MAXITER without one), or on a large mesh by the fewer counts
+harness/optimize/select_counts.py chooses from its flop counts (row columns ``fit_*``); the case's
 ``max_seconds`` caps the whole validated fit and only aborts (harness/optimize/deadline.py),
 so the same mesh and seed export the same model on any machine under any load. The fits
 run side by side in worker processes where the machine has the cores

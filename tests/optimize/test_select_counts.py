@@ -39,6 +39,14 @@ def test_an_engine_without_volume_terms_keeps_none_at_any_level():
     springs_only = ("springs-prior1", "springs-prior0.1")
     assert sc.resolved(sc.LADDER[2], springs_only, 30, 3, 100).candidates == ("springs-prior1",)
     assert sc.resolved(sc.LADDER[3], springs_only, 30, 3, 100).candidates == ("scale",)
+    # a case of element volume terms keeps them (their columns are the problem's)
+    element = ("springs-prior1+volume",)
+    assert sc.resolved(sc.LADDER[3], element, 30, 3, 100).candidates == ("scale+volume",)
+    every = sc.resolved(sc.LADDER[2], ("features", "springs-prior1+node-volume"), 30, 3, 100)
+    assert every.candidates == ("springs-prior1", "springs-prior1+node-volume")
+    names = {c.name for c in sel.CANDIDATES}
+    for level in sc.LADDER:
+        assert set(sc.resolved(level, SELECT_DEFAULT, 30, 3, 100).candidates) <= names
 
 
 def test_dense_sets_cost_n_cubed_over_three():
