@@ -160,9 +160,10 @@ def metadata(s, rows, exported, net, case) -> dict:
         masses=s.masses,
         prior_weight=weight,
         engine=s.engine,
-        candidates=_candidates(case),
         fit_counts=_fit_counts(exported),
     )
+    # what the validation chose among: the counts' candidates on a large mesh
+    meta["candidates"] = (meta["fit_counts"] or {}).get("candidates") or _candidates(case)
     rules = rule_rows(rows)
     said, rule = cv.verdict(exported, rules) if case.heldout else (None, None)
     best = None

@@ -45,6 +45,7 @@ def test_the_fit_runs_the_counts_its_mesh_affords(tmp_path, monkeypatch, capsys)
     assert "Validation at level 3 of the fit's counts for a mesh this size" in said
     c = cheap["fit_counts"]
     assert c["level"] == 3 and c["candidates"] == ["scale", "scale+node-volume"]
+    assert cheap["candidates"] == c["candidates"] and data["candidates"] == list(SELECT_DEFAULT)
     assert (c["folds"], c["maxiter"], c["starts"], c["final_maxiter"]) == ("two", 4, 1, 8)
     assert c["budget_gflop"] == 0.0 and c["work_gflop"] > 0
     table = cheap["validation"]
