@@ -154,9 +154,10 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               left-out family), validation_skipped (always null: the validation always runs),
               engine (--engine, or null), candidates (the names the validation chose among:
               --engine keeps those whose volume term it runs, a large mesh fewer: fit_counts;
-              null without a validated fit), fit_counts ({level, candidates, folds, maxiter, starts, final_maxiter,
-              work_gflop, budget_gflop}: the fits the validated fit ran, fewer on a large mesh,
-              chosen before it from flop counts; null without a validated fit),
+              null without a validated fit), fit_counts ({level, candidates, folds, maxiter,
+              starts, final_maxiter, work_gflop, budget_gflop}: the fits the validated fit
+              ran, fewer on a large mesh, chosen before it from flop counts; null without a
+              validated fit),
               G_heldout_mean_spread (over the final fit's starts),
               reference_error (FEM's own, relative; the worst of reference_error_fitted and
               reference_error_heldout), status (the exported row's reference status: ok, or

@@ -85,11 +85,12 @@ def execute(job: Job, sink=None) -> JobResult:
                 field="run.stages",
                 fix=f"available: {', '.join(names) or 'none'}",
             )
-        rows = []
+        rows, everything = [], False
         for stage in modules:
             stage_name = stage.NAME
             if (wanted and stage.NAME not in wanted) or not stage.applies(case):
                 continue
+            everything |= bool(getattr(stage, "SUBPROCESS_CODE", False))
             _seed_everything(job.seed)
             ctx = StageContext(
                 out_dir=tmp, mode=job.mode, seed=job.seed, status=status, n_seeds=job.n_seeds
@@ -127,7 +128,7 @@ def execute(job: Job, sink=None) -> JobResult:
             rows,
             files,
             seconds=time.perf_counter() - t_job,
-            code=loaded_sources(job.stages),
+            code=loaded_sources(job.stages, everything),
         )
     except SpringbenchError as exc:
         msg = str(exc).replace(job.case_file, job.rel_file or job.case_file)

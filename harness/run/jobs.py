@@ -68,12 +68,23 @@ class JobResult:
     code: dict = field(default_factory=dict)  # {source file: sha256} the job loaded
 
 
-def loaded_sources(stage_modules=()) -> dict[str, str]:
+# what a stage whose commands run in their own processes depends on besides (SUBPROCESS_CODE)
+_NOT_SUBPROCESS_CODE = ("harness/report/", "harness/bench/")
+
+
+def loaded_sources(stage_modules=(), everything: bool = False) -> dict[str, str]:
     """{file: sha256} of the code this process has loaded that a result can depend on:
     modules under ``harness/`` and ``reference/`` (paths relative to the checkout) and the
-    stage modules (absolute paths when they live elsewhere)."""
+    stage modules (absolute paths when they live elsewhere). ``everything``: a stage that
+    ran says ``SUBPROCESS_CODE = True`` (it runs springbench commands in their own
+    processes, whose imports this process never sees): every source file under both."""
     out = {}
     roots = (ROOT / "harness", ROOT / "reference")
+    if everything:
+        for p in sorted(q for r in roots for q in r.rglob("*.py")):
+            key = relative(p)
+            if not key.startswith(_NOT_SUBPROCESS_CODE) and (sha := file_sha(p)):
+                out[key] = sha
     for name, mod in list(sys.modules.items()):
         f = getattr(mod, "__file__", None)
         if not f or not f.endswith(".py"):

@@ -8,7 +8,9 @@ resumable, and with the same table bit for bit for the same seed and inputs.
   manifest. A finished job is skipped while its input hash and each of those files are
   unchanged: editing the report, the figures, the CLI or a module the job never imported
   re-runs nothing, editing anything the job imported re-runs it. (Code is only ever
-  reached through imports, so the files a job loaded are all the code it depends on.)
+  reached through imports, so the files a job loaded are all the code it depends on; a
+  stage that runs springbench commands in their own processes, ``SUBPROCESS_CODE`` as the
+  engines stage, depends on every source file but the report's and the bench's.)
 - A job runs in a fresh temporary folder (in a worker process, a Dask worker or, for a
   single job or ``--jobs 1``, in this process). It returns its rows and the bytes of the
   data files its stages wrote; the parent writes them under

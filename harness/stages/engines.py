@@ -40,6 +40,9 @@ from harness.io.meshfile import read_mesh
 from harness.registry import ENGINE_EXPORTS, ENGINES
 
 NAME = "engines"
+# its commands (pack, calibrate, engines run) run in their own processes: a result depends on
+# every source file, not only on those this process imports (harness/run/jobs.py)
+SUBPROCESS_CODE = True
 OWN = "own (E, nu)"
 UNSUPPORTED = "unsupported-load"  # a load an engine does not take (its rows say why)
 COLUMNS = (

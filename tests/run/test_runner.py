@@ -97,6 +97,43 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     assert len(rep.ran) == 1 and len(calls(suite)) == 2
 
 
+def test_a_stage_running_commands_in_their_own_processes_depends_on_every_source(
+    tmp_path, monkeypatch
+):
+    """A stage with SUBPROCESS_CODE (the engines stage: pack, calibrate, engines run as
+    commands) records every source file of harness/ and reference/ as its code, the commands
+    included (this process never imports what they run); the report and the bench are not."""
+    import shutil
+    import uuid
+
+    from harness.stages import engines
+
+    assert engines.SUBPROCESS_CODE is True
+    mods = tmp_path / "mods"
+    mods.mkdir()
+    name = f"fake_sub_{uuid.uuid4().hex[:8]}"
+    src = mods / f"{name}.py"
+    shutil.copy(ROOT / "tests" / "fakestage.py", src)
+    src.write_text(src.read_text() + "\nSUBPROCESS_CODE = True\n")
+    monkeypatch.syspath_prepend(str(mods))
+    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": name}))
+    suite = tmp_path / "cases" / "demo"
+    write_case(suite, "a")
+    res = tmp_path / "results"
+    run_suite([suite], results=res, jobs=1, figures=False, progress=False)
+    code = json.loads((res / "demo" / "a" / "result-seed0.json").read_text())["code"]
+    every = {
+        p.relative_to(ROOT).as_posix()
+        for root in ("harness", "reference")
+        for p in (ROOT / root).rglob("*.py")
+    }
+    assert {k for k in every if not k.startswith(("harness/report/", "harness/bench/"))} <= set(
+        code
+    )
+    assert "harness/commands/calibrate_write.py" in code
+    assert not any(k.startswith(("harness/report/", "harness/bench/")) for k in code)
+
+
 def test_failures_are_rows_not_tracebacks(tmp_path, fake, capsys):
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "good", "rows=1")
