@@ -15,6 +15,7 @@ from harness.commands.calibrate_case import prior_weight
 from harness.commands.calibrate_run import tets_row
 from harness.export.engine_loads import load_records, settle_recipe
 from harness.export.model_json import export
+from harness.optimize.select_counts import RECORDED
 from harness.outputs import staged
 from harness.report.findings import flags, heldout_error
 from harness.stages.sms_measures import rank
@@ -48,24 +49,12 @@ def _candidates(case) -> list[str] | None:
     return list(select["candidates"]) if select else None
 
 
-# the JSON's fit_counts: its key -> the exported row's column (harness/stages/sms_select.py)
-FIT_COUNTS = dict(
-    level="fit_level",
-    candidates="fit_candidates",
-    folds="fit_folds",
-    maxiter="fit_maxiter",
-    starts="fit_starts",
-    final_maxiter="fit_final_maxiter",
-    work_gflop="fit_work_gflop",
-    budget_gflop="fit_budget_gflop",
-)
-
-
 def _fit_counts(row) -> dict | None:
-    """The JSON's ``fit_counts``: the counts the validated fit ran, None without one."""
+    """The JSON's ``fit_counts``: the counts the validated fit ran (the row's fit_<key>
+    columns, harness/optimize/select_counts.py RECORDED), None without one."""
     if "fit_level" not in row:
         return None
-    out = {key: row[col] for key, col in FIT_COUNTS.items()}
+    out = {key: row[f"fit_{key}"] for key in RECORDED}
     out["candidates"] = str(out["candidates"]).split()
     return {k: v.item() if hasattr(v, "item") else v for k, v in out.items()}
 

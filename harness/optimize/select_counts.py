@@ -62,6 +62,19 @@ LADDER = (
 VOLUMES = ("", "volume", "node-volume")  # a candidate's volume term: its name's suffix
 
 
+# what a fit records of its counts (the row's fit_<key> columns, the JSON's fit_counts)
+RECORDED = (
+    "level",
+    "candidates",
+    "folds",
+    "maxiter",
+    "starts",
+    "final_maxiter",
+    "work_gflop",
+    "budget_gflop",
+)
+
+
 def resolved(level: Counts, case_candidates, maxiter: int, starts: int, final_maxiter: int):
     """``level`` with the case's counts where it keeps them; its base capacities each with
     the volume terms the case's candidates have (none for an engine that runs none)."""

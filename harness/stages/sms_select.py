@@ -89,18 +89,11 @@ def optimise(setting, run_, base, first, first_res=None, rules=()):
 
 
 def fit_counts(counts) -> dict:
-    """The row's record of the counts the validated fit ran (harness/optimize/select_counts.py):
-    its level, candidates, folds, iterations, starts and the predicted work and budget."""
-    return {
-        "fit_level": counts.level,
-        "fit_candidates": " ".join(counts.candidates),
-        "fit_folds": counts.folds,
-        "fit_maxiter": counts.maxiter,
-        "fit_starts": counts.starts,
-        "fit_final_maxiter": counts.final_maxiter,
-        "fit_work_gflop": counts.work_gflop,
-        "fit_budget_gflop": counts.budget_gflop,
-    }
+    """The row's record of the counts the validated fit ran (harness/optimize/select_counts.py
+    RECORDED, as fit_<key> columns; the candidates space-separated)."""
+    out = {f"fit_{key}": getattr(counts, key) for key in select_counts.RECORDED}
+    out["fit_candidates"] = " ".join(counts.candidates)
+    return out
 
 
 def _rule_export(setting, s, rule) -> tuple:
