@@ -102,34 +102,43 @@ def heldout_summary(df):
     return pd.DataFrame(rows) if rows else None
 
 
+HELDOUT_NOTE = (
+    "Each held-out gmsh body, its own loads and clamps, an independent P2 truth; per body and "
+    "nu the geometric mean over the loads of calibrate's error / the best rule's (below 1: "
+    "calibrate predicts better). Every load and rule is in heldout.csv."
+)
+TETS_NOTE = (
+    "Calibrated materials for linear tetrahedra (calibrate --model p1-global: one pair; "
+    "--model p1: one per tetrahedron) against the same tetrahedra with the plain (E, nu), on "
+    "the held-out gmsh bodies with their own loads and clamps, an independent P2 truth: per "
+    "body and nu the geometric mean over the loads of each error. Every load is in tets.csv."
+)
+
+
+def _engines_note(df) -> str:
+    return (
+        engines_note(df)
+        + engines_finding(df)
+        + " Every load, step count and wall time is in engines.csv."
+    )
+
+
+# benchmarks with a summary table of their own: name -> (summary(df) or None, note(df))
+SUMMARIES = {
+    "engines": (engines_summary, _engines_note),
+    "heldout": (heldout_summary, lambda df: HELDOUT_NOTE),
+    "tets": (tets_summary, lambda df: TETS_NOTE),
+}
+
+
 def bench_table(name: str, df):
-    """(table of display strings, note) of one benchmark's CSV."""
-    if name == "engines":
-        t = engines_summary(df)
+    """(table of display strings, note) of one benchmark's CSV: its summary where it has one
+    (SUMMARIES), else its key columns."""
+    if name in SUMMARIES:
+        summary, note = SUMMARIES[name]
+        t = summary(df)
         if t is not None:
-            return t, engines_note(df) + engines_finding(
-                df
-            ) + " Every load, step count and wall time is in engines.csv."
-    if name == "heldout":
-        t = heldout_summary(df)
-        if t is not None:
-            return t, (
-                "Each held-out gmsh body, its own loads and clamps, an independent P2 "
-                "truth; per body and nu "
-                "the geometric mean over the loads of calibrate's error / the best rule's "
-                "(below 1: calibrate "
-                "predicts better). Every load and rule is in heldout.csv."
-            )
-    if name == "tets":
-        t = tets_summary(df)
-        if t is not None:
-            return t, (
-                "Calibrated materials for linear tetrahedra (calibrate --model p1-global: one "
-                "pair; --model p1: one per tetrahedron) against the same tetrahedra with the "
-                "plain (E, nu), on the held-out gmsh bodies with their own loads and clamps, "
-                "an independent P2 truth: per body and nu the geometric mean over the loads "
-                "of each error. Every load is in tets.csv."
-            )
+            return t, note(df)
     cols = COLUMNS.get(name) or [c for c in df.columns if not c.endswith("_version")][:8]
     more = f" (first {MAX_ROWS} of {len(df)} rows)" if len(df) > MAX_ROWS else ""
     return _display(df, cols), f"Key columns of {name}.csv{more}; every column is in the CSV."
