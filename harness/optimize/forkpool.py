@@ -7,7 +7,9 @@ each task is a module-level function and small arguments, its result comes back 
 Every fit runs with one BLAS thread, in a worker as in the caller, so a task's numbers are
 the same bit for bit whichever process runs it and however many there are: the pool
 changes the wall time, never the answer. Without fork (not Linux), inside a worker of
-another pool, or for small problems, the tasks run one after the other in the caller.
+another pool, or for small problems, the tasks run one after the other in the caller; so do
+the tasks left when a worker dies (the system kills the largest process when memory runs
+out: on a 200k-tet mesh two fits side by side need ~20 GB), said in one line.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import os
 import signal
 import sys
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 
 MAX_WORKERS = 8
@@ -65,27 +68,44 @@ def pool(workers: int):
         ex.shutdown(wait=True, cancel_futures=True)
 
 
-def run(executor, fn, tasks, announce=lambda j: None) -> list:
+def run(executor, fn, tasks, announce=lambda j: None, say=lambda msg: None) -> list:
     """[fn(task) for task in tasks], in the pool ``executor`` (or in the caller when None).
     ``announce(j)``: task j (from 1) of them is next: in the caller as it begins, in a pool
     as j - 1 tasks have finished (the pool's tasks start in their order). An error in a task
-    is raised here as it was raised there."""
+    is raised here as it was raised there. A worker that dies (killed by the system, e.g.
+    out of memory) breaks the pool: the tasks without a result then run here, one after the
+    other, with the same numbers (every fit runs with one BLAS thread in either place);
+    ``say`` gets the one line that says so."""
     tasks = list(tasks)
     if not tasks:
         return []
     if executor is None:
-        out = []
-        for j, task in enumerate(tasks, 1):
-            announce(j)
-            out.append(fn(task))
-        return out
-    futures = {executor.submit(fn, task): j for j, task in enumerate(tasks)}
-    out, pending = [None] * len(tasks), set(futures)
-    announce(1)
-    while pending:
-        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-        for f in finished:
-            out[futures[f]] = f.result()
-        if pending:
-            announce(len(tasks) - len(pending) + 1)
+        return _here(fn, tasks, range(len(tasks)), [None] * len(tasks), announce)
+    out, done = [None] * len(tasks), set()
+    try:
+        futures = {executor.submit(fn, task): j for j, task in enumerate(tasks)}
+        pending = set(futures)
+        announce(1)
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for f in finished:
+                out[futures[f]] = f.result()
+                done.add(futures[f])
+            if pending:
+                announce(len(tasks) - len(pending) + 1)
+    except BrokenProcessPool:
+        left = [j for j in range(len(tasks)) if j not in done]
+        say(
+            f"a worker process of the fits died (out of memory?): the {len(left)} fits left "
+            "run here one after the other (the same numbers, more time)"
+        )
+        return _here(fn, tasks, left, out, announce)
+    return out
+
+
+def _here(fn, tasks, which, out, announce) -> list:
+    """``out`` with fn(tasks[j]) for each j of ``which``, run in the caller in order."""
+    for j in which:
+        announce(j + 1)
+        out[j] = fn(tasks[j])
     return out

@@ -452,7 +452,7 @@ def validate(ex, names: list, status) -> list:
             else (f"validation: {j - 1} of {n} fits done (fit {j} of {n})")
         )
 
-    scores = dict(zip(tasks, forkpool.run(ex, _validation_fit, tasks, announce)))
+    scores = dict(zip(tasks, forkpool.run(ex, _validation_fit, tasks, announce, status)))
     return [{"model": c, **{f: scores[c, f] for f in folds if (c, f) in scores}} for c in names]
 
 
@@ -484,7 +484,7 @@ def final_fit(ex, name: str, n_starts: int, seed: int, status) -> list:
     def announce(j):
         status(f"fitting {name} on every training state (start {j} of {n_starts})")
 
-    fits = forkpool.run(ex, _final_start, tasks, announce)
+    fits = forkpool.run(ex, _final_start, tasks, announce, status)
     fits.sort(key=lambda t: t[0])
     return fits
 

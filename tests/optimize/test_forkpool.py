@@ -3,6 +3,8 @@ same selection bit for bit as one after the other in the caller (choice, every s
 every start's constants and stop), a cap passed inside a worker aborts in the same one
 line, and the pool's bookkeeping (results in task order, errors raised in the caller)."""
 
+import os
+import signal
 import sys
 
 import numpy as np
@@ -68,3 +70,49 @@ def test_small_problems_and_workers_of_other_pools_stay_in_one_process():
     assert forkpool.available_workers(24, forkpool.MIN_COLUMNS - 1) == 1
     assert 1 <= forkpool.available_workers(24, forkpool.MIN_COLUMNS) <= forkpool.MAX_WORKERS
     assert forkpool.available_workers(1, 10**6) == 1
+
+
+def _in_a_worker() -> bool:
+    import multiprocessing as mp
+
+    return mp.parent_process() is not None
+
+
+def _dies_in_a_worker(x):
+    """x squared; task 2 kills its worker process (as the system does when memory runs out)."""
+    if x == 2 and _in_a_worker():
+        os.kill(os.getpid(), signal.SIGKILL)
+    return x * x
+
+
+def test_a_dead_worker_hands_its_tasks_back_to_the_caller():
+    said = []
+    with forkpool.pool(2) as ex:
+        out = forkpool.run(ex, _dies_in_a_worker, range(6), say=said.append)
+        assert out == [x * x for x in range(6)]
+        again = forkpool.run(ex, _square, [3, 4], say=said.append)  # the pool stays broken
+    assert again == [9, 16]
+    assert len(said) == 2 and "died (out of memory?)" in said[0] and "\n" not in said[0]
+    assert "the 2 fits left" in said[1]
+
+
+_REAL_FIT = sel._validation_fit
+
+
+def _validation_fit_dies_once(task):
+    """The validation fit, whose second candidate's first fold kills its worker."""
+    if task == (CANDS[1].name, FAMILIES[0]) and _in_a_worker():
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _REAL_FIT(task)
+
+
+def test_a_selection_whose_worker_died_is_the_selection_one_after_the_other(monkeypatch):
+    prob, _, _ = problem(np.full(1, 2.0))
+    alone = _select(prob, 1)
+    monkeypatch.setattr(sel, "_validation_fit", _validation_fit_dies_once)
+    said = []
+    pooled = _select(prob, 2, status=said.append)
+    assert any("died (out of memory?)" in m for m in said)
+    assert pooled.choice == alone.choice and pooled.table == alone.table
+    for a, b in zip(pooled.starts, alone.starts):
+        assert np.array_equal(a, b)
