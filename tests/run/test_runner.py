@@ -68,9 +68,9 @@ def test_suite_tables_and_resume(tmp_path, fake, capsys):
     assert len(calls(suite)) == 7
 
 
-def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
-    """The code version of a job is the hash of the sources it loaded: editing a stage
-    module re-runs its cases; editing nothing re-runs nothing."""
+def _stage_copy(tmp_path, monkeypatch, extra: str = ""):
+    """A copy of tests/fakestage.py (plus ``extra``) as a module of its own, registered as
+    the stage 'fake'; its path."""
     import shutil
     import uuid
 
@@ -79,8 +79,16 @@ def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
     name = f"fake_copy_{uuid.uuid4().hex[:8]}"
     src = mods / f"{name}.py"
     shutil.copy(ROOT / "tests" / "fakestage.py", src)
+    src.write_text(src.read_text() + extra)
     monkeypatch.syspath_prepend(str(mods))
     monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": name}))
+    return src
+
+
+def test_code_change_reruns_only_cases_that_loaded_it(tmp_path, monkeypatch):
+    """The code version of a job is the hash of the sources it loaded: editing a stage
+    module re-runs its cases; editing nothing re-runs nothing."""
+    src = _stage_copy(tmp_path, monkeypatch)
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     res = tmp_path / "results"
@@ -103,20 +111,10 @@ def test_a_stage_running_commands_in_their_own_processes_depends_on_every_source
     """A stage with SUBPROCESS_CODE (the engines stage: pack, calibrate, engines run as
     commands) records every source file of harness/ and reference/ as its code, the commands
     included (this process never imports what they run); the report and the bench are not."""
-    import shutil
-    import uuid
-
     from harness.stages import engines
 
     assert engines.SUBPROCESS_CODE is True
-    mods = tmp_path / "mods"
-    mods.mkdir()
-    name = f"fake_sub_{uuid.uuid4().hex[:8]}"
-    src = mods / f"{name}.py"
-    shutil.copy(ROOT / "tests" / "fakestage.py", src)
-    src.write_text(src.read_text() + "\nSUBPROCESS_CODE = True\n")
-    monkeypatch.syspath_prepend(str(mods))
-    monkeypatch.setattr(registry, "STAGES", registry.STAGES.with_entries({"fake": name}))
+    _stage_copy(tmp_path, monkeypatch, "\nSUBPROCESS_CODE = True\n")
     suite = tmp_path / "cases" / "demo"
     write_case(suite, "a")
     res = tmp_path / "results"
