@@ -20,15 +20,17 @@ import scipy.sparse as sp
 from harness.errors import ModelError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.linalg.sparse import single_thread_blas
-from harness.linalg.stiffness import stiffness_map
+from harness.linalg.stiffness import restriction, stiffness_map
 
 
 class SharedSets:
     """The restrictions of K = B diag(k) B^T to the free dofs of several sets: ``Bs`` per
     set its incidence rows (one network's columns), ``dofs`` per set its free dofs' ids
-    (ascending, as its rows), ``coords`` per set its rows' positions (the ordering)."""
+    (ascending, as its rows), ``coords`` per set its rows' positions (the ordering);
+    ``whole``: None, or two functions: () -> the pattern of the network's whole K, and
+    k -> its values; K is their restriction to the union (its own map is not built)."""
 
-    def __init__(self, Bs, dofs, coords, name: str = ""):
+    def __init__(self, Bs, dofs, coords, name: str = "", whole=None):
         dofs = [np.asarray(d, np.int64) for d in dofs]
         self.union = np.unique(np.concatenate(dofs))
         self.keeps = [np.searchsorted(self.union, d) for d in dofs]
@@ -47,6 +49,7 @@ class SharedSets:
         self.B = sp.vstack(rows).tocsr()[order].tocsc()
         self.coords = np.concatenate(X)[order]
         self.name = name
+        self.whole, self.values = whole if whole is not None else (None, None)
         self._map = None
         count = np.zeros(len(self.union), np.int64)
         for kp in self.keeps:
@@ -71,12 +74,18 @@ class SharedSets:
         return float(flop / 1e9)
 
     def stiffness(self, k) -> sp.csc_matrix:
-        """K on the union of the free dofs (the map k -> K built at the first call)."""
+        """K on the union of the free dofs (the map k -> K, or its restriction of the
+        network's, built at the first call)."""
         if self._map is None:
-            self._map = stiffness_map(self.B)
-        pattern, kmap = self._map
+            if self.values is None:
+                self._map = (*stiffness_map(self.B), None)
+            else:
+                pattern, gather = restriction(self.whole(), self.union)
+                self._map = (pattern, None, gather)
+        pattern, kmap, gather = self._map
         K = pattern.copy()
-        K.data = kmap @ np.asarray(k, float)
+        k = np.asarray(k, float)
+        K.data = kmap @ k if gather is None else self.values(k)[gather]
         return K
 
     def factor(self, k) -> "SharedFactor":
@@ -141,13 +150,14 @@ class SharedFactor:
         ]
 
 
-def best_group(Bs, dofs, coords, alone, names):
+def best_group(Bs, dofs, coords, alone, names, whole=None):
     """(positions, in the order of their :class:`SharedSets`, and it) of the sets (``Bs``,
     ``dofs``, ``coords`` as SharedSets'; ``alone``: each set's own factorisation's Gflop)
     that share a factorisation, or None: from the set with the most free dofs, each other
     set (largest first) joins when the group's flops with it are fewer than the group's
     without it plus its own. A set that holds a large part of the body (a clamped face as
-    big as a side) stays apart: its held dofs would make the shared root large and dense."""
+    big as a side) stays apart: its held dofs would make the shared root large and dense.
+    ``whole``: as SharedSets'."""
     order = sorted(range(len(Bs)), key=lambda i: -Bs[i].shape[0])
     group, cost, shared = [order[0]], alone[order[0]], None
     for i in order[1:]:
@@ -157,6 +167,7 @@ def best_group(Bs, dofs, coords, alone, names):
             [dofs[j] for j in trial],
             [coords[j] for j in trial],
             "+".join(names[j] for j in trial),
+            whole,
         )
         if cand.estimate() < cost + alone[i]:
             group, cost, shared = trial, cand.estimate(), cand

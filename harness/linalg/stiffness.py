@@ -59,3 +59,20 @@ def _pairs(B, keys, n, cnt, sq, j0):
     pa, pb = first + t // c, first + t % c
     ia, ib = B.indices[pa].astype(np.int64), B.indices[pb].astype(np.int64)
     return np.searchsorted(keys, ib * n + ia), B.data[pa] * B.data[pb]
+
+
+def restriction(pattern: sp.csc_matrix, dofs: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
+    """The pattern of K on ``dofs`` (ascending ids of ``pattern``'s rows) and where each of
+    its entries sits in ``pattern.data``: K_dofs.data = K.data[gather]. The same entries as
+    :func:`stiffness_pattern` of B's rows ``dofs`` (an entry is there when a column touches
+    both dofs), so a restriction of one whole-network map gives every load set's K, value
+    for value as its own map would (each entry sums the same columns in the same order)."""
+    dofs = np.asarray(dofs, np.int64)
+    numbered = pattern.copy()
+    numbered.data = np.arange(1, pattern.nnz + 1, dtype=float)  # exact below 2**53
+    sub = numbered[dofs][:, dofs].tocsc()
+    sub.sort_indices()
+    index = np.int32 if pattern.nnz < 2**31 else np.int64
+    gather = (sub.data - 1).astype(index)
+    sub.data[:] = 0.0
+    return sub, gather

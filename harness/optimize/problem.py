@@ -25,7 +25,7 @@ from harness.errors import SpringbenchError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import DenseFactor, Factor, nested_dissection
-from harness.linalg.stiffness import stiffness_map, stiffness_pattern
+from harness.linalg.stiffness import restriction, stiffness_map, stiffness_pattern
 from harness.models.springs import incidence
 
 
@@ -34,7 +34,9 @@ class LoadBlock:
     """One load case on its free dofs: B (nfree x e, csc), f, u_ref, w (nfree,), and
     const = sum of w |u_ref|^2 over the constrained dofs; ``dofs``: the free dofs' ids in
     the network (ascending; None: unknown), which lets load sets of one network that hold
-    different dofs share a factorisation (harness/linalg/shared.py)."""
+    different dofs share a factorisation (harness/linalg/shared.py); ``network``: the
+    network's incidence on every dof (B is its rows ``dofs``; None: unknown), whose one map
+    k -> K serves every load set and every shared group (:func:`network_map`)."""
 
     name: str
     B: sp.csc_matrix
@@ -43,6 +45,7 @@ class LoadBlock:
     w: np.ndarray
     const: float = 0.0
     dofs: np.ndarray | None = None
+    network: sp.csc_matrix | None = None
 
 
 @dataclass(frozen=True)
@@ -154,7 +157,7 @@ class FitProblem:
                 fix="one row per load case",
             )
         blocks, coords = [], []
-        cache = {}
+        cache, network = {}, B.tocsc()
         X = np.repeat(points, points.shape[1], axis=0)
         for name, free, f, ur in zip(names, free_masks, forces, u_ref):
             key = free.tobytes()
@@ -170,6 +173,7 @@ class FitProblem:
                     w[free].copy(),
                     float(np.sum(w[fixed] * ur[fixed] ** 2)),
                     cache[key][2],
+                    network,
                 )
             )
             coords.append(cache[key][1])
@@ -260,17 +264,22 @@ class FitProblem:
             object.__setattr__(self, "_parts", cached)
         return cached
 
+    def prepare(self) -> None:
+        """Build the network's map k -> K now (:func:`network_map`): a pool of fits forked
+        after it shares it (the answer is the same either way)."""
+        for network in {id(b.network): b.network for b in self.blocks}.values():
+            if network is not None:
+                network_map(network)
+
     def solvers(self, k):
         """(load sets, solver) per group of :meth:`solve_parts` at k: the solver maps one
-        right-hand side block per set to its solution block; one fresh factorisation each."""
+        right-hand side block per set to its solution block; one fresh factorisation each.
+        Nothing here keeps a solver once yielded: a caller that drops it before the next
+        one (``del``) holds one factorisation at a time, not two."""
         sets, k = self.load_sets(), np.asarray(k, float)
         for idx, shared in self.solve_parts():
             group = [sets[i] for i in idx]
-            if shared is not None:
-                yield group, shared.factor(k).solve
-            else:
-                fac = group[0].factor(k)
-                yield group, lambda rhs, fac=fac: [fac.solve(r).reshape(r.shape) for r in rhs]
+            yield group, (shared.factor(k).solve if shared is not None else _each(group[0], k))
 
     def solve(self, k) -> list[np.ndarray]:
         """Free-dof displacements per load by a fresh sparse factorisation (shared by
@@ -280,6 +289,7 @@ class FitProblem:
             for s, U in zip(group, solve([s.F for s in group])):
                 for j, i in enumerate(s.index):
                     out[i] = U[:, j]
+            del solve  # its factorisation, before the next one
         return out
 
     def G(self, k) -> float:
@@ -317,6 +327,7 @@ class LoadSet:
     k0: np.ndarray | None = None  # the constants the ordering's pattern is built from
     dofs: np.ndarray | None = None  # the free dofs' ids in the network (LoadBlock.dofs)
     key: str = ""  # B's content digest
+    network: sp.csc_matrix | None = None  # LoadBlock.network
 
     @property
     def perm(self) -> np.ndarray | None:
@@ -328,10 +339,19 @@ class LoadSet:
         )
 
     def stiffness(self, k) -> sp.csc_matrix:
-        """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data."""
-        pattern, kmap = per_matrix(self.B, "kmap", lambda: stiffness_map(self.B))
+        """K = B diag(k) B^T as one sparse product with a precomputed map k -> K.data: the
+        network's (:func:`network_map`) restricted to the set's dofs when it is known, else
+        the set's own."""
+        k = np.asarray(k, float)
+        if self.network is None or self.dofs is None:
+            pattern, kmap = per_matrix(self.B, "kmap", lambda: stiffness_map(self.B))
+            K = pattern.copy()
+            K.data = kmap @ k
+            return K
+        whole = network_map(self.network)[0]
+        pattern, gather = per_matrix(self.B, "gather", lambda: restriction(whole, self.dofs))
         K = pattern.copy()
-        K.data = kmap @ np.asarray(k, float)
+        K.data = network_values(self.network, k)[gather]
         return K
 
     def factor(self, k, kind: str = "auto"):
@@ -362,6 +382,28 @@ class LoadSet:
 
 
 _PER_MATRIX: dict = {}  # id(B) -> (weakref to B, {name: value})
+
+
+def _each(load_set: "LoadSet", k: np.ndarray):
+    """The solver of one load set's fresh factorisation at k (for :meth:`FitProblem.solvers`)."""
+    fac = load_set.factor(k)
+    return lambda rhs: [fac.solve(r).reshape(r.shape) for r in rhs]
+
+
+def network_map(network: sp.csc_matrix):
+    """(pattern, map k -> K.data) of a network's whole K (harness/linalg/stiffness.py), kept
+    per matrix: one map for all its load sets and shared groups, built before a pool of fits
+    forks (:meth:`FitProblem.prepare`) so that its workers share it, not one each."""
+    return per_matrix(network, "kmap", lambda: stiffness_map(network))
+
+
+def network_values(network: sp.csc_matrix, k: np.ndarray) -> np.ndarray:
+    """The whole K's values at k (:func:`network_map`), kept for the last k: the load sets
+    of one evaluation restrict one product."""
+    last = per_matrix(network, "last k", dict)
+    if last.get("k") is None or not np.array_equal(last["k"], k):
+        last.update(k=np.array(k, float), data=network_map(network)[1] @ k)
+    return last["data"]
 
 
 def per_matrix(B, name: str, make):
@@ -415,6 +457,7 @@ def load_sets(problem: FitProblem) -> list[LoadSet]:
                 problem.k0,
                 bl[0].dofs,
                 key,
+                bl[0].network,
             )
         )
     return out
@@ -430,6 +473,10 @@ def solve_parts(sets: list[LoadSet]) -> list[tuple[list, SharedSets | None]]:
         if s.dofs is not None and s.coords is not None and s.B.shape[0] > DENSE_FACTOR_MAX
     ]
     found = None
+    network = sets[idx[0]].network if idx else None
+    whole = None
+    if network is not None:
+        whole = (lambda: network_map(network)[0], lambda k: network_values(network, k))
     if len(idx) >= 2:
         h = hashlib.sha1()
         for i in idx:
@@ -444,6 +491,7 @@ def solve_parts(sets: list[LoadSet]) -> list[tuple[list, SharedSets | None]]:
                 [sets[i].coords for i in idx],
                 [sets[i].symbolic().estimate()["gflop"] for i in idx],
                 [sets[i].name for i in idx],
+                whole,
             ),
         )
     if found is None:
@@ -478,4 +526,5 @@ def value_and_grad(
         if grad:
             for s, U, Lam in zip(group, Us, solve(Rs)):
                 g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
+        del solve  # its factorisation, before the next one
     return G2, g

@@ -202,18 +202,15 @@ def columns(
     if cand.volume:
         keep = np.concatenate([keep, np.arange(*volumes[cand.volume])])
     e = len(keep)
-    whole = e == problem.n_springs
-    sliced: dict = {}  # blocks with one B (the same free dofs) keep sharing one
-    for b in problem.blocks:
-        if id(b.B) not in sliced:
-            sliced[id(b.B)] = (
-                b.B
-                if whole
-                else per_matrix(
-                    b.B, f"columns:{cand.volume or 'springs'}", lambda: b.B[:, keep].tocsc()
-                )
-            )
-    blocks = tuple(dataclasses.replace(b, B=sliced[id(b.B)]) for b in problem.blocks)
+
+    def cut(B):  # kept per matrix: blocks (and networks) that share a B keep sharing one
+        if B is None or e == problem.n_springs:
+            return B
+        return per_matrix(B, f"columns:{cand.volume or 'springs'}", lambda: B[:, keep].tocsc())
+
+    blocks = tuple(
+        dataclasses.replace(b, B=cut(b.B), network=cut(b.network)) for b in problem.blocks
+    )
     k0 = problem.k0[keep].copy()
     if cand.volume:
         k0[n_springs:] = kv0
@@ -397,6 +394,8 @@ def select(
         n_springs=n_springs,
         shared_final=shared_final,
     )
+    for _, cp in _RUN["cands"].values():
+        cp.prepare()  # before the pool forks: its workers share the networks' maps
     if workers is None:
         n = len(candidates) * len(folds) if len(folds) > 1 else 0
         workers = forkpool.available_workers(max(n, n_starts), problem.n_springs)

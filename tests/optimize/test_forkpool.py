@@ -116,3 +116,30 @@ def test_a_selection_whose_worker_died_is_the_selection_one_after_the_other(monk
     assert pooled.choice == alone.choice and pooled.table == alone.table
     for a, b in zip(pooled.starts, alone.starts):
         assert np.array_equal(a, b)
+
+
+def test_the_workers_share_the_networks_map_built_before_the_fork(monkeypatch, tmp_path):
+    """The map k -> K (at 200k tets ~1 GB with a volume term) is built once, by the caller
+    before the pool forks, and the workers' load sets and shared groups restrict it: no
+    process but the caller builds a map (the rule's scores given, as calibrate gives them,
+    so that nothing else would build it before the fork)."""
+    from harness.linalg import shared
+    from harness.optimize import problem as pr
+
+    log = tmp_path / "maps"
+
+    def recording(make):
+        def built(B):
+            with open(log, "a") as f:
+                f.write(f"{os.getpid()}\n")
+            return make(B)
+
+        return built
+
+    monkeypatch.setattr(pr, "stiffness_map", recording(pr.stiffness_map))
+    monkeypatch.setattr(shared, "stiffness_map", recording(shared.stiffness_map))
+    prob, _, _ = problem(np.full(1, 2.0))
+    pooled = _select(prob, 2, rule_scores=np.ones(len(prob.blocks)))
+    assert pooled.choice != "rule"
+    pids = log.read_text().split()
+    assert pids and set(pids) == {str(os.getpid())}

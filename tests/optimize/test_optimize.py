@@ -335,9 +335,9 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2, prob.n_springs)
     whole = prob.G2(k)
     part = sel.subset(prob, [0])
-    # fresh matrices: nothing shared
+    # fresh matrices, no network: nothing shared, each set's own map k -> K
     again = FitProblem(
-        tuple(dataclasses.replace(b, B=b.B.copy()) for b in part.blocks),
+        tuple(dataclasses.replace(b, B=b.B.copy(), network=None) for b in part.blocks),
         part.k0,
         None,
         part.bounds,
@@ -350,8 +350,10 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     )
     assert part.G2(k) == again.G2(k) and 0 < part.G2(k) <= whole
     shared = part.load_sets()[0].B
-    # built once, shared
-    assert shared is prob.load_sets()[0].B and "kmap" in pr._PER_MATRIX[id(shared)][1]
+    # built once, shared: the network's one map, restricted to the set's dofs
+    assert shared is prob.load_sets()[0].B and "gather" in pr._PER_MATRIX[id(shared)][1]
+    network = part.blocks[0].network
+    assert "kmap" in pr._PER_MATRIX[id(network)][1] and "kmap" not in pr._PER_MATRIX[id(shared)][1]
 
 
 def test_the_symbolic_factorisation_needs_the_pattern_alone():
@@ -405,3 +407,31 @@ def test_the_stiffness_map_built_in_blocks_is_the_same_map(block, monkeypatch):
     K.data = P @ k
     dense = B.toarray() @ np.diag(k) @ B.toarray().T
     assert np.allclose(K.toarray(), dense, rtol=1e-13, atol=1e-13 * abs(dense).max())
+
+
+def test_an_evaluation_holds_one_factorisation_at_a_time(monkeypatch):
+    """G2, the gradient and the solves factorise load set after load set and drop each
+    factorisation before the next (at 200k tets one is ~1-3 GB): when a factorisation
+    starts, none of the earlier ones is alive."""
+    import gc
+    import weakref
+
+    from harness.optimize import problem as pr
+    from harness.optimize.synthetic import recoverable_problem
+
+    prob, _ = recoverable_problem((8, 8, 8), seed=5)
+    assert len(prob.solve_parts()) >= 2
+    alive, refs = [], []
+    real = pr.LoadSet.factor
+
+    def factor(self, k, kind="auto"):
+        gc.collect()
+        alive.append(sum(r() is not None for r in refs))
+        f = real(self, k, kind)
+        refs.append(weakref.ref(f))
+        return f
+
+    monkeypatch.setattr(pr.LoadSet, "factor", factor)
+    pr.value_and_grad(prob, prob.k0 * 1.2)
+    prob.solve(prob.k0)
+    assert len(alive) == 2 * len(prob.solve_parts()) and max(alive) == 0

@@ -14,7 +14,7 @@ import scipy.sparse.linalg as spla
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import single_thread_blas
-from harness.linalg.stiffness import stiffness_map
+from harness.linalg.stiffness import restriction, stiffness_map
 from harness.optimize.gradient import Objective
 from harness.optimize.problem import value_and_grad
 from harness.optimize.synthetic import recoverable_problem
@@ -148,3 +148,44 @@ def test_every_separator_of_the_dissection_separates_its_children():
             assert A[a][:, b].nnz == 0
     order = np.concatenate([V for V, _ in nodes])
     assert np.array_equal(np.sort(order), np.arange(A.shape[0]))
+
+
+def _own(B, k):
+    pattern, P = stiffness_map(B)
+    K = pattern.copy()
+    K.data = P @ k
+    return K
+
+
+def test_the_network_map_restricted_is_each_sets_own_map_bit_for_bit():
+    """Every load set's K and every shared group's K taken from the network's one map k -> K
+    (restriction) equal those of their own maps bit for bit, pattern and values: also with
+    node-volume-like columns (tens of nonzeros) beside the springs; and the dense product."""
+    prob = grid()
+    sets = prob.load_sets()
+    network = sets[0].network
+    assert network is not None and all(s.network is network for s in sets)
+    rng = np.random.default_rng(7)
+    k = prob.k0 * rng.uniform(0.5, 2.0, prob.n_springs)
+    for s in sets:
+        K, own = s.stiffness(k), _own(s.B, k)
+        assert np.array_equal(K.indptr, own.indptr) and np.array_equal(K.indices, own.indices)
+        assert K.data.tobytes() == own.data.tobytes()
+    whole = stiffness_map(network)
+    args = ([s.B for s in sets], [s.dofs for s in sets], [s.coords for s in sets])
+    parts = (lambda: whole[0], lambda k: whole[1] @ k)
+    a, b = SharedSets(*args, whole=parts).stiffness(k), SharedSets(*args).stiffness(k)
+    assert np.array_equal(a.indices, b.indices) and a.data.tobytes() == b.data.tobytes()
+    n = network.shape[0]
+    wide = sp.random(n, 30, density=0.3, random_state=8, format="csc")
+    B2 = sp.hstack([network, wide]).tocsc()
+    k2 = np.concatenate([k, rng.uniform(0.5, 2.0, 30)])
+    pattern, P = stiffness_map(B2)
+    for s in sets:
+        sub, gather = restriction(pattern, s.dofs)
+        K = sub.copy()
+        K.data = (P @ k2)[gather]
+        own = _own(B2[s.dofs], k2)
+        assert np.array_equal(K.indices, own.indices) and K.data.tobytes() == own.data.tobytes()
+        Bd = B2[s.dofs].toarray()
+        assert np.allclose(K.toarray(), (Bd * k2) @ Bd.T, rtol=1e-12, atol=1e-12)
