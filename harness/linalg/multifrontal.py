@@ -230,20 +230,25 @@ class MultifrontalCholesky:
     def _flat(self, drop: bool = False):
         """The factor as flat arrays for the compiled substitution: per front its first
         row, sizes and offsets; inverted L11 blocks and L21 blocks (row-major). ``drop``
-        frees the LAPACK path's blocks (half the memory; numba is then required)."""
+        frees the LAPACK path's blocks as they are copied (the factor is held once, not
+        twice; numba is then required)."""
         if getattr(self, "_flat_cache", None) is None:
             keep = [t for t, nd in enumerate(self.sym.nodes) if nd["nv"]]
             nv = np.array([self.sym.nodes[t]["nv"] for t in keep], np.int64)
             nu = np.array([len(self.sym.nodes[t]["Ur"]) for t in keep], np.int64)
             start = np.array([self.sym.nodes[t]["sl"].start for t in keep], np.int64)
-            inv = [sla.lapack.dtrtri(self.L11[t], lower=1)[0] for t in keep]
             off = lambda sizes: np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-            Li = np.concatenate([x.ravel() for x in inv])
-            L21 = np.concatenate([self.L21[t].ravel() for t in keep] + [np.empty(0)])
+            o11, o21 = off(nv * nv), off(nv * nu)
+            Li, L21 = np.empty(o11[-1]), np.empty(o21[-1])
+            for j, t in enumerate(keep):
+                Li[o11[j] : o11[j + 1]] = sla.lapack.dtrtri(self.L11[t], lower=1)[0].ravel()
+                L21[o21[j] : o21[j + 1]] = self.L21[t].ravel()
+                if drop:
+                    self.L11[t] = self.L21[t] = None
             Ur = np.concatenate(
                 [self.sym.nodes[t]["Ur"] for t in keep] + [np.empty(0, np.int64)]
             ).astype(np.int64)
-            self._flat_cache = (start, nv, nu, off(nv * nv), off(nv * nu), off(nu), Li, L21, Ur)
+            self._flat_cache = (start, nv, nu, o11, o21, off(nu), Li, L21, Ur)
             if drop:  # every later solve takes the compiled path: the blocks are not needed
                 self.L11 = self.L21 = None
         return self._flat_cache
@@ -259,7 +264,8 @@ class MultifrontalCholesky:
     def _solve_compiled(self, rhs):
         order = self.sym.order
         b = np.ascontiguousarray(rhs[order])
-        _subst_kernel()(b, *self._flat())
+        # every later solve takes this path too (solve): the blocks are dropped as copied
+        _subst_kernel()(b, *self._flat(drop=True))
         out = np.empty_like(b)
         out[order] = b
         return out

@@ -40,7 +40,8 @@ from scipy.linalg.blas import dsyrk as syrk
 
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic, _subst_kernel, warm_up
 from harness.optimize.incremental_kernels import _accept, _kernels, _propose  # noqa: F401  (tests call the plain ones)
-from harness.optimize.problem import FitProblem, per_matrix
+from harness.optimize.permatrix import per_matrix
+from harness.optimize.problem import FitProblem
 
 
 class _Set:

@@ -15,7 +15,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import hashlib
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +26,7 @@ from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import DenseFactor, Factor, nested_dissection
 from harness.linalg.stiffness import restriction, stiffness_map, stiffness_pattern
 from harness.models.springs import incidence
+from harness.optimize.permatrix import network_map, network_values, per_matrix
 
 
 @dataclass(frozen=True)
@@ -381,44 +381,10 @@ class LoadSet:
         )
 
 
-_PER_MATRIX: dict = {}  # id(B) -> (weakref to B, {name: value})
-
-
 def _each(load_set: "LoadSet", k: np.ndarray):
     """The solver of one load set's fresh factorisation at k (for :meth:`FitProblem.solvers`)."""
     fac = load_set.factor(k)
     return lambda rhs: [fac.solve(r).reshape(r.shape) for r in rhs]
-
-
-def network_map(network: sp.csc_matrix):
-    """(pattern, map k -> K.data) of a network's whole K (harness/linalg/stiffness.py), kept
-    per matrix: one map for all its load sets and shared groups, built before a pool of fits
-    forks (:meth:`FitProblem.prepare`) so that its workers share it, not one each."""
-    return per_matrix(network, "kmap", lambda: stiffness_map(network))
-
-
-def network_values(network: sp.csc_matrix, k: np.ndarray) -> np.ndarray:
-    """The whole K's values at k (:func:`network_map`), kept for the last k: the load sets
-    of one evaluation restrict one product."""
-    last = per_matrix(network, "last k", dict)
-    if last.get("k") is None or not np.array_equal(last["k"], k):
-        last.update(k=np.array(k, float), data=network_map(network)[1] @ k)
-    return last["data"]
-
-
-def per_matrix(B, name: str, make):
-    """``make()`` once per matrix object B and name, kept while B lives: the stiffness
-    map, the orderings and the symbolic factorisation depend on B's pattern alone, and a
-    validated fit solves subsets of the same blocks dozens of times."""
-    entry = _PER_MATRIX.get(id(B))
-    if entry is None or entry[0]() is not B:
-        entry = (weakref.ref(B), {})
-        _PER_MATRIX[id(B)] = entry
-        weakref.finalize(B, _PER_MATRIX.pop, id(B), None)
-    store = entry[1]
-    if name not in store:
-        store[name] = make()
-    return store[name]
 
 
 DENSE_FACTOR_MAX = 400

@@ -64,7 +64,8 @@ from harness.linalg.sparse import single_thread_blas
 from harness.optimize import forkpool
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
-from harness.optimize.problem import FitProblem, per_matrix, value_and_grad
+from harness.optimize.permatrix import per_matrix
+from harness.optimize.problem import FitProblem, value_and_grad
 from harness.optimize.select_table import (  # noqa: F401 (the table's names, here as well)
     CLAMPED,
     MARGIN,

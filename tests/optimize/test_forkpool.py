@@ -124,6 +124,7 @@ def test_the_workers_share_the_networks_map_built_before_the_fork(monkeypatch, t
     process but the caller builds a map (the rule's scores given, as calibrate gives them,
     so that nothing else would build it before the fork)."""
     from harness.linalg import shared
+    from harness.optimize import permatrix as pm
     from harness.optimize import problem as pr
 
     log = tmp_path / "maps"
@@ -137,6 +138,7 @@ def test_the_workers_share_the_networks_map_built_before_the_fork(monkeypatch, t
         return built
 
     monkeypatch.setattr(pr, "stiffness_map", recording(pr.stiffness_map))
+    monkeypatch.setattr(pm, "stiffness_map", recording(pm.stiffness_map))
     monkeypatch.setattr(shared, "stiffness_map", recording(shared.stiffness_map))
     prob, _, _ = problem(np.full(1, 2.0))
     pooled = _select(prob, 2, rule_scores=np.ones(len(prob.blocks)))

@@ -314,21 +314,21 @@ def test_per_matrix_values_are_made_once_and_dropped_with_their_matrix():
 
     import scipy.sparse as sp
 
-    from harness.optimize import problem as pr
+    from harness.optimize import permatrix as pm
 
     B = sp.random(30, 40, 0.2, format="csc", random_state=0)
     made = []
     for _ in range(3):
-        assert pr.per_matrix(B, "x", lambda: made.append(1) or len(made)) == 1
-    assert made == [1] and id(B) in pr._PER_MATRIX
+        assert pm.per_matrix(B, "x", lambda: made.append(1) or len(made)) == 1
+    assert made == [1] and id(B) in pm._PER_MATRIX
     key = id(B)
     del B
     gc.collect()
-    assert key not in pr._PER_MATRIX
+    assert key not in pm._PER_MATRIX
 
 
 def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
-    from harness.optimize import problem as pr
+    from harness.optimize import permatrix as pm
     from harness.optimize import select as sel
 
     prob, _ = recoverable_problem((34, 34))
@@ -351,9 +351,9 @@ def test_subsets_share_the_stiffness_map_and_match_a_fresh_problem():
     assert part.G2(k) == again.G2(k) and 0 < part.G2(k) <= whole
     shared = part.load_sets()[0].B
     # built once, shared: the network's one map, restricted to the set's dofs
-    assert shared is prob.load_sets()[0].B and "gather" in pr._PER_MATRIX[id(shared)][1]
+    assert shared is prob.load_sets()[0].B and "gather" in pm._PER_MATRIX[id(shared)][1]
     network = part.blocks[0].network
-    assert "kmap" in pr._PER_MATRIX[id(network)][1] and "kmap" not in pr._PER_MATRIX[id(shared)][1]
+    assert "kmap" in pm._PER_MATRIX[id(network)][1] and "kmap" not in pm._PER_MATRIX[id(shared)][1]
 
 
 def test_the_symbolic_factorisation_needs_the_pattern_alone():
@@ -362,6 +362,7 @@ def test_the_symbolic_factorisation_needs_the_pattern_alone():
     as from K itself, and the same solution bit for bit; the map is built only to factorise."""
     from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
     from harness.linalg.stiffness import stiffness_map, stiffness_pattern
+    from harness.optimize import permatrix as pm
     from harness.optimize import problem as pr
 
     prob, _ = recoverable_problem((6, 6, 6))
@@ -373,7 +374,7 @@ def test_the_symbolic_factorisation_needs_the_pattern_alone():
     assert np.array_equal(alone.indptr, pattern.indptr)
     assert np.array_equal(alone.indices, pattern.indices)
     sym = s.symbolic()
-    assert "kmap" not in pr._PER_MATRIX[id(s.B)][1]  # no map for a symbolic alone
+    assert "kmap" not in pm._PER_MATRIX[id(s.B)][1]  # no map for a symbolic alone
     k = prob.k0 * np.random.default_rng(1).uniform(0.5, 2, prob.n_springs)
     from_k = Symbolic(s.stiffness(prob.k0), s.coords)
     assert np.array_equal(sym.order, from_k.order)

@@ -144,3 +144,47 @@ def test_a_cheaper_level_still_recovers_a_wrong_rule(monkeypatch):
         ).k0,
     ).max() == pytest.approx(1.0, rel=1e-9)
     assert sel.per_load(prob, s.k).max() < 0.01
+
+
+def test_the_predicted_memory_holds_the_largest_factorisation():
+    """eval_gbytes bounds what one evaluation holds: the largest factorisation of its solve
+    parts (sets apart and shared groups), measured as its arrays' bytes after it is made."""
+    import dataclasses
+
+    from tests.optimize.test_shared_factor import grid
+
+    prob = grid()
+    k = prob.k0 * 1.2
+    for shared in (False, True):
+        p = dataclasses.replace(prob, shared=shared)
+        made = []
+        for idx, group in p.solve_parts():
+            if group is not None:
+                f = group.factor(k)
+                arrays = [*f.mf.L11, *f.mf.L21, f.mf.root, *[r for r in f.roots if r is not None]]
+            else:
+                f = p.load_sets()[idx[0]].factor(k)
+                arrays = [*f.L11, *f.L21]
+            made.append(sum(a.nbytes for a in arrays) / 1e9)
+        predicted = sc.gbytes(prob, shared)
+        assert max(made) <= predicted <= 10 * max(made), (shared, made, predicted)
+    # no set above the dense size: nothing to bound
+    assert sc.gbytes(problem(np.full(1, 1.3))[0], False) == 0.0
+
+
+def test_the_fits_run_in_as_many_processes_as_the_free_memory_holds(monkeypatch):
+    """Two CPUs and eight tasks: two workers with room for both, one when the free memory
+    holds one fit's WORKER_MEMORY x its factorisation, never none; without a prediction the
+    memory is not asked."""
+    import os
+
+    from harness.optimize import forkpool
+
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    assert 0 < forkpool.free_gbytes() <= total
+    monkeypatch.setattr(forkpool.os, "sched_getaffinity", lambda pid: {0, 1})
+    for free, expected in ((100.0, 2), (7.0, 1), (0.5, 1)):
+        monkeypatch.setattr(forkpool, "free_gbytes", lambda free=free: free)
+        assert forkpool.available_workers(8, 5000, task_gbytes=3.0) == expected
+    monkeypatch.setattr(forkpool, "free_gbytes", lambda: 0.0)
+    assert forkpool.available_workers(8, 5000) == 2

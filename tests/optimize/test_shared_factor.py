@@ -189,3 +189,34 @@ def test_the_network_map_restricted_is_each_sets_own_map_bit_for_bit():
         assert np.array_equal(K.indices, own.indices) and K.data.tobytes() == own.data.tobytes()
         Bd = B2[s.dofs].toarray()
         assert np.allclose(K.toarray(), (Bd * k2) @ Bd.T, rtol=1e-12, atol=1e-12)
+
+
+def test_a_factor_is_held_once_after_its_compiled_solve():
+    """The first solve with many right-hand sides flattens the factor for the compiled
+    substitution (every later solve takes that path): the blocks are freed as they are
+    copied, so the factor is held once, not twice (at 200k tets ~3 GB each), and the
+    solution is K's."""
+    import tracemalloc
+
+    from harness.linalg.multifrontal import _subst_kernel
+
+    if _subst_kernel() is None:
+        pytest.skip("numba not installed: the LAPACK path keeps its blocks")
+    prob = grid((12, 12, 12))
+    s = max(prob.load_sets(), key=lambda s: s.B.shape[0])
+    K, sym = s.stiffness(prob.k0 * 1.3), s.symbolic()
+    rhs = np.random.default_rng(9).normal(size=(K.shape[0], 10))
+    tracemalloc.start()
+    try:
+        f = MultifrontalCholesky(K, sym)
+        size = sum(x.nbytes for x in f.L11) + sum(x.nbytes for x in f.L21)
+        before = tracemalloc.get_traced_memory()[0]
+        x = f.solve(rhs)
+        after = tracemalloc.get_traced_memory()[0] - x.nbytes
+    finally:
+        tracemalloc.stop()
+    assert after - before < 0.2 * size, (after - before, size)
+    ref = spla.splu(K.tocsc()).solve(rhs)
+    assert np.allclose(x, ref, rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+    one = f.solve(rhs[:, 0])  # a later solve of one column: the compiled path, blocks gone
+    assert f.L11 is None and np.allclose(one, x[:, 0], rtol=1e-12, atol=1e-14 * abs(x).max())
