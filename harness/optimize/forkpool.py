@@ -6,10 +6,12 @@ problem, the compiled kernels, the cached orderings) and fills its own caches as
 each task is a module-level function and small arguments, its result comes back pickled.
 Every fit runs with one BLAS thread, in a worker as in the caller, so a task's numbers are
 the same bit for bit whichever process runs it and however many there are: the pool
-changes the wall time, never the answer. Without fork (not Linux), inside a worker of
-another pool, or for small problems, the tasks run one after the other in the caller; so do
-the tasks left when a worker dies (the system kills the largest process when memory runs
-out: on a 200k-tet mesh two fits side by side need ~20 GB), said in one line.
+changes the wall time, never the answer. The workers are as many as the CPUs, the tasks
+and the free memory allow (a fit's largest factorisation, predicted from its symbolic
+factorisation: ~3 GB for a 200k-tet body with a node-volume term). Without fork (not
+Linux), inside a worker of another pool, or for small problems, the tasks run one after
+the other in the caller; so do the tasks left when a worker dies (the system kills the
+largest process when memory runs out), said in one line.
 """
 
 from __future__ import annotations
