@@ -30,8 +30,9 @@ MAX_WORKERS = 8
 MIN_COLUMNS = 1000
 
 
-# a worker's own memory per GB of its largest predicted factorisation (the factorisation,
-# its fronts' updates, the fit's cached orderings; measured ~1.2-1.4 at 200k tets)
+# a worker's own memory per GB of its largest predicted factorisation: the estimate holds
+# the factor and its largest fronts; the rest is the fit's cached orderings and restrictions
+# (0.9 GB beside a 3.2 GB factor at 200k tets, measured)
 WORKER_MEMORY = 1.5
 
 
