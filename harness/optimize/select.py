@@ -40,9 +40,9 @@ harness/linalg/shared.py: the same solutions to rounding, the same scores to ~1e
 final fit, whose constants are exported, factorises each load set on its own, as every
 other fit of the project does: a different rounding moves a 100-iteration fit within the
 spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
-those of the project's one solve path. The fits are independent of each other
-and run side by side in forked workers where the machine has the cores
-(harness/optimize/forkpool.py: the same numbers as one after the other).
+those of the project's one solve path. The fits are independent and run side by side in
+forked workers as the CPUs and the free memory allow (harness/optimize/forkpool.py: the
+same numbers as one after the other).
 
 The problem holds the springs' columns first and, for the volume candidates, the volume
 terms' columns after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T): one
@@ -61,7 +61,7 @@ import numpy as np
 
 from harness.case.sections import SELECT_CANDIDATES
 from harness.linalg.sparse import single_thread_blas
-from harness.optimize import forkpool
+from harness.optimize import forkpool, select_counts
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.permatrix import per_matrix
@@ -267,16 +267,8 @@ def features_fit(problem: FitProblem, M: np.ndarray, options: dict, x0=None, dea
     from harness.optimize.gradient import scipy_stop
 
     x = np.zeros(M.shape[1]) if x0 is None else np.asarray(x0, float)
-    stop = scipy_stop(
-        minimize(
-            phi,
-            x,
-            jac=True,
-            method="L-BFGS-B",
-            bounds=[(-7.0, 7.0)] * len(x),
-            options={"maxiter": int(options.get("maxiter") or 200)},
-        )
-    )
+    bounds, opts = [(-7.0, 7.0)] * len(x), {"maxiter": int(options.get("maxiter") or 200)}
+    stop = scipy_stop(minimize(phi, x, jac=True, method="L-BFGS-B", bounds=bounds, options=opts))
     return {
         "k": problem.k0 * np.exp(np.clip(M @ best[1], -30, 30)),
         "info": {"phi": float(best[0]), "stop": stop},
@@ -367,8 +359,9 @@ def select(
     geometric features of the springs, which 'features' candidates need (None: skipped);
     ``rule_scores``: each block's own normalised G at the rule, when the caller has solved
     them (else solved here); ``criterion``: how a candidate must beat the rule; ``workers``:
-    processes for the fits (None: harness/optimize/forkpool.py's choice; the answer is the
-    same bit for bit with any number); ``folds`` and ``shared_final``: as a level of
+    processes for the fits (None: as many as the tasks, the CPUs and the free memory over
+    the largest predicted factorisation allow, harness/optimize/forkpool.py; the answer is
+    the same bit for bit with any number); ``folds`` and ``shared_final``: as a level of
     harness/optimize/select_counts.py (its Counts) says.
 
     The validation always runs, and every fit stops by its options' maxiter and tolerances,
@@ -397,9 +390,10 @@ def select(
     )
     for _, cp in _RUN["cands"].values():
         cp.prepare()  # before the pool forks: its workers share the networks' maps
-    if workers is None:
+    if workers is None:  # each fit holds the largest factorisation of an evaluation
         n = len(candidates) * len(folds) if len(folds) > 1 else 0
-        workers = forkpool.available_workers(max(n, n_starts), problem.n_springs)
+        peak = max(select_counts.gbytes(problem, shared) for shared in (False, True))
+        workers = forkpool.available_workers(max(n, n_starts), problem.n_springs, peak)
     try:
         with single_thread_blas(), forkpool.pool(workers) as ex:
             rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)

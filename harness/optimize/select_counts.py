@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from harness.optimize import forkpool
 from harness.optimize.problem import DENSE_FACTOR_MAX, FitProblem
 
 EVALS_PER_ITER = 1.2  # L-BFGS-B's evaluations per iteration on the fits (~1.1-1.3 measured)
@@ -41,9 +40,7 @@ class Counts:
     one per family as harness/optimize/select_table.py make_folds, 'two': the free-traction
     families together and the clamped states), each validation fit's maxiter, the final
     fit's starts and maxiter (None: the case's), whether the final fit shares the sets'
-    factorisation; ``work_gflop`` and ``budget_gflop`` once predicted; ``eval_gbytes``: the
-    largest factorisation of one evaluation (GB, predicted), which bounds the processes the
-    fits run in (:func:`workers`: the wall time, never the answer)."""
+    factorisation; ``work_gflop`` and ``budget_gflop`` once predicted."""
 
     level: int
     candidates: tuple | None
@@ -54,7 +51,6 @@ class Counts:
     shared_final: bool
     work_gflop: float = math.nan
     budget_gflop: float = math.nan
-    eval_gbytes: float = 0.0
 
 
 LADDER = (
@@ -135,14 +131,6 @@ def gbytes(problem: FitProblem, shared: bool) -> float:
     return most
 
 
-def workers(counts: Counts, families, n_columns: int) -> int:
-    """Processes for the fits of ``counts`` (harness/optimize/forkpool.py): as many as their
-    tasks and the CPUs allow and as the machine's free memory holds, each fit needing
-    ``eval_gbytes``. A speed choice: the answer is the same bit for bit with any number."""
-    tasks = max(len(counts.candidates) * n_folds(counts, families), counts.starts)
-    return forkpool.available_workers(tasks, n_columns, counts.eval_gbytes)
-
-
 def work(counts: Counts, families, per_eval_shared: float, per_eval_sets: float) -> float:
     """The level's predicted Gflop: its validation fits' and its final fit's evaluations."""
     val = len(counts.candidates) * n_folds(counts, families) * counts.maxiter
@@ -164,7 +152,6 @@ def choose(
     """The first level of LADDER whose work fits the budget (module doc), or the last; with
     ``fixed`` the case's own counts (level 0)."""
     shared, apart = gflop(problem, True), gflop(problem, False)
-    peak = max(gbytes(problem, True), gbytes(problem, False))
     budget = max(FLOOR_GFLOP, BUDGET * max(n_rules, 1) * apart)
     levels = LADDER[:1] if fixed else LADDER
     for level in levels:
@@ -172,7 +159,7 @@ def choose(
         if not c.candidates:
             continue
         w = work(c, families, shared, apart)
-        c = replace(c, work_gflop=w, budget_gflop=budget, eval_gbytes=peak)
+        c = replace(c, work_gflop=w, budget_gflop=budget)
         if w <= budget or level is levels[-1]:
             return c
     return c

@@ -196,7 +196,6 @@ def _selection(setting, run_, base, first_res, n_rules: int = 0):
         volumes=volumes,
         criterion=spec["criterion"],
         max_seconds=run_["options"].get("max_seconds"),
-        workers=select_counts.workers(counts, fams, problem.n_springs),
         folds=counts.folds,
         shared_final=counts.shared_final,
     )

@@ -188,3 +188,29 @@ def test_the_fits_run_in_as_many_processes_as_the_free_memory_holds(monkeypatch)
         assert forkpool.available_workers(8, 5000, task_gbytes=3.0) == expected
     monkeypatch.setattr(forkpool, "free_gbytes", lambda: 0.0)
     assert forkpool.available_workers(8, 5000) == 2
+
+
+def test_select_asks_for_workers_with_its_largest_factorisation(monkeypatch):
+    """Every caller of select gets the memory bound: select itself passes forkpool the
+    largest factorisation one evaluation holds (select_counts.gbytes, sets apart or shared),
+    not 0, which would let as many fits start as there are CPUs."""
+    from harness.optimize import forkpool
+    from tests.optimize.test_shared_factor import grid
+
+    class Asked(Exception):
+        pass
+
+    asked = []
+
+    def available(tasks, n_columns, task_gbytes=0.0):
+        asked.append(task_gbytes)
+        raise Asked
+
+    monkeypatch.setattr(forkpool, "available_workers", available)
+    prob = grid()
+    fams = ["constant", "constant", "bending", "clamped", "clamped", "clamped"]
+    cands = [c for c in sel.CANDIDATES if c.name in ("scale", "springs-prior1")]
+    with pytest.raises(Asked):
+        sel.select(prob, prob.n_springs, fams, 1.0, np.zeros(prob.n_springs, int), cands)
+    expected = max(sc.gbytes(prob, shared) for shared in (False, True))
+    assert expected > 0 and asked == [pytest.approx(expected, rel=1e-12)]
