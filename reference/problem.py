@@ -4,6 +4,7 @@ solves (loads that share constraints share one factorisation)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 
 import numpy as np
@@ -19,6 +20,7 @@ from reference.mirror import Mirror, plane_dofs
 from reference.solvers import linearfield, sparse, tensorpre, tensorsolve, twolevel
 from reference.solvers.plan import System, choose_plan
 from reference.solvers.record import SolveRecord
+from reference.solvers.sets import SetSolve, Shared, solve_sets
 
 
 def body_bbox(case, mesh) -> tuple[np.ndarray, np.ndarray]:
@@ -122,20 +124,15 @@ def solve_system(
     ``guess`` {load: dof vector} when given) and else gets the fast-diagonalisation
     preconditioner (reference/solvers/tensorpre.py); a large P2/Q2 system gets its P1/Q1
     subspace for the two-level method (reference/solvers/twolevel.py)."""
-    out = {}
     groups: dict[bytes, list[str]] = {}
     for name in loads:
         groups.setdefault(fixed[name].tobytes(), []).append(name)
-    R, assembled = None, [K if not callable(K) else None]
+    assembled = [K if not callable(K) else None]
 
     def stiffness():
         if assembled[0] is None:
             assembled[0] = K()
         return assembled[0]
-
-    def record(rec, names, n):
-        if records is not None:
-            records.append(dataclasses.replace(rec, loads=tuple(names), n=n))
 
     tensor_mesh = (
         C is not None
@@ -146,77 +143,82 @@ def solve_system(
     lat = Lattice.q2(d.doflocs) if tensor_mesh and not prescribed else None
     C0 = None if lat is None else tensorsolve.homogeneous(C)
     op = None if C0 is None else tensorsolve.operator(lat, C0)
-    for names in groups.values():
+    solved, left = {}, []  # solved: group -> (names, x, record, free dofs)
+    for j, names in enumerate(groups.values()):
         fx = fixed[names[0]]
-        nfree = d.ndof - len(fx)
-        plan = choose_plan(System(nfree, d.dim, method, ndof=d.ndof, matrix_free=op is not None))
-        tried = None
+        plan = choose_plan(
+            System(d.ndof - len(fx), d.dim, method, ndof=d.ndof, matrix_free=op is not None)
+        )
+        F = np.column_stack([loads[n] for n in names])
+        found, tried = None, None
         if not prescribed:
-            t0 = time.perf_counter()
-            if op is not None:
-                apply, norm = op.apply_dofs, op.norm_bound()
-            else:
-                apply, norm = stiffness().__matmul__, float(abs(stiffness()).sum(axis=1).max())
-            found = linearfield.solve(
-                apply, d.doflocs, np.column_stack([loads[n] for n in names]), fx, norm
-            )
-            if found is not None:
-                record(
-                    SolveRecord("linear", found[1], sparse.RTOL, 0, time.perf_counter() - t0),
-                    names,
-                    nfree,
-                )
-                out.update({n: found[0][:, i] for i, n in enumerate(names)})
-                continue
-        if plan.matrix_free:
-            x0 = (
-                None
-                if not guess or any(n not in guess for n in names)
-                else np.column_stack([guess[n] for n in names])
-            )
-            x, rec = tensorsolve.solve(op, np.column_stack([loads[n] for n in names]), fx, x0)
-            if x is not None:
-                record(rec, names, nfree)
-                out.update({n: x[:, i] for i, n in enumerate(names)})
-                continue
-            tried = rec
-        Kf = stiffness()
+            found = _linear_field(stiffness, op, d, F, fx)
+        if found is None and plan.matrix_free:
+            x0 = None if not guess or any(n not in guess for n in names) else guess
+            x, rec = tensorsolve.solve(op, F, fx, _stack(x0, names))
+            found, tried = ((x, rec), None) if x is not None else (None, rec)
+        if found is not None:
+            solved[j] = (names, *found, d.ndof - len(fx))
+        else:
+            left.append((j, names, fx, tried, plan))
+    if left:
+        solved.update(_factorised(stiffness(), left, loads, d, method, prescribed, C, tensor_mesh))
+    out = {}
+    for j in sorted(solved):
+        names, x, rec, nfree = solved[j]
+        if records is not None:
+            records.append(dataclasses.replace(rec, loads=tuple(names), n=nfree))
+        out.update({n: x[:, i] for i, n in enumerate(names)})
+    return out
+
+
+def _stack(guess: dict | None, names) -> np.ndarray | None:
+    return None if guess is None else np.column_stack([guess[n] for n in names])
+
+
+def _linear_field(stiffness, op, d: Discretisation, F: np.ndarray, fx: np.ndarray):
+    """(x, record) when the loads' solution is a linear field (reference/solvers/
+    linearfield.py: no solve), else None."""
+    t0 = time.perf_counter()
+    if op is not None:
+        apply, norm = op.apply_dofs, op.norm_bound()
+    else:
+        apply, norm = stiffness().__matmul__, float(abs(stiffness()).sum(axis=1).max())
+    found = linearfield.solve(apply, d.doflocs, F, fx, norm)
+    if found is None:
+        return None
+    return found[0], SolveRecord("linear", found[1], sparse.RTOL, 0, time.perf_counter() - t0)
+
+
+def _factorised(Kf, left, loads, d, method, prescribed, C, tensor_mesh) -> dict:
+    """{group: (names, u (ndof, m), record, free dofs)} of the groups ``left`` (j, names,
+    held dofs, the failed matrix-free record or None, plan), solved on the assembled
+    stiffness side by side (reference/solvers/sets.py)."""
+    R = d.rigid_modes()
+    coords = np.repeat(d.doflocs.T, d.dim, axis=0)  # location of each interleaved dof
+    P = twolevel.prolongation(d) if left[0][4].coarse else None
+    tasks = []
+    for _, names, fx, tried, _ in left:
         free = np.setdiff1d(np.arange(d.ndof), fx)
-        A = Kf[free][:, free]
         rhs = []
         for n in names:
             F = loads[n].copy()
             if prescribed and n in prescribed:
                 F -= Kf[:, fx] @ prescribed[n]
             rhs.append(F[free])
-        if R is None:
-            R = d.rigid_modes()
-            coords = np.repeat(d.doflocs.T, d.dim, axis=0)  # location of each interleaved dof
-            P = twolevel.prolongation(d) if plan.coarse else None
-        tensor = None
-        if tensor_mesh and tried is None:
-            tensor = tensorpre.preconditioner(d.doflocs, free, C)
-        done: list = []
-        x = sparse.solve(
-            A,
-            np.column_stack(rhs),
-            "auto" if tried else method,
-            R[free],
-            records=done,
-            coords=coords[free],
-            coarse=None if P is None else P[free],
-            tensor=tensor,
-        )
-        rec = done[0]
-        if tried:
-            rec = dataclasses.replace(rec, fallbacks=(tried,) + rec.fallbacks)
-        record(rec, names, len(free))
+        tasks.append(SetSolve(tuple(names), free, np.column_stack(rhs), tried))
+    tensor_of = None
+    if tensor_mesh:
+        tensor_of = functools.partial(tensorpre.preconditioner, d.doflocs, C=C)
+    shared = Shared(Kf, method, R, coords, P, tensor_of)
+    out = {}
+    for (j, names, fx, _, _), task, (x, rec) in zip(left, tasks, solve_sets(shared, tasks)):
+        u = np.zeros((d.ndof, len(names)))
+        u[task.free] = x.reshape(len(task.free), -1)
         for i, n in enumerate(names):
-            u = np.zeros(d.ndof)
-            u[free] = x[:, i]
             if prescribed and n in prescribed:
-                u[fx] = prescribed[n]
-            out[n] = u
+                u[fx, i] = prescribed[n]
+        out[j] = (names, u, rec, len(task.free))
     return out
 
 

@@ -149,7 +149,7 @@ REFERENCE_FLOORS = (
 # below everything; the report reads stored results and never imports the runner, which calls it.
 LAYERS = (
     "harness harness.registry harness.sources harness.errors harness.paths harness.outputs "
-    "harness.linalg harness.provenance harness.progress",
+    "harness.linalg harness.provenance harness.progress harness.forkpool",
     "harness.io",
     "harness.case",
     *REFERENCE_FLOORS,

@@ -41,7 +41,7 @@ final fit, whose constants are exported, factorises each load set on its own, as
 other fit of the project does: a different rounding moves a 100-iteration fit within the
 spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
 those of the project's one solve path. The fits are independent and run side by side in
-forked workers as the CPUs and the free memory allow (harness/optimize/forkpool.py: the
+forked workers as the CPUs and the free memory allow (harness/forkpool.py: the
 same numbers as one after the other).
 
 The problem holds the springs' columns first and, for the volume candidates, the volume
@@ -59,9 +59,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from harness import forkpool
 from harness.case.sections import SELECT_CANDIDATES
 from harness.linalg.sparse import single_thread_blas
-from harness.optimize import forkpool, select_counts
+from harness.optimize import select_counts
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.permatrix import per_matrix
@@ -360,7 +361,7 @@ def select(
     ``rule_scores``: each block's own normalised G at the rule, when the caller has solved
     them (else solved here); ``criterion``: how a candidate must beat the rule; ``workers``:
     processes for the fits (None: as many as the tasks, the CPUs and the free memory over
-    the largest predicted factorisation allow, harness/optimize/forkpool.py; the answer is
+    the largest predicted factorisation allow, harness/forkpool.py; the answer is
     the same bit for bit with any number); ``folds`` and ``shared_final``: as a level of
     harness/optimize/select_counts.py (its Counts) says.
 
@@ -370,8 +371,7 @@ def select(
     fit) and only aborts (harness/optimize/deadline.py); the options must not hold one."""
     if "max_seconds" in {**(options or {}), **(final or {})}:
         raise ValueError("select caps its fits together: pass max_seconds=, not in the options")
-    t0 = time.perf_counter()
-    problem = balanced(problem)
+    t0, problem = time.perf_counter(), balanced(problem)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
     folds = two_folds(families) if folds == "two" else make_folds(families)
     _RUN.update(
@@ -432,7 +432,7 @@ _RUN: dict = {}
 def validate(ex, names: list, status) -> list:
     """The validation table's rows of the candidates ``names`` (of the running select): each
     fitted without each fold in turn and scored on it, in the pool ``ex``
-    (harness/optimize/forkpool.py; None: here, one after the other), fit j of n announced by
+    (harness/forkpool.py; None: here, one after the other), fit j of n announced by
     ``status``. No fold to leave out (one family): rows without scores."""
     folds = _RUN["folds"]
     tasks = [(c, f) for c in names for f in folds] if len(folds) > 1 else []

@@ -24,7 +24,7 @@ harness/optimize/select_counts.py chooses from its flop counts (row columns ``fi
 ``max_seconds`` caps the whole validated fit and only aborts (harness/optimize/deadline.py),
 so the same mesh and seed export the same model on any machine under any load. The fits
 run side by side in worker processes where the machine has the cores
-(harness/optimize/forkpool.py), with the same numbers as one after the other.
+(harness/forkpool.py), with the same numbers as one after the other.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The validated fit's fits in forked worker processes (harness/optimize/forkpool.py): the
+"""The validated fit's fits in forked worker processes (harness/forkpool.py): the
 same selection bit for bit as one after the other in the caller (choice, every score,
 every start's constants and stop), a cap passed inside a worker aborts in the same one
 line, and the pool's bookkeeping (results in task order, errors raised in the caller)."""
@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from harness.optimize import forkpool
+from harness import forkpool
 from harness.optimize import select as sel
 from tests.optimize.test_select import CANDS, FAMILIES, jumping_clock, problem
 
@@ -93,7 +93,7 @@ def test_a_dead_worker_hands_its_tasks_back_to_the_caller():
         again = forkpool.run(ex, _square, [3, 4], say=said.append)  # the pool stays broken
     assert again == [9, 16]
     assert len(said) == 2 and "died (out of memory?)" in said[0] and "\n" not in said[0]
-    assert "the 2 fits left" in said[1]
+    assert "the 2 tasks left" in said[1]
 
 
 _REAL_FIT = sel._validation_fit

@@ -178,7 +178,7 @@ def test_the_fits_run_in_as_many_processes_as_the_free_memory_holds(monkeypatch)
     memory is not asked."""
     import os
 
-    from harness.optimize import forkpool
+    from harness import forkpool
 
     total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
     assert 0 < forkpool.free_gbytes() <= total
@@ -194,7 +194,7 @@ def test_select_asks_for_workers_with_its_largest_factorisation(monkeypatch):
     """Every caller of select gets the memory bound: select itself passes forkpool the
     largest factorisation one evaluation holds (select_counts.gbytes, sets apart or shared),
     not 0, which would let as many fits start as there are CPUs."""
-    from harness.optimize import forkpool
+    from harness import forkpool
     from tests.optimize.test_shared_factor import grid
 
     class Asked(Exception):

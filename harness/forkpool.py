@@ -1,17 +1,18 @@
-"""Independent fits in forked worker processes: the validated fit's 24 or so validation fits
-and its final fit's starts each depend on the input alone, so they can run side by side.
+"""Independent tasks in forked worker processes: the validated fit's 24 or so validation fits
+and its final fit's starts, the reference's constraint sets (each its own factorisation)
+depend on the input alone, so they can run side by side.
 
 A worker is a fork of the caller, so it starts with everything the caller has built (the
 problem, the compiled kernels, the cached orderings) and fills its own caches as it goes;
 each task is a module-level function and small arguments, its result comes back pickled.
-Every fit runs with one BLAS thread, in a worker as in the caller, so a task's numbers are
+Every task runs with one BLAS thread, in a worker as in the caller, so a task's numbers are
 the same bit for bit whichever process runs it and however many there are: the pool
 changes the wall time, never the answer. The workers are as many as the CPUs, the tasks
-and the free memory allow (a fit's largest factorisation, predicted from its symbolic
-factorisation: ~3 GB for a 200k-tet body with a node-volume term). Without fork (not
-Linux), inside a worker of another pool, or for small problems, the tasks run one after
-the other in the caller; so do the tasks left when a worker dies (the system kills the
-largest process when memory runs out), said in one line.
+and the free memory allow (a task's largest factorisation, predicted from its symbolic
+factorisation: ~3 GB for a fit of a 200k-tet body with a node-volume term). Without fork
+(not Linux), inside a worker of another pool, or for small problems, the tasks run one
+after the other in the caller; so do the tasks left when a worker dies (the system kills
+the largest process when memory runs out), said in one line.
 """
 
 from __future__ import annotations
@@ -36,19 +37,17 @@ MIN_COLUMNS = 1000
 WORKER_MEMORY = 1.5
 
 
-def available_workers(n_tasks: int, n_columns: int, task_gbytes: float = 0.0) -> int:
-    """Processes for ``n_tasks`` fits of a problem with ``n_columns`` constants: the CPUs this
-    process may run on (at most MAX_WORKERS and the tasks) and, for fits whose largest
-    factorisation is ``task_gbytes`` (predicted), as many as the free memory now holds
-    (WORKER_MEMORY each); 1 where forking is unavailable (not Linux), the caller is itself a
-    pool's worker, or the problem is small."""
+def available_workers(
+    n_tasks: int, size: int, task_gbytes: float = 0.0, min_size: int = MIN_COLUMNS
+) -> int:
+    """Processes for ``n_tasks`` tasks of a problem of ``size`` (a fit's constants, a solve's
+    dofs): the CPUs this process may run on (at most MAX_WORKERS and the tasks) and, for
+    tasks whose largest factorisation is ``task_gbytes`` (predicted), as many as the free
+    memory now holds (WORKER_MEMORY each); 1 where forking is unavailable (not Linux), the
+    caller is itself a pool's worker, or the problem is smaller than ``min_size``."""
     import multiprocessing as mp
 
-    if (
-        not sys.platform.startswith("linux")
-        or mp.parent_process() is not None
-        or n_columns < MIN_COLUMNS
-    ):
+    if not sys.platform.startswith("linux") or mp.parent_process() is not None or size < min_size:
         return 1
     n = min(len(os.sched_getaffinity(0)), MAX_WORKERS, n_tasks)
     if task_gbytes > 0:
@@ -97,7 +96,7 @@ def run(executor, fn, tasks, announce=lambda j: None, say=lambda msg: None) -> l
     as j - 1 tasks have finished (the pool's tasks start in their order). An error in a task
     is raised here as it was raised there. A worker that dies (killed by the system, e.g.
     out of memory) breaks the pool: the tasks without a result then run here, one after the
-    other, with the same numbers (every fit runs with one BLAS thread in either place);
+    other, with the same numbers (every task runs with one BLAS thread in either place);
     ``say`` gets the one line that says so."""
     tasks = list(tasks)
     if not tasks:
@@ -119,8 +118,8 @@ def run(executor, fn, tasks, announce=lambda j: None, say=lambda msg: None) -> l
     except BrokenProcessPool:
         left = [j for j in range(len(tasks)) if j not in done]
         say(
-            f"a worker process of the fits died (out of memory?): the {len(left)} fits left "
-            "run here one after the other (the same numbers, more time)"
+            f"a worker process died (out of memory?): the {len(left)} tasks left run here "
+            "one after the other (the same numbers, more time)"
         )
         return _here(fn, tasks, left, out, announce)
     return out
