@@ -161,7 +161,10 @@ def centroid_normal(geometry, masks, nodes: int) -> str:
 
 
 def vector(v) -> str:
-    """'(1, 0.5, 0)': a vector to three digits."""
+    """'(1, 0.5, 0)': a vector to three digits, a component below 1e-12 of its largest (the
+    rounding of a sum that cancels, e.g. a symmetric face's centroid: -3e-19 m) as 0."""
+    v = np.asarray(v, float)
+    v = np.where(np.abs(v) < 1e-12 * np.abs(v).max(initial=0.0), 0.0, v)
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 

@@ -199,3 +199,13 @@ def test_the_grown_clamp_is_well_posed_where_the_5_percent_cap_is_not(bodies):
     assert pull[1] < 0.1 and pull[1] < 0.5 * pull[0], pull
     bend = [p1_p2_change(m, c, tip, e.across) for c in (cap, clamp)]
     assert bend[1] < 0.9 * bend[0], bend
+
+
+def test_a_printed_vector_shows_rounding_noise_as_zero():
+    """A symmetric face's centroid sums to -3e-19 m across it: printed as 0, while a small
+    but real component keeps its digits."""
+    from harness.case.regions import vector
+
+    assert vector([0.0, -3.1e-19, 0.005]) == "(0, 0, 0.005)"
+    assert vector([0.1, 1e-6, 0.005]) == "(0.1, 1e-06, 0.005)"
+    assert vector([0.0, 0.0, 0.0]) == "(0, 0, 0)"
