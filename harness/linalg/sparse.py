@@ -163,6 +163,19 @@ def _blas_threads(controller) -> int:
 
 
 @contextmanager
+def seeded_numpy(seed: int = 0):
+    """Run the block with numpy's global random state seeded (and put it back after): pyamg
+    draws the start vector of its spectral-radius estimate from it, so an AMG hierarchy,
+    and every solve it accepts, would differ from run to run at the solver's tolerance."""
+    state = np.random.get_state()
+    np.random.seed(seed)
+    try:
+        yield
+    finally:
+        np.random.set_state(state)
+
+
+@contextmanager
 def single_thread_blas():
     """Run the block with one BLAS thread: threads do not speed up a chain's small dense
     products, and the other core runs another chain. Nested blocks cost nothing (the

@@ -27,9 +27,12 @@ import scipy.sparse.linalg as spla
 
 from harness.errors import ModelError
 from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
+from harness.linalg.sparse import seeded_numpy
 from harness.registry import SOLVERS
 from reference.solvers import tensorpre
 from reference.solvers.dofcoords import coords_from_modes
+from reference.solvers.krylov import pcg as _pcg
+from reference.solvers.krylov import sa_hierarchy
 from reference.solvers.plan import SYMBOLIC_MAX, System, choose_plan
 from reference.solvers.record import Fallback, SolveRecord
 
@@ -50,12 +53,25 @@ DIRECT_RTOL = 1e-6
 AMG_MAXITER = 300
 STRONG_MAXITER = 1000
 CG_MAXITER = 20_000
-# after a failed AMG, 'amg-strong' is skipped when the Cholesky's estimated time
-# (SECONDS_PER_GFLOP per Gflop of its symbolic estimate, measured 0.09-0.1 s on one
-# core) is below twice the CPU time already spent, and otherwise gets that time as its
-# budget, as long as the factor fits in FALLBACK_GBYTES
-SECONDS_PER_GFLOP = 0.1
-CHOLESKY_OVERHEAD = 1.0
+# after a failed iterative step, 'amg-strong' is skipped when the Cholesky's work (its
+# symbolic estimate's Gflop plus CHOLESKY_OVERHEAD_GFLOP) is below twice the work the failed
+# steps did, and otherwise gets that work as its budget, as long as the factor fits in
+# FALLBACK_GBYTES. The work is counted, never timed (the same choice on a busy machine): a
+# step's iterations (plus SETUP_ITERATIONS for its preconditioner) times A's nonzeros times
+# its cost per nonzero and iteration, in Gflop of the Cholesky's that take the same CPU time
+# (one core, a 42k-dof P2 bar: the Cholesky ~0.1 s per Gflop; a CG iteration with an AMG
+# V-cycle 22 ns per nonzero, with the strong one 36 ns, the setup ~8 iterations; the
+# two-level ~23 ns per nonzero and load, plan.py; Jacobi and the tensor preconditioner
+# taken as a few matrix products)
+GFLOP_PER_NONZERO = {
+    "amg": 2.2e-7,
+    "amg-strong": 3.6e-7,
+    "two-level": 2.3e-7,
+    "cg": 3e-8,
+    "tensor": 1e-7,
+}
+SETUP_ITERATIONS = 8
+CHOLESKY_OVERHEAD_GFLOP = 10.0
 FALLBACK_GBYTES = 6.0
 # fast-diagonalisation PCG (reference/solvers/tensorpre.py): 100-300 iterations measured
 TENSOR_MAXITER = 2000
@@ -209,7 +225,7 @@ class _Run:
     the steps may use (the dimension, the free dofs' ``coords``, the scaled rigid-body
     modes ``Bs``, the P1/Q1 subspace ``coarse``, the preconditioner ``tensor``), the
     Cholesky's symbolic factorisation and estimate once made, the failed steps and their
-    CPU seconds."""
+    work (Gflop, counted: see :data:`GFLOP_PER_NONZERO`)."""
 
     t0: float
     records: list | None
@@ -236,8 +252,7 @@ def _try_steps(steps: tuple[str, ...], eq: _Equilibrated, run: _Run) -> np.ndarr
     """The first step whose solution is accepted (a direct one after one step of iterative
     refinement); a failed iterative step is a Fallback of the record."""
     for step in steps:
-        t1, c1 = time.perf_counter(), time.process_time()
-        budget = None
+        t1, budget = time.perf_counter(), None
         if step == "amg-strong" and steps[-1] == "cholesky":
             skip, budget = _strong_budget(eq, run)
             if skip:
@@ -263,19 +278,27 @@ def _try_steps(steps: tuple[str, ...], eq: _Equilibrated, run: _Run) -> np.ndarr
             raise _singular()
         reason = why or f"residual above {tol:.1e}"
         run.fallbacks.append(Fallback(step, res, reason, time.perf_counter() - t1))
-        run.spent += time.process_time() - c1
+        run.spent += work(step, its, eq.As.nnz, int(eq.live.sum()))
     return run.done(np.zeros_like(eq.b2), "none")  # not reached: a plan ends with a direct step
 
 
-def _strong_budget(eq: _Equilibrated, run: _Run) -> tuple[bool, float | None]:
-    """(skip, CPU seconds) of 'amg-strong' before the Cholesky it falls back to: a stronger
-    AMG only while it can beat that Cholesky (see :data:`SECONDS_PER_GFLOP`)."""
+def work(step: str, iterations: int, nnz: int, columns: int) -> float:
+    """The work (Gflop, :data:`GFLOP_PER_NONZERO`) of an iterative ``step`` that ran
+    ``iterations`` on ``columns`` right-hand sides of a matrix of ``nnz`` nonzeros."""
+    per = GFLOP_PER_NONZERO.get(step, 0.0)
+    return (iterations + SETUP_ITERATIONS) * nnz * per * max(columns, 1)
+
+
+def _strong_budget(eq: _Equilibrated, run: _Run) -> tuple[bool, int | None]:
+    """(skip, iterations over all columns) of 'amg-strong' before the Cholesky it falls back
+    to: a stronger AMG only while it can beat that Cholesky (:data:`GFLOP_PER_NONZERO`)."""
     if run.sym is None and eq.A.shape[0] <= SYMBOLIC_MAX[run.dim]:
         run.sym = _symbolic(eq.As, run.coords)
         run.estimate = _estimate(run.sym)
     if run.sym is not None and run.estimate["gbytes"] <= FALLBACK_GBYTES:
-        chol = SECONDS_PER_GFLOP * run.estimate["gflop"] + CHOLESKY_OVERHEAD
-        return chol < 2 * run.spent, chol
+        chol = run.estimate["gflop"] + CHOLESKY_OVERHEAD_GFLOP
+        its = chol / (eq.As.nnz * GFLOP_PER_NONZERO["amg-strong"]) - SETUP_ITERATIONS
+        return chol < 2 * run.spent, max(int(its), 0)
     return False, None
 
 
@@ -374,29 +397,15 @@ def _two_level(eq: _Equilibrated, run: _Run, step: str, budget):
 
 
 def _hierarchy(As, Bs, strong: bool):
-    import pyamg
-
-    if not strong:
-        return pyamg.smoothed_aggregation_solver(As, B=Bs, symmetry="hermitian")
-    smoother = ("gauss_seidel", {"sweep": "symmetric", "iterations": 2})
-    return pyamg.smoothed_aggregation_solver(
-        As,
-        B=Bs,
-        symmetry="hermitian",
-        strength=("symmetric", {"theta": 0.0}),
-        smooth=("energy", {"krylov": "cg", "maxiter": 4, "degree": 2, "weighting": "local"}),
-        improve_candidates=[("gauss_seidel", {"sweep": "symmetric", "iterations": 4})] * 2 + [None],
-        presmoother=smoother,
-        postsmoother=smoother,
-        max_coarse=500,
-    )
+    """The smoothed-aggregation hierarchy (seeded: the same one every run)."""
+    with seeded_numpy():
+        return sa_hierarchy(As, Bs, strong)
 
 
 def _iterative(eq: _Equilibrated, run: _Run, step: str, budget):
     """CG preconditioned by one AMG V-cycle ('amg', 'amg-strong') or Jacobi ('cg'; the
-    diagonal of As is 1) on every column. ``budget``: CPU seconds (setup included) after
-    which it is not worth continuing."""
-    c0 = time.process_time()
+    diagonal of As is 1) on every column. ``budget``: iterations over all columns after
+    which it is not worth continuing (None: the step's own maxiter per column)."""
     As, bs, Bs = eq.As, eq.bs[:, eq.live], run.Bs
     if step == "cg":
         M, maxiter = None, min(20 * As.shape[0], CG_MAXITER)
@@ -408,61 +417,13 @@ def _iterative(eq: _Equilibrated, run: _Run, step: str, budget):
         M = ml.aspreconditioner(cycle="V")
         maxiter = AMG_MAXITER if step == "amg" else STRONG_MAXITER
     Y, its, why = np.zeros_like(bs), 0, ""
+    used = 0
     for j in range(bs.shape[1]):
-        left = None if budget is None else budget - (time.process_time() - c0)
-        Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, maxiter, 20 if M is not None else 200, left)
-        its, why = max(its, k), why or w
+        cap = maxiter if budget is None else max(min(maxiter, budget - used), 1)
+        window = 20 if M is not None else 200
+        Y[:, j], k, w = _pcg(As, bs[:, j], M, RTOL / 4, cap, window, cap < maxiter)
+        its, why, used = max(its, k), why or w, used + k
     return Y, its, why, None
-
-
-def _pcg(A, b, M, rtol, maxiter, window=20, seconds=None):
-    """Preconditioned CG to ||b - A x|| <= rtol ||b|| (recursive residual; the caller
-    checks the true one). Gives up when the iteration budget runs out or the rate of the
-    last ``window`` iterations cannot reach rtol within it (or within ``seconds`` CPU).
-    Returns (x, iterations, reason)."""
-    c0 = time.process_time()
-    x = np.zeros_like(b)
-    r = b.copy()
-    nb = np.linalg.norm(b)
-    z = r if M is None else M @ r
-    p = z.copy()
-    rz = r @ z
-    hist = [1.0]
-    if not rz > 0:
-        return x, 0, "breakdown (the preconditioner is not positive definite)"
-    for k in range(1, maxiter + 1):
-        Ap = A @ p
-        pAp = p @ Ap
-        if not np.isfinite(pAp) or pAp <= 0:
-            return x, k, "breakdown (the matrix or the preconditioner is not positive definite)"
-        a = rz / pAp
-        x += a * p
-        r -= a * Ap
-        rel = np.linalg.norm(r) / nb
-        hist.append(rel)
-        if rel <= rtol:
-            return x, k, ""
-        if k >= 2 * window and k % 10 == 0:  # rate of the best residual over the window
-            rate = (min(hist[-window:]) / min(hist[:-window])) ** (1 / window)
-            more = np.log(rtol / rel) / np.log(rate) if rate < 1 else np.inf
-            if more > maxiter - k:
-                return x, k, f"too slow (rate {rate:.3f} per iteration at {k} iterations)"
-            if seconds is not None and more * (time.process_time() - c0) / k > seconds - (
-                time.process_time() - c0
-            ):
-                return (
-                    x,
-                    k,
-                    f"too slow ({k} iterations, ~{more:.0f} more would take longer than the "
-                    "Cholesky)",
-                )
-        z = r if M is None else M @ r
-        rz_new = r @ z
-        if not rz_new > 0:
-            return x, k, "breakdown (the preconditioner is not positive definite)"
-        p = z + (rz_new / rz) * p
-        rz = rz_new
-    return x, maxiter, f"no convergence in {maxiter} iterations"
 
 
 # -- the steps: (system, run, step, budget) -> (y, iterations, reason of a failure, the

@@ -211,7 +211,7 @@ def test_amg_that_fails_falls_back_to_cholesky(monkeypatch):
     truth = np.linalg.solve(A.toarray(), b)
     monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
     monkeypatch.setattr(sparse, "STRONG_MAXITER", 3)
-    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 1e6)  # never skip the strong AMG
+    monkeypatch.setattr(sparse, "CHOLESKY_OVERHEAD_GFLOP", 1e9)  # never skip the strong AMG
     for method in ("auto", "amg", "cg"):
         if method == "auto":
             monkeypatch.setattr(plan, "CHOLESKY_GFLOP", 0.0)
@@ -336,10 +336,35 @@ def test_strong_amg_is_skipped_when_the_cholesky_is_cheaper(monkeypatch):
     A, b, R, X, _, _ = elasticity(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
     monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
-    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 0.0)
-    monkeypatch.setattr(sparse, "CHOLESKY_OVERHEAD", -1.0)
+    monkeypatch.setitem(sparse.GFLOP_PER_NONZERO, "amg", 1e3)  # its work passed the Cholesky's
     info = []
     x = sparse.solve(A, b, "amg", R, coords=X, records=info)
     assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["amg"]
     assert info[-1].estimate["gflop"] > 0
     assert np.abs(x - truth).max() <= 1e-9 * np.abs(truth).max()
+
+
+def test_the_fallback_chain_is_chosen_by_work_not_by_the_clock(monkeypatch):
+    """A failed AMG's work is counted (iterations x nonzeros), not timed: with a clock that
+    jumps 1000 s at every reading (a busy machine) the same steps run, the strong AMG gets
+    the same iterations and the answer is the same bit for bit."""
+    A, b, R, X, _, _ = elasticity(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
+    monkeypatch.setattr(sparse, "AMG_MAXITER", 2)
+    monkeypatch.setattr(sparse, "STRONG_MAXITER", 3)
+    runs = []
+    for jumping in (False, True):
+        if jumping:
+            now = [0.0]
+
+            def clock():
+                now[0] += 1000.0
+                return now[0]
+
+            monkeypatch.setattr(sparse.time, "process_time", clock)
+            monkeypatch.setattr(sparse.time, "perf_counter", clock)
+        info = []
+        x = sparse.solve(A, np.column_stack([b, 3 * b]), "amg", R, coords=X, records=info)
+        runs.append((x, [(f.method, f.residual) for f in info[-1].fallbacks], info[-1].method))
+    (x0, steps0, m0), (x1, steps1, m1) = runs
+    assert [s for s, _ in steps0] == ["amg", "amg-strong"] and m0 == m1 == "cholesky"
+    assert steps0 == steps1 and np.array_equal(x0, x1)

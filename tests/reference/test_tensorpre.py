@@ -177,8 +177,8 @@ def test_a_drifted_cg_is_restarted_from_the_true_residual(monkeypatch):
     it to the tolerance, and the solve stays 'tensor'."""
     real, calls = sparse._pcg, []
 
-    def drifting(A, b, M, rtol, maxiter, window=20, seconds=None):
-        x, k, why = real(A, b, M, rtol, maxiter, window, seconds)
+    def drifting(A, b, M, rtol, maxiter, window=20, budget=False):
+        x, k, why = real(A, b, M, rtol, maxiter, window, budget)
         calls.append(rtol)
         return (x * (1 + 1e-6) if len(calls) == 1 else x), k, why
 

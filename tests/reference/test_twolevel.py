@@ -107,8 +107,7 @@ def test_two_level_that_fails_falls_back(monkeypatch):
     A, b, R, X, P = _system(size=(2.0, 1.0, 0.5), divs=(4, 2, 2), nu=0.49)
     truth = np.linalg.solve(A.toarray(), b)
     monkeypatch.setattr(sparse, "TWO_LEVEL_MAXITER", 2)
-    monkeypatch.setattr(sparse, "SECONDS_PER_GFLOP", 0.0)  # skip the strong AMG
-    monkeypatch.setattr(sparse, "CHOLESKY_OVERHEAD", -1.0)
+    monkeypatch.setitem(sparse.GFLOP_PER_NONZERO, "two-level", 1e3)  # skip the strong AMG
     info = []
     x = sparse.solve(A, b, "two-level", R, coords=X, records=info, coarse=P)
     assert info[-1].method == "cholesky" and [f.method for f in info[-1].fallbacks] == ["two-level"]
