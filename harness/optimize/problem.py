@@ -345,13 +345,13 @@ class LoadSet:
         k = np.asarray(k, float)
         if self.network is None or self.dofs is None:
             pattern, kmap = per_matrix(self.B, "kmap", lambda: stiffness_map(self.B))
-            K = pattern.copy()
-            K.data = kmap @ k
-            return K
-        whole = network_map(self.network)[0]
-        pattern, gather = per_matrix(self.B, "gather", lambda: restriction(whole, self.dofs))
+            data = kmap @ k
+        else:
+            whole = network_map(self.network)[0]
+            pattern, gather = per_matrix(self.B, "gather", lambda: restriction(whole, self.dofs))
+            data = network_values(self.network, k)[gather]
         K = pattern.copy()
-        K.data = network_values(self.network, k)[gather]
+        K.data = data
         return K
 
     def factor(self, k, kind: str = "auto"):
