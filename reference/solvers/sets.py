@@ -16,6 +16,8 @@ however many workers run; the pool only changes the wall time.
 from __future__ import annotations
 
 import dataclasses
+import itertools
+import threading
 import warnings
 from dataclasses import dataclass
 
@@ -58,25 +60,38 @@ class Shared:
     tensor_of: object = None
 
 
-_RUN: dict = {}  # the running solve's Shared and sets: set before the pool forks
+# the running solves' Shared and sets, by a token of each call: set before its pool forks (a
+# worker inherits them); several calls may run at once in threads (the graded levels')
+_RUNS: dict = {}
 
 
 def solve_sets(shared: Shared, sets: list[SetSolve]) -> list[tuple[np.ndarray, SolveRecord]]:
-    """(x (free, m), its SolveRecord) of each set, in the order given (module docstring)."""
+    """(x (free, m), its SolveRecord) of each set, in the order given (module docstring).
+    Called from a thread other than the main one (the graded levels solve meshes in
+    threads), the sets are solved there one after the other: a fork beside running threads
+    can inherit a lock one of them holds."""
     n = max(len(s.free) for s in sets)
     matrix_gb = 3 * 12 * shared.K.nnz / 1e9  # a set's restriction of K, equilibrated, sorted
     workers = forkpool.available_workers(len(sets), n, CHOLESKY_GBYTES + matrix_gb, MIN_DOFS)
-    _RUN.update(shared=shared, sets=sets)
+    if threading.current_thread() is not threading.main_thread():
+        workers = 1
+    token = next(_TOKENS)
+    _RUNS[token] = (shared, sets)
     try:
         with single_thread_blas(), forkpool.pool(workers) as ex:
-            return forkpool.run(ex, _solve_one, range(len(sets)), say=warnings.warn)
+            tasks = [(token, j) for j in range(len(sets))]
+            return forkpool.run(ex, _solve_one, tasks, say=warnings.warn)
     finally:
-        _RUN.clear()
+        del _RUNS[token]
 
 
-def _solve_one(j: int) -> tuple[np.ndarray, SolveRecord]:
-    """Set j of the running solve (a module-level function: a worker's task)."""
-    sh, s = _RUN["shared"], _RUN["sets"][j]
+_TOKENS = itertools.count()
+
+
+def _solve_one(task: tuple[int, int]) -> tuple[np.ndarray, SolveRecord]:
+    """Set j of the solve ``token`` (a module-level function: a worker's task)."""
+    token, j = task
+    sh, s = _RUNS[token][0], _RUNS[token][1][j]
     tensor = sh.tensor_of(s.free) if sh.tensor_of is not None and s.tried is None else None
     done: list = []
     x = sparse.solve(

@@ -88,3 +88,30 @@ def test_the_reference_is_the_same_with_one_blas_thread_or_two(monkeypatch):
     two, _ = _solve(6, 1, monkeypatch, threads=2)
     for name in one:
         assert np.array_equal(one[name], two[name]), name
+
+
+def test_solves_running_at_once_in_threads_keep_their_own_sets(monkeypatch):
+    """The graded levels solve meshes in threads: two solves at once each get their own
+    sets' answers (one finishing first must not take the other's sets away), solved in
+    their thread (no fork beside running threads)."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    barrier, solve, pids = threading.Barrier(2, timeout=60), sets.sparse.solve, set()
+
+    def together(*args, **kw):  # both threads inside a set's solve at once, once
+        pids.add(os.getpid())
+        if not getattr(threading.current_thread(), "met", False):
+            threading.current_thread().met = True
+            barrier.wait()
+        return solve(*args, **kw)
+
+    alone, _ = _solve(2, 1, monkeypatch)
+    monkeypatch.setattr(sets.sparse, "solve", together)
+    monkeypatch.setattr(forkpool, "available_workers", lambda *a, **k: 2)
+    K, loads, fixed, d = bar(2)
+    with ThreadPoolExecutor(2) as pool:
+        outs = list(pool.map(lambda _: solve_system(K, loads, fixed, "direct", d), range(2)))
+    for out in outs:
+        assert all(np.array_equal(out[n], alone[n]) for n in alone)
+    assert pids == {os.getpid()}
