@@ -333,6 +333,41 @@ FITS = [  # spring/mass models and their fits (harness/stages/sms*.py)
         "evaluations of G (SA: proposals; Gauss-Newton: outer iterations)",
     ),
     Column("opt_iterations", "count", "the optimiser's iterations"),
+    Column("opt_nit", "count", "L-BFGS-B's iterations of a material fitted per element (p1)"),
+    Column("opt_nfev", "count", "L-BFGS-B's evaluations of a material fitted per element (p1)"),
+    Column(
+        "opt_stops",
+        "",
+        "why each start of the validated fit's final fit stopped (the exported one first)",
+    ),
+    Column("start_rule", "", "the stiffness rule the validated fit started from (its k0, its row)"),
+    Column(
+        "training_dropped",
+        "",
+        "training states left out of the fit: the FEM's error on them above a third of the "
+        "best rule's (space-separated)",
+    ),
+    Column(
+        "ref_note",
+        "",
+        "why the reference missed its tolerance: the loads above tol and how its levels ended",
+    ),
+    Column("E_fit_min", "Pa", "the smallest Young's modulus of a material fitted per element"),
+    Column("E_fit_max", "Pa", "the largest Young's modulus of a material fitted per element"),
+    Column("nu_fit_min", "", "the smallest Poisson's ratio of a material fitted per element"),
+    Column("nu_fit_max", "", "the largest Poisson's ratio of a material fitted per element"),
+    Column(
+        "E_effective",
+        "Pa",
+        "the one Young's modulus every element shares (p1-global's fitted pair; empty when "
+        "the elements differ)",
+    ),
+    Column(
+        "nu_effective",
+        "",
+        "the one Poisson's ratio every element shares (p1-global's fitted pair; empty when "
+        "the elements differ)",
+    ),
     Column("opt_solves", "count", "Gauss-Newton: linear solves"),
     Column("opt_at_bounds", "count", "constants the fit left at a bound"),
     Column(
