@@ -63,6 +63,7 @@ class Shared:
 # the running solves' Shared and sets, by a token of each call: set before its pool forks (a
 # worker inherits them); several calls may run at once in threads (the graded levels')
 _RUNS: dict = {}
+_TOKENS = itertools.count()
 
 
 def solve_sets(shared: Shared, sets: list[SetSolve]) -> list[tuple[np.ndarray, SolveRecord]]:
@@ -83,9 +84,6 @@ def solve_sets(shared: Shared, sets: list[SetSolve]) -> list[tuple[np.ndarray, S
             return forkpool.run(ex, _solve_one, tasks, say=warnings.warn)
     finally:
         del _RUNS[token]
-
-
-_TOKENS = itertools.count()
 
 
 def _solve_one(task: tuple[int, int]) -> tuple[np.ndarray, SolveRecord]:
