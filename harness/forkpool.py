@@ -21,6 +21,7 @@ import math
 import os
 import signal
 import sys
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -44,10 +45,17 @@ def available_workers(
     dofs): the CPUs this process may run on (at most MAX_WORKERS and the tasks) and, for
     tasks whose largest factorisation is ``task_gbytes`` (predicted), as many as the free
     memory now holds (WORKER_MEMORY each); 1 where forking is unavailable (not Linux), the
-    caller is itself a pool's worker, or the problem is smaller than ``min_size``."""
+    caller is itself a pool's worker or runs in a thread other than the main one (a fork
+    beside running threads can inherit a lock one of them holds), or the problem is smaller
+    than ``min_size``."""
     import multiprocessing as mp
 
-    if not sys.platform.startswith("linux") or mp.parent_process() is not None or size < min_size:
+    if (
+        not sys.platform.startswith("linux")
+        or mp.parent_process() is not None
+        or threading.current_thread() is not threading.main_thread()
+        or size < min_size
+    ):
         return 1
     n = min(len(os.sched_getaffinity(0)), MAX_WORKERS, n_tasks)
     if task_gbytes > 0:

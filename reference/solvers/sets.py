@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import threading
 import warnings
 from dataclasses import dataclass
 
@@ -67,15 +66,12 @@ _TOKENS = itertools.count()
 
 
 def solve_sets(shared: Shared, sets: list[SetSolve]) -> list[tuple[np.ndarray, SolveRecord]]:
-    """(x (free, m), its SolveRecord) of each set, in the order given (module docstring).
-    Called from a thread other than the main one (the graded levels solve meshes in
-    threads), the sets are solved there one after the other: a fork beside running threads
-    can inherit a lock one of them holds."""
+    """(x (free, m), its SolveRecord) of each set, in the order given (module docstring);
+    from a thread other than the main one (the graded levels') one after the other there
+    (harness/forkpool.py never forks from such a thread)."""
     n = max(len(s.free) for s in sets)
     matrix_gb = 3 * 12 * shared.K.nnz / 1e9  # a set's restriction of K, equilibrated, sorted
     workers = forkpool.available_workers(len(sets), n, CHOLESKY_GBYTES + matrix_gb, MIN_DOFS)
-    if threading.current_thread() is not threading.main_thread():
-        workers = 1
     token = next(_TOKENS)
     _RUNS[token] = (shared, sets)
     try:

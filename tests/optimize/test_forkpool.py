@@ -145,3 +145,14 @@ def test_the_workers_share_the_networks_map_built_before_the_fork(monkeypatch, t
     assert pooled.choice != "rule"
     pids = log.read_text().split()
     assert pids and set(pids) == {str(os.getpid())}
+
+
+def test_a_thread_other_than_the_main_one_never_forks():
+    """A fork beside running threads can inherit a lock one of them holds: from such a
+    thread the tasks run in it, whatever the CPUs."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    main = forkpool.available_workers(24, 10**6)
+    with ThreadPoolExecutor(1) as pool:
+        there = pool.submit(forkpool.available_workers, 24, 10**6).result()
+    assert there == 1 and (main > 1 or len(os.sched_getaffinity(0)) == 1)
