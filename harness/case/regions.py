@@ -157,14 +157,16 @@ def centroid_normal(geometry, masks, nodes: int) -> str:
     centre = sum(a[m] @ c[m] for (c, _, a), m in zip(geometry, masks))
     normal = sum(a[m] @ n[m] for (_, n, a), m in zip(geometry, masks))
     n = normal / max(np.linalg.norm(normal), 1e-300)
-    return f": centroid {vector(centre / max(area, 1e-300))} m, normal {vector(n)}, {nodes} nodes"
+    c = vector(centre / max(area, 1e-300), scale=np.sqrt(area))
+    return f": centroid {c} m, normal {vector(n)}, {nodes} nodes"
 
 
-def vector(v) -> str:
-    """'(1, 0.5, 0)': a vector to three digits, a component below 1e-12 of its largest (the
-    rounding of a sum that cancels, e.g. a symmetric face's centroid: -3e-19 m) as 0."""
+def vector(v, scale: float = 0.0) -> str:
+    """'(1, 0.5, 0)': a vector to three digits, a component below 1e-12 of its largest or of
+    ``scale`` (the rounding of a sum that cancels, e.g. a symmetric face's centroid: -3e-19 m;
+    a face at x = 0 has no large component, so its own size is the scale) as 0."""
     v = np.asarray(v, float)
-    v = np.where(np.abs(v) < 1e-12 * np.abs(v).max(initial=0.0), 0.0, v)
+    v = np.where(np.abs(v) < 1e-12 * max(np.abs(v).max(initial=0.0), scale), 0.0, v)
     return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
 
 

@@ -209,3 +209,21 @@ def test_a_printed_vector_shows_rounding_noise_as_zero():
     assert vector([0.0, -3.1e-19, 0.005]) == "(0, 0, 0.005)"
     assert vector([0.1, 1e-6, 0.005]) == "(0.1, 1e-06, 0.005)"
     assert vector([0.0, 0.0, 0.0]) == "(0, 0, 0)"
+    assert vector([0.0, 1.7e-17, -7.3e-18], scale=0.17) == "(0, 0, 0)"  # a face at x = 0
+
+
+def test_a_centroid_at_the_origin_prints_as_zeros():
+    """A disc's facets centred on the origin: the area-weighted centroid's rounding (~1e-17 m
+    on a 0.1 m disc) printed as 0 against the face's own size."""
+    from harness.case.regions import centroid_normal
+
+    t = np.linspace(0, 2 * np.pi, 13)[:-1] + 0.1
+    c = 0.1 * np.c_[np.zeros(12), np.cos(t), np.sin(t)] / 3  # the triangles' centroids
+    n = np.tile([-1.0, 0.0, 0.0], (12, 1))
+    a = np.full(12, 0.5 * 0.01 * np.sin(2 * np.pi / 12))
+    geometry, masks = [(c, n, a)], [np.ones(12, bool)]
+    assert np.abs(a @ c / a.sum()).max() > 0  # the sum does not cancel exactly
+    assert (
+        centroid_normal(geometry, masks, 13)
+        == ": centroid (0, 0, 0) m, normal (-1, 0, 0), 13 nodes"
+    )

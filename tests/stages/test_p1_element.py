@@ -1,7 +1,8 @@
 """Model class "p1" with a fitted material per element (harness/stages/classes/p1_element.py).
 Its adjoint gradient equals central differences of its misfit; on a synthetic truth solved
 here with the P1 network of a known two-region material (harness/models/p1.py, statics) the
-per-element fit recovers the regions where the one fitted pair of p1-global cannot; with no
+per-element fit recovers the regions where the one fitted pair of p1-global cannot, and never
+leaves the box of the case's stiffness and compressibility; with no
 information in the data the prior returns every element to the case's (E, nu); calibrate
 --model p1 writes one material per tetrahedron (V0 > 0) that is the network's own."""
 
@@ -117,6 +118,21 @@ def test_two_regions_are_recovered_per_element_and_not_by_one_pair(case, base):
     assert err < 0.25 * err_pair
     left = E_t > E
     assert np.median(fit.E[left]) > 1.5 * E > 0.75 * E > np.median(fit.E[~left])
+
+
+def test_no_element_is_stiffer_or_nearer_incompressible_than_the_case(case, base):
+    """A truth four times stiffer on one half and at nu = 0.49 on the other pulls the fit out
+    of the box M_e <= M, nu_e <= nu (the case's): it stops on the box's faces."""
+    c = base.points[base.volume.elements].mean(axis=1)[:, 0]
+    left = c < 0.5 * (base.points[:, 0].min() + base.points[:, 0].max())
+    t = _synthetic(case, base, np.where(left, 4 * E, E), np.where(left, NU, 0.49))
+    fit = pe.fit_elements(_split(base), t, E, NU, pe.PRIOR_WEIGHT)
+    a, mu = pg.coefficients(fit.E, fit.nu, False)
+    a0, mu0 = pg.coefficients(E, NU, False)
+    M, M0 = a + 2 * mu, a0 + 2 * mu0
+    print(M.max() / M0, fit.nu.max())
+    assert M.max() <= M0 * (1 + 1e-9) and fit.nu.max() <= NU + 1e-9
+    assert M[left].max() > 0.999 * M0 and fit.nu[~left].max() > NU - 1e-6
 
 
 def test_with_no_information_the_prior_returns_every_element_to_the_case(case, base):

@@ -1,18 +1,26 @@
 """A material per element for linear tetrahedra (2-D: triangles): the fit of model class "p1",
 for engines that take one (E, nu) per tetrahedron (NVIDIA Newton's k_mu, k_lambda per tet).
 
-Each element e has two parameters, theta_e = (p_e, s_e) = (log mu_e, log(1 + a_e / mu_e)),
-where a = lambda (plane stress: 2 lambda mu / (lambda + 2 mu)). Both are logs, so the prior
-and L-BFGS-B see one scale: p is the element's stiffness, s its compressibility (3-D:
-s = -log(1 - 2 nu), 0 at nu = 0, log 10 at nu = 0.45), and nu_e in [0, NU_MAX] is the box
-s_e in [0, s(NU_MAX)]. (log E, nu) would put nu near 0.5 on a scale a thousand times
-steeper than log E; log(a / mu) has no value at nu = 0.
+Each element e has two parameters, theta_e = (q_e, s_e) = (log M_e, log(1 + a_e / mu_e)),
+where a = lambda (plane stress: 2 lambda mu / (lambda + 2 mu)) and M = a + 2 mu is the
+element's P-wave modulus: mu = M / (e^s + 1), a = M tanh(s / 2). Both are logs, so the prior
+and L-BFGS-B see one scale: q is the element's stiffness, s its compressibility (3-D:
+s = -log(1 - 2 nu), 0 at nu = 0, log 10 at nu = 0.45). (log E, nu) would put nu near 0.5 on
+a scale a thousand times steeper than log E; log(a / mu) has no value at nu = 0.
+
+The box: q_e <= q(E, nu) and 0 <= s_e <= s(E, nu), the case's material. No element is
+stiffer (M bounds the wave speed, so an explicit engine's stable time step is never smaller
+than with the plain material, and the stress a float32 engine makes of rounded positions
+is never larger) or nearer incompressible than the material the engine already runs: the
+export asks nothing of the engine that the plain (E, nu) does not. Without the box the fit
+drove elements at nu = 0.49 to nu' = 0.499 and M' to 16 M, which float32 Newton could not
+settle; M' <= M alone settles it, nu' <= nu keeps it 4x closer there (docs/engines.md).
 
 Objective: the balanced misfit of p1-global over the training states (each fitted load's
 weighted squared error over its reference norm squared, harness/stages/classes/p1_global.py
 ``Training``) plus PRIOR_WEIGHT x L x sum_e (V_e / V) |theta_e - theta_case|^2 over the L
 fitted loads: in the objective's own units (a load's whole reference norm is 1), a uniform
-step of one unit in p and s away from the case's material costs as much as a relative error
+step of one unit in q and s away from the case's material costs as much as a relative error
 of sqrt(PRIOR_WEIGHT) = 3.2 % on every fitted load, whatever their number. Where the data
 say little (elements the loads barely strain, combinations they cannot tell apart) the
 element stays near the case's material. Gradient by the adjoint (K symmetric: one
@@ -56,7 +64,7 @@ from harness.stages.sms_measures import scored_columns
 METHOD = "l-bfgs-b"
 MAXITER = 300  # L-BFGS-B iterations (each: one factorisation per constraint set and step)
 FTOL, GTOL = 1e-12, 1e-10  # its relative objective decrease and projected gradient tolerances
-PRIOR_WEIGHT = 1e-3  # per fitted load per unit of (p, s) deviation, volume-weighted
+PRIOR_WEIGHT = 1e-3  # per fitted load per unit of (q, s) deviation, volume-weighted
 
 
 @dataclass(frozen=True, eq=False)
@@ -101,15 +109,15 @@ class ElementSplit:
 
 
 def lame_of(theta: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
-    """(a, mu) per element of theta = (p (m,), s (m,)) stacked."""
-    mu = np.exp(theta[:m])
-    return mu * np.expm1(theta[m:]), mu
+    """(a, mu) per element of theta = (q (m,), s (m,)) stacked."""
+    M, s = np.exp(theta[:m]), theta[m:]
+    return M * np.tanh(0.5 * s), M / (np.exp(s) + 1)
 
 
 def theta_of(E, nu, plane_stress: bool) -> tuple[float, float]:
-    """(p, s) of one pair (E, nu)."""
+    """(q, s) of one pair (E, nu)."""
     a, mu = coefficients(float(E), float(nu), plane_stress)
-    return math.log(mu), math.log1p(a / mu)
+    return math.log(a + 2 * mu), math.log1p(a / mu)
 
 
 def pairs_of(a, mu, plane_stress: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -141,7 +149,8 @@ def misfit(split: ElementSplit, t: Training, theta: np.ndarray) -> tuple[float, 
     eu, el = split.strains(u), split.strains(lam)
     g_a = -split.V * np.einsum("lmv,vw,lmw->m", el, split.D_a, eu)
     g_mu = -split.V * np.einsum("lmv,vw,lmw->m", el, split.D_mu, eu)
-    return J, np.concatenate([mu * g_mu + a * g_a, (a + mu) * g_a])
+    ds = mu / (1 + np.exp(-theta[m:]))  # d mu / ds = -ds, d a / ds = 2 ds
+    return J, np.concatenate([mu * g_mu + a * g_a, ds * (2 * g_a - g_mu)])
 
 
 @dataclass(frozen=True)
@@ -161,12 +170,14 @@ class ElementFit:
 
 def fit_elements(split: ElementSplit, t: Training, E0, nu0, prior: float, start=None):
     """:class:`ElementFit` from the case's (E0, nu0), the prior's centre, with weight
-    ``prior`` x the number of fitted loads (``start``: another (E, nu) to start from, e.g.
-    p1-global's pair)."""
+    ``prior`` x the number of fitted loads, in the box of the module's docstring (``start``:
+    another (E, nu) to start from, e.g. p1-global's pair, moved into the box)."""
     m = len(split.V)
     nu0 = min(max(float(nu0), 0.0), NU_MAX)
-    centre = np.repeat(theta_of(E0, nu0, split.plane_stress), m)
+    q0, s0 = theta_of(E0, nu0, split.plane_stress)
+    centre = np.repeat([q0, s0], m)
     x0 = centre if start is None else np.repeat(theta_of(*start, split.plane_stress), m)
+    x0 = np.clip(x0, np.repeat([-np.inf, 0.0], m), centre)
     v = np.tile(split.V / split.V.sum(), 2)
     w = float(prior) * len(t.forces)
 
@@ -175,8 +186,7 @@ def fit_elements(split: ElementSplit, t: Training, E0, nu0, prior: float, start=
         d = x - centre
         return J + w * float(v @ (d * d)), g + 2 * w * v * d
 
-    s_max = theta_of(1.0, NU_MAX, split.plane_stress)[1]
-    bounds = [(None, None)] * m + [(0.0, s_max)] * m
+    bounds = [(None, q0)] * m + [(0.0, s0)] * m
     opts = {"maxiter": MAXITER, "maxfun": 2 * MAXITER, "ftol": FTOL, "gtol": GTOL}
     res = minimize(f, x0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts)
     E, nu = pairs_of(*lame_of(res.x, m), split.plane_stress)
