@@ -191,28 +191,8 @@ def write_pack(pack: Pack, out_dir) -> Path:
     return path
 
 
-def read_pack(folder) -> Pack:
-    """Read a benchmark pack, every array checked against its manifest.
-
-    Parameters
-    ----------
-    folder : str or Path
-        The pack's folder or its problem.json.
-
-    Returns
-    -------
-    Pack
-
-    Raises
-    ------
-    SpringbenchError
-        One line naming the file and the fix (missing file, wrong shape, bad manifest).
-    """
-    import meshio
-
-    folder = Path(folder)
-    if folder.name == "problem.json":
-        folder = folder.parent
+def _manifest(folder: Path) -> dict:
+    """The pack's problem.json, its format and version checked."""
     man_path = folder / "problem.json"
     if not man_path.is_file():
         _bad(
@@ -239,6 +219,81 @@ def read_pack(folder) -> Pack:
             "write the pack again with this version of `springbench pack`",
             "format_version",
         )
+    return man
+
+
+LOAD_ARRAYS = ("held_nodes", "held_components", "force", "u_fem", "u_fem_error")
+
+
+def _load(folder: Path, e: dict, n: int, dim: int) -> PackLoad:
+    """One load of the manifest's list, its arrays checked against the mesh's n nodes."""
+    f = folder / str(e.get("file", ""))
+    try:
+        z = np.load(f)
+        arrays = {k: z[k] for k in LOAD_ARRAYS}
+    except (OSError, KeyError, ValueError) as exc:
+        _bad(
+            f"load {e.get('name')!r}: unreadable ({type(exc).__name__}: {exc})",
+            f,
+            "write the pack again with `springbench pack`",
+        )
+    h = len(arrays["held_nodes"])
+    shapes = {
+        "force": (n, dim),
+        "u_fem": (n, dim),
+        "u_fem_error": (n,),
+        "held_components": (h, dim),
+    }
+    for key, shape in shapes.items():
+        if arrays[key].shape != shape:
+            _bad(
+                f"{key} has shape {arrays[key].shape}, expected {shape}",
+                f,
+                "write the pack again",
+                key,
+            )
+    for key in ("force", "u_fem"):
+        if not np.all(np.isfinite(arrays[key])):
+            _bad(f"{key} holds NaN or infinite values", f, "write the pack again", key)
+    if h and (arrays["held_nodes"].min() < 0 or arrays["held_nodes"].max() >= n):
+        _bad("held_nodes outside the mesh's nodes", f, "write the pack again", "held_nodes")
+    g = e.get("gravity")
+    return PackLoad(
+        str(e["name"]),
+        str(e.get("role", "")),
+        arrays["held_nodes"].astype(int),
+        arrays["held_components"].astype(bool),
+        arrays["force"].astype(float),
+        arrays["u_fem"].astype(float),
+        arrays["u_fem_error"].astype(float),
+        None if g is None else np.asarray(g, float),
+        str(e.get("kind", "")),
+    )
+
+
+def read_pack(folder) -> Pack:
+    """Read a benchmark pack, every array checked against its manifest.
+
+    Parameters
+    ----------
+    folder : str or Path
+        The pack's folder or its problem.json.
+
+    Returns
+    -------
+    Pack
+
+    Raises
+    ------
+    SpringbenchError
+        One line naming the file and the fix (missing file, wrong shape, bad manifest).
+    """
+    import meshio
+
+    folder = Path(folder)
+    if folder.name == "problem.json":
+        folder = folder.parent
+    man = _manifest(folder)
     try:
         mesh = meshio.read(folder / man["mesh"])
         dim, n = int(man["dim"]), int(man["n_nodes"])
@@ -248,7 +303,7 @@ def read_pack(folder) -> Pack:
     except (KeyError, TypeError, ValueError, OSError) as exc:
         _bad(
             f"incomplete or unreadable pack ({type(exc).__name__}: {exc})",
-            man_path,
+            folder / "problem.json",
             "write the pack again with `springbench pack`",
         )
     points = np.asarray(mesh.points, float)[:, :dim]
@@ -259,59 +314,12 @@ def read_pack(folder) -> Pack:
             "write the pack again with `springbench pack`",
             "n_nodes",
         )
-    loads = []
-    for e in entries:
-        f = folder / str(e.get("file", ""))
-        try:
-            z = np.load(f)
-            arrays = {
-                k: z[k] for k in ("held_nodes", "held_components", "force", "u_fem", "u_fem_error")
-            }
-        except (OSError, KeyError, ValueError) as exc:
-            _bad(
-                f"load {e.get('name')!r}: unreadable ({type(exc).__name__}: {exc})",
-                f,
-                "write the pack again with `springbench pack`",
-            )
-        h = len(arrays["held_nodes"])
-        shapes = {
-            "force": (n, dim),
-            "u_fem": (n, dim),
-            "u_fem_error": (n,),
-            "held_components": (h, dim),
-        }
-        for key, shape in shapes.items():
-            if arrays[key].shape != shape:
-                _bad(
-                    f"{key} has shape {arrays[key].shape}, expected {shape}",
-                    f,
-                    "write the pack again",
-                    key,
-                )
-        for key in ("force", "u_fem"):
-            if not np.all(np.isfinite(arrays[key])):
-                _bad(f"{key} holds NaN or infinite values", f, "write the pack again", key)
-        if h and (arrays["held_nodes"].min() < 0 or arrays["held_nodes"].max() >= n):
-            _bad("held_nodes outside the mesh's nodes", f, "write the pack again", "held_nodes")
-        g = e.get("gravity")
-        loads.append(
-            PackLoad(
-                str(e["name"]),
-                str(e.get("role", "")),
-                arrays["held_nodes"].astype(int),
-                arrays["held_components"].astype(bool),
-                arrays["force"].astype(float),
-                arrays["u_fem"].astype(float),
-                arrays["u_fem_error"].astype(float),
-                None if g is None else np.asarray(g, float),
-                str(e.get("kind", "")),
-            )
-        )
+    loads = tuple(_load(folder, e, n, dim) for e in entries)
     cells = {c.type: np.asarray(c.data, int) for c in mesh.cells}
     meta = {
         k: v for k, v in man.items() if k in ("source", "springbench", "peak_strain", "load_set")
     }
-    return Pack(points, cells, E, nu, rho, tuple(loads), mat.get("plane"), meta)
+    return Pack(points, cells, E, nu, rho, loads, mat.get("plane"), meta)
 
 
 def named_loads(text: str, names) -> list[str]:

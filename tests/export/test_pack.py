@@ -249,3 +249,53 @@ def test_a_case_file_with_a_mesh_body_packs_every_load_of_the_case(tmp_path, cap
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mesh" in err[0] and not (tmp_path / "q").exists()
+
+
+def _broken(src, dst, edit_manifest=None, edit_load=None):
+    """A copy of the pack at ``src`` with its manifest or its first load's arrays edited."""
+    import shutil
+
+    shutil.copytree(src, dst)
+    man = json.loads((dst / "problem.json").read_text())
+    if edit_manifest is not None:
+        man = edit_manifest(man)
+        (dst / "problem.json").write_text(json.dumps(man))
+    if edit_load is not None:
+        f = dst / man["loads"][0]["file"]
+        z = dict(np.load(f))
+        edit_load(z)
+        np.savez(f, **z)
+    return dst
+
+
+@pytest.mark.parametrize(
+    "name, manifest, load, says",
+    [
+        ("nojson", lambda m: None, None, "format is None"),
+        ("format", lambda m: {**m, "format": "other"}, None, "not 'springbench-pack'"),
+        ("version", lambda m: {**m, "format_version": 99}, None, "format_version 99"),
+        ("incomplete", lambda m: {k: v for k, v in m.items() if k != "material"}, None, "material"),
+        ("nodes", lambda m: {**m, "n_nodes": m["n_nodes"] + 1}, None, "the manifest says"),
+        ("shape", None, lambda z: z.update(force=z["force"][:-1]), "force has shape"),
+        ("nan", None, lambda z: z["u_fem"].__setitem__((0, 0), np.nan), "u_fem holds NaN"),
+        ("held", None, lambda z: z["held_nodes"].__setitem__(0, 10**6), "held_nodes outside"),
+        ("gone", None, lambda z: z.pop("u_fem"), "unreadable"),
+    ],
+)
+def test_a_broken_pack_is_one_line_naming_its_file(packed, tmp_path, name, manifest, load, says):
+    """Each broken manifest or load array: one SpringbenchError line naming the file and the
+    fix (write the pack again)."""
+    from harness.errors import SpringbenchError
+
+    d, _, pack = packed
+    if name == "nojson":
+        (tmp_path / "p").mkdir()
+        (tmp_path / "p" / "problem.json").write_text("null")
+        broken = tmp_path / "p"
+    else:
+        broken = _broken(d / "p", tmp_path / "p", manifest, load)
+    with pytest.raises(SpringbenchError) as err:
+        read_pack(broken)
+    line = str(err.value)
+    assert says in line and "\n" not in line and str(broken) in line, line
+    assert "pack" in line
