@@ -160,120 +160,134 @@ def _section(key: str, value, file: str) -> dict:
     return check(value, spec, file, key + ".")
 
 
+def _box_body(b: dict, dim: int, fail) -> Body:
+    """A rectangle or box body: its size and origin checked."""
+    shape = b["shape"]
+    want = 2 if shape == "rectangle" else 3
+    if dim != want:
+        fail(
+            "shape",
+            f"a {shape} needs dim = {want}",
+            f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}",
+        )
+    if b["size"] is None:
+        fail("size", "missing required field", f"give {dim} positive extents")
+    if len(b["size"]) != dim:
+        fail("size", f"expected {dim} entries, got {len(b['size'])}")
+    origin = b["origin"] or (0.0,) * dim
+    if len(origin) != dim:
+        fail("origin", f"expected {dim} entries, got {len(origin)}")
+    problem = coordinate_problem([origin, np.add(origin, b["size"])])
+    if problem:  # blame the size if it alone is the problem
+        fail(
+            "size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin",
+            problem,
+            COORDINATE_FIX,
+        )
+    return Body(shape, origin=origin, size=b["size"])
+
+
+def _polygon_body(b: dict, dim: int, fail) -> Body:
+    """A polygon body: at least three vertices enclosing an area."""
+    if dim != 2:
+        fail("shape", "a polygon needs dim = 2")
+    v = b["vertices"]
+    if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
+        fail("vertices", "expected at least 3 points [x, y]")
+    if coordinate_problem(v):
+        fail("vertices", coordinate_problem(v), COORDINATE_FIX)
+    x, y = np.asarray(v, float).T
+    area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
+    if abs(area) <= 1e-14:
+        fail("vertices", "the polygon has zero area", "list the vertices in order around the body")
+    return Body("polygon", vertices=v)
+
+
+def _mesh_body(b: dict, dim: int, path: Path, fail):
+    """(the body, its mesh) of a mesh file, read and checked."""
+    if not b["file"]:
+        fail(
+            "file",
+            "missing required field for shape = 'mesh'",
+            "give the mesh path relative to the case file",
+        )
+    mpath = (path.parent / b["file"]).resolve()
+    try:
+        mesh = read_mesh(mpath, b["format"])
+        from harness.case.mesh_checks import check_mesh
+
+        check_mesh(mesh, str(mpath))
+    except SpringbenchError as exc:
+        fail("file", exc.message, exc.fix)
+    if mesh.dim != dim:
+        fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}", f"set dim = {mesh.dim}")
+    return Body(b["shape"], file=mpath, format=b["format"]), mesh
+
+
+def _box_part(box, name: str, dim: int, fail) -> tuple:
+    """A part given as {box = [[lo...], [hi...]]}: its two corners."""
+    ok = (
+        isinstance(box, list)
+        and len(box) == 2
+        and all(
+            isinstance(r, list)
+            and len(r) == dim
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
+            for r in box
+        )
+    )
+    if not ok:
+        fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
+    if np.isnan(np.asarray(box, float)).any():  # every comparison with nan is false
+        fail(f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)")
+    if any(lo > hi for lo, hi in zip(*box)):
+        fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
+    return (tuple(map(float, box[0])), tuple(map(float, box[1])))
+
+
+def _part(spec, name: str, dim: int, body: Body, mesh, path: Path, file: str, fail):
+    """One [body.parts] entry: a mesh group, an end face, facets or a box."""
+    if isinstance(spec, dict) and set(spec) == {"group"}:  # a named group of the mesh file
+        if body.shape != "mesh" or not isinstance(spec["group"], str):
+            fail(
+                f"parts.{name}.group",
+                "expected the name of a group of the body's mesh file",
+                "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}",
+            )
+        require_group(
+            mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError
+        )
+        return GroupPart(spec["group"], body.file, body.format)
+    if isinstance(spec, dict) and "end" in spec:  # an end face of the mesh along an axis
+        return _end_part(spec, name, body.shape, dim, body, fail)
+    if isinstance(spec, dict) and set(spec) == {"facets"}:  # a group, nodes:, box: or sphere:
+        return _facets_part(spec["facets"], name, body.shape, mesh, body, path, file, fail)
+    if not isinstance(spec, dict) or set(spec) != {"box"}:
+        fail(
+            f"parts.{name}",
+            'expected {box = [[lo...], [hi...]]}, {group = "name"}, {end = "x1"} or '
+            '{facets = "box:..."}',
+        )
+    return _box_part(spec["box"], name, dim, fail)
+
+
 def _body(b: dict, dim: int, path: Path, file: str) -> Body:
     def fail(fld, msg, fix=None):
         raise CaseError(msg, file=file, field="body." + fld, fix=fix)
 
-    shape = b["shape"]
-    if shape in ("rectangle", "box"):
-        want = 2 if shape == "rectangle" else 3
-        if dim != want:
-            fail(
-                "shape",
-                f"a {shape} needs dim = {want}",
-                f"use {'box' if want == 2 else 'rectangle'} or set dim = {want}",
-            )
-        if b["size"] is None:
-            fail("size", "missing required field", f"give {dim} positive extents")
-        if len(b["size"]) != dim:
-            fail("size", f"expected {dim} entries, got {len(b['size'])}")
-        origin = b["origin"] or (0.0,) * dim
-        if len(origin) != dim:
-            fail("origin", f"expected {dim} entries, got {len(origin)}")
-        problem = coordinate_problem([origin, np.add(origin, b["size"])])
-        if problem:  # blame the size if it alone is the problem
-            fail(
-                "size" if coordinate_problem([(0.0,) * dim, b["size"]]) else "origin",
-                problem,
-                COORDINATE_FIX,
-            )
-        body = Body(shape, origin=origin, size=b["size"])
-    elif shape == "polygon":
-        if dim != 2:
-            fail("shape", "a polygon needs dim = 2")
-        v = b["vertices"]
-        if v is None or len(v) < 3 or any(len(p) != 2 for p in v):
-            fail("vertices", "expected at least 3 points [x, y]")
-        if coordinate_problem(v):
-            fail("vertices", coordinate_problem(v), COORDINATE_FIX)
-        x, y = np.asarray(v, float).T
-        area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
-        if abs(area) <= 1e-14:
-            fail(
-                "vertices",
-                "the polygon has zero area",
-                "list the vertices in order around the body",
-            )
-        body = Body(shape, vertices=v)
+    mesh = None
+    if b["shape"] in ("rectangle", "box"):
+        body = _box_body(b, dim, fail)
+    elif b["shape"] == "polygon":
+        body = _polygon_body(b, dim, fail)
     else:
-        if not b["file"]:
-            fail(
-                "file",
-                "missing required field for shape = 'mesh'",
-                "give the mesh path relative to the case file",
-            )
-        mpath = (path.parent / b["file"]).resolve()
-        try:
-            mesh = read_mesh(mpath, b["format"])
-            from harness.case.mesh_checks import check_mesh
-
-            check_mesh(mesh, str(mpath))
-        except SpringbenchError as exc:
-            fail("file", exc.message, exc.fix)
-        if mesh.dim != dim:
-            fail("file", f"the mesh is {mesh.dim}-D but dim = {dim}", f"set dim = {mesh.dim}")
-        body = Body(shape, file=mpath, format=b["format"])
-    parts = {}
+        body, mesh = _mesh_body(b, dim, path, fail)
     if not isinstance(b["parts"], dict):
         fail("parts", "expected a table of name = {box = [[lo], [hi]]}")
-    for name, spec in b["parts"].items():
-        if isinstance(spec, dict) and set(spec) == {"group"}:  # a named group of the mesh file
-            if shape != "mesh" or not isinstance(spec["group"], str):
-                fail(
-                    f"parts.{name}.group",
-                    "expected the name of a group of the body's mesh file",
-                    "groups need shape = 'mesh'; elsewhere use {box = [[lo...], [hi...]]}",
-                )
-            require_group(
-                mesh, spec["group"], file=file, field=f"body.parts.{name}.group", error=CaseError
-            )
-            parts[name] = GroupPart(spec["group"], body.file, body.format)
-            continue
-        if isinstance(spec, dict) and "end" in spec:  # an end face of the mesh along an axis
-            parts[name] = _end_part(spec, name, shape, dim, body, fail)
-            continue
-        if isinstance(spec, dict) and set(spec) == {"facets"}:  # a group, nodes:, box: or sphere:
-            m = mesh if shape == "mesh" else None
-            parts[name] = _facets_part(spec["facets"], name, shape, m, body, path, file, fail)
-            continue
-        if not isinstance(spec, dict) or set(spec) != {"box"}:
-            fail(
-                f"parts.{name}",
-                'expected {box = [[lo...], [hi...]]}, {group = "name"}, {end = "x1"} or '
-                '{facets = "box:..."}',
-            )
-        box = spec["box"]
-        ok = (
-            isinstance(box, list)
-            and len(box) == 2
-            and all(
-                isinstance(r, list)
-                and len(r) == dim
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in r)
-                for r in box
-            )
-        )
-        if not ok:
-            fail(f"parts.{name}.box", f"expected [[lo], [hi]] with {dim} numbers each")
-        if np.isnan(
-            np.asarray(box, float)
-        ).any():  # every comparison with nan is false: selects nothing
-            fail(
-                f"parts.{name}.box", "nan in the box", "give numbers (inf is fine for an open side)"
-            )
-        if any(lo > hi for lo, hi in zip(*box)):
-            fail(f"parts.{name}.box", "lo > hi", "the first corner is the minimum")
-        parts[name] = (tuple(map(float, box[0])), tuple(map(float, box[1])))
+    parts = {
+        name: _part(spec, name, dim, body, mesh, path, file, fail)
+        for name, spec in b["parts"].items()
+    }
     return Body(
         body.shape,
         body.origin,
