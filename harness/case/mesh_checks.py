@@ -127,30 +127,50 @@ def check_mesh(mesh, file: str | None = None) -> None:
         fail("the mesh has no cells", "give triangle, quad, tetra or hexahedron cells")
     if pts.shape[1] == 3 and not cells.keys() & {"tetra", "hexahedron"}:
         _surface(pts, cells, fail)
-    n = len(pts)
-    used = np.zeros(n, bool)
+    used = np.zeros(len(pts), bool)
     for kind, c in cells.items():
-        if c.min() < 0 or c.max() >= n:
-            row = np.flatnonzero((c < 0).any(1) | (c >= n).any(1))
-            fail(
-                f"{kind} cells {_first(row)} refer to nodes that do not exist (mesh has {n} nodes)",
-                "node indices must be 0 .. n-1",
-            )
-        s = np.sort(c, axis=1)
-        rep = np.flatnonzero((s[:, 1:] == s[:, :-1]).any(1))
-        if len(rep):
-            fail(
-                f"{kind} cells {_first(rep)} repeat a node (collapsed cells)",
-                "remove or fix those cells",
-            )
+        _check_indices(kind, c, len(pts), fail)
         used[c.ravel()] = True
-        _, first, counts = np.unique(s, axis=0, return_index=True, return_counts=True)
-        if (counts > 1).any():
-            fail(
-                f"{int((counts > 1).sum())} {kind} cells appear twice (e.g. cell "
-                f"{first[counts > 1][0]})",
-                "remove duplicate cells",
-            )
+    _check_nodes(pts, used, fail)
+    for kind, c in cells.items():
+        _check_sizes(pts, kind, c, fail)
+    if len(cells) > 1:  # the FEM reference meshes one cell type: it would drop the others
+        split = "hexahedra into tetrahedra" if "hexahedron" in cells else "quads into triangles"
+        fail(
+            f"the mesh mixes {' and '.join(sorted(cells))} cells",
+            f"give one cell type, e.g. split the {split}",
+        )
+    for kind, c in cells.items():
+        _check_manifold(kind, c, fail)
+    _check_connected(pts, cells, fail)
+
+
+def _check_indices(kind: str, c: np.ndarray, n: int, fail) -> None:
+    """Cells of one kind: nodes that exist, none repeated in a cell, no cell twice."""
+    if c.min() < 0 or c.max() >= n:
+        row = np.flatnonzero((c < 0).any(1) | (c >= n).any(1))
+        fail(
+            f"{kind} cells {_first(row)} refer to nodes that do not exist (mesh has {n} nodes)",
+            "node indices must be 0 .. n-1",
+        )
+    s = np.sort(c, axis=1)
+    rep = np.flatnonzero((s[:, 1:] == s[:, :-1]).any(1))
+    if len(rep):
+        fail(
+            f"{kind} cells {_first(rep)} repeat a node (collapsed cells)",
+            "remove or fix those cells",
+        )
+    _, first, counts = np.unique(s, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        fail(
+            f"{int((counts > 1).sum())} {kind} cells appear twice (e.g. cell "
+            f"{first[counts > 1][0]})",
+            "remove duplicate cells",
+        )
+
+
+def _check_nodes(pts: np.ndarray, used: np.ndarray, fail) -> None:
+    """No two nodes at one position, none outside every cell."""
     scale = float(np.linalg.norm(pts.max(0) - pts.min(0))) or 1.0
     from scipy.spatial import cKDTree
 
@@ -167,41 +187,40 @@ def check_mesh(mesh, file: str | None = None) -> None:
             f"{len(unused)} nodes belong to no cell (nodes {_first(unused)})",
             "remove unused nodes (meshio: mesh.remove_orphaned_nodes())",
         )
-    for kind, c in cells.items():
-        v = signed_size(pts, kind, c)
-        ref = np.median(np.abs(v))
-        degen = np.flatnonzero(np.abs(v) <= DEGENERATE_RTOL * max(ref, np.finfo(float).tiny))
-        if len(degen) or ref == 0:
-            degen = degen if len(degen) else np.arange(len(c))
-            fail(
-                f"{len(degen)} degenerate {kind} cells with zero size (cells {_first(degen)})",
-                "remove flat or collapsed cells",
-            )
-        pos, neg = np.flatnonzero(v > 0), np.flatnonzero(v < 0)
-        if len(pos) and len(neg):
-            wrong = neg if len(neg) <= len(pos) else pos
-            fail(
-                f"{len(wrong)} inverted {kind} cells (cells {_first(wrong)}) have the "
-                "opposite orientation to the rest",
-                "reorder their nodes so every cell has positive volume",
-            )
-    if len(cells) > 1:  # the FEM reference meshes one cell type: it would drop the others
-        split = "hexahedra into tetrahedra" if "hexahedron" in cells else "quads into triangles"
+
+
+def _check_sizes(pts: np.ndarray, kind: str, c: np.ndarray, fail) -> None:
+    """Cells of one kind: none of zero size, all of one orientation."""
+    v = signed_size(pts, kind, c)
+    ref = np.median(np.abs(v))
+    degen = np.flatnonzero(np.abs(v) <= DEGENERATE_RTOL * max(ref, np.finfo(float).tiny))
+    if len(degen) or ref == 0:
+        degen = degen if len(degen) else np.arange(len(c))
         fail(
-            f"the mesh mixes {' and '.join(sorted(cells))} cells",
-            f"give one cell type, e.g. split the {split}",
+            f"{len(degen)} degenerate {kind} cells with zero size (cells {_first(degen)})",
+            "remove flat or collapsed cells",
         )
-    for kind, c in cells.items():
-        faces = np.concatenate([np.sort(c[:, list(f)], axis=1) for f in FACES[kind]])
-        _, counts = np.unique(faces, axis=0, return_counts=True)
-        over = int((counts > 2).sum())
-        if over:
-            what = "edges" if kind in ("triangle", "quad") else "faces"
-            fail(
-                f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
-                "each face may belong to at most two cells; remove overlapping or duplicate cells",
-            )
-    _check_connected(pts, cells, fail)
+    pos, neg = np.flatnonzero(v > 0), np.flatnonzero(v < 0)
+    if len(pos) and len(neg):
+        wrong = neg if len(neg) <= len(pos) else pos
+        fail(
+            f"{len(wrong)} inverted {kind} cells (cells {_first(wrong)}) have the "
+            "opposite orientation to the rest",
+            "reorder their nodes so every cell has positive volume",
+        )
+
+
+def _check_manifold(kind: str, c: np.ndarray, fail) -> None:
+    """No face (2-D: edge) shared by more than two cells."""
+    faces = np.concatenate([np.sort(c[:, list(f)], axis=1) for f in FACES[kind]])
+    _, counts = np.unique(faces, axis=0, return_counts=True)
+    over = int((counts > 2).sum())
+    if over:
+        what = "edges" if kind in ("triangle", "quad") else "faces"
+        fail(
+            f"non-manifold {kind} mesh: {over} {what} shared by more than two cells",
+            "each face may belong to at most two cells; remove overlapping or duplicate cells",
+        )
 
 
 def _surface(pts, cells, fail):
