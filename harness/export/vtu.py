@@ -66,30 +66,15 @@ def write_vtu(path, network, displacements: dict | None = None) -> Path:
     return path
 
 
-def read_vtu(path):
-    """Read a spring network written by :func:`write_vtu` (or any VTU of line cells with
-    cell data ``stiffness``).
-
-    Parameters
-    ----------
-    path : str or Path
-        The .vtu file.
-
-    Returns
-    -------
-    network : harness.models.springs.Network
-    displacements : dict of str to ndarray (n, dim)
-        Its ``u_<load>`` point data by load name.
-    """
-
+def _read_mesh(path: Path):
+    """meshio's reading of ``path``, its failures as one line naming the file."""
     import meshio
 
-    path = Path(path)
     if not path.exists():
         raise SpringbenchError("file not found", file=str(path), fix="check the path")
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-            m = meshio.read(path)
+            return meshio.read(path)
     except (Exception, SystemExit) as exc:  # meshio exits on some broken files
         why = (
             "the file is empty"
@@ -103,6 +88,10 @@ def read_vtu(path):
         raise SpringbenchError(
             why, file=str(path), fix="give a VTU file written by 'springbench build' or meshio"
         )
+
+
+def _springs(m, path: Path):
+    """(springs (s, 2), stiffness (s,), group (s,) or None) of the mesh's line cells."""
     blocks = [i for i, c in enumerate(m.cells) if c.type == "line"]
     if not blocks:
         raise SpringbenchError(
@@ -121,6 +110,11 @@ def read_vtu(path):
         if "group" in m.cell_data
         else None
     )
+    return springs, k, groups
+
+
+def _points(m, path: Path) -> np.ndarray:
+    """The mesh's points in its dimension (field data ``dim``, else 2 when z is 0)."""
     pts = np.asarray(m.points, float)
     dim = (
         int(np.ravel(m.field_data["dim"])[0])
@@ -135,6 +129,28 @@ def read_vtu(path):
             file=str(path),
             fix="fix the point coordinates",
         )
+    return pts
+
+
+def read_vtu(path):
+    """Read a spring network written by :func:`write_vtu` (or any VTU of line cells with
+    cell data ``stiffness``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The .vtu file.
+
+    Returns
+    -------
+    network : harness.models.springs.Network
+    displacements : dict of str to ndarray (n, dim)
+        Its ``u_<load>`` point data by load name.
+    """
+    path = Path(path)
+    m = _read_mesh(path)
+    springs, k, groups = _springs(m, path)
+    pts = _points(m, path)
     masses = np.asarray(m.point_data["mass"], float).ravel() if "mass" in m.point_data else None
     classes = (
         np.asarray(m.point_data["class"]).astype(int).ravel() if "class" in m.point_data else None
@@ -152,6 +168,7 @@ def read_vtu(path):
             field=exc.field,
             fix=exc.fix or "springs are pairs of distinct point indices 0 .. n-1",
         ) from None
+    dim = pts.shape[1]
     disp = {
         name[2:]: np.asarray(v, float)[:, :dim]
         for name, v in m.point_data.items()
