@@ -47,22 +47,86 @@ def _components(names: tuple[str, ...], dim: int, file: str, where: str) -> tupl
     return tuple(comps)
 
 
+def _standard_set(l: dict, dim: int, body: Body, file: str) -> list[LoadCase]:
+    """The load cases of [loads] set (none without one)."""
+    if l["set"] is None:
+        return []
+    want, make = registry.LOAD_SETS.about[l["set"]], registry.LOAD_SETS.load(l["set"])
+    if want != dim:
+        raise CaseError(
+            f"load set '{l['set']}' is {want}-D but dim = {dim}",
+            file=file,
+            field="loads.set",
+            fix=f"use basic{dim}d",
+        )
+    anchors = None
+    if anchored(l["set"], body) and ANCHORS[0] in body.parts:
+        anchors = np.array([body.parts[a][0] for a in ANCHORS[:dim]])
+    frame = body_frame(body) if l["set"].startswith("linear") else None
+    return list(make(l["magnitude"], anchors, frame))
+
+
+def _traction(t: dict, dim: int, body: Body, file: str, where: str) -> Traction:
+    """One [[loads.case.traction]]: its part, and a vector or (3-D) a twist."""
+    _check_part(t["part"], dim, body, file, f"{where}.part")
+    if t["vector"] is None and t["twist"] is None:
+        raise CaseError(
+            "a traction needs a vector or a twist",
+            file=file,
+            field=where,
+            fix=f"add vector = [{', '.join(['0.0'] * dim)}] (stress units) or twist = [wx, wy, wz]",
+        )
+    if t["vector"] is not None and len(t["vector"]) != dim:
+        raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.vector")
+    if t["twist"] is not None and dim != 3:
+        raise CaseError(
+            "a twist (torsion) needs dim = 3",
+            file=file,
+            field=f"{where}.twist",
+            fix="use vector in 2-D",
+        )
+    vector = tuple(t["vector"]) if t["vector"] is not None else (0.0,) * dim
+    return Traction(t["part"], vector, None if t["twist"] is None else tuple(t["twist"]))
+
+
+def _user_case(u: dict, dim: int, body: Body, file: str, where: str) -> LoadCase:
+    """One [[loads.case]]: held parts, tractions, gravity or body force, not all zero."""
+    cons = []
+    for j, c in enumerate(u["constraint"]):
+        _check_part(c["part"], dim, body, file, f"{where}.constraint[{j}].part")
+        comps = _components(c["components"], dim, file, f"{where}.constraint[{j}].components")
+        cons.append(Constraint(c["part"], comps))
+    tracs = [
+        _traction(t, dim, body, file, f"{where}.traction[{j}]") for j, t in enumerate(u["traction"])
+    ]
+    for key in ("gravity", "body_force"):
+        if u[key] is not None and len(u[key]) != dim:
+            raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.{key}")
+    if not cons:
+        raise CaseError(
+            "no constraint: the body can move freely",
+            file=file,
+            field=where + ".constraint",
+            fix="add [[loads.case.constraint]] with a part",
+        )
+    given = tracs or any(u[key] is not None for key in ("gravity", "body_force"))
+    # constraints alone: a modal case
+    if (
+        given
+        and not any(any(t.vector) or any(t.twist or ()) for t in tracs)
+        and not any(any(u[key] or ()) for key in ("gravity", "body_force"))
+    ):
+        raise CaseError(
+            f"load '{u['name']}' is zero: nothing moves (G would be 0/0)",
+            file=file,
+            field=where,
+            fix="give a non-zero traction vector, twist, gravity or body_force",
+        )
+    return LoadCase(u["name"], tuple(cons), tuple(tracs), u["gravity"], u["body_force"])
+
+
 def parse_loads(l: dict, dim: int, body: Body, file: str):
-    cases: list[LoadCase] = []
-    if l["set"] is not None:
-        want, make = registry.LOAD_SETS.about[l["set"]], registry.LOAD_SETS.load(l["set"])
-        if want != dim:
-            raise CaseError(
-                f"load set '{l['set']}' is {want}-D but dim = {dim}",
-                file=file,
-                field="loads.set",
-                fix=f"use basic{dim}d",
-            )
-        anchors = None
-        if anchored(l["set"], body) and ANCHORS[0] in body.parts:
-            anchors = np.array([body.parts[a][0] for a in ANCHORS[:dim]])
-        frame = body_frame(body) if l["set"].startswith("linear") else None
-        cases.extend(make(l["magnitude"], anchors, frame))
+    cases = _standard_set(l, dim, body, file)
     names = {c.name for c in cases}
     for i, u in enumerate(l["case"]):
         where = f"loads.case[{i}]"
@@ -75,65 +139,7 @@ def parse_loads(l: dict, dim: int, body: Body, file: str):
                 "shear-x, ...)",
             )
         names.add(u["name"])
-        cons = []
-        for j, c in enumerate(u["constraint"]):
-            _check_part(c["part"], dim, body, file, f"{where}.constraint[{j}].part")
-            cons.append(
-                Constraint(
-                    c["part"],
-                    _components(c["components"], dim, file, f"{where}.constraint[{j}].components"),
-                )
-            )
-        tracs = []
-        for j, t in enumerate(u["traction"]):
-            _check_part(t["part"], dim, body, file, f"{where}.traction[{j}].part")
-            if t["vector"] is None and t["twist"] is None:
-                raise CaseError(
-                    "a traction needs a vector or a twist",
-                    file=file,
-                    field=f"{where}.traction[{j}]",
-                    fix=f"add vector = [{', '.join(['0.0'] * dim)}] (stress units) or twist "
-                    "= [wx, wy, wz]",
-                )
-            if t["vector"] is not None and len(t["vector"]) != dim:
-                raise CaseError(
-                    f"expected {dim} entries", file=file, field=f"{where}.traction[{j}].vector"
-                )
-            if t["twist"] is not None and dim != 3:
-                raise CaseError(
-                    "a twist (torsion) needs dim = 3",
-                    file=file,
-                    field=f"{where}.traction[{j}].twist",
-                    fix="use vector in 2-D",
-                )
-            vector = tuple(t["vector"]) if t["vector"] is not None else (0.0,) * dim
-            tracs.append(
-                Traction(t["part"], vector, None if t["twist"] is None else tuple(t["twist"]))
-            )
-        for key in ("gravity", "body_force"):
-            if u[key] is not None and len(u[key]) != dim:
-                raise CaseError(f"expected {dim} entries", file=file, field=f"{where}.{key}")
-        if not cons:
-            raise CaseError(
-                "no constraint: the body can move freely",
-                file=file,
-                field=where + ".constraint",
-                fix="add [[loads.case.constraint]] with a part",
-            )
-        given = tracs or any(u[key] is not None for key in ("gravity", "body_force"))
-        # constraints alone: a modal case
-        if (
-            given
-            and not any(any(t.vector) or any(t.twist or ()) for t in tracs)
-            and not any(any(u[key] or ()) for key in ("gravity", "body_force"))
-        ):
-            raise CaseError(
-                f"load '{u['name']}' is zero: nothing moves (G would be 0/0)",
-                file=file,
-                field=where,
-                fix="give a non-zero traction vector, twist, gravity or body_force",
-            )
-        cases.append(LoadCase(u["name"], tuple(cons), tuple(tracs), u["gravity"], u["body_force"]))
+        cases.append(_user_case(u, dim, body, file, where))
     return tuple(cases), l["set"]
 
 
