@@ -123,6 +123,52 @@ def _tets_of(model):
     return np.zeros((0, 4), np.int64) if t is None else np.asarray(t, np.int64)
 
 
+def _check(integrator: str, engine: str, dt: float, steps: int) -> None:
+    """One line for an unknown integrator or engine, or a step that cannot run."""
+    if integrator not in INTEGRATORS:
+        raise SimulationError(
+            f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}"
+        )
+    if engine not in ("auto", "numba", "numpy"):
+        raise SimulationError(f"unknown engine '{engine}'", fix="one of auto, numba, numpy")
+    if dt <= 0 or steps < 0:
+        raise SimulationError(f"need dt > 0 and steps >= 0 (got dt={dt}, steps={steps})")
+
+
+def _compiled(model, loading, arrays, x, dt, steps, tets, obs, snap_steps, out, size, threads):
+    """The compiled verlet run (x moved in place; ``out``: the snapshot, snapshot-step,
+    volume and observed arrays it fills): the final velocities."""
+    snaps, snaps_d, vol, observed = out
+    d = np.zeros((len(x), 3))
+    springs, tet, hexa = arrays
+    done = _kernel()(
+        x,
+        d,
+        int(steps),
+        float(dt),
+        loading.mass.astype(float),
+        ~loading.fixed,
+        loading.mass[:, None] * loading.gravity[None, :],
+        loading.push.astype(float),
+        float(loading.drag / dt),
+        springs,
+        tet,
+        hexa,
+        tets,
+        obs,
+        snap_steps,
+        snaps,
+        snaps_d,
+        vol,
+        observed,
+        10.0 * size,
+        threads >= 2,
+    )
+    if done < steps:
+        _blow_up(model, loading, dt, done)
+    return d / dt
+
+
 def simulate(
     model,
     loading: Loading,
@@ -146,14 +192,7 @@ def simulate(
     ``volume``: measure the volume every step (off for timing runs). ``threads``: 2 runs
     the elements on two threads (same result bit for bit; pays off on free cores).
     """
-    if integrator not in INTEGRATORS:
-        raise SimulationError(
-            f"unknown integrator '{integrator}'", fix=f"one of {', '.join(INTEGRATORS)}"
-        )
-    if engine not in ("auto", "numba", "numpy"):  # was silently the numpy engine
-        raise SimulationError(f"unknown engine '{engine}'", fix="one of auto, numba, numpy")
-    if dt <= 0 or steps < 0:
-        raise SimulationError(f"need dt > 0 and steps >= 0 (got dt={dt}, steps={steps})")
+    _check(integrator, engine, dt, steps)
     x = np.array(model.points if x0 is None else x0, float)
     n = len(x)
     snap_steps = np.array(sorted({int(s) for s in snapshots if 0 <= int(s) <= steps}), np.int64)
@@ -173,36 +212,11 @@ def simulate(
     observed = np.zeros((steps + 1, len(obs), 3))
     snaps = np.zeros((len(snap_steps), n, 3))
     snaps_d = np.zeros((len(snap_steps), n, 3))
+    out = (snaps, snaps_d, vol, observed)
     if arrays is not None:
-        d = np.zeros((n, 3))
-        springs, tet, hexa = arrays
-        run = _kernel()
-        done = run(
-            x,
-            d,
-            int(steps),
-            float(dt),
-            loading.mass.astype(float),
-            ~loading.fixed,
-            loading.mass[:, None] * loading.gravity[None, :],
-            loading.push.astype(float),
-            float(loading.drag / dt),
-            springs,
-            tet,
-            hexa,
-            tets,
-            obs,
-            snap_steps,
-            snaps,
-            snaps_d,
-            vol,
-            observed,
-            10.0 * size,
-            threads >= 2,
+        v = _compiled(
+            model, loading, arrays, x, dt, steps, tets, obs, snap_steps, out, size, threads
         )
-        if done < steps:
-            _blow_up(model, loading, dt, done)
-        v = d / dt
     else:
         x, v = _numpy_run(
             model,
@@ -214,10 +228,7 @@ def simulate(
             tets,
             obs,
             snap_steps,
-            snaps,
-            snaps_d,
-            vol,
-            observed,
+            *out,
             size,
             jacobian_every,
         )
@@ -229,16 +240,8 @@ def simulate(
         en = np.array(
             [_energy(model, loading, snaps[k], snaps_d[k] / dt) for k in range(len(snap_steps))]
         )
-    return Trajectory(
-        t,
-        vol,
-        observed,
-        {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)},
-        x,
-        v,
-        dt,
-        en,
-    )
+    kept = {int(s): (snaps[k], snaps_d[k]) for k, s in enumerate(snap_steps)}
+    return Trajectory(t, vol, observed, kept, x, v, dt, en)
 
 
 def _energy(model, loading, x, v):
