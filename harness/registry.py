@@ -405,7 +405,7 @@ REPORT_TABLES = Registry(
     "report table",
     {
         "deussen1995": "harness.report.headlines:deussen_tables",
-        "bourguignon2000": "harness.report.headlines:bc2000_tables",
+        "bourguignon2000": "harness.report.headlines_bc2000:bc2000_tables",
         "verification": "harness.report.headlines:verification_tables",
         "engines": "harness.report.engines:engines_tables",
     },
