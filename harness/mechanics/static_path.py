@@ -129,6 +129,58 @@ def solve_static_path(
     return StaticPath(None, float(path["lam_max"]), folds, status, path["x_limit"])
 
 
+@dataclass(frozen=True)
+class _Path:
+    """The continuation's problem: the model, its free dofs, the external force (f on the
+    free dofs) and c, the displacement per unit load factor at the start (the scale of u)."""
+
+    model: object
+    free: np.ndarray
+    ext: np.ndarray
+    f: np.ndarray
+    c: float
+
+    def residual(self, y, lam):
+        return (self.model.forces(y) + lam * self.ext).ravel()[self.free]
+
+    def factor(self, y):
+        return spla.splu(stiffness(self.model, y)[self.free][:, self.free].tocsc())
+
+    def moved(self, y, du):
+        z = y.copy().ravel()
+        z[self.free] += du
+        return z.reshape(-1, 3)
+
+    def tangent(self, b, prev=None):
+        """The unit tangent (u / c, lambda) of K du = f dlambda (b = K^-1 f), oriented
+        along ``prev``."""
+        t = np.append(b / self.c, 1.0)
+        t /= np.linalg.norm(t)
+        return -t if prev is not None and t @ prev < 0 else t
+
+
+def _corrected(p: _Path, x, lam, t, ds, tol, max_iter):
+    """(y, l, the LU of the last iterate, iterations) of Newton on the equilibrium plus the
+    arclength condition t . (z - z_prev) = ds from the predictor; None when it fails."""
+    y, l, lu = p.moved(x, ds * p.c * t[:-1]), lam + ds * t[-1], None
+    for it in range(max_iter):
+        r = p.residual(y, l)
+        g = t[:-1] @ ((y - x).ravel()[p.free] / p.c) + t[-1] * (l - lam) - ds
+        if np.linalg.norm(r, np.inf) <= tol and abs(g) <= 1e-10 and it > 0:
+            return y, l, lu, it
+        try:
+            lu = p.factor(y)
+        except RuntimeError:
+            return None
+        a, bb = lu.solve(r), lu.solve(p.f)
+        dl = (-g - t[:-1] @ a / p.c) / (t[:-1] @ bb / p.c + t[-1])
+        du = a + bb * dl
+        if not np.all(np.isfinite(du)):
+            return None
+        y, l = p.moved(y, du), l + dl
+    return None
+
+
 def arclength(
     model,
     graph,
@@ -149,62 +201,24 @@ def arclength(
     displacement per unit load factor at the start. Each step: predictor along the unit
     tangent t (from K du = f_ext dlambda, oriented along the previous one), Newton
     corrector on the equilibrium plus t . (z - z_prev) = ds (bordered solve with the
-    sparse LU of K); a sign change of the tangent's lambda component marks a limit point.
+    sparse LU of K; the step halved until it converges); a sign change of the tangent's
+    lambda component marks a limit point.
     Returns dict(x at lambda = 1 or None, lam, lam_max, folds, why, x_limit: the equilibrium
     next to the first limit point)."""
     f = ext.ravel()[free]
-
-    def residual(y, l):
-        return (model.forces(y) + l * ext).ravel()[free]
-
-    def factor(y):
-        K = stiffness(model, y)[free][:, free]
-        return spla.splu(K.tocsc())
-
-    def moved(y, du):
-        z = y.copy().ravel()
-        z[free] += du
-        return z.reshape(-1, 3)
-
-    lu = factor(x)
-    b = lu.solve(f)
-    c = max(np.linalg.norm(b), 1e-300)
-
-    def tangent(b, prev=None):
-        t = np.append(b / c, 1.0)
-        t /= np.linalg.norm(t)
-        if prev is not None and t @ prev < 0:
-            t = -t
-        return t
-
-    t = tangent(b)
+    b = _Path(model, free, ext, f, 1.0).factor(x).solve(f)
+    p = _Path(model, free, ext, f, max(np.linalg.norm(b), 1e-300))
+    t = p.tangent(b)
     folds, lam_max, why, x_limit = [], lam, "step size below the minimum", None
     for _ in range(steps):
-        ok = False
-        while ds >= ds_min:
-            y, l = moved(x, ds * c * t[:-1]), lam + ds * t[-1]
-            for it in range(max_iter):  # Newton on the equilibrium + the arclength condition
-                r = residual(y, l)
-                g = t[:-1] @ ((y - x).ravel()[free] / c) + t[-1] * (l - lam) - ds
-                if np.linalg.norm(r, np.inf) <= tol and abs(g) <= 1e-10 and it > 0:
-                    ok = True
-                    break
-                try:
-                    lu = factor(y)
-                except RuntimeError:
-                    break
-                a, bb = lu.solve(r), lu.solve(f)
-                dl = (-g - t[:-1] @ a / c) / (t[:-1] @ bb / c + t[-1])
-                du = a + bb * dl
-                if not np.all(np.isfinite(du)):
-                    break
-                y, l = moved(y, du), l + dl
-            if ok:
-                break
-            ds /= 2
-        if not ok:
+        step = None
+        while step is None and ds >= ds_min:
+            step = _corrected(p, x, lam, t, ds, tol, max_iter)
+            ds = ds if step is not None else ds / 2
+        if step is None:
             return dict(x=None, lam=lam, lam_max=lam_max, folds=folds, why=why, x_limit=x_limit)
-        tn = tangent(lu.solve(f), t)  # K of the last iterate: the tangent to O(|du|)
+        y, l, lu, it = step
+        tn = p.tangent(lu.solve(f), t)  # K of the last iterate: the tangent to O(|du|)
         if tn[-1] * t[-1] < 0:  # the fold lies between the two points
             folds.append(float(max(l, lam) if t[-1] > 0 else min(l, lam)))
             if x_limit is None:
