@@ -9,6 +9,7 @@ import shutil
 import signal
 import time
 import traceback
+from pathlib import Path
 
 import numpy as np
 
@@ -65,6 +66,55 @@ def _seed_everything(seed: int):
     np.random.seed(seed % 2**32)
 
 
+def _stages(job: Job, case):
+    """(the stage modules the job runs, the case's [run] stages: () for every one); an
+    unknown name in the case is a one-line CaseError."""
+    modules = load_stages(list(job.stages))
+    wanted = tuple((case.section("run") or {}).get("stages", ()))
+    names = [m.NAME for m in modules]
+    unknown = [w for w in wanted if w not in names]
+    if unknown:
+        raise CaseError(
+            f"unknown stage '{unknown[0]}'",
+            file=job.rel_file,
+            field="run.stages",
+            fix=f"available: {', '.join(names) or 'none'}",
+        )
+    return modules, wanted
+
+
+def _stage_rows(stage, case, job: Job, tmp: Path, status) -> list[dict]:
+    """One stage's rows, seeded, each with the case, stage, seed, status and seconds."""
+    _seed_everything(job.seed)
+    ctx = StageContext(
+        out_dir=tmp, mode=job.mode, seed=job.seed, status=status, n_seeds=job.n_seeds
+    )
+    status(f"{stage.NAME}")
+    t0 = time.perf_counter()
+    out = stage.run(case, ctx) or []
+    dt = time.perf_counter() - t0
+    rows = []
+    for row in out:
+        row = dict(row)
+        row["case"] = job.case
+        row.setdefault("model", "")
+        row.setdefault("stage", stage.NAME)
+        row.setdefault("seed", job.seed)
+        row.setdefault("status", "ok")
+        row.setdefault("seconds", dt)
+        rows.append({str(k): _jsonable(v) for k, v in row.items()})
+    return rows
+
+
+def _files(tmp: Path) -> dict:
+    """{relative path: bytes} of the files the stages wrote."""
+    return {
+        f.relative_to(tmp).as_posix(): f.read_bytes()
+        for f in sorted(tmp.rglob("*"))
+        if f.is_file() and not f.is_symlink()
+    }
+
+
 def execute(job: Job, sink=None) -> JobResult:
     """Run one job in a fresh temporary folder; never raises."""
 
@@ -74,40 +124,14 @@ def execute(job: Job, sink=None) -> JobResult:
     stage_name = "case"
     try:
         case = load_case(job.case_file, job.mode)
-        modules = load_stages(list(job.stages))
-        wanted = tuple((case.section("run") or {}).get("stages", ()))
-        names = [m.NAME for m in modules]
-        unknown = [w for w in wanted if w not in names]
-        if unknown:
-            raise CaseError(
-                f"unknown stage '{unknown[0]}'",
-                file=job.rel_file,
-                field="run.stages",
-                fix=f"available: {', '.join(names) or 'none'}",
-            )
+        modules, wanted = _stages(job, case)
         rows, everything = [], False
         for stage in modules:
             stage_name = stage.NAME
             if (wanted and stage.NAME not in wanted) or not stage.applies(case):
                 continue
             everything |= bool(getattr(stage, "SUBPROCESS_CODE", False))
-            _seed_everything(job.seed)
-            ctx = StageContext(
-                out_dir=tmp, mode=job.mode, seed=job.seed, status=status, n_seeds=job.n_seeds
-            )
-            status(f"{stage.NAME}")
-            t0 = time.perf_counter()
-            out = stage.run(case, ctx) or []
-            dt = time.perf_counter() - t0
-            for row in out:
-                row = dict(row)
-                row["case"] = job.case
-                row.setdefault("model", "")
-                row.setdefault("stage", stage.NAME)
-                row.setdefault("seed", job.seed)
-                row.setdefault("status", "ok")
-                row.setdefault("seconds", dt)
-                rows.append({str(k): _jsonable(v) for k, v in row.items()})
+            rows += _stage_rows(stage, case, job, tmp, status)
         if not rows:
             rows = [
                 {
@@ -118,15 +142,11 @@ def execute(job: Job, sink=None) -> JobResult:
                     "status": "no stage applies",
                 }
             ]
-        files = {}
-        for f in sorted(tmp.rglob("*")):
-            if f.is_file() and not f.is_symlink():
-                files[f.relative_to(tmp).as_posix()] = f.read_bytes()
         return JobResult(
             job,
             "ok",
             rows,
-            files,
+            _files(tmp),
             seconds=time.perf_counter() - t_job,
             code=loaded_sources(job.stages, everything),
         )
