@@ -268,29 +268,21 @@ def data_folders(suite_dir: Path, manifests: list[dict]) -> list[Path]:
     return out
 
 
-def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
-    """(Re)write summary.csv, summary.md, seeds.csv and the figures of one suite."""
-    suite_dir = Path(suite_dir)
-    manifests = load_results(suite_dir)
-    if not manifests:
-        raise SpringbenchError(
-            "no stored results here",
-            file=str(suite_dir),
-            fix="give a folder results/<suite> written by 'springbench run'",
-        )
-    df = summary_frame(manifests)
-    origin.write(suite_dir, manifests)
-    csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
-    write_changed(csv_path, df.to_csv(index=False).encode())
+def _seeds_csv(suite_dir: Path, df):
+    """seeds.csv (the across-seed table), removed when the suite has one seed."""
     seeds = seeds_frame(df)
     seeds_path = suite_dir / "seeds.csv"
     if not seeds.empty:
         write_changed(seeds_path, seeds.to_csv(index=False).encode())
     elif seeds_path.exists():
         seeds_path.unlink()
+    return seeds
+
+
+def _head(suite_dir: Path, manifests, df) -> list[str]:
+    """summary.md's title, counts and the ref-coarse note."""
     n_err = int((df.get("status") == "error").sum()) if "status" in df else 0
     n_coarse = int((df.get("status") == REF_COARSE).sum()) if "status" in df else 0
-    key = key_columns(df.columns)
     md = [
         f"# {suite_dir.name}\n",
         f"{len(manifests)} results, {len(df)} rows, {n_err} errors, {n_coarse} ref-coarse. "
@@ -310,43 +302,72 @@ def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
             "their status and "
             "a `!` after `G_ref`.\n"
         )
-    md.append(markdown_table(_flagged(df[key])))
-    if not seeds.empty:
-        md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
+    return md
+
+
+OPTIMISERS_TEXT = (
+    "Same initial model, reference and weights per case; means over seeds. "
+    "`G_final_vs_sa` = "
+    "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals; "
+    "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches "
+    "SA's G_final; "
+    "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
+    "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS "
+    "relative error "
+    "of the first natural frequencies against the FEM; `G_ref`: the reference's own "
+    "error as a "
+    "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the "
+    "loads the fits "
+    "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n"
+)
+SWEEP_TEXT = (
+    "Per body and nu, each model class's fitted row (`p1`: its only row, no constants): "
+    "`G_norm` on the fitted loads, `G_heldout` on the loads no fit saw; the classes share "
+    "nodes, masses, loads and reference. The frequency error, `k_spread` and "
+    "`dt_stable` per "
+    "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n"
+)
+
+
+def _sections(df) -> list[str]:
+    """summary.md's optimiser comparison and Poisson-ratio sweep, where the suite has them."""
+    md = []
     opts = optimizer_frame(df)
     if not opts.empty:
-        md += [
-            "\n## Optimisers compared\n",
-            "Same initial model, reference and weights per case; means over seeds. "
-            "`G_final_vs_sa` = "
-            "G_final / G_final of SA (same seed); `opt_evaluations`: G evaluations (SA: proposals; "
-            "gauss-newton: outer iterations); `*_to_sa_G`: when the trace first reaches "
-            "SA's G_final; "
-            "`jac_cond_*`: condition of the weighted Jacobian at the result over log k and over k "
-            "(identifiable directions: `jac_rank` of `n_params`); `freq_error_*`: RMS "
-            "relative error "
-            "of the first natural frequencies against the FEM; `G_ref`: the reference's own "
-            "error as a "
-            "normalised G (compare with `G_norm_final`); `G_heldout`: normalised G on the "
-            "loads the fits "
-            "never saw (`[loads] heldout`); `status` ref-coarse if any seed's row is.\n",
-            markdown_table(opts),
-        ]
+        md += ["\n## Optimisers compared\n", OPTIMISERS_TEXT, markdown_table(opts)]
     sweep = sweep_table(sweep_frame(df))
     if not sweep.empty:
         md += [
             "\n## Model classes against Poisson's ratio\n",
-            "Per body and nu, each model class's fitted row (`p1`: its only row, no constants): "
-            "`G_norm` on the fitted loads, `G_heldout` on the loads no fit saw; the classes share "
-            "nodes, masses, loads and reference. The frequency error, `k_spread` and "
-            "`dt_stable` per "
-            "row are in summary.csv; `fig-nu-sweep.png` plots the table.\n",
+            SWEEP_TEXT,
             markdown_table(sweep),
         ]
         skipped = skipped_lines(df)
         if skipped:
             md += ["\nNo rows (status `skip`):\n"] + skipped
         md += markdown_section(df)
+    return md
+
+
+def build_suite(suite_dir, figures: bool = True, redraw: bool = False) -> dict:
+    """(Re)write summary.csv, summary.md, seeds.csv and the figures of one suite."""
+    suite_dir = Path(suite_dir)
+    manifests = load_results(suite_dir)
+    if not manifests:
+        raise SpringbenchError(
+            "no stored results here",
+            file=str(suite_dir),
+            fix="give a folder results/<suite> written by 'springbench run'",
+        )
+    df = summary_frame(manifests)
+    origin.write(suite_dir, manifests)
+    csv_path, md_path = suite_dir / "summary.csv", suite_dir / "summary.md"
+    write_changed(csv_path, df.to_csv(index=False).encode())
+    seeds = _seeds_csv(suite_dir, df)
+    md = _head(suite_dir, manifests, df) + [markdown_table(_flagged(df[key_columns(df.columns)]))]
+    if not seeds.empty:
+        md += ["\n## Across seeds (mean, std)\n", markdown_table(seeds)]
+    md += _sections(df)
     sources = sorted(
         {
             str(m["expect"].get("source", ""))
