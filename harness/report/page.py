@@ -145,25 +145,16 @@ def _summary(suite: Path):
         return None
 
 
-def _suite_section(root: Path, suite: Path) -> list[str]:
-    title, text = SUITES.get(suite.name, (suite.name, ""))
-    parts = [f"<section id='{_e(suite.name)}'>", f"<h2>{_e(title)}</h2>"]
-    if text:
-        parts.append(f"<p>{_e(text)}</p>")
-    df = _summary(suite)
-    if df is None:
-        parts.append(
-            f"<p class='warn'>{_e(suite.name)}/summary.csv could not be read: run "
-            "<code>springbench report</code> again.</p></section>"
-        )
-        return parts
+def _notes(suite: Path, df) -> list[str]:
+    """The suite's counts, the units caveat, and the warnings (quick budgets, engines not
+    installed, failed rows)."""
     status = df["status"].astype(str) if "status" in df else None
     counts = (status_counts(status) if status is not None else "") or "no status"
     modes = sorted(set(df["mode"].dropna().astype(str))) if "mode" in df else []
-    parts.append(
+    parts = [
         f"<p class='note'>{df['case'].nunique()} cases, {len(df)} rows ({counts}); budgets: "
         f"{_e(', '.join(modes) or 'unknown')}.</p>"
-    )
+    ]
     if "G_final" in df:  # the units caveat belongs to suites that report G
         parts.append(f"<p class='caveat'>{_e(UNITS)}</p>")
     if "quick" in modes:
@@ -178,6 +169,11 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
         msg = [e[:200] if isinstance(e, str) else "" for e in _col_or_empty(errs, "error")]
         items = "".join(f"<li>{_e(c)}: {_e(m)}</li>" for c, m in zip(errs["case"].head(10), msg))
         parts.append(f"<div class='warn'><p>{len(errs)} rows failed:</p><ul>{items}</ul></div>")
+    return parts
+
+
+def _tables(suite: Path, df) -> list[str]:
+    """The suite's headline tables (a summary the tables cannot read: a warning, none)."""
     try:
         tables = headline_tables(suite.name, df)
     except Exception as exc:  # a foreign or damaged summary must not stop the page
@@ -188,10 +184,70 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
             file=sys.stderr,
         )
         tables = []
+    parts = []
     for heading, table, note in tables:
         parts += [f"<h3>{_e(heading)}</h3>", f"<div class='scroll'>{html_table(table)}</div>"]
         if note:
             parts.append(f"<p class='note'>{_e(note)}</p>")
+    return parts
+
+
+def _data(root: Path, suite: Path, df) -> list[str]:
+    """Links to the suite's full tables, and its code and machine."""
+    data = [
+        f"<a href='{_href(root, suite / 'summary.csv')}'>summary.csv</a> (all {len(df)} rows, "
+        f"{len(df.columns)} columns: every score, per-load G and stage detail)"
+    ]
+    for name, what in (
+        ("summary.md", "the key columns as Markdown"),
+        ("seeds.csv", "means and spreads over seeds"),
+    ):
+        if (suite / name).is_file():
+            data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
+    return [
+        "<p>Full tables: " + "; ".join(data) + ".</p>",
+        "<details class='note'><summary>Code and machine</summary>"
+        + "".join(f"<p>{_e(line)}</p>" for line in lines(suite))
+        + "</details>",
+    ]
+
+
+def _all_figures(root: Path, suite: Path, pngs: list[Path]) -> list[str]:
+    """Every figure of the suite, linked by case folder, folded."""
+    if not pngs:
+        return []
+    parts = [
+        f"<details><summary>All {len(pngs)} figures of this suite, by case</summary><ul "
+        "class='figs'>"
+    ]
+    by_folder: dict[Path, list[Path]] = {}
+    for p in pngs:
+        by_folder.setdefault(p.parent, []).append(p)
+    for folder, files in by_folder.items():
+        name = folder.relative_to(suite).as_posix()
+        links = ", ".join(
+            f"<a href='{_href(root, p)}' title='{_e(figure_caption(p.name))}'>"
+            f"{_e(p.name[4:-4])}</a>"
+            for p in files
+        )
+        parts.append(f"<li>{_e(suite.name if name == '.' else name)}: {links}</li>")
+    parts.append("</ul></details>")
+    return parts
+
+
+def _suite_section(root: Path, suite: Path) -> list[str]:
+    title, text = SUITES.get(suite.name, (suite.name, ""))
+    parts = [f"<section id='{_e(suite.name)}'>", f"<h2>{_e(title)}</h2>"]
+    if text:
+        parts.append(f"<p>{_e(text)}</p>")
+    df = _summary(suite)
+    if df is None:
+        parts.append(
+            f"<p class='warn'>{_e(suite.name)}/summary.csv could not be read: run "
+            "<code>springbench report</code> again.</p></section>"
+        )
+        return parts
+    parts += _notes(suite, df) + _tables(suite, df)
     pngs = sorted(suite.rglob("fig-*.png"))
     key = _key_figures(suite, pngs)
     lists = suite_lists(suite.name, df)
@@ -203,42 +259,11 @@ def _suite_section(root: Path, suite: Path) -> list[str]:
             f"<h3>{_e(heading)}</h3>",
             "<ul class='findings'>" + "".join(f"<li>{_e(x)}</li>" for x in sentences) + "</ul>",
         ]
-    data = [
-        f"<a href='{_href(root, suite / 'summary.csv')}'>summary.csv</a> (all {len(df)} rows, "
-        f"{len(df.columns)} columns: every score, per-load G and stage detail)"
-    ]
-    for name, what in (
-        ("summary.md", "the key columns as Markdown"),
-        ("seeds.csv", "means and spreads over seeds"),
-    ):
-        if (suite / name).is_file():
-            data.append(f"<a href='{_href(root, suite / name)}'>{name}</a> ({what})")
-    parts.append("<p>Full tables: " + "; ".join(data) + ".</p>")
-    parts.append(
-        "<details class='note'><summary>Code and machine</summary>"
-        + "".join(f"<p>{_e(line)}</p>" for line in lines(suite))
-        + "</details>"
-    )
+    parts += _data(root, suite, df)
     if key:
         parts.append("<h3>Figures</h3>")
         parts += [_figure(root, p, cap) for p, cap in key]
-    if pngs:
-        parts.append(
-            f"<details><summary>All {len(pngs)} figures of this suite, by case</summary><ul "
-            "class='figs'>"
-        )
-        by_folder: dict[Path, list[Path]] = {}
-        for p in pngs:
-            by_folder.setdefault(p.parent, []).append(p)
-        for folder, files in by_folder.items():
-            name = folder.relative_to(suite).as_posix()
-            links = ", ".join(
-                f"<a href='{_href(root, p)}' title='{_e(figure_caption(p.name))}'>"
-                f"{_e(p.name[4:-4])}</a>"
-                for p in files
-            )
-            parts.append(f"<li>{_e(suite.name if name == '.' else name)}: {links}</li>")
-        parts.append("</ul></details>")
+    parts += _all_figures(root, suite, pngs)
     parts.append("</section>")
     return parts
 
