@@ -214,7 +214,8 @@ when no candidate beats it there (JSON choice, validation); --prior-weight a fix
 fit instead; MODEL.csv's opt_prior is a."""
 
 
-def add_arguments(p):
+def _input_arguments(p):
+    """calibrate's options: the mesh and its material."""
     p.add_argument(
         "mesh",
         type=Path,
@@ -236,6 +237,10 @@ def add_arguments(p):
         default=1000.0,
         help="density (kg/m^3; default 1000; outside 10..30,000 a warning: g/cm^3?)",
     )
+
+
+def _model_arguments(p):
+    """calibrate's options: the model, its fit and its start."""
     p.add_argument(
         "--method",
         choices=tuple(METHODS),
@@ -284,6 +289,10 @@ def add_arguments(p):
         help="stiffness rule of the initial constants: best (default: the rule with the lowest "
         "G_fit_score on the fitted loads, which the fit then starts from) or one of them",
     )
+
+
+def _load_arguments(p):
+    """calibrate's options: the loads and the regions they hold and load."""
     p.add_argument(
         "--loads",
         choices=("linear", "homogeneous", "basic"),
@@ -320,6 +329,10 @@ def add_arguments(p):
         "end of the longest axis; the torsion turns about the region's mean outward normal): "
         "as --clamp",
     )
+
+
+def _body_arguments(p):
+    """calibrate's options: masses, damping, units and the plane."""
     p.add_argument(
         "--masses",
         choices=MASSES,
@@ -356,6 +369,10 @@ def add_arguments(p):
         default="stress",
         help="2-D meshes: plane stress/strain",
     )
+
+
+def _reference_arguments(p):
+    """calibrate's options: the loads' size and the reference's accuracy."""
     p.add_argument(
         "--magnitude",
         type=float,
@@ -403,6 +420,10 @@ def add_arguments(p):
         "counts fixed before the run, so the answer does not depend on the machine or its load; "
         "a fit that runs longer than the cap aborts with an error",
     )
+
+
+def _output_arguments(p):
+    """calibrate's options: the outputs, the seed and what is printed."""
     p.add_argument(
         "--format",
         default=None,
@@ -432,6 +453,16 @@ def add_arguments(p):
         help="no progress line (phase, elapsed time, ETA; never drawn when stderr is not a "
         "terminal)",
     )
+
+
+def add_arguments(p):
+    """calibrate's options, in the order --help lists them."""
+    _input_arguments(p)
+    _model_arguments(p)
+    _load_arguments(p)
+    _body_arguments(p)
+    _reference_arguments(p)
+    _output_arguments(p)
 
 
 def main(args) -> int:
