@@ -135,90 +135,97 @@ def _accuracy_row(method, sol, u, u_true, estimate, seconds, note="", truth_chan
     return row
 
 
+def _uniform_rows(tmp: Path, points, u_true, quick: bool) -> list[dict]:
+    """Uniform P2 tetrahedra, one level per division count."""
+    import reference
+
+    rows = []
+    for div in (2, 3, 4, 6) if quick else (2, 3, 4, 5, 6, 8, 12):
+        case, _ = shear_case(
+            tmp, f"tet{div}", dict(method="refine", cell="tet", divisions=div, max_refine=0)
+        )
+        sol = reference.solve(case)
+        u = sol.displacement(points, LOAD)
+        est = sol.error_estimate(points, LOAD)
+        note = f"divisions {div}, no refinement"
+        rows.append(_accuracy_row("uniform P2 tet", sol, u, u_true, est, sol.seconds, note))
+    return rows
+
+
+def _graded_rows(tmp: Path, points, u_true, quick: bool, change: float) -> list[dict]:
+    """The graded Q2 levels: the finest plain field and the Richardson extrapolant, for the
+    defaults and for fixed level sequences."""
+    import reference
+
+    rows = []
+    graded = [(None, None)] + ([(4, 2), (6, 2)] if quick else [(4, 2), (6, 2), (8, 2), (10, 2)])
+    for last, n_more in graded:
+        keys = dict(method="graded")
+        if last is not None:  # levels last - 2 .. last cells per end zone, no early stop
+            keys.update(divisions=2 * (last - n_more), max_refine=n_more, tol=1e-12)
+        case, _ = shear_case(tmp, f"graded{last}", keys)
+        sol = reference.solve(case)
+        ns = list(sol.levels.ns)
+        what = (
+            "defaults" if last is None else f"levels n = {ns}"
+        ) + ", solved on a quarter (mirror symmetry)"
+        vals, _ = sol.levels.values(points, LOAD)
+        rows.append(
+            _accuracy_row(
+                "graded Q2 finest level",
+                sol,
+                vals[-1],
+                u_true,
+                None,
+                sol.seconds,
+                f"{what}; plain field of n = {ns[-1]}",
+            )
+        )
+        rows.append(
+            _accuracy_row(
+                "graded Q2 + Richardson",
+                sol,
+                sol.displacement(points, LOAD),
+                u_true,
+                sol.error_estimate(points, LOAD),
+                sol.seconds,
+                f"{what}; order {sol.levels.orders.get(LOAD, np.nan):.2f}",
+                change,
+            )
+        )
+    return rows
+
+
 def accuracy_rows(quick: bool = False) -> list[dict]:
     """True errors of the reference on the sec6 cube's shear-xz at the 4 x 4 x 4 grid: uniform
     P2 tetrahedra (one level), the graded Q2 levels' finest plain field, and their
     Richardson extrapolant with its per-point estimate."""
-    import reference
-
     ie = _independent()
     if ie is None:
         return [dict(task="accuracy", note=f"skipped: {INDEPENDENT.relative_to(ROOT)} not found")]
-    rows = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         base, s = shear_case(tmp, "truth", {})
         points, u_true, info = _truth(ie, base, s, quick)
-        rows.append(
-            dict(
-                task="accuracy",
-                dim=3,
-                element="Q2 hex",
-                method="independent truth",
-                n_dofs=info["n_dofs"],
-                seconds=info["seconds"],
-                true_error=np.nan,
-                estimate=info["change"],
-                points=len(points),
-                note=f"quarter, levels {TRUTH_LEVELS[quick]}, beta {TRUTH_BETA}, knot "
-                f"{TRUTH_KNOT}, "
-                f"order {info['order']:.2f}; estimate = change of the extrapolant",
-            )
+        truth = dict(
+            task="accuracy",
+            dim=3,
+            element="Q2 hex",
+            method="independent truth",
+            n_dofs=info["n_dofs"],
+            seconds=info["seconds"],
+            true_error=np.nan,
+            estimate=info["change"],
+            points=len(points),
+            note=f"quarter, levels {TRUTH_LEVELS[quick]}, beta {TRUTH_BETA}, knot "
+            f"{TRUTH_KNOT}, "
+            f"order {info['order']:.2f}; estimate = change of the extrapolant",
         )
-        tets = (2, 3, 4, 6) if quick else (2, 3, 4, 5, 6, 8, 12)
-        for div in tets:
-            case, _ = shear_case(
-                tmp, f"tet{div}", dict(method="refine", cell="tet", divisions=div, max_refine=0)
-            )
-            sol = reference.solve(case)
-            u = sol.displacement(points, LOAD)
-            rows.append(
-                _accuracy_row(
-                    "uniform P2 tet",
-                    sol,
-                    u,
-                    u_true,
-                    sol.error_estimate(points, LOAD),
-                    sol.seconds,
-                    f"divisions {div}, no refinement",
-                )
-            )
-        graded = [(None, None)] + ([(4, 2), (6, 2)] if quick else [(4, 2), (6, 2), (8, 2), (10, 2)])
-        for last, n_more in graded:
-            keys = dict(method="graded")
-            if last is not None:  # levels last - 2 .. last cells per end zone, no early stop
-                keys.update(divisions=2 * (last - n_more), max_refine=n_more, tol=1e-12)
-            case, _ = shear_case(tmp, f"graded{last}", keys)
-            sol = reference.solve(case)
-            ns = list(sol.levels.ns)
-            what = (
-                "defaults" if last is None else f"levels n = {ns}"
-            ) + ", solved on a quarter (mirror symmetry)"
-            vals, _ = sol.levels.values(points, LOAD)
-            rows.append(
-                _accuracy_row(
-                    "graded Q2 finest level",
-                    sol,
-                    vals[-1],
-                    u_true,
-                    None,
-                    sol.seconds,
-                    f"{what}; plain field of n = {ns[-1]}",
-                )
-            )
-            rows.append(
-                _accuracy_row(
-                    "graded Q2 + Richardson",
-                    sol,
-                    sol.displacement(points, LOAD),
-                    u_true,
-                    sol.error_estimate(points, LOAD),
-                    sol.seconds,
-                    f"{what}; order {sol.levels.orders.get(LOAD, np.nan):.2f}",
-                    info["change"],
-                )
-            )
-    return rows
+        return [
+            truth,
+            *_uniform_rows(tmp, points, u_true, quick),
+            *_graded_rows(tmp, points, u_true, quick, info["change"]),
+        ]
 
 
 # thin and nearly incompressible boxes at default settings; the
