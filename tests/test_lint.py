@@ -128,17 +128,16 @@ def test_no_import_or_type_error_is_swallowed():
     assert silent_handlers(loud) == []
 
 
-# the rooms where most new work goes: a function there does one thing, in at most this many
-# lines (from ``def`` to its last line)
+# a function does one thing, in at most this many lines (from ``def`` to its last line), in
+# every hand-written module (generated ones say so on their first line)
 MAX_FUNCTION_LINES = 80
-SMALL_FUNCTION_ROOMS = ("harness/stages", "harness/commands", "harness/optimize")
+SMALL_FUNCTION_ROOMS = ("harness", "reference")
 # (file, function): why it is longer; an entry that fits the limit is an error (remove it)
 LONG_ALLOWED = {
     ("harness/optimize/incremental_kernels.py", "_propose"): (
         "a numba kernel compiled with fastmath: split, its vectorised sums would round "
         "differently (27 of its lines are the argument list)"
     ),
-    ("harness/commands/calibrate.py", "add_arguments"): "argparse: one add_argument per flag",
 }
 
 
@@ -159,7 +158,10 @@ def test_functions_are_small():
     for room in SMALL_FUNCTION_ROOMS:
         for path in sorted((ROOT / room).rglob("*.py")):
             rel = path.relative_to(ROOT).as_posix()
-            for name, n in long_functions(path.read_text(encoding="utf-8")):
+            text = path.read_text(encoding="utf-8")
+            if text.lstrip('"').startswith("GENERATED"):
+                continue
+            for name, n in long_functions(text):
                 seen.add((rel, name))
                 if (rel, name) not in LONG_ALLOWED:
                     found[f"{rel}:{name}"] = n
