@@ -13,7 +13,7 @@ stiffer (M bounds the wave speed, so an explicit engine's stable time step is ne
 than with the plain material, and the stress a float32 engine makes of rounded positions
 is never larger) or nearer incompressible than the material the engine already runs: the
 export asks nothing of the engine that the plain (E, nu) does not. Without the box the fit
-drove elements at nu = 0.49 to nu' = 0.499 and M' to 16 M, which float32 Newton could not
+drove elements at nu = 0.49 to nu' = 0.499 and M' to 21 M, which float32 Newton could not
 settle; M' <= M alone settles it, nu' <= nu keeps it 4x closer there (docs/engines.md).
 
 Objective: the balanced misfit of p1-global over the training states (each fitted load's
