@@ -114,6 +114,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from harness.commands import calibrate_options as options
 from harness.commands.calibrate_case import (
     PRIOR_WEIGHT,
 )
@@ -204,10 +205,12 @@ fit instead; MODEL.csv's opt_prior is a."""
 
 def add_arguments(p):
     """calibrate's options (harness/commands/calibrate_options.py), in --help's order."""
-    from harness.commands import calibrate_options as o
-
-    for group in (o.inputs, o.model, o.loads, o.body, o.reference, o.outputs):
-        group(p)
+    options.inputs(p)
+    options.model(p)
+    options.loads(p)
+    options.body(p)
+    options.reference(p)
+    options.outputs(p)
 
 
 def main(args) -> int:

@@ -129,6 +129,11 @@ def solve_static_path(
     return StaticPath(None, float(path["lam_max"]), folds, status, path["x_limit"])
 
 
+def _lu(model, free, y):
+    """The sparse LU of the tangent stiffness at y on the free dofs."""
+    return spla.splu(stiffness(model, y)[free][:, free].tocsc())
+
+
 @dataclass(frozen=True)
 class _Path:
     """The continuation's problem: the model, its free dofs, the external force (f on the
@@ -144,12 +149,19 @@ class _Path:
         return (self.model.forces(y) + lam * self.ext).ravel()[self.free]
 
     def factor(self, y):
-        return spla.splu(stiffness(self.model, y)[self.free][:, self.free].tocsc())
+        return _lu(self.model, self.free, y)
 
     def moved(self, y, du):
         z = y.copy().ravel()
         z[self.free] += du
         return z.reshape(-1, 3)
+
+    @classmethod
+    def at(cls, model, free, ext, x):
+        """(the path from the equilibrium x, b = K(x)^-1 f): c is |b|."""
+        f = ext.ravel()[free]
+        b = _lu(model, free, x).solve(f)
+        return cls(model, free, ext, f, max(np.linalg.norm(b), 1e-300)), b
 
     def tangent(self, b, prev=None):
         """The unit tangent (u / c, lambda) of K du = f dlambda (b = K^-1 f), oriented
@@ -205,9 +217,8 @@ def arclength(
     lambda component marks a limit point.
     Returns dict(x at lambda = 1 or None, lam, lam_max, folds, why, x_limit: the equilibrium
     next to the first limit point)."""
-    f = ext.ravel()[free]
-    b = _Path(model, free, ext, f, 1.0).factor(x).solve(f)
-    p = _Path(model, free, ext, f, max(np.linalg.norm(b), 1e-300))
+    p, b = _Path.at(model, free, ext, x)
+    f = p.f
     t = p.tangent(b)
     folds, lam_max, why, x_limit = [], lam, "step size below the minimum", None
     for _ in range(steps):
