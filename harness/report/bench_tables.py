@@ -15,8 +15,8 @@ from harness.report.numbers import fmt
 MAX_ROWS = 40
 COLUMNS = {  # bench name -> the columns shown, in order (those present)
     "calibrate": (
-        ["n_tets", "seconds", "rule_seconds", "peak_gb", "choice"]
-        + ["validation_skipped", "start_rule", "G_heldout_mean", "best_rule"]
+        ["body", "n_tets", "seconds", "rule_seconds", "fit_ratio", "peak_gb", "choice"]
+        + ["fit_level", "start_rule", "G_heldout_mean", "best_rule"]
         + ["G_heldout_mean_best_rule", "reference_error_heldout"]
     ),
     "reference": (

@@ -46,3 +46,52 @@ def test_a_fork_workers_peak_counts(tmp_path):
     )
     _, proc, peak = _run(tmp_path, code, "fork")
     assert proc.returncode == 0 and own + 0.35 <= peak < own + 1.0
+
+
+def _rows(change=()):
+    """bench calibrate's rows that meet every target, one field of one row changed."""
+    import pandas as pd
+
+    rows = [
+        dict(body="cylinder", n_tets=n, choice=c, start_rule="vangelder", fit_ratio=f, peak_gb=p)
+        for n, c, f, p in (
+            (875, "springs-prior1", 3.0, 0.5),  # small meshes: no time target
+            (9_261, "springs-prior1+node-volume", 0.9, 2.0),
+            (48_880, "scale+node-volume", 0.7, 3.9),
+            (201_639, "scale", 0.5, 11.0),
+        )
+    ]
+    rows.append(
+        dict(
+            body="bracket",
+            n_tets=30_512,
+            choice="springs-prior1",
+            start_rule="vangelder",
+            fit_ratio=0.9,
+            peak_gb=2.5,
+            G_heldout_mean=0.04,
+            G_heldout_mean_best_rule=0.05,
+        )
+    )
+    df = pd.DataFrame(rows)
+    df["ratio_to_rule"] = df.fit_ratio + 1
+    for (i, key), value in dict(change).items():
+        df.loc[i, key] = value
+    return df
+
+
+def test_verdict_names_each_missed_target():
+    from harness.bench.calibrate import verdict
+
+    assert verdict(_rows()).startswith("PASS")
+    for change, words in (
+        ({(2, "choice"): "rule"}, "48880 tets exported the rule vangelder"),
+        ({(1, "fit_ratio"): 1.2}, "9261 tets: fit 1.20x"),
+        ({(2, "peak_gb"): 4.2}, "peak 4.2 GB > 4"),
+        ({(3, "peak_gb"): 12.5}, "peak 12.5 GB > 12"),
+        ({(4, "G_heldout_mean"): 0.045}, "held-out 0.90x the best rule"),
+        ({(4, "ratio_to_rule"): 2.3}, "in 2.30x the rule-only time"),
+        ({(4, "choice"): "rule"}, "bracket 30512 tets exported the rule"),
+    ):
+        text = verdict(_rows(change))
+        assert text.startswith("FAIL") and words in text, (change, text)
