@@ -36,12 +36,15 @@ import subprocess
 import sys
 import tempfile
 import time
+from functools import partial
+from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from harness.bench.heldout_bodies import BODIES, make_body
+from harness.bench.resume import kept
 from harness.progress import steps
 
 FULL = (1_000, 10_000, 50_000, 200_000)
@@ -153,7 +156,18 @@ def _one(mesh: Path, out: Path) -> dict:
     )
 
 
-def run(quick: bool = False) -> pd.DataFrame:
+def _sized(body: str, n: int, tmp: Path) -> dict:
+    """The row of one body meshed to about n tets."""
+    mesh = tmp / f"{body}{n}.{'vtu' if body == 'cylinder' else 'msh'}"
+    tets = cylinder(mesh, n) if body == "cylinder" else make_body(BODIES[0], mesh, n)
+    return dict(
+        task="calibrate", body=body, n_tets=tets, **_one(mesh, tmp / f"model-{body}{n}.vtu")
+    )
+
+
+def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
+    """The rows of every mesh; ``work``: the folder that keeps each mesh's finished row
+    (harness/bench/resume.py)."""
     try:
         import gmsh  # noqa: F401
     except ImportError:
@@ -165,16 +179,14 @@ def run(quick: bool = False) -> pd.DataFrame:
                 )
             ]
         )
+    sizes = [("cylinder", n) for n in (QUICK if quick else FULL)]
+    sizes.append(("bracket", BRACKET_QUICK if quick else BRACKET_FULL))
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
-        tmp = Path(tmp)
-        sizes = [("cylinder", n) for n in (QUICK if quick else FULL)]
-        sizes.append(("bracket", BRACKET_QUICK if quick else BRACKET_FULL))
         for body, n in steps(sizes, "bench calibrate", "mesh"):
-            mesh = tmp / f"{body}{n}.{'vtu' if body == 'cylinder' else 'msh'}"
-            tets = cylinder(mesh, n) if body == "cylinder" else make_body(BODIES[0], mesh, n)
-            one = _one(mesh, tmp / f"model-{body}{n}.vtu")
-            rows.append(dict(task="calibrate", body=body, n_tets=tets, **one))
+            inputs = dict(body=body, n=n, nu=0.45, gmsh=version("gmsh"))
+            one = partial(_sized, body, n, Path(tmp))
+            rows.append(kept(work, f"{body}{n}", inputs, __file__, one))
     df = pd.DataFrame(rows)
     df["ratio"] = df["seconds"] / df["seconds"].iloc[0]
     df["ratio_to_rule"] = df["seconds"] / df["rule_seconds"]

@@ -4,6 +4,8 @@ commit and dirty flag, library versions, CPU model, cores, load average at the s
 
 from __future__ import annotations
 
+import inspect
+import sys
 from pathlib import Path
 
 from harness import registry
@@ -56,7 +58,15 @@ def main(args) -> int:
     configure(getattr(args, "quiet", False))
     started = collect()  # the load average at the start, before the bench loads the machine
     mod = registry.BENCHES.load(args.name)
-    df = mod.run(quick=args.quick)
+    extra = {}
+    if "work" in inspect.signature(mod.run).parameters:  # a bench that resumes its units
+        extra["work"] = Path(out) / "_work" / (args.name + ("-quick" if args.quick else ""))
+        print(
+            f"finished units are kept in {extra['work']}: a run that stops resumes there "
+            "(delete the folder to start over)",
+            file=sys.stderr,
+        )
+    df = mod.run(quick=args.quick, **extra)
     df = df.assign(**{k: v for k, v in columns(started).items() if k not in df.columns})
     atomic_write(path, df.to_csv(index=False).encode(), flag)
     from harness.provenance import FIELDS, describe
