@@ -37,14 +37,13 @@ import sys
 import tempfile
 import time
 from functools import partial
-from importlib.metadata import version
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from harness.bench.heldout_bodies import BODIES, make_body
-from harness.bench.resume import kept
+from harness.bench.resume import kept, package_version
 from harness.progress import steps
 
 FULL = (1_000, 10_000, 50_000, 200_000)
@@ -184,9 +183,9 @@ def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
         for body, n in steps(sizes, "bench calibrate", "mesh"):
-            inputs = dict(body=body, n=n, nu=0.45, gmsh=version("gmsh"))
+            inputs = dict(body=body, n=n, nu=0.45, gmsh=package_version("gmsh"))
             one = partial(_sized, body, n, Path(tmp))
-            rows.append(kept(work, f"{body}{n}", inputs, __file__, one))
+            rows.append(kept(work, f"{body}{n}", inputs, one, finished=lambda r: "choice" in r))
     df = pd.DataFrame(rows)
     df["ratio"] = df["seconds"] / df["seconds"].iloc[0]
     df["ratio_to_rule"] = df["seconds"] / df["rule_seconds"]

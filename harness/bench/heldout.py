@@ -55,6 +55,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +63,7 @@ import pandas as pd
 
 from harness.bench.heldout_bodies import BODIES, Body, make_body, read_body
 from harness.bench.heldout_judge import RHO, E, model_answers, study_loads, truth
+from harness.bench.resume import kept, package_version
 from harness.models.stiffness_rules import RULES  # the rule names calibrate's --rule takes
 from harness.progress import steps
 
@@ -228,10 +230,11 @@ def verdict(df: pd.DataFrame) -> str:
     )
 
 
-def over_bodies(quick: bool, name: str, study) -> pd.DataFrame | None:
+def over_bodies(quick: bool, name: str, study, work: Path | None = None) -> pd.DataFrame | None:
     """The rows of ``study(body, mesh, nu, folder)`` over the study's bodies (each meshed
     once into a temporary folder) and Poisson ratios (``quick``: the first body, nu and
-    fewer tets); None without gmsh."""
+    fewer tets); ``work`` keeps each finished (body, nu) (harness/bench/resume.py); None
+    without gmsh."""
     if importlib.util.find_spec("gmsh") is None:
         return None
     bodies, nus, n_tets = (BODIES[:1], NUS[:1], QUICK_TETS) if quick else (BODIES, NUS, FULL_TETS)
@@ -240,10 +243,18 @@ def over_bodies(quick: bool, name: str, study) -> pd.DataFrame | None:
         tmp = Path(tmp)
         for body in steps(bodies, f"bench {name}", "body"):
             mesh = tmp / f"{body.name}.msh"
-            make_body(body, mesh, n_tets)
             for nu in nus:
-                rows += study(body, mesh, nu, tmp)
+                inputs = dict(body=body.name, nu=nu, n_tets=n_tets, gmsh=package_version("gmsh"))
+                one = partial(_meshed_study, study, body, mesh, n_tets, nu, tmp)
+                rows += kept(work, f"{body.name}-{nu:g}", inputs, one)
     return pd.DataFrame(rows)
+
+
+def _meshed_study(study, body: Body, mesh: Path, n_tets: int, nu: float, folder: Path):
+    """``study``'s rows of one (body, nu), the body meshed first if it is not yet."""
+    if not mesh.exists():
+        make_body(body, mesh, n_tets)
+    return study(body, mesh, nu, folder)
 
 
 NO_GMSH = pd.DataFrame(
@@ -251,8 +262,8 @@ NO_GMSH = pd.DataFrame(
 )
 
 
-def run(quick: bool = False) -> pd.DataFrame:
-    rows = over_bodies(quick, "heldout", study_one)
+def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
+    rows = over_bodies(quick, "heldout", study_one, work)
     if rows is None:
         return NO_GMSH
     df = summarise(rows)

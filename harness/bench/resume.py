@@ -3,13 +3,14 @@ killed machine) resumes where it stopped: each unit's rows go to ``WORK/<unit>.j
 (``springbench bench NAME`` keeps them in OUT/_work/NAME, git-ignored) with
 the unit's inputs and the code they ran (the hash of every source file of harness/ and
 reference/, as the suite runner records a stage that runs springbench commands, and of the
-benchmark's own module). A unit whose inputs and code are unchanged is read back instead of
-run again; anything else runs. Deleting WORK starts over."""
+benchmarks' own modules, harness/bench/). A unit whose inputs and code are unchanged is
+read back instead of run again; anything else runs. Deleting WORK starts over."""
 
 from __future__ import annotations
 
 import json
 import sys
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from harness.outputs import atomic_write
@@ -24,19 +25,29 @@ def _plain(value):
     return value.item() if hasattr(value, "item") else str(value)
 
 
+def package_version(name: str) -> str | None:
+    """An installed package's version (a unit's input: gmsh meshes the bodies), None without it."""
+    try:
+        return version(name)
+    except PackageNotFoundError:
+        return None
+
+
 def _say(line: str):
     print(line, file=sys.stderr)
 
 
-def _code(module_file: str) -> dict:
+def _code() -> dict:
     code = loaded_sources(everything=True)
-    code[relative(Path(module_file))] = file_sha(Path(module_file))
+    for p in sorted(Path(__file__).parent.glob("*.py")):
+        code[relative(p)] = file_sha(p)
     return code
 
 
-def kept(work: Path | None, unit: str, inputs: dict, module_file: str, compute, status=None):
+def kept(work: Path | None, unit: str, inputs: dict, compute, finished=None, status=None):
     """``compute()``'s rows of one unit (a dict or a list of dicts), from ``work`` when a run
-    with the same inputs and code left them there, else computed and saved there (``work``
+    with the same inputs and code left them there, else computed and saved there when
+    ``finished(rows)`` says they are (a failed unit's rows run again next time; ``work``
     None: always computed, nothing saved)."""
     if work is None:
         return compute()
@@ -48,8 +59,10 @@ def kept(work: Path | None, unit: str, inputs: dict, module_file: str, compute, 
             if code_unchanged(old.get("code")):
                 (status or _say)(f"{unit}: unchanged since it ran, read from {path}")
                 return old["rows"]
-    code = _code(module_file)  # before the unit runs: the code it ran
+    code = _code()  # before the unit runs: the code it ran
     rows = compute()
+    if finished is not None and not finished(rows):
+        return rows
     data = dict(format=FORMAT, unit=unit, inputs=inputs, code=code, rows=rows)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(path, json.dumps(data, indent=1, default=_plain).encode())

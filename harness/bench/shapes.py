@@ -28,11 +28,13 @@ import sys
 import tempfile
 import time
 from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from harness.bench.resume import kept, package_version
 from harness.bench.shapes_bodies import SHAPES, make_shape
 from harness.progress import steps
 
@@ -128,14 +130,20 @@ def verdict(df: pd.DataFrame) -> str:
     )
 
 
-def run(quick: bool = False) -> pd.DataFrame:
+def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
+    """Every shape's row; ``work``: the folder that keeps each finished row
+    (harness/bench/resume.py)."""
     shapes = SHAPES[1:2] if quick else SHAPES
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-shapes-") as tmp:
         for shape in steps(shapes, "bench shapes", "shape"):
             folder = Path(tmp) / shape.name
             folder.mkdir()
-            rows.append(study_one(shape, folder))
+            inputs = dict(
+                shape=shape.name, nu=shape.nu, n_tets=shape.n_tets, gmsh=package_version("gmsh")
+            )
+            one = partial(study_one, shape, folder)
+            rows.append(kept(work, shape.name, inputs, one, finished=lambda r: not r["note"]))
     df = pd.DataFrame(rows)
     print(verdict(df))
     return df

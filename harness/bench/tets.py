@@ -174,8 +174,8 @@ def verdict(df: pd.DataFrame) -> str:
     return f"{'PASS' if ok else 'FAIL'}: " + "; ".join(parts) + f"; {n} (body, nu)"
 
 
-def run(quick: bool = False) -> pd.DataFrame:
-    rows = over_bodies(quick, "tets", study_one)
+def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
+    rows = over_bodies(quick, "tets", study_one, work)
     if rows is None:
         return NO_GMSH
     df = summarise(rows)
