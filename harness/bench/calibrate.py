@@ -43,13 +43,15 @@ import numpy as np
 import pandas as pd
 
 from harness.bench.heldout_bodies import BODIES, make_body
-from harness.bench.resume import kept, package_version
+from harness.bench.resume import kept
 from harness.progress import steps
+from harness.provenance import version
 
 FULL = (1_000, 10_000, 50_000, 200_000)
 QUICK = (1_000, 5_000)
 BRACKET_FULL, BRACKET_QUICK = 30_000, 2_000  # the L-bracket's size
 RADIUS, LENGTH = 0.1, 0.5
+NU = 0.45  # every mesh's Poisson ratio (E = 1e5 Pa)
 RULE = "vangelder"  # the rule-only run beside each calibration: --method rule --rule RULE
 
 
@@ -106,7 +108,7 @@ def measured(cmd: list, env: dict, logs: tuple) -> tuple[float, subprocess.Compl
 def _calibrate(mesh: Path, out: Path, *extra) -> tuple[float, subprocess.CompletedProcess, float]:
     """:func:`measured` of one cold ``springbench calibrate``: its own process and an empty
     reference cache."""
-    cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", "0.45"]
+    cmd = [sys.executable, "-m", "harness", "calibrate", str(mesh), "--E", "1e5", "--nu", repr(NU)]
     cmd += ["--out", str(out), *extra]
     env = dict(os.environ, SPRINGBENCH_CACHE=str(out.parent / f"cache-{out.stem}"))
     return measured(cmd, env, tuple(out.with_name(f"{out.stem}.{s}.txt") for s in ("out", "err")))
@@ -183,7 +185,7 @@ def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
     rows = []
     with tempfile.TemporaryDirectory(prefix="springbench-bench-") as tmp:
         for body, n in steps(sizes, "bench calibrate", "mesh"):
-            inputs = dict(body=body, n=n, nu=0.45, gmsh=package_version("gmsh"))
+            inputs = dict(body=body, n=n, nu=NU, gmsh=version("gmsh"))
             one = partial(_sized, body, n, Path(tmp))
             rows.append(kept(work, f"{body}{n}", inputs, one, finished=lambda r: "choice" in r))
     df = pd.DataFrame(rows)

@@ -63,9 +63,10 @@ import pandas as pd
 
 from harness.bench.heldout_bodies import BODIES, Body, make_body, read_body
 from harness.bench.heldout_judge import RHO, E, model_answers, study_loads, truth
-from harness.bench.resume import kept, package_version
+from harness.bench.resume import kept
 from harness.models.stiffness_rules import RULES  # the rule names calibrate's --rule takes
 from harness.progress import steps
+from harness.provenance import version
 
 NUS = (0.3, 0.45)
 FULL_TETS, QUICK_TETS = 3000, 1000
@@ -244,7 +245,7 @@ def over_bodies(quick: bool, name: str, study, work: Path | None = None) -> pd.D
         for body in steps(bodies, f"bench {name}", "body"):
             mesh = tmp / f"{body.name}.msh"
             for nu in nus:
-                inputs = dict(body=body.name, nu=nu, n_tets=n_tets, gmsh=package_version("gmsh"))
+                inputs = dict(body=body.name, nu=nu, n_tets=n_tets, gmsh=version("gmsh"))
                 one = partial(_meshed_study, study, body, mesh, n_tets, nu, tmp)
                 rows += kept(work, f"{body.name}-{nu:g}", inputs, one, finished=_no_failure)
     return pd.DataFrame(rows)

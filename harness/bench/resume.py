@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import sys
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from harness.outputs import atomic_write
@@ -23,14 +22,6 @@ FORMAT = 1
 def _plain(value):
     """JSON's value of a numpy scalar (rows hold numpy ints and floats)."""
     return value.item() if hasattr(value, "item") else str(value)
-
-
-def package_version(name: str) -> str | None:
-    """An installed package's version (a unit's input: gmsh meshes the bodies), None without it."""
-    try:
-        return version(name)
-    except PackageNotFoundError:
-        return None
 
 
 def _say(line: str):

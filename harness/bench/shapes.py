@@ -34,9 +34,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness.bench.resume import kept, package_version
+from harness.bench.resume import kept
 from harness.bench.shapes_bodies import SHAPES, make_shape
 from harness.progress import steps
+from harness.provenance import version
 
 E, RHO = 1e5, 1000.0
 ACCEPT_RATIO, ACCEPT_REF = 1.05, 0.01
@@ -139,9 +140,7 @@ def run(quick: bool = False, work: Path | None = None) -> pd.DataFrame:
         for shape in steps(shapes, "bench shapes", "shape"):
             folder = Path(tmp) / shape.name
             folder.mkdir()
-            inputs = dict(
-                shape=shape.name, nu=shape.nu, n_tets=shape.n_tets, gmsh=package_version("gmsh")
-            )
+            inputs = dict(shape=shape.name, nu=shape.nu, n_tets=shape.n_tets, gmsh=version("gmsh"))
             one = partial(study_one, shape, folder)
             rows.append(kept(work, shape.name, inputs, one, finished=lambda r: not r["note"]))
     df = pd.DataFrame(rows)
