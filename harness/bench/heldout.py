@@ -246,8 +246,13 @@ def over_bodies(quick: bool, name: str, study, work: Path | None = None) -> pd.D
             for nu in nus:
                 inputs = dict(body=body.name, nu=nu, n_tets=n_tets, gmsh=package_version("gmsh"))
                 one = partial(_meshed_study, study, body, mesh, n_tets, nu, tmp)
-                rows += kept(work, f"{body.name}-{nu:g}", inputs, one)
+                rows += kept(work, f"{body.name}-{nu:g}", inputs, one, finished=_no_failure)
     return pd.DataFrame(rows)
+
+
+def _no_failure(rows) -> bool:
+    """Whether no run of a (body, nu) failed (a failed run's rows say why in ``note``)."""
+    return not any(r["note"] for r in rows)
 
 
 def _meshed_study(study, body: Body, mesh: Path, n_tets: int, nu: float, folder: Path):
