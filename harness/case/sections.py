@@ -353,7 +353,7 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                 ),
                 "starts": Field(
                     "int",
-                    3,
+                    1,
                     min=1,
                     max=10,
                     doc="starts of the final fit (the rule, its best global "

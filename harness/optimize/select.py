@@ -151,13 +151,18 @@ class Selection:
         )
 
 
-def balanced(problem: FitProblem) -> FitProblem:
+def balanced(problem: FitProblem, families=None) -> FitProblem:
     """Each block's weights divided by its reference's weighted norm squared: G^2 becomes
-    the sum of the loads' own normalised G^2."""
+    the sum of the loads' own normalised G^2; with ``families``, the clamped states weigh as
+    much together as the free-traction states together (the total weight unchanged)."""
+    n = len(problem.blocks)
+    side = [f == CLAMPED for f in families] if families is not None else [False] * n
+    n_c = sum(side)
+    part = [(n / (2 * n_c) if c else n / (2 * (n - n_c))) if 0 < n_c < n else 1.0 for c in side]
     blocks = []
-    for b in problem.blocks:
+    for b, a in zip(problem.blocks, part):
         r2 = float(b.u_ref @ (b.w * b.u_ref)) + b.const
-        s = 1.0 / r2 if r2 > 0 else 1.0
+        s = a / r2 if r2 > 0 else a
         blocks.append(dataclasses.replace(b, w=b.w * s, const=b.const * s))
     return dataclasses.replace(problem, blocks=tuple(blocks))
 
@@ -371,7 +376,7 @@ def select(
     fit) and only aborts (harness/optimize/deadline.py); the options must not hold one."""
     if "max_seconds" in {**(options or {}), **(final or {})}:
         raise ValueError("select caps its fits together: pass max_seconds=, not in the options")
-    t0, problem = time.perf_counter(), balanced(problem)
+    t0, problem = time.perf_counter(), balanced(problem, families)
     candidates = [c for c in candidates if c.groups != "features" or features is not None]
     folds = two_folds(families) if folds == "two" else make_folds(families)
     _RUN.update(

@@ -51,7 +51,7 @@ from harness.stages.sms_measures import families, heldout_columns, scored_column
 
 # L-BFGS-B iterations of each start of the final fit when the case's options set none (a
 # start of calibrate's default fit of the 632-node lug: 100 iterations in ~5 s of one core)
-FINAL_MAXITER = 100
+FINAL_MAXITER = 300
 
 
 def optimise(setting, run_, base, first, first_res=None, rules=()):

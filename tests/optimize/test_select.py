@@ -51,6 +51,20 @@ def test_balanced_sums_the_loads_own_normalised_g():
     assert np.allclose(sel.per_load(prob, k) ** 2, own, rtol=1e-12)
 
 
+def test_balanced_weighs_the_clamped_states_as_much_as_the_free_ones_together():
+    """Four free-traction states and two clamped ones: each clamped state's own normalised
+    G^2 counts 6 / (2 * 2) times, each free one's 6 / (2 * 4); the scores stay each load's own."""
+    prob, _, _ = problem(np.full(1, 1.7))
+    k = prob.k0 * 1.3
+    own = sel.per_load(prob, k) ** 2
+    part = np.array([6 / 8] * 4 + [6 / 4] * 2)
+    assert sel.balanced(prob, FAMILIES).G2(k) == pytest.approx(float(part @ own), rel=1e-12)
+    assert np.allclose(sel.per_load(sel.balanced(prob, FAMILIES), k) ** 2, own, rtol=1e-12)
+    # no clamped state, or only clamped ones: every state alike
+    for fams in (["constant"] * 6, ["clamped"] * 6):
+        assert sel.balanced(prob, fams).G2(k) == pytest.approx(float(own.sum()), rel=1e-12)
+
+
 def test_best_scale_is_the_minimum_of_g_over_a_global_factor():
     rng = np.random.default_rng(1)
     prob, _, _ = problem(2.5 * np.exp(0.3 * rng.standard_normal(1)))
