@@ -356,8 +356,8 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                     1,
                     min=1,
                     max=10,
-                    doc="starts of the final fit (the rule, its best global "
-                    "scale, perturbed ones): the spread is reported",
+                    doc="starts of the final fit (the rule; then its best global "
+                    "scale, perturbed ones): with two or more the spread is reported",
                 ),
                 "work": Field(
                     "str",

@@ -9,21 +9,23 @@ loads, which the fit then starts from), then spring
 constants fitted (``--method``) so the network's statics match a FEM reference of the
 same body and material on the fitted loads, and scored on held-out loads it never saw.
 
-Fit (``--method lbfgs``, the default): the training states' relative misfits (each state
-counts alike) + a mean_e log(k_e/k_rule,e)^2 are minimised by L-BFGS-B with an adjoint
-gradient. Which capacity (per-spring constants with a = 1 or 0.1, or with one volume term
-per element as well) is chosen by leave-one-family-out validation on the training states
+Fit (``--method lbfgs``, the default): the training states' relative misfits (the clamped
+states together weigh as much as the free-traction states together) + a mean_e
+log(k_e/k_rule,e)^2 are minimised by L-BFGS-B with an adjoint gradient. Which capacity
+(per-spring constants with a = 1 or 0.1, or with one volume term per element as well) is
+chosen by leave-one-family-out validation on the training states
 (harness/optimize/select.py: constant, bending, torsion, shear-gradient, gravity, and the
 clamped training states together); the held-out loads never choose. A candidate must beat
-the rule on the validation score and be no worse on the clamped states; when none does,
-the rule's constants are exported (JSON ``choice`` = "rule"). The chosen fit starts from
-the rule, its best global scale and a perturbed start (``G_heldout_mean_spread``: the
-spread of their held-out error). ``--prior-weight a`` fixes a per-spring fit with weight
-a instead (no validation). ``--engine ENGINE`` (harness/commands/calibrate_engine.py; an
-export engine: newton-springs, mujoco-springs) exports only what that engine runs natively
-(harness/registry.py EXPORT_TERMS): the validation chooses among the candidates whose volume
-term it runs (mujoco-springs: springs only), a ``--model`` with a term it cannot run is
-refused, and the first line printed says what was restricted.
+the rule on the validation score (the geometric mean of its free-traction and clamped errors
+relative to the rule's); when none does, the rule's constants are exported (JSON ``choice``
+= "rule"). The chosen fit starts from the rule (``[optimizer.select] starts`` adds its best
+global scale and perturbed starts, ``G_heldout_mean_spread`` the spread of their held-out
+error). ``--prior-weight a`` fixes a per-spring fit with weight a instead (no validation).
+``--engine ENGINE`` (harness/commands/calibrate_engine.py; an export engine: newton-springs,
+mujoco-springs) exports only what that engine runs natively (harness/registry.py
+EXPORT_TERMS): the validation chooses among the candidates whose volume term it runs
+(mujoco-springs: springs only), a ``--model`` with a term it cannot run is refused, and the
+first line printed says what was restricted.
 
 Loads (docs/design.md, "Load sets"). Fitted (``--loads linear``, the default): the equilibrated
 linear

@@ -38,8 +38,8 @@ load sets (the free-traction states' minimal constraints, each clamped face) sha
 factorisation per evaluation where that saves flops (FitProblem ``shared``,
 harness/linalg/shared.py: the same solutions to rounding, the same scores to ~1e-8). The
 final fit, whose constants are exported, factorises each load set on its own, as every
-other fit of the project does: a different rounding moves a 100-iteration fit within the
-spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
+other fit of the project does: a different rounding moves a fit of 100 iterations within
+the spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
 those of the project's one solve path. The fits are independent and run side by side in
 forked workers as the CPUs and the free memory allow (harness/forkpool.py: the
 same numbers as one after the other).

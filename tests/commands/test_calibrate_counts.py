@@ -32,8 +32,8 @@ def test_the_fit_runs_the_counts_its_mesh_affords(tmp_path, monkeypatch, capsys)
     assert (counts["folds"], counts["maxiter"], counts["starts"], counts["final_maxiter"]) == (
         "families",
         30,
-        3,
-        100,
+        1,
+        300,
     )
     assert 0 < counts["work_gflop"] <= counts["budget_gflop"] == select_counts.FLOOR_GFLOP
     assert [r["model"] for r in data["validation"]] == ["rule", *SELECT_DEFAULT]
