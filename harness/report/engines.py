@@ -126,7 +126,10 @@ def material_findings(df) -> list[str]:
     case and load, and where it helps (< 1) and where it hurts (> 1)."""
     import numpy as np
 
-    keys = [k for k in ("body", "resolution", "n_tets", "nu") if k in df.columns]
+    # a case names its body, mesh and nu (which may be missing from a partial table)
+    keys = [k for k in ("case", "seed") if k in df.columns] or [
+        k for k in ("body", "resolution", "n_tets", "nu") if k in df.columns
+    ]
     runs = df[(df["load"] != "mean") & _has(df["G_norm"])].copy()
     runs["G_norm"] = runs["G_norm"].astype(float)
     own = runs[runs["model"] == "own (E, nu)"].set_index([*keys, "engine", "load"])["G_norm"]
