@@ -46,6 +46,19 @@ def test_truth_meets_closed_forms(bar, refine):
     assert fem["pull"][1] == pytest.approx(1 / J.E, rel=1e-8)  # the strain peak: s / E everywhere
 
 
+def test_a_refined_truth_with_a_wrong_solve_stops(bar, monkeypatch):
+    """The refined truth's solutions are checked by their residual: a Cholesky that returns
+    a wrong solution (here half the right one) stops the study with one line."""
+    from harness.linalg import multifrontal
+
+    right = multifrontal.MultifrontalCholesky.solve
+    monkeypatch.setattr(multifrontal.MultifrontalCholesky, "solve", lambda s, b: right(s, b) / 2)
+    points, tets, groups = B.read_body(bar)
+    loads = [J.Load("hang", ("clamp",), gravity=(1.0, 0, 0))]
+    with pytest.raises(RuntimeError, match="relative residual"):
+        J.truth(points, tets, groups, loads, nu=0.3, refine=True)
+
+
 def test_bodies_groups_are_what_calibrate_reads(tmp_path):
     from harness.io.meshfile import read_mesh
 
@@ -209,4 +222,8 @@ def test_small_study_end_to_end(tmp_path):
         summary.ratio_to_best_rule["calibrate"]
     )
     assert summary.rule["lloyd"] == "lloyd" and summary.seconds["calibrate"] > 0
+    # the truth is P2 on the mesh refined once; P2 on the mesh itself differs from it by a
+    # small, nonzero amount per load, the largest on each geomean row
+    assert ((per.truth_error > 0) & (per.truth_error < 0.1)).all()
+    assert summary.truth_error["calibrate"] == pytest.approx(per.truth_error.max())
     assert H.verdict(df).startswith(("PASS", "FAIL")) and len(H.summary_table(df)) == 1

@@ -219,6 +219,16 @@ def test_the_results_table_reads_the_bench_csv(tmp_path):
     assert rows[3] == "| part (1,234) | 0.45 | the rule cauchy | 0.07 | cauchy | 0.07 | 1.000 |"
     assert rows[4] == "| all (geometric mean) | | | | | | **0.707** |"
     assert len(rows) == 5
+    # with the truth's own error measured, a column of it (the geomean row's: its loads' largest)
+    csv = tmp_path / "bench" / "heldout.csv"
+    lines = csv.read_text().splitlines()
+    lines = [lines[0] + ",truth_error"] + [
+        x + (",0.003" if "geomean" in x else ",") for x in lines[1:]
+    ]
+    csv.write_text("\n".join(lines) + "\n")
+    rows = heldout_table(tmp_path).splitlines()
+    assert rows[0].endswith("| ratio | truth's error |") and rows[2] == row + " <= 0.003 |"
+    assert rows[4] == "| all (geometric mean) | | | | | | **0.707** | |"
 
 
 def test_commands_page_is_what_the_command_line_gives():
