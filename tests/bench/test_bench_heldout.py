@@ -206,7 +206,11 @@ def test_small_study_end_to_end(tmp_path):
     mesh = tmp_path / "bracket.msh"
     B.make_body(body, mesh, 600)
     df = H.summarise(
-        pd.DataFrame(H.study_one(body, mesh, 0.3, tmp_path, rules=("lloyd", "deussen")))
+        pd.DataFrame(
+            H.study_one(
+                body, mesh, 0.3, tmp_path, rules=("lloyd", "deussen"), extra=("--max-refine", "1")
+            )
+        )
     )
     per = df[df.load != "geomean"]
     assert (

@@ -145,7 +145,7 @@ def test_plain_export_ratio_one_and_failed_run_noted(bar, tmp_path, monkeypatch)
     path, points, tets, _ = bar
 
     def fake(mesh, out, nu, cache, *extra):
-        if extra[-1] == "p1":
+        if "p1" in extra:  # --model p1
             raise RuntimeError("calibrate --model p1: invalid choice")
         data = _export(points, tets, J.E, nu, shuffle=False)
         return dict(data, E_effective=J.E, nu_effective=nu), "rule", "p1", 1.5
