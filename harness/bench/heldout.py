@@ -133,7 +133,7 @@ def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, extr
     cache = folder / f"cache-{body.name}-{nu:g}"  # empty: the calibrate run is cold
     runs = [("calibrate", extra)] + [(r, (*extra, "--method", "rule", "--rule", r)) for r in rules]
     rows = []
-    for model, extra in runs:
+    for model, args in runs:
         row = dict(
             body=body.name,
             n_tets=len(tets),
@@ -147,7 +147,7 @@ def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, extr
         )
         try:
             data, row["choice"], row["rule"], row["seconds"] = calibrate(
-                mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *extra
+                mesh, folder / f"{body.name}-{nu:g}-{model}.vtu", nu, cache, *args
             )
             u = model_answers(data, points, groups, loads, scale)
         except (
