@@ -14,6 +14,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.bench.heldout_bodies import Body
+from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 
 E, RHO = 1e5, 1000.0
 
@@ -135,8 +136,6 @@ def _lu(A):
 def _cholesky(A, coords):
     """A solve of the SPD ``A`` by a sparse Cholesky (the refined P2's ~110k dofs: ~15 s, where
     SuperLU took over ten minutes); each solution checked by its residual on ``A`` itself."""
-    from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
-
     A = sp.csr_matrix(A)
     chol = MultifrontalCholesky(A, Symbolic(A, coords))
 
