@@ -115,7 +115,8 @@ def geomean(x) -> float:
     return float(np.exp(np.mean(np.log(np.asarray(x, float)))))
 
 
-def _relative(u, ref) -> float:
+def relative(u, ref) -> float:
+    """|u - ref| / |ref| over the vertices: the study's error of one answer."""
     return float(np.linalg.norm(u - ref) / np.linalg.norm(ref))
 
 
@@ -128,7 +129,7 @@ def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, extr
     fem = truth(points, tets, groups, loads, nu, refine=True)
     truth_seconds = time.perf_counter() - t0
     rough = truth(points, tets, groups, loads, nu)  # P2 on the mesh itself: the truth's check
-    off = {k: _relative(rough[k][0], fem[k][0]) for k in fem}
+    off = {k: relative(rough[k][0], fem[k][0]) for k in fem}
     scale = {name: PEAK_STRAIN / peak for name, (_, peak) in fem.items()}
     cache = folder / f"cache-{body.name}-{nu:g}"  # empty: the calibrate run is cold
     runs = [("calibrate", extra)] + [(r, (*extra, "--method", "rule", "--rule", r)) for r in rules]
@@ -157,7 +158,7 @@ def study_one(body: Body, mesh: Path, nu: float, folder: Path, rules=RULES, extr
             u, row["note"] = None, str(exc)
         for load in loads:
             ut = scale[load.name] * fem[load.name][0]
-            err = math.nan if u is None else _relative(u[load.name], ut)
+            err = math.nan if u is None else relative(u[load.name], ut)
             rows.append(dict(row, load=load.name, err=err, truth_error=off[load.name]))
     return rows
 

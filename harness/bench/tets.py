@@ -47,10 +47,16 @@ import math
 import time
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
-from harness.bench.heldout import NO_GMSH, PEAK_STRAIN, calibrate, geomean, over_bodies
+from harness.bench.heldout import (
+    NO_GMSH,
+    PEAK_STRAIN,
+    calibrate,
+    geomean,
+    over_bodies,
+    relative,
+)
 from harness.bench.heldout_bodies import Body, read_body
 from harness.bench.heldout_judge import E, export_materials, study_loads, tet_solve, truth
 
@@ -70,9 +76,7 @@ def _load_rows(row: dict, u, fem: dict, scale: dict, loads) -> list[dict]:
     out = []
     for load in loads:
         ut = scale[load.name] * fem[load.name][0]
-        err = (
-            math.nan if u is None else float(np.linalg.norm(u[load.name] - ut) / np.linalg.norm(ut))
-        )
+        err = math.nan if u is None else relative(u[load.name], ut)
         out.append(dict(row, load=load.name, err=err))
     return out
 
