@@ -30,8 +30,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from harness.errors import SpringbenchError
+from harness.optimize.evaluation import value_and_grad
 from harness.optimize.options import check_options, static_only
-from harness.optimize.problem import FitProblem, value_and_grad
+from harness.optimize.problem import FitProblem
 
 EG_DEFAULTS = dict(
     rtol=1e-10,  # relative residual of CG on the normal equations

@@ -11,9 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from harness.optimize.deadline import deadline as limit
+from harness.optimize.evaluation import value_and_grad
 from harness.optimize.gradient import start_point
 from harness.optimize.options import check_options, static_only
-from harness.optimize.problem import FitProblem, value_and_grad
+from harness.optimize.problem import FitProblem
 
 GN_DEFAULTS = dict(
     maxiter=200,  # outer (Levenberg-Marquardt) iterations

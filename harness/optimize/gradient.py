@@ -43,8 +43,9 @@ import scipy.sparse.linalg as spla
 from harness.errors import SpringbenchError
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.equilibrium import equilibrium_gap_factors
+from harness.optimize.evaluation import value_and_grad
 from harness.optimize.options import check_options
-from harness.optimize.problem import FitProblem, stiffness, value_and_grad
+from harness.optimize.problem import FitProblem, stiffness
 
 LBFGS_DEFAULTS = dict(
     maxiter=15000,  # L-BFGS-B iterations

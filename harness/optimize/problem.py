@@ -276,10 +276,15 @@ class FitProblem:
         right-hand side block per set to its solution block; one fresh factorisation each.
         Nothing here keeps a solver once yielded: a caller that drops it before the next
         one (``del``) holds one factorisation at a time, not two."""
+        for j in range(len(self.solve_parts())):
+            yield self.solver_of(j, k)
+
+    def solver_of(self, j: int, k):
+        """(load sets, solver) of group j of :meth:`solve_parts` at k (as :meth:`solvers`)."""
         sets, k = self.load_sets(), np.asarray(k, float)
-        for idx, shared in self.solve_parts():
-            group = [sets[i] for i in idx]
-            yield group, (shared.factor(k).solve if shared is not None else _each(group[0], k))
+        idx, shared = self.solve_parts()[j]
+        group = [sets[i] for i in idx]
+        return group, (shared.factor(k).solve if shared is not None else _each(group[0], k))
 
     def solve(self, k) -> list[np.ndarray]:
         """Free-dof displacements per load by a fresh sparse factorisation (shared by
@@ -469,28 +474,3 @@ def solve_parts(sets: list[LoadSet]) -> list[tuple[list, SharedSets | None]]:
 def stiffness(B: sp.csc_matrix, k: np.ndarray) -> sp.csc_matrix:
     """K = B diag(k) B^T on a block's free dofs."""
     return (B.multiply(k[None, :]) @ B.T).tocsc()
-
-
-def value_and_grad(
-    problem: FitProblem, k: np.ndarray, grad: bool = True, tension2: np.ndarray | None = None
-):
-    """G^2 and dG^2/dk (e,) by the adjoint method. If ``tension2`` (e,) is given, the
-    squared spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2,
-    are added to it."""
-    k = np.asarray(k, float)
-    G2 = 0.0
-    g = np.zeros(len(k)) if grad else None
-    for group, solve in problem.solvers(k):
-        Us = solve([s.F for s in group])
-        Rs = []
-        for s, U in zip(group, Us):
-            D = s.Uref - U
-            Rs.append(s.W * D)
-            G2 += float(np.sum(D * Rs[-1])) + s.const
-            if tension2 is not None:
-                tension2 += np.sum((k[:, None] * (s.B.T @ U)) ** 2, axis=1)
-        if grad:
-            for s, U, Lam in zip(group, Us, solve(Rs)):
-                g += 2.0 * np.sum((s.B.T @ Lam) * (s.B.T @ U), axis=1)
-        del solve  # its factorisation, before the next one
-    return G2, g

@@ -4,13 +4,12 @@
 A fit has choices the data must make: how many constants it may move (one scale for all
 springs, a few groups, a few coefficients of the springs' geometric features, every
 spring with a pull towards the rule, springs plus a volume term per element) and how hard
-the pull is. Leave-one-family-out validation makes them:
-every candidate is fitted without one fold of the training states and scored on it; the
-folds are the free-traction families (constant, bending, torsion, shear-gradient,
-gravity: harness/case/linear_states.py) and the clamped training states together. A
-candidate's ``free`` error is the mean over its free-traction folds, its ``clamped`` the
-clamped fold's; the rule itself (no fit) is scored the same way. The criterion
-(:func:`choose`):
+the pull is. Leave-one-family-out validation makes them: every candidate is fitted
+without one fold of the training states and scored on it; the folds are the free-traction
+families (constant, bending, torsion, shear-gradient, gravity: harness/case/linear_states.py)
+and the clamped training states together. A candidate's ``free`` error is the mean over
+its free-traction folds, its ``clamped`` the clamped fold's; the rule itself (no fit) is
+scored the same way. The criterion (:func:`choose`):
 
 - 'ratio' (the default): a candidate's ``ratio`` is the geometric mean of its free and
   clamped errors each divided by the rule's, so a fit 1.6x better on the free-traction
@@ -23,11 +22,10 @@ clamped fold's; the rule itself (no fit) is scored the same way. The criterion
 - 'score': the lowest ``score`` (the arithmetic mean of free and clamped) that beats the
   rule's by more than MARGIN and is no worse than the rule's on the clamped fold.
 
-Else the rule is the choice. The chosen candidate is refitted on all training states from
-several starts. The held-out loads never choose anything: they are not in the problem
-given here. Nothing is chosen by the clock: the validation always runs, every fit stops by
-iteration counts and tolerances fixed before the run, and a wall-time cap only aborts
-(:func:`select`).
+Else the rule is the choice. The chosen candidate is refitted on all training states. The
+held-out loads never choose anything: they are not in the problem given here. Nothing is
+chosen by the clock: the validation always runs, every fit stops by iteration counts and
+tolerances fixed before the run, and a wall-time cap only aborts (:func:`select`).
 
 Every training state counts alike: each load's misfit is divided by its own reference
 norm (``balanced``), so the fit and the scores see the relative error of each state, not
@@ -36,13 +34,11 @@ the states with the largest displacements.
 Cost. The validation's fits solve subsets of the training states dozens of times; their
 load sets (the free-traction states' minimal constraints, each clamped face) share one
 factorisation per evaluation where that saves flops (FitProblem ``shared``,
-harness/linalg/shared.py: the same solutions to rounding, the same scores to ~1e-8). The
-final fit, whose constants are exported, factorises each load set on its own, as every
-other fit of the project does: a different rounding moves a fit of 100 iterations within
-the spread of its starts (the lug's held-out error by 0.02 %), and the exported constants stay
-those of the project's one solve path. The fits are independent and run side by side in
-forked workers as the CPUs and the free memory allow (harness/forkpool.py: the
-same numbers as one after the other).
+harness/linalg/shared.py: the same solutions to rounding). The final fit, whose constants
+are exported, factorises each load set on its own, as every other fit does. The fits run
+side by side in forked workers as the CPUs and the free memory allow, a final fit of one
+start with its load groups spread over them (harness/forkpool.py, harness/optimize/
+evaluation.py: the same numbers as in the caller alone).
 
 The problem holds the springs' columns first and, for the volume candidates, the volume
 terms' columns after them (harness/models/volume.py: K = [B C] diag([k, kv]) [B C]^T): one
@@ -65,8 +61,9 @@ from harness.linalg.sparse import single_thread_blas
 from harness.optimize import select_counts
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
+from harness.optimize.evaluation import spread, value_and_grad
 from harness.optimize.permatrix import per_matrix
-from harness.optimize.problem import FitProblem, value_and_grad
+from harness.optimize.problem import FitProblem
 from harness.optimize.select_table import (  # noqa: F401 (the table's names, here as well)
     CLAMPED,
     MARGIN,
@@ -180,16 +177,6 @@ def subset(problem: FitProblem, keep) -> FitProblem:
         coords,
         problem.shared,
     )
-
-
-def direction_groups(directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
-    """(e,) group ids: the axis a spring points along most (|n_a| largest) times its
-    length tercile: 9 groups in 3-D, 6 in 2-D (empty ones renumbered away)."""
-    axis = np.argmax(np.abs(directions), axis=1)
-    cuts = np.quantile(lengths, [1 / 3, 2 / 3])
-    tercile = np.searchsorted(cuts, lengths, side="right")
-    _, ids = np.unique(axis * 3 + tercile, return_inverse=True)
-    return ids
 
 
 def columns(
@@ -395,26 +382,34 @@ def select(
     )
     for _, cp in _RUN["cands"].values():
         cp.prepare()  # before the pool forks: its workers share the networks' maps
-    if workers is None:  # each fit holds the largest factorisation of an evaluation
-        n = len(candidates) * len(folds) if len(folds) > 1 else 0
-        peak = max(select_counts.gbytes(problem, shared) for shared in (False, True))
-        workers = forkpool.available_workers(max(n, n_starts), problem.n_springs, peak)
+    # a final fit of one start: its load groups in the workers
+    _RUN["spread"] = workers = workers or _workers(problem, len(candidates), folds, n_starts)
     try:
-        with single_thread_blas(), forkpool.pool(workers) as ex:
-            rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
-            scores = per_load(rule, rule.k0) if rule_scores is None else rule_scores
-            table = [rule_row(scores, folds)]
-            table += validate(ex, [c.name for c in candidates], status)
-            best = choose(scored(table, tuple(folds)), criterion)
-            seconds = {"validation": time.perf_counter() - t0, "final": 0.0}
-            if best["model"] == "rule":
-                k = (problem.k0[:n_springs].copy(),)
-                return Selection("rule", k, tuple(table), tuple(folds), seconds=seconds)
-            fits = final_fit(ex, best["model"], n_starts, seed, status)
+        with single_thread_blas():
+            with forkpool.pool(workers) as ex:
+                rule = columns(problem, n_springs, Candidate("rule", "one"), kv0, groups, volumes)
+                scores = per_load(rule, rule.k0) if rule_scores is None else rule_scores
+                table = [rule_row(scores, folds)]
+                table += validate(ex, [c.name for c in candidates], status)
+                best = choose(scored(table, tuple(folds)), criterion)
+                seconds = {"validation": time.perf_counter() - t0, "final": 0.0}
+                if best["model"] == "rule":
+                    k = (problem.k0[:n_springs].copy(),)
+                    return Selection("rule", k, tuple(table), tuple(folds), seconds=seconds)
+                fits = final_fit(ex, best["model"], n_starts, seed, status) if n_starts > 1 else []
+            fits = fits or final_fit(None, best["model"], 1, seed, status)  # its groups spread
     finally:
         _RUN.clear()
     seconds["final"] = time.perf_counter() - t0 - seconds["validation"]
     return _fitted(best["model"], fits, table, folds, seconds)
+
+
+def _workers(problem: FitProblem, n_candidates: int, folds: dict, n_starts: int) -> int:
+    """The fits' processes: as the tasks, the CPUs and the free memory over the largest
+    predicted factorisation of an evaluation allow (each fit holds one)."""
+    n = n_candidates * len(folds) if len(folds) > 1 else 0
+    peak = max(select_counts.gbytes(problem, shared) for shared in (False, True))
+    return forkpool.available_workers(max(n, n_starts), problem.n_springs, peak)
 
 
 def _fitted(name: str, fits: list, table: list, folds: dict, seconds: dict) -> Selection:
@@ -495,5 +490,6 @@ def _final_start(task) -> tuple:
     cp = dataclasses.replace(cp, shared=True) if _RUN["shared_final"] else cp
     where = f"{name} on every training state (start {i + 1} of {n_starts})"
     _RUN["cap"].phase = f"the validated fit's final fit ({where})"
-    r = fit_result(cp, cand, _RUN["final"], x0, _RUN["features"], _RUN["cap"])
+    with spread(cp, _RUN["spread"] if n_starts == 1 else 1):  # its load groups in workers
+        r = fit_result(cp, cand, _RUN["final"], x0, _RUN["features"], _RUN["cap"])
     return r["info"]["phi"], r["k"], str(r["info"].get("stop"))

@@ -183,7 +183,7 @@ def _selection(setting, run_, base, first_res, n_rules: int = 0):
         base.n_springs,
         fams,
         kv0,
-        sel.direction_groups(d, L),
+        direction_groups(d, L),
         cands,
         {**opts, "maxiter": counts.maxiter},
         {**opts, "maxiter": counts.final_maxiter},
@@ -256,3 +256,13 @@ def _row(setting, first, base, s, cands, scored, seconds) -> dict:
     if s.volume:
         row.update(volume=s.volume, n_volumes=net.volume.n_elements)
     return row
+
+
+def direction_groups(directions: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """(e,) group ids: the axis a spring points along most (|n_a| largest) times its
+    length tercile: 9 groups in 3-D, 6 in 2-D (empty ones renumbered away)."""
+    axis = np.argmax(np.abs(directions), axis=1)
+    cuts = np.quantile(lengths, [1 / 3, 2 / 3])
+    tercile = np.searchsorted(cuts, lengths, side="right")
+    _, ids = np.unique(axis * 3 + tercile, return_inverse=True)
+    return ids

@@ -13,7 +13,7 @@ from harness.linalg.sparse import single_thread_blas
 from harness.models.cells import hex_to_tets
 from harness.models.volume import VolumeTerm, volume_gradients, volumes
 from harness.optimize import FitProblem, optimize
-from harness.optimize.problem import value_and_grad
+from harness.optimize.evaluation import value_and_grad
 from harness.optimize.synthetic import basic_loads, grid_network
 from tests.numdiff import energy_forces, force_jacobian
 

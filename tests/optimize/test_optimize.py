@@ -418,6 +418,7 @@ def test_an_evaluation_holds_one_factorisation_at_a_time(monkeypatch):
     import weakref
 
     from harness.optimize import problem as pr
+    from harness.optimize.evaluation import value_and_grad
     from harness.optimize.synthetic import recoverable_problem
 
     prob, _ = recoverable_problem((8, 8, 8), seed=5)
@@ -433,6 +434,6 @@ def test_an_evaluation_holds_one_factorisation_at_a_time(monkeypatch):
         return f
 
     monkeypatch.setattr(pr.LoadSet, "factor", factor)
-    pr.value_and_grad(prob, prob.k0 * 1.2)
+    value_and_grad(prob, prob.k0 * 1.2)
     prob.solve(prob.k0)
     assert len(alive) == 2 * len(prob.solve_parts()) and max(alive) == 0

@@ -15,8 +15,8 @@ from harness.linalg.multifrontal import MultifrontalCholesky, Symbolic
 from harness.linalg.shared import SharedSets, best_group
 from harness.linalg.sparse import single_thread_blas
 from harness.linalg.stiffness import restriction, stiffness_map
+from harness.optimize.evaluation import value_and_grad
 from harness.optimize.gradient import Objective
-from harness.optimize.problem import value_and_grad
 from harness.optimize.synthetic import recoverable_problem
 from tests.optimize.test_gradient import fd
 
