@@ -75,3 +75,22 @@ def test_a_factorisation_on_the_tree_solves():
     b = np.random.default_rng(0).normal(size=(A.shape[0], 2))
     x = mf.MultifrontalCholesky(A, mf.Symbolic(A, coords[~fixed], leaf=64)).solve(b)
     assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b) * 1e3
+
+
+def test_a_dense_cut_takes_the_smaller_touching_layer():
+    """A matrix coupling dofs as widely as a coarse level's Galerkin matrix (A^2 of the lug's:
+    ~500 nonzeros a row): its cuts are too dense for the matching, and the separator is the
+    smaller of the two layers that touch the other side; it still separates."""
+    from harness.linalg.sparse import DENSE_CUT
+
+    A, coords = p2_block()
+    A2 = sp.csr_matrix(abs(A) @ abs(A))
+    tree = dissection_tree(A2, coords, leaf=64)
+    assert separated(A2, tree)
+    c = coords[:, 0]
+    left = c < np.median(c)
+    cut = A2[np.flatnonzero(left)][:, np.flatnonzero(~left)]
+    touch_l = int((np.diff(cut.indptr) > 0).sum())
+    touch_r = len(np.unique(cut.indices))
+    assert cut.nnz > DENSE_CUT * (touch_l + touch_r)
+    assert len(tree[-1][0]) == min(touch_l, touch_r)
