@@ -28,6 +28,7 @@ from harness.linalg.sparse import (
     blas_limited,
     dissection_tree,
     outer_blas_threads,
+    row_entries,
     single_thread_blas,
 )
 
@@ -36,15 +37,6 @@ from harness.linalg.sparse import (
 LEAF = 128
 BIG_FRONT = 1000  # fronts of at least this many dofs factorise with every BLAS thread the caller
 # allows (a 104k-dof spring network of a 200k-tet mesh: 107 fronts, 95 % of the flops)
-
-
-def _row_entries(indptr: np.ndarray, V: np.ndarray):
-    """(positions of rows V's entries in a csr matrix's arrays, row of each within V)."""
-    V = np.asarray(V, np.int64)
-    first = indptr[V].astype(np.int64)
-    count = indptr[V + 1].astype(np.int64) - first
-    rows = np.repeat(np.arange(len(V), dtype=np.int64), count)
-    return np.repeat(first - (np.cumsum(count) - count), count) + np.arange(len(rows)), rows
 
 
 def _tree(A: sp.csr_matrix, coords: np.ndarray, leaf: int, last) -> list:
@@ -82,7 +74,7 @@ class Symbolic:
                 parent[c] = t
         for t, (V, kids) in enumerate(nodes):
             top = rank[V].max(initial=-1)
-            cols = A.indices[_row_entries(A.indptr, V)[0]]
+            cols = A.indices[row_entries(A.indptr, V)[0]]
             cand = [cols[rank[cols] > top]] + [U_of[c][rank[U_of[c]] > top] for c in kids]
             U = np.unique(np.concatenate(cand)) if cand else np.empty(0, int)
             U = U[np.argsort(rank[U])]
@@ -95,7 +87,7 @@ class Symbolic:
             pos[front] = np.arange(nf)
             # original entries of rows V into the front's lower triangle: (row, column) when
             # the column is an earlier V dof, its mirror (column, row) when it is in U
-            kidx, rows = _row_entries(A.indptr, V)
+            kidx, rows = row_entries(A.indptr, V)
             cl = pos[A.indices[kidx]]
             keep = (cl >= 0) & ((cl <= rows) | (cl >= nv))
             kidx, rows, cl = kidx[keep], rows[keep], cl[keep]

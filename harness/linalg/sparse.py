@@ -22,6 +22,15 @@ from harness.errors import ModelError
 LEAF = 96
 
 
+def row_entries(indptr: np.ndarray, V: np.ndarray):
+    """(positions of rows V's entries in a csr matrix's arrays, row of each within V)."""
+    V = np.asarray(V, np.int64)
+    first = indptr[V].astype(np.int64)
+    count = indptr[V + 1].astype(np.int64) - first
+    rows = np.repeat(np.arange(len(V), dtype=np.int64), count)
+    return np.repeat(first - (np.cumsum(count) - count), count) + np.arange(len(rows)), rows
+
+
 def dissection_tree(A: sp.spmatrix, coords: np.ndarray, leaf: int = LEAF) -> list:
     """Nested-dissection tree of symmetric A with vertex coordinates (n, dim): recursive
     bisection at the median of the widest coordinate; the separator is the smallest set of
@@ -72,12 +81,11 @@ def _cover(A: sp.csr_matrix, idx: np.ndarray, left: np.ndarray, pos: np.ndarray)
     18 instead of 64 Gflop to factorise); on a dense cut (DENSE_CUT) the smaller of the two
     touching layers. ``pos``: -1 for every vertex, as it is left."""
     L, R = np.flatnonzero(left), np.flatnonzero(~left)
-    first, count = A.indptr[idx[L]], np.diff(A.indptr)[idx[L]]
-    at = np.repeat(first - np.cumsum(count) + count, count) + np.arange(count.sum())
+    at, rows = row_entries(A.indptr, idx[L])
     pos[idx[R]] = np.arange(len(R))
     cols = pos[A.indices[at]]
     pos[idx[R]] = -1
-    rows = np.repeat(np.arange(len(L)), count)[cols >= 0]
+    rows = rows[cols >= 0]
     sep = np.zeros(len(idx), bool)
     if not len(rows):
         return sep

@@ -382,8 +382,8 @@ def select(
     )
     for _, cp in _RUN["cands"].values():
         cp.prepare()  # before the pool forks: its workers share the networks' maps
-    # a final fit of one start: its load groups in the workers
-    _RUN["spread"] = workers = workers or _workers(problem, len(candidates), folds, n_starts)
+    workers = workers or _workers(problem, len(candidates), folds, n_starts)
+    _RUN["spread"] = workers if n_starts == 1 else 1  # one start: its load groups in workers
     try:
         with single_thread_blas():
             with forkpool.pool(workers) as ex:
@@ -490,6 +490,6 @@ def _final_start(task) -> tuple:
     cp = dataclasses.replace(cp, shared=True) if _RUN["shared_final"] else cp
     where = f"{name} on every training state (start {i + 1} of {n_starts})"
     _RUN["cap"].phase = f"the validated fit's final fit ({where})"
-    with spread(cp, _RUN["spread"] if n_starts == 1 else 1):  # its load groups in workers
+    with spread(cp, _RUN["spread"]):  # harness/optimize/evaluation.py
         r = fit_result(cp, cand, _RUN["final"], x0, _RUN["features"], _RUN["cap"])
     return r["info"]["phi"], r["k"], str(r["info"].get("stop"))

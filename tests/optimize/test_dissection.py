@@ -74,7 +74,7 @@ def test_a_factorisation_on_the_tree_solves():
     A = A[~fixed][:, ~fixed]
     b = np.random.default_rng(0).normal(size=(A.shape[0], 2))
     x = mf.MultifrontalCholesky(A, mf.Symbolic(A, coords[~fixed], leaf=64)).solve(b)
-    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b) * 1e3
+    assert np.linalg.norm(A @ x - b) <= 1e-7 * np.linalg.norm(b)
 
 
 def test_a_dense_cut_takes_the_smaller_touching_layer():
