@@ -11,11 +11,17 @@ rules calibrate computed itself), the reference's own error on the held-out load
 status, and a digest of the exported model (every array an engine reads: positions,
 masses, springs, stiffness, damping, the volume or kn terms).
 
+Then the same mesh mirrored across the mid-plane of its longest axis is calibrated once
+(``*_mirror`` columns): the held-out loads are then held at the other end. Which rule wins
+the held-out loads can belong to one end of a body (docs/calibrate.md, "What to trust"):
+the mirror shows how much of a ratio is that end's.
+
 Acceptance, per body: ratio = G_heldout_mean / best rule's <= ACCEPT_RATIO, the
 reference's held-out error <= ACCEPT_REF, and the same digest twice (the export does not
 depend on the machine's load). Columns: shape, n_tets, nu, choice, rule (the exported
 row's start rule), G_heldout_mean, best_rule, best_rule_heldout, ratio, reference_error,
-reference_error_heldout, status, seconds, seconds_busy, same_export, ok.
+reference_error_heldout, status, seconds, seconds_busy, same_export, ok,
+G_heldout_mean_mirror, best_rule_mirror, best_rule_heldout_mirror, ratio_mirror.
 """
 
 from __future__ import annotations
@@ -35,7 +41,7 @@ import numpy as np
 import pandas as pd
 
 from harness.bench.resume import kept
-from harness.bench.shapes_bodies import SHAPES, make_shape
+from harness.bench.shapes_bodies import SHAPES, make_shape, mirror
 from harness.progress import steps
 from harness.provenance import version
 
@@ -88,7 +94,7 @@ def calibrate(mesh: Path, out: Path, nu: float, cache: Path) -> tuple[dict, floa
 
 
 def study_one(shape, folder: Path) -> dict:
-    """One shape's row: calibrated on an idle and on a busy machine."""
+    """One shape's row: calibrated on an idle and on a busy machine, then mirrored."""
     mesh = folder / f"{shape.name}.vtu"
     n_tets = make_shape(shape, mesh)
     row = dict(shape=shape.name, n_tets=n_tets, nu=shape.nu, note="")
@@ -96,6 +102,8 @@ def study_one(shape, folder: Path) -> dict:
         data, row["seconds"] = calibrate(mesh, folder / "a.vtu", shape.nu, folder / "ca")
         with busy():
             again, row["seconds_busy"] = calibrate(mesh, folder / "b.vtu", shape.nu, folder / "cb")
+        mirror(mesh, folder / "mirror.vtu")
+        other, _ = calibrate(folder / "mirror.vtu", folder / "m.vtu", shape.nu, folder / "cm")
     except RuntimeError as exc:  # a failed run: its row says why, the study goes on
         return dict(row, note=str(exc), ok=False)
     best = data.get("best_rule_heldout") or {}
@@ -112,10 +120,24 @@ def study_one(shape, folder: Path) -> dict:
     ratio = (row["G_heldout_mean"] or np.nan) / (row["best_rule_heldout"] or np.nan)
     ref = row["reference_error_heldout"]
     row["ratio"] = float(ratio)
+    row.update(_mirrored(other))
     row["ok"] = bool(
         ratio <= ACCEPT_RATIO and ref is not None and ref <= ACCEPT_REF and row["same_export"]
     )
     return row
+
+
+def _mirrored(data: dict) -> dict:
+    """The mirror's columns (module doc): its export's held-out error beside its own best
+    rule's, and their ratio."""
+    best = data.get("best_rule_heldout") or {}
+    held, rule = data.get("G_heldout_mean"), best.get("G_heldout_mean")
+    return dict(
+        G_heldout_mean_mirror=held,
+        best_rule_mirror=best.get("rule"),
+        best_rule_heldout_mirror=rule,
+        ratio_mirror=float((held or np.nan) / (rule or np.nan)),
+    )
 
 
 def verdict(df: pd.DataFrame) -> str:
@@ -124,9 +146,10 @@ def verdict(df: pd.DataFrame) -> str:
     r = int((df.ratio <= ACCEPT_RATIO).sum())
     f = int((df.reference_error_heldout <= ACCEPT_REF).sum())
     s = int(df.same_export.fillna(False).astype(bool).sum())
+    m = int((df.get("ratio_mirror", pd.Series(dtype=float)) <= ACCEPT_RATIO).sum())
     return (
         f"{r} of {n} shapes within {ACCEPT_RATIO:g}x the best rule (worst "
-        f"{df.ratio.max():.3g}), reference error <= {ACCEPT_REF:.0%} on {f}, "
+        f"{df.ratio.max():.3g}; mirrored: {m}), reference error <= {ACCEPT_REF:.0%} on {f}, "
         f"the same export on a busy machine on {s}"
     )
 

@@ -121,3 +121,17 @@ def make_shape(shape: Shape, path: Path) -> int:
     points = coords.reshape(-1, 3)[used]
     meshio.write(path, meshio.Mesh(points, [("tetra", renumber[cells])]))
     return tets
+
+
+def mirror(path: Path, out: Path) -> None:
+    """The VTU ``path`` reflected across the mid-plane of its longest axis (the axis
+    calibrate clamps at its low end), every tetrahedron's orientation kept positive: the
+    same mesh held and loaded at its other end."""
+    import meshio
+
+    m = meshio.read(path)
+    p = np.array(m.points, float)
+    a = int(np.argmax(np.ptp(p, axis=0)))
+    p[:, a] = p[:, a].min() + p[:, a].max() - p[:, a]
+    tets = np.array(m.cells_dict["tetra"])[:, [1, 0, 2, 3]]  # a reflection flips each sign
+    meshio.write(out, meshio.Mesh(p, [("tetra", tets)]))
