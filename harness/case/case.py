@@ -100,6 +100,7 @@ class Case:
     digest: str = ""
     heldout: tuple[str, ...] = ()
     validation: tuple[str, ...] = ()  # scored to accept or refuse a fit, never fitted
+    rank_by: tuple[str, ...] = ()  # fitted loads the rules are ranked by first
 
     def section(self, name: str) -> Mapping | None:
         return self.sections.get(name)

@@ -113,12 +113,17 @@ class EndLoads:
         )
 
     @property
+    def swapped(self) -> tuple[str, ...]:
+        """The tip loads and the twist with the ends swapped (the high end held, the low end
+        loaded): the training states most like the held-out loads, which calibrate ranks
+        the rules by ([loads] rank_by)."""
+        return ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
+
+    @property
     def training(self) -> tuple[str, ...]:
-        """Clamped training states (the family 'clamped'): the tip loads and the twist with
-        the ends swapped (the high end held, the low end loaded), so a fit sees how a clamp
-        behaves without seeing a held-out load."""
-        ends = ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
-        return ends + tuple(name for name, *_ in self._side_states())
+        """Clamped training states (the family 'clamped'): :attr:`swapped`, so a fit sees how
+        a clamp behaves without seeing a held-out load, and the side states."""
+        return self.swapped + tuple(name for name, *_ in self._side_states())
 
     def _side_states(self, prefix: str = "train"):
         """(name, side axis b, load axis c) of the side states (``prefix`` 'val': the

@@ -122,6 +122,12 @@ LOADS = {
         doc="load cases never fitted that decide whether a validated fit beats every rule "
         "(G_val_mean); never held out",
     ),
+    "rank_by": Field(
+        "strs",
+        None,
+        doc="fitted load cases the rules are ranked by first (G_rank_score: the mean of "
+        "their own normalised G), before G_fit_score",
+    ),
 }
 
 GRADED_LEVELS = 8  # default max_refine of the graded method: n = 2..10 cells per end zone. A cube's

@@ -173,6 +173,20 @@ def parse_validation(l: dict, loads, file: str) -> tuple[str, ...]:
     return tuple(n for n in names if n in val)
 
 
+def parse_rank_by(l: dict, loads, file: str, fitted) -> tuple[str, ...]:
+    """The [loads] rank_by names: fitted load cases (harness/stages/sms_measures.py rank)."""
+    _known(l, [c.name for c in loads], file, ("rank_by",))
+    for n in l["rank_by"] or ():
+        if n not in fitted:
+            raise CaseError(
+                f"load case '{n}' in rank_by is not fitted (held out or for validation)",
+                file=file,
+                field="loads.rank_by",
+                fix="rank the rules by fitted load cases only: the held-out ones never choose",
+            )
+    return tuple(n for n in fitted if n in set(l["rank_by"] or ()))
+
+
 def parse_heldout(l: dict, loads, file: str, validation=()) -> tuple[str, ...]:
     """The held-out load names from [loads] fit / heldout (either one, or both covering
     every load case but the ``validation`` ones once)."""

@@ -19,7 +19,13 @@ from harness.case import sections as case_sections
 from harness.case.case import Body, Case, Fibre, Material, ReferenceSpec, Region
 from harness.case.elasticity import transversely_isotropic_compliance
 from harness.case.fields import GRADED_LEVELS, TOP
-from harness.case.loads import parse_heldout, parse_loads, parse_validation, with_anchors
+from harness.case.loads import (
+    parse_heldout,
+    parse_loads,
+    parse_rank_by,
+    parse_validation,
+    with_anchors,
+)
 from harness.case.mesh_checks import COORDINATE_FIX, coordinate_problem
 from harness.case.schema import Field, check, describe, did_you_mean
 from harness.case.selectors import SPELLINGS, case_part
@@ -101,6 +107,8 @@ def case_of(
     loads, load_set = parse_loads(d["loads"], dim, body, file)
     validation = parse_validation(d["loads"], loads, file)
     heldout = parse_heldout(d["loads"], loads, file, validation)
+    fitted = [c.name for c in loads if c.name not in set(heldout) | set(validation)]
+    rank_by = parse_rank_by(d["loads"], loads, file, fitted)
     reference = _reference(d["reference"], dim, body, file)
     return Case(
         path=path,
@@ -119,6 +127,7 @@ def case_of(
         digest=digest,
         heldout=heldout,
         validation=validation,
+        rank_by=rank_by,
     )
 
 

@@ -85,7 +85,8 @@ FROM_ROW = dict(
 # MODEL.csv's columns, in order (those no row has are left out, dt_safe always written)
 COLUMNS = (
     "model stiffness optimizer exported n_nodes n_springs G_initial G_final G_norm_initial "
-    "G_norm_final G_fit_score G_fit_score_bound G_heldout G_heldout_mean G_heldout_mean_spread "
+    "G_norm_final G_fit_score G_fit_score_bound G_rank_score G_heldout G_heldout_mean "
+    "G_heldout_mean_spread "
     "G_val_mean val_fit val_best_rule val_accepted "
     "choice ref_error_max ref_error_heldout status k_ratio dt_stable dt_safe seconds seed "
     "opt_stop opt_stops opt_prior training_dropped E_effective nu_effective ref_note note"
@@ -117,7 +118,9 @@ def table(df: pd.DataFrame, wide: bool = False) -> str:
     # a fit the validation did not choose: its optimiser
     choice = short["choice"].astype(object)
     short["choice"] = choice.where(choice.notna(), fitted.where(fitted != "none", ""))
-    return short.to_string(index=False, float_format=lambda v: f"{v:.3g}", na_rep="-")
+    number = lambda v: "-" if pd.isna(v) else f"{v:.3g}"  # noqa: E731  (no sign column)
+    floats = ("held-out", "fitted", "ref-error", "dt_safe")
+    return short.to_string(index=False, formatters={c: number for c in floats}, na_rep="-")
 
 
 def metadata(s, rows, exported, net, case) -> dict:

@@ -188,6 +188,12 @@ SCORES = [  # the G criteria (harness/scoring.py)
         "normalised G averaged per family (linear states, clamped), families alike",
     ),
     Column(
+        "G_rank_score",
+        "",
+        "the mean of the own normalised G of the fitted loads [loads] rank_by names "
+        "(calibrate: the end-swapped training states); rules are ranked by it first",
+    ),
+    Column(
         "G_fit_score_bound",
         "",
         "a rule left unsolved under the clamps: a lower bound of its G_fit_score (half its "

@@ -49,7 +49,7 @@ from harness.stages import sms_rows, sms_training
 from harness.stages.classes.base import Setting
 from harness.stages.classes.springs import of_spec
 from harness.stages.sms_fit import case_file
-from harness.stages.sms_rules import fit_score_of, solve_rules
+from harness.stages.sms_rules import fit_score_of, rank_score_of, solve_rules
 from harness.stages.sms_runs import optimiser_runs, time_to_reach
 
 NAME = "sms"
@@ -352,13 +352,13 @@ def _solve_rules(case, ctx, opt, base, nets, first, u_ref, names, weights) -> tu
     """Every rule's statics over every load and the G_fit_score bounds of the rules a large
     mesh leaves unsolved (harness/stages/sms_rules.py; ``first`` always solved unless the
     fits start from the best rule)."""
-    score = None
+    score = rank = None
     if u_ref is not None:
-        score = partial(
-            fit_score_of, case=case, u_ref=u_ref, names=names, classes=base.classes, weights=weights
-        )
+        of = dict(case=case, u_ref=u_ref, names=names, classes=base.classes, weights=weights)
+        score = partial(fit_score_of, **of)
+        rank = partial(rank_score_of, **of) if case.rank_by else None
     first = first if opt.get("start", "first") != "best" else None
-    return solve_rules(case, nets, score, first, ctx.status)
+    return solve_rules(case, nets, score, first, ctx.status, rank)
 
 
 def _training(case, ctx, ref, base, weights, names, u_ref, solved) -> tuple:

@@ -40,17 +40,31 @@ def families(case, names) -> list[str]:
 def fit_score(case, sc) -> dict:
     """``G_fit_score``: the validation's score of the row's model on the fitted loads as
     they are (harness/optimize/select.py ``training_score``: each load's own normalised G,
-    families and clamped states weighted alike); 'best' starts the fits from its lowest."""
+    families and clamped states weighted alike); ``G_rank_score``: the mean of the own
+    normalised G of the fitted loads [loads] rank_by names (NaN: none of them fitted)."""
     names = list(case.fit_loads)
+    by = [sc.per_load_norm[n] for n in names if n in set(case.rank_by)]
     return {
-        "G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names))
+        "G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names)),
+        "G_rank_score": float(np.mean(by)) if by else math.nan,
     }
 
 
+def _finite(row, key) -> float:
+    v = row.get(key, math.nan)
+    return v if v is not None and math.isfinite(v) else math.inf
+
+
 def rank(row) -> tuple:
-    """Rows ranked as 'best' ranks rules: by ``G_fit_score``, then by the pooled G."""
-    score = row.get("G_fit_score", math.nan)
-    return (score if math.isfinite(score) else math.inf, row.get("G_norm_final", math.inf))
+    """Rows ranked as 'best' ranks rules (the fits start from the first, a refused fit
+    exports it): by ``G_rank_score``, then ``G_fit_score``, then the pooled G. calibrate
+    ranks by the end-swapped training states, the fitted loads most like the held-out
+    ones (docs/calibrate.md, "Rules and the fit")."""
+    return (
+        _finite(row, "G_rank_score"),
+        _finite(row, "G_fit_score"),
+        row.get("G_norm_final", math.inf),
+    )
 
 
 def validation_rank(row) -> tuple:

@@ -9,7 +9,9 @@ free-traction score, and stops at the rules that cannot rank first: a rule's
 ``G_fit_score`` (harness/optimize/select.py ``training_score``: the mean of its
 free-traction part and its clamped part) is at least half its free-traction part, so a
 rule whose half is above the best complete score so far is not solved under the clamps.
-Its row keeps that bound (``G_fit_score_bound``) and says why it has no other score.
+Its row keeps that bound (``G_fit_score_bound``) and says why it has no other score. A case
+that ranks by [loads] rank_by (calibrate's) solves every rule on the free-traction and the
+rank_by states instead, and under the other clamps only the rule they rank first.
 """
 
 from __future__ import annotations
@@ -43,12 +45,13 @@ def _merge(a, b, names):
 
 
 def solve_rules(
-    case, nets: dict, score, first: str | None = None, status=lambda msg: None
+    case, nets: dict, score, first: str | None = None, status=lambda msg: None, rank=None
 ) -> tuple[dict, dict]:
     """({rule: StaticsResult over every load}, {rule: lower bound of its G_fit_score} for
     the rules left unsolved under the clamps). ``score(res)``: a complete result's
     G_fit_score, and of a free-traction-only result its free-traction part; ``first``: a
-    rule always solved (the one the user named)."""
+    rule always solved (the one the user named); ``rank(res)``: the G_rank_score of a
+    result holding the [loads] rank_by states (None: the case has none)."""
     rules = list(nets)
     if score is None:
         return dict(zip(rules, statics.solve_all(list(nets.values()), case))), {}
@@ -58,6 +61,8 @@ def solve_rules(
     if n_dofs <= ALL_RULES_DOFS or not free or not rest:
         status(f"statics of the {len(rules)} stiffness rule{'s' * (len(rules) > 1)}")
         return dict(zip(rules, statics.solve_all(list(nets.values()), case))), {}
+    if rank is not None:
+        return _ranked(case, nets, score, first, status, rank)
     status(f"statics of the {len(rules)} stiffness rules on the free-traction states")
     part = dict(zip(rules, statics.solve_all(list(nets.values()), case, free)))
     halves = {
@@ -75,6 +80,41 @@ def solve_rules(
         solved[r] = res
         best = min(best, score(res))
     return solved, bounds
+
+
+def _ranked(case, nets: dict, score, first, status, rank) -> tuple[dict, dict]:
+    """solve_rules on a large mesh of a case with [loads] rank_by: every rule on the
+    free-traction and the rank_by states, then under every other clamp only ``first`` and
+    the rule of the lowest G_rank_score (the others get their G_fit_score bound)."""
+    rules = list(nets)
+    some = free_loads(case) + [n for n in case.rank_by if n not in free_loads(case)]
+    rest = [l.name for l in case.loads if l.name not in some]
+    status(f"statics of the {len(rules)} stiffness rules on the free and the ranking states")
+    part = dict(zip(rules, statics.solve_all(list(nets.values()), case, some)))
+    best = min(rules, key=lambda r: (rank(part[r]), r))
+    names = [l.name for l in case.loads]
+    solved, bounds = {}, {}
+    for r in rules:
+        if r not in (first, best):
+            free = free_loads(case)
+            bounds[r] = 0.5 * score(_merge(part[r], part[r], free))  # as solve_rules bounds
+            continue
+        status(f"statics of the stiffness rule {r} under the clamps")
+        solved[r] = _merge(part[r], statics.solve_all([nets[r]], case, rest)[0], names)
+    return solved, bounds
+
+
+def rank_score_of(res, case, u_ref, names, classes, weights) -> float:
+    """The G_rank_score of a statics result holding the [loads] rank_by states."""
+    held = [n for n in case.rank_by if n in case.fit_loads]
+    sc = g_arrays(
+        u_ref[[names.index(n) for n in held]],
+        res.u[[res.names.index(n) for n in held]],
+        classes,
+        weights,
+        held,
+    )
+    return float(np.mean([sc.per_load_norm[n] for n in held])) if held else math.inf
 
 
 def fit_score_of(res, case, u_ref, names, classes, weights) -> float:

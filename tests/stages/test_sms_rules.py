@@ -24,8 +24,22 @@ def rows(mesh, out, *argv):
 
 @pytest.mark.slow
 def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, monkeypatch):
+    """Without [loads] rank_by (calibrate's end-swapped states taken away): the bound."""
     import json
 
+    from harness.case.default_loads import EndLoads
+
+    monkeypatch.setattr(EndLoads, "swapped", property(lambda self: ()))
+    monkeypatch.setattr(
+        EndLoads,
+        "training",
+        property(
+            lambda self: (
+                ("train-tip", "train-tip2", "train-torsion")
+                + tuple(n for n, *_ in self._side_states())
+            )
+        ),
+    )
     mesh = meshes.cylinder(tmp_path)
     full, full_json = rows(mesh, tmp_path / "full.vtu")
     from harness.mechanics import statics
@@ -59,3 +73,47 @@ def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, 
         json.loads(full_json)["spring_stiffness"]
     )
     assert part.index[part.exported][0] == full.index[full.exported][0]
+
+
+@pytest.mark.slow
+def test_ranked_rules_a_large_mesh_solves_the_best_ranked_one_under_the_clamps(
+    tmp_path, monkeypatch
+):
+    """calibrate's case ranks by [loads] rank_by (the end-swapped states): a large mesh
+    solves every rule on the free and those states (24 + 3 loads), then only the rule of
+    the lowest G_rank_score under the other clamps; it is the one the full solve ranks
+    first, its row and the export are the same, every other rule's bound is below its
+    true G_fit_score."""
+    import json
+
+    from harness.mechanics import statics
+
+    mesh = meshes.cylinder(tmp_path)
+    full, full_json = rows(mesh, tmp_path / "full.vtu")
+    solved = []
+    solve_all = statics.solve_all
+
+    def counting(nets, case, loads=None):
+        solved.append((len(list(nets)), None if loads is None else len(loads)))
+        return solve_all(nets, case, loads)
+
+    monkeypatch.setattr(statics, "solve_all", counting)
+    from harness.commands import calibrate_write
+
+    monkeypatch.setattr(calibrate_write, "settle_recipe", lambda net, case: None)
+    monkeypatch.setattr(sms_rules, "ALL_RULES_DOFS", 0)
+    part, part_json = rows(mesh, tmp_path / "part.vtu")
+    solved = [x for x in solved if x[1] is not None]
+    data = json.loads(full_json)
+    n_loads = len(data["loads_fitted"]) + len(data["loads_heldout"])
+    assert solved == [(len(part), 27), (1, n_loads - 27)]
+    best = full.G_rank_score.idxmin()
+    assert part.G_fit_score.notna().sum() == 1 and part.G_fit_score.notna()[best]
+    for col in ("G_rank_score", "G_fit_score", "G_norm_final", "G_heldout_mean"):
+        assert part.loc[best, col] == pytest.approx(full.loc[best, col], rel=1e-9), col
+    for r in part.index.difference([best]):
+        assert part.loc[r, "G_fit_score_bound"] <= full.loc[r, "G_fit_score"] + 1e-12, r
+    assert part.index[part.exported][0] == best == full.index[full.exported][0]
+    assert json.loads(part_json)["spring_stiffness"] == pytest.approx(
+        json.loads(full_json)["spring_stiffness"]
+    )
