@@ -13,8 +13,9 @@ from harness.stages import sms_measures as measures
 from harness.stages.rows import RuleColumns
 
 UNSOLVED = (
-    "not solved under the clamps: half its free-traction score is above the best rule's "
-    "G_fit_score (large meshes, harness/stages/sms_rules.py)"
+    "not solved under the clamps: it cannot rank first (half its free-traction score above "
+    "the best rule's G_fit_score, or a higher G_rank_score; large meshes, "
+    "harness/stages/sms_rules.py)"
 )
 
 
