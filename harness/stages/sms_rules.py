@@ -86,8 +86,8 @@ def _ranked(case, nets: dict, score, first, status, rank) -> tuple[dict, dict]:
     """solve_rules on a large mesh of a case with [loads] rank_by: every rule on the
     free-traction and the rank_by states, then under every other clamp only ``first`` and
     the rule of the lowest G_rank_score (the others get their G_fit_score bound)."""
-    rules = list(nets)
-    some = free_loads(case) + [n for n in case.rank_by if n not in free_loads(case)]
+    rules, free = list(nets), free_loads(case)
+    some = free + [n for n in case.rank_by if n not in free]
     rest = [l.name for l in case.loads if l.name not in some]
     status(f"statics of the {len(rules)} stiffness rules on the free and the ranking states")
     part = dict(zip(rules, statics.solve_all(list(nets.values()), case, some)))
@@ -96,7 +96,6 @@ def _ranked(case, nets: dict, score, first, status, rank) -> tuple[dict, dict]:
     solved, bounds = {}, {}
     for r in rules:
         if r not in (first, best):
-            free = free_loads(case)
             bounds[r] = 0.5 * score(_merge(part[r], part[r], free))  # as solve_rules bounds
             continue
         status(f"statics of the stiffness rule {r} under the clamps")
@@ -104,9 +103,8 @@ def _ranked(case, nets: dict, score, first, status, rank) -> tuple[dict, dict]:
     return solved, bounds
 
 
-def rank_score_of(res, case, u_ref, names, classes, weights) -> float:
-    """The G_rank_score of a statics result holding the [loads] rank_by states."""
-    held = [n for n in case.rank_by if n in case.fit_loads]
+def _per_load(res, held, u_ref, names, classes, weights) -> dict:
+    """{load: own normalised G} of a statics result over the loads ``held``."""
     sc = g_arrays(
         u_ref[[names.index(n) for n in held]],
         res.u[[res.names.index(n) for n in held]],
@@ -114,7 +112,16 @@ def rank_score_of(res, case, u_ref, names, classes, weights) -> float:
         weights,
         held,
     )
-    return float(np.mean([sc.per_load_norm[n] for n in held])) if held else math.inf
+    return sc.per_load_norm
+
+
+def rank_score_of(res, case, u_ref, names, classes, weights) -> float:
+    """The G_rank_score of a statics result holding the [loads] rank_by states."""
+    held = [n for n in case.rank_by if n in case.fit_loads]
+    if not held:
+        return math.inf
+    per = _per_load(res, held, u_ref, names, classes, weights)
+    return float(np.mean([per[n] for n in held]))
 
 
 def fit_score_of(res, case, u_ref, names, classes, weights) -> float:
@@ -123,11 +130,5 @@ def fit_score_of(res, case, u_ref, names, classes, weights) -> float:
     from harness.stages.sms_measures import families
 
     held = [n for n in case.fit_loads if n in res.names]
-    sc = g_arrays(
-        u_ref[[names.index(n) for n in held]],
-        res.u[[res.names.index(n) for n in held]],
-        classes,
-        weights,
-        held,
-    )
-    return training_score([sc.per_load_norm[n] for n in held], families(case, held))
+    per = _per_load(res, held, u_ref, names, classes, weights)
+    return training_score([per[n] for n in held], families(case, held))

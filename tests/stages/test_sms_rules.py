@@ -22,28 +22,14 @@ def rows(mesh, out, *argv):
     return rules, out.with_suffix(".json").read_text()
 
 
-@pytest.mark.slow
-def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, monkeypatch):
-    """Without [loads] rank_by (calibrate's end-swapped states taken away): the bound."""
-    import json
-
-    from harness.case.default_loads import EndLoads
-
-    monkeypatch.setattr(EndLoads, "swapped", property(lambda self: ()))
-    monkeypatch.setattr(
-        EndLoads,
-        "training",
-        property(
-            lambda self: (
-                ("train-tip", "train-tip2", "train-torsion")
-                + tuple(n for n, *_ in self._side_states())
-            )
-        ),
-    )
-    mesh = meshes.cylinder(tmp_path)
-    full, full_json = rows(mesh, tmp_path / "full.vtu")
+def full_and_part(tmp_path, monkeypatch):
+    """(every rule solved: rows, JSON; the same with the large-mesh path forced: rows, JSON;
+    the (networks, loads) of every rule solve the latter made)."""
+    from harness.commands import calibrate_write
     from harness.mechanics import statics
 
+    mesh = meshes.cylinder(tmp_path)
+    full, full_json = rows(mesh, tmp_path / "full.vtu")
     solved = []
     solve_all = statics.solve_all
 
@@ -52,16 +38,26 @@ def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, 
         return solve_all(nets, case, loads)
 
     monkeypatch.setattr(statics, "solve_all", counting)
-    from harness.commands import calibrate_write
-
     # the export's solve, not a rule's
     monkeypatch.setattr(calibrate_write, "settle_recipe", lambda net, case: None)
     monkeypatch.setattr(sms_rules, "ALL_RULES_DOFS", 0)
     part, part_json = rows(mesh, tmp_path / "part.vtu")
+    # each rule's solves (the plain tets row's solve of every load is not a rule's)
+    return full, full_json, part, part_json, [x for x in solved if x[1] is not None]
+
+
+@pytest.mark.slow
+def test_rules_that_cannot_rank_first_are_not_solved_under_the_clamps(tmp_path, monkeypatch):
+    """Without [loads] rank_by (calibrate's taken away): the free-traction bound."""
+    import json
+
+    from harness.case import reader
+
+    monkeypatch.setattr(reader, "parse_rank_by", lambda *args: ())
+    full, full_json, part, part_json, solved = full_and_part(tmp_path, monkeypatch)
     skipped = part.index[part.G_fit_score.isna()]
     assert len(skipped) >= 1
-    # free states, then each rule (the plain tets row's solve of every load is not a rule's)
-    solved = [x for x in solved if x[1] is not None]
+    # free states, then each rule
     assert solved[0] == (len(part), 24) and len(solved) - 1 == len(part) - len(skipped)
     best = full.G_fit_score.min()
     for r in skipped:
@@ -86,24 +82,7 @@ def test_ranked_rules_a_large_mesh_solves_the_best_ranked_one_under_the_clamps(
     true G_fit_score."""
     import json
 
-    from harness.mechanics import statics
-
-    mesh = meshes.cylinder(tmp_path)
-    full, full_json = rows(mesh, tmp_path / "full.vtu")
-    solved = []
-    solve_all = statics.solve_all
-
-    def counting(nets, case, loads=None):
-        solved.append((len(list(nets)), None if loads is None else len(loads)))
-        return solve_all(nets, case, loads)
-
-    monkeypatch.setattr(statics, "solve_all", counting)
-    from harness.commands import calibrate_write
-
-    monkeypatch.setattr(calibrate_write, "settle_recipe", lambda net, case: None)
-    monkeypatch.setattr(sms_rules, "ALL_RULES_DOFS", 0)
-    part, part_json = rows(mesh, tmp_path / "part.vtu")
-    solved = [x for x in solved if x[1] is not None]
+    full, full_json, part, part_json, solved = full_and_part(tmp_path, monkeypatch)
     data = json.loads(full_json)
     n_loads = len(data["loads_fitted"]) + len(data["loads_heldout"])
     assert solved == [(len(part), 27), (1, n_loads - 27)]
