@@ -12,6 +12,7 @@ polynomial of their nearest element. Memory is O(points x k), in chunks.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 import skfem
 from scipy.spatial import cKDTree
 
@@ -93,6 +94,19 @@ class Locator:
                 fix="give points inside or on the boundary of the body",
             )
         return elem, ref
+
+    def matrix(self, basis: skfem.CellBasis, points) -> sp.csr_matrix:
+        """The sparse (n, ns) matrix taking scalar-dof values (ns, c) to their field at
+        points (n, dim): what :meth:`evaluate` computes, built once for many fields (its
+        nonzeros are the element's basis functions per point, where ``evaluate``'s work
+        array holds every field's values at them)."""
+        elem, ref = self.locate(points)
+        phi = self.shape_values(basis.elem, ref)  # nbf, n
+        rows = np.broadcast_to(np.arange(phi.shape[1]), phi.shape)
+        cols = basis.element_dofs[:, elem]
+        return sp.csr_matrix(
+            (phi.ravel(), (rows.ravel(), cols.ravel())), shape=(phi.shape[1], basis.N)
+        )
 
     def shape_values(self, elem_obj: skfem.Element, ref: np.ndarray) -> np.ndarray:
         """Basis function values (nbf, n) of a scalar element at reference points."""

@@ -310,7 +310,7 @@ def _refine_levels(case, d: Discretisation, solved, parts, est: dict, how: Plan,
             return d.mesh, U, est, history, changes, stop
         kept = prune(kept + [(d.ndof, U)])
         fd = Discretisation(finer, spec.cell, spec.element)
-        kept = carry(kept, d, fd, names)
+        kept = carry(kept, d, fd, [l.name for l in solved])  # closed forms: no change
         d = fd
     raise AssertionError("unreachable: the last level returns")
 

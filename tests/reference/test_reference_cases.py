@@ -40,6 +40,8 @@ def test_locator_agrees_with_scikit_fem_probes(tmp_path, cell, dim):
     mine = sol.displacement(x, load)
     theirs = np.column_stack([sol.basis.probes(x.T) @ U[:, c] for c in range(dim)])
     assert np.abs(mine - theirs).max() <= 1e-12 * np.abs(theirs).max()
+    matrix = sol.locator.matrix(sol.basis, x) @ U  # the same sampling as one sparse matrix
+    assert np.abs(matrix - theirs).max() <= 1e-12 * np.abs(theirs).max()
     elem, _ = sol.locator.locate(x[60:])
     finder = sol.mesh.element_finder()(*x[60:].T)
     assert np.mean(elem == finder) > 0.99  # interior points: the same element
