@@ -209,7 +209,7 @@ def reference(p):
         type=int,
         default=100,
         help="reference refinements at most (default 100: not counted, tri/tet meshes are "
-        "refined adaptively until --tol on every held-out load or 300k dofs in 3-D, 400k in "
+        "refined adaptively until --tol on every held-out load or 600k dofs in 3-D, 400k in "
         "2-D, a mesh too large for that estimated from coarser meshes of its body; below 100: "
         "that many, 2-3 adaptive bisection steps each within 200k dofs; quad/hex: uniform, "
         "x4-8 dofs; 0: no estimate)",
