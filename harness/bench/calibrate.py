@@ -21,7 +21,8 @@ rule's G_fit_score, the exported model's G_heldout_mean beside the best
 rule's in hindsight, the reference's own error on the fitted and held-out loads, and the
 ratios of seconds to the 1k mesh's and to the rule alone, and fit_ratio: the fit's time
 (seconds - rule_seconds) over the rule alone's (target: at most 1). The reference's error: meshes
-up to ~10k tets are refined adaptively (up to 200k dofs); larger ones are estimated from
+of up to a quarter of the adaptive cap's dofs (reference/adaptive/adapt.py TARGET_DOFS: 150k
+dofs, ~30k tets) are refined adaptively; larger ones are estimated from
 coarse levels of their body (reference/adaptive/coarse.py, their own system solved in the coarse
 levels' subspaces), the solve on the mesh itself by the two-level method
 (reference/solvers/twolevel.py).
