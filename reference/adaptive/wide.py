@@ -131,10 +131,8 @@ def coefficients(p: float, dofs, dim: int) -> tuple:
 
 def _interpolate(coarse: Discretisation, fields: np.ndarray, fine: Discretisation) -> np.ndarray:
     """Coarse fields (ns_c, m) at the fine mesh's dof locations (ns_f, m): exact, the
-    meshes being nested and the element the same. One sparse evaluation matrix for all m
-    fields (every load of every kept level: ~330 columns; evaluating them point by point
-    held 10 x 100k x m values, 5.6-8.4 GB of a 1k-tet ellipsoid's levels at 113-173k dofs)."""
-    return Locator(coarse.mesh).matrix(coarse.basis, fine.doflocs.T) @ fields
+    meshes being nested and the element the same."""
+    return Locator(coarse.mesh).evaluate(coarse.basis, fields, fine.doflocs.T)
 
 
 def wide_levels(dofs, k: int):
