@@ -115,9 +115,19 @@ class EndLoads:
     @property
     def swapped(self) -> tuple[str, ...]:
         """The tip loads and the twist with the ends swapped (the high end held, the low end
-        loaded): the training states most like the held-out loads, which calibrate ranks
-        the rules by ([loads] rank_by)."""
+        loaded): the training states most like the held-out loads (:attr:`twins`)."""
         return ("train-tip", "train-tip2", "train-torsion") if self.dim == 3 else ("train-tip",)
+
+    @property
+    def twins(self) -> tuple[str, ...]:
+        """Each held-out load's end-swapped twin, in :attr:`names`' order: the swapped
+        state that bends the same way (the sag, the tip and the bridge: ``train-tip``) or
+        twists. Calibrate ranks the rules by their mean ([loads] rank_by, a name listed
+        three times counting three times), so the ranking weighs the bending across, the
+        bending along the third axis and the twist as the held-out mean does."""
+        if self.dim == 2:
+            return ("train-tip",) * 3
+        return ("train-tip", "train-tip", "train-tip2", "train-torsion", "train-tip")
 
     @property
     def training(self) -> tuple[str, ...]:

@@ -126,7 +126,7 @@ LOADS = {
         "strs",
         None,
         doc="fitted load cases the rules are ranked by first (G_rank_score: the mean of "
-        "their own normalised G), before G_fit_score",
+        "their own normalised G, a name listed n times counting n times), before G_fit_score",
     ),
 }
 

@@ -174,7 +174,8 @@ def parse_validation(l: dict, loads, file: str) -> tuple[str, ...]:
 
 
 def parse_rank_by(l: dict, loads, file: str, fitted) -> tuple[str, ...]:
-    """The [loads] rank_by names: fitted load cases (harness/stages/sms_measures.py rank)."""
+    """The [loads] rank_by names as listed: fitted load cases (harness/stages/sms_measures.py
+    rank), a name listed n times counting n times in their mean."""
     _known(l, [c.name for c in loads], file, ("rank_by",))
     for n in l["rank_by"] or ():
         if n not in fitted:
@@ -184,7 +185,7 @@ def parse_rank_by(l: dict, loads, file: str, fitted) -> tuple[str, ...]:
                 field="loads.rank_by",
                 fix="rank the rules by fitted load cases only: the held-out ones never choose",
             )
-    return tuple(n for n in fitted if n in set(l["rank_by"] or ()))
+    return tuple(l["rank_by"] or ())
 
 
 def parse_heldout(l: dict, loads, file: str, validation=()) -> tuple[str, ...]:

@@ -183,9 +183,10 @@ EPILOG = """outputs (SI units; lengths in m whatever --length-unit):
               the row tets[E, nu], stiffness p1, optimizer not-a-candidate: the plain linear
               tetrahedra with --E, --nu, never exported nor ranked),
               n_nodes, n_springs, G_initial and G_final (weighted G, m), G_norm_initial and
-              G_norm_final (fitted loads, pooled), G_rank_score (the end-swapped training
-              states' mean G_norm; ranks the rules first), G_fit_score (fitted loads: the mean
-              of each family's and of the clamped states' own G_norm; ranks them next), G_heldout,
+              G_norm_final (fitted loads, pooled), G_rank_score (the mean G_norm of the
+              held-out loads' end-swapped twins; ranks the rules first), G_fit_score (fitted
+              loads: the mean of each family's and of the clamped states' own G_norm; ranks
+              them next), G_heldout,
               G_heldout_mean, G_heldout_mean_spread, G_val_mean, val_fit, val_best_rule and
               val_accepted (the validation loads: each row's error, the fit's, the rule they rank
               first, whether the fit is exported), choice, ref_error_max and ref_error_heldout

@@ -131,7 +131,7 @@ def case_table(s, dim: int, cell_types=(), mesh_file: Path | None = None, ends=N
         magnitudes = ends.magnitudes(s.E, s.nu, s.density, s.peak_strain)
         parts, cases = ends.tables(magnitudes, validation=validates(s))
         body["parts"] = parts
-        loads.update(heldout=list(ends.names), case=cases, rank_by=list(ends.swapped))
+        loads.update(heldout=list(ends.names), case=cases, rank_by=list(ends.twins))
         if validates(s):
             loads["validation"] = list(ends.validation)
     reference = {"modes": 0, "tol": float(s.tol), "max_refine": int(s.max_refine)}

@@ -95,7 +95,7 @@ def model(p):
         choices=RULES + ("best",),
         default="best",
         help="stiffness rule of the initial constants: best (default: the rule with the lowest "
-        "G_rank_score, the error on the end-swapped training states, then G_fit_score on "
+        "G_rank_score, the error on the held-out loads' end-swapped twins, then G_fit_score on "
         "the fitted loads; the fit starts from it) or one of them",
     )
 

@@ -191,7 +191,7 @@ SCORES = [  # the G criteria (harness/scoring.py)
         "G_rank_score",
         "",
         "the mean of the own normalised G of the fitted loads [loads] rank_by names "
-        "(calibrate: the end-swapped training states); rules are ranked by it first",
+        "(calibrate: each held-out load's end-swapped twin); rules are ranked by it first",
     ),
     Column(
         "G_fit_score_bound",

@@ -41,9 +41,10 @@ def fit_score(case, sc) -> dict:
     """``G_fit_score``: the validation's score of the row's model on the fitted loads as
     they are (harness/optimize/select.py ``training_score``: each load's own normalised G,
     families and clamped states weighted alike); ``G_rank_score``: the mean of the own
-    normalised G of the fitted loads [loads] rank_by names (NaN: none of them fitted)."""
+    normalised G of the fitted loads [loads] rank_by names, each as often as it is listed
+    (NaN: none of them fitted)."""
     names = list(case.fit_loads)
-    by = [sc.per_load_norm[n] for n in names if n in set(case.rank_by)]
+    by = [sc.per_load_norm[n] for n in case.rank_by if n in set(names)]
     return {
         "G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names)),
         "G_rank_score": float(np.mean(by)) if by else math.nan,

@@ -87,7 +87,7 @@ def _ranked(case, nets: dict, score, first, status, rank) -> tuple[dict, dict]:
     free-traction and the rank_by states, then under every other clamp only ``first`` and
     the rule of the lowest G_rank_score (the others get their G_fit_score bound)."""
     rules, free = list(nets), free_loads(case)
-    some = free + [n for n in case.rank_by if n not in free]
+    some = free + [n for n in dict.fromkeys(case.rank_by) if n not in free]
     rest = [l.name for l in case.loads if l.name not in some]
     status(f"statics of the {len(rules)} stiffness rules on the free and the ranking states")
     part = dict(zip(rules, statics.solve_all(list(nets.values()), case, some)))
@@ -117,10 +117,10 @@ def _per_load(res, held, u_ref, names, classes, weights) -> dict:
 
 def rank_score_of(res, case, u_ref, names, classes, weights) -> float:
     """The G_rank_score of a statics result holding the [loads] rank_by states."""
-    held = [n for n in case.rank_by if n in case.fit_loads]
+    held = [n for n in case.rank_by if n in case.fit_loads]  # a repeated name counts again
     if not held:
         return math.inf
-    per = _per_load(res, held, u_ref, names, classes, weights)
+    per = _per_load(res, list(dict.fromkeys(held)), u_ref, names, classes, weights)
     return float(np.mean([per[n] for n in held]))
 
 

@@ -1,7 +1,8 @@
 """[loads] rank_by: the fitted loads the rules are ranked by first (harness/stages/
 sms_measures.py ``rank``). It names fitted loads only (a held-out load never chooses),
-calibrate's case ranks by the end-swapped training states, and rank() orders rows by
-G_rank_score, then G_fit_score, then the pooled G."""
+a name listed n times counts n times, calibrate's case ranks by each held-out load's
+end-swapped twin, and rank() orders rows by G_rank_score, then G_fit_score, then the
+pooled G."""
 
 import math
 import textwrap
@@ -38,10 +39,23 @@ def box_case(tmp_path, rank_by: str):
     return p
 
 
-def test_rank_by_names_fitted_loads_in_the_case_order(tmp_path):
-    case = load_case(box_case(tmp_path, '["shear-xz", "stretch-y"]'))
-    assert case.rank_by == ("stretch-y", "shear-xz")  # the case's order of loads
+def test_rank_by_names_fitted_loads_as_listed(tmp_path):
+    case = load_case(box_case(tmp_path, '["shear-xz", "stretch-y", "shear-xz"]'))
+    assert case.rank_by == ("shear-xz", "stretch-y", "shear-xz")  # repeats kept: weights
     assert set(case.rank_by) <= set(case.fit_loads)
+
+
+def test_the_rank_score_counts_a_name_as_often_as_it_is_listed(tmp_path):
+    """G_rank_score is the mean over the list: shear-xz listed twice weighs 2/3."""
+    from types import SimpleNamespace
+
+    from harness.stages.sms_measures import fit_score
+
+    case = load_case(box_case(tmp_path, '["shear-xz", "stretch-y", "shear-xz"]'))
+    per = {n: 0.0 for n in case.fit_loads}
+    per.update({"shear-xz": 0.3, "stretch-y": 0.6})
+    score = fit_score(case, SimpleNamespace(per_load_norm=per))["G_rank_score"]
+    assert score == pytest.approx((0.3 + 0.6 + 0.3) / 3)  # 0.45 once each
 
 
 def test_a_held_out_load_cannot_rank(tmp_path):
@@ -61,8 +75,9 @@ def test_rank_orders_by_the_rank_score_first():
     assert min(plain, key=rank) is plain[2]
 
 
-def test_calibrate_ranks_by_the_end_swapped_states():
-    """calibrate's case table on a box of tets: rank_by is the three end-swapped states."""
+def test_calibrate_ranks_by_the_end_swapped_twins():
+    """calibrate's case table on a box of tets: rank_by is each held-out load's end-swapped
+    twin (sag, tip, bridge: train-tip; tip2: train-tip2; torsion: train-torsion)."""
     import numpy as np
     import skfem
 
@@ -78,5 +93,7 @@ def test_calibrate_ranks_by_the_end_swapped_states():
     args = ["calibrate", "box.vtu", "--E", "1e5", "--nu", "0.3", "--out", "m.vtu"]
     s = Settings.of(build_parser().parse_args(args))
     table = case_table(s, 3, ("tetra",), ends=ends)
-    assert table["loads"]["rank_by"] == ["train-tip", "train-tip2", "train-torsion"]
+    assert table["loads"]["heldout"] == ["sag", "tip", "tip2", "torsion", "bridge"]
+    twins = ["train-tip", "train-tip", "train-tip2", "train-torsion", "train-tip"]
+    assert table["loads"]["rank_by"] == twins
     assert set(table["loads"]["rank_by"]) <= {c["name"] for c in table["loads"]["case"]}
