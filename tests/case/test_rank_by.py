@@ -55,7 +55,7 @@ def test_the_rank_score_counts_a_name_as_often_as_it_is_listed(tmp_path):
     per = {n: 0.0 for n in case.fit_loads}
     per.update({"shear-xz": 0.3, "stretch-y": 0.6})
     score = fit_score(case, SimpleNamespace(per_load_norm=per))["G_rank_score"]
-    assert score == pytest.approx((0.3 + 0.6 + 0.3) / 3)  # 0.45 once each
+    assert score == pytest.approx((0.3 + 0.6 + 0.3) / 3)  # 0.4, not (0.3 + 0.6) / 2
 
 
 def test_a_held_out_load_cannot_rank(tmp_path):
