@@ -78,6 +78,11 @@ class Section:
     tip_radius: float
 
 
+# each held-out load's end-swapped twin (EndLoads.twins): the state loading the other end alike
+TWIN = {"sag": "train-tip", "tip": "train-tip", "bridge": "train-tip"}
+TWIN.update({"tip2": "train-tip2", "torsion": "train-torsion"})
+
+
 @dataclass(frozen=True)
 class EndLoads:
     axis: int  # the longest axis: clamp at its low end, tip at its high end
@@ -125,9 +130,7 @@ class EndLoads:
         twists. Calibrate ranks the rules by their mean ([loads] rank_by, a name listed
         three times counting three times), so the ranking weighs the bending across, the
         bending along the third axis and the twist as the held-out mean does."""
-        if self.dim == 2:
-            return ("train-tip",) * 3
-        return ("train-tip", "train-tip", "train-tip2", "train-torsion", "train-tip")
+        return tuple(TWIN[n] for n in self.names)
 
     @property
     def training(self) -> tuple[str, ...]:

@@ -44,7 +44,7 @@ def fit_score(case, sc) -> dict:
     normalised G of the fitted loads [loads] rank_by names, each as often as it is listed
     (NaN: none of them fitted)."""
     names = list(case.fit_loads)
-    by = [sc.per_load_norm[n] for n in case.rank_by if n in set(names)]
+    by = [sc.per_load_norm[n] for n in case.rank_by if n in case.fit_loads]
     return {
         "G_fit_score": training_score([sc.per_load_norm[n] for n in names], families(case, names)),
         "G_rank_score": float(np.mean(by)) if by else math.nan,
