@@ -154,7 +154,7 @@ def _one(mesh: Path, out: Path) -> dict:
         reference_error_fitted=data.get("reference_error_fitted"),
         reference_error_heldout=data.get("reference_error_heldout"),
         dt_stable=data.get("dt_stable"),
-        note=f"lbfgs by iteration counts; stop {fit.get('opt_stop', '')}",
+        note=f"fits by iteration counts; stop {fit.get('opt_stop', '')}",
     )
 
 

@@ -28,12 +28,10 @@ def value_and_grad(problem, k: np.ndarray, grad: bool = True, tension2: np.ndarr
     spring tensions of the model's solutions, sum over loads of (k_e b_e.u)^2, are added to
     it (in the caller: a spread evaluates without them)."""
     k = np.asarray(k, float)
-    running = _SPREAD.get(id(problem)) if tension2 is None else None
-    if running is not None:
-        tasks = [(id(problem), j, k, grad) for j in range(len(problem.solve_parts()))]
-        parts = forkpool.run(running[0], _remote, tasks)
+    if tension2 is None:
+        parts = per_group(problem, k, group_terms, grad)
     else:
-        parts = _here(problem, k, grad, tension2)
+        parts = _here(problem, k, group_terms, (grad, tension2))
     G2, g = 0.0, (np.zeros(len(k)) if grad else None)
     for part in parts:
         for term, gradient in part:
@@ -41,6 +39,18 @@ def value_and_grad(problem, k: np.ndarray, grad: bool = True, tension2: np.ndarr
             if grad:
                 g += gradient
     return G2, g
+
+
+def per_group(problem, k: np.ndarray, fn, *args) -> list:
+    """[fn(group, solve, k, *args)] of each group of the problem's load sets at k (a fresh
+    factorisation each, FitProblem.solvers), in the caller or, within :func:`spread`, in
+    its workers (``fn`` a module-level function: it is pickled by its name); the list in the
+    groups' order either way."""
+    running = _SPREAD.get(id(problem))
+    if running is None:
+        return list(_here(problem, np.asarray(k, float), fn, args))
+    tasks = [(id(problem), j, k, fn, args) for j in range(len(problem.solve_parts()))]
+    return forkpool.run(running[0], _remote, tasks)
 
 
 def group_terms(group: list, solve, k: np.ndarray, grad: bool, tension2=None) -> list:
@@ -60,27 +70,27 @@ def group_terms(group: list, solve, k: np.ndarray, grad: bool, tension2=None) ->
     return out
 
 
-def _here(problem, k: np.ndarray, grad: bool, tension2):
-    """Each group's terms in the caller, its factorisation dropped before the next one."""
+def _here(problem, k: np.ndarray, fn, args):
+    """Each group's fn(...) in the caller, its factorisation dropped before the next one."""
     for group, solve in problem.solvers(k):
-        yield group_terms(group, solve, k, grad, tension2)
+        yield fn(group, solve, k, *args)
         del solve  # its factorisation, before the next one
 
 
-def _remote(task) -> list:
-    """One group's terms (a task of a spread's pool)."""
-    token, j, k, grad = task
+def _remote(task):
+    """One group's fn(...) (a task of a spread's pool)."""
+    token, j, k, fn, args = task
     group, solve = _SPREAD[token][1].solver_of(j, k)
-    return group_terms(group, solve, k, grad)
+    return fn(group, solve, k, *args)
 
 
 @contextmanager
 def spread(problem, workers: int):
-    """Within the block, :func:`value_and_grad` of ``problem`` (this very object) sends its
-    groups to a pool of ``workers`` processes (at most one per group; none when that is one:
-    the caller evaluates). The pool forks at the first evaluation after the block begins,
-    so what the caller computed before it (the first evaluation's orderings and maps) is
-    shared."""
+    """Within the block, :func:`per_group` (and so :func:`value_and_grad`) of ``problem``
+    (this very object) sends its groups to a pool of ``workers`` processes (at most one per
+    group; none when that is one: the caller evaluates). The pool forks at the first
+    evaluation after the block begins, so what the caller computed before it (the first
+    evaluation's orderings and maps) is shared."""
     workers = min(workers, len(problem.solve_parts()))
     if workers <= 1:
         yield

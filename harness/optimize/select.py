@@ -62,6 +62,7 @@ from harness.optimize import select_counts
 from harness.optimize.deadline import Deadline
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.evaluation import spread, value_and_grad
+from harness.optimize.few import few_fit
 from harness.optimize.permatrix import per_matrix
 from harness.optimize.problem import FitProblem
 from harness.optimize.select_table import (  # noqa: F401 (the table's names, here as well)
@@ -221,7 +222,7 @@ def columns(
 def fit(
     problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None, deadline=None
 ) -> np.ndarray:
-    """The candidate's constants fitted on ``problem`` (L-BFGS-B, adjoint gradient), from
+    """The candidate's constants fitted on ``problem`` (as :func:`fit_result`), from
     the rule (x0 None) or from log(k/k0) = x0 per parameter; ``deadline``: a cap that
     aborts (harness/optimize/deadline.py; None: the options' max_seconds)."""
     return fit_result(problem, cand, options, x0, features, deadline)["k"]
@@ -272,10 +273,13 @@ def fit_result(
     problem: FitProblem, cand: Candidate, options: dict, x0=None, features=None, deadline=None
 ) -> dict:
     """lbfgs's result fields (harness/optimize/gradient.py) of the candidate's fit
-    ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features);
-    ``deadline`` as :func:`fit`'s."""
+    ('features' candidates: :func:`features_fit`, ``features`` the (springs, q) features;
+    'one': harness/optimize/few.py, its maxiter counting evaluations); ``deadline`` as
+    :func:`fit`'s."""
     from harness.optimize.gradient import lbfgs
 
+    if cand.groups == "one":
+        return few_fit(problem, options, x0, deadline)
     if cand.groups == "features":
         M = basis(problem, len(features), features)
         return features_fit(problem, M, options, x0, deadline)
@@ -306,7 +310,7 @@ def starts(problem: FitProblem, n: int, seed: int = 0, M: np.ndarray | None = No
     else:
         npar = M.shape[1]
         scale = np.linalg.lstsq(M, np.ones(len(M)), rcond=None)[0]  # M scale = 1: the global factor
-    out = [np.zeros(npar), math.log(best_scale(problem)) * scale]
+    out = [np.zeros(npar)] + ([math.log(best_scale(problem)) * scale] if n > 1 else [])
     rng = np.random.default_rng(seed)
     out += [0.2 * rng.standard_normal(npar) for _ in range(max(n - 2, 0))]
     return out[:n]

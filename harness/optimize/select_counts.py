@@ -9,7 +9,9 @@ than the one before, and a fit takes the first level whose predicted work fits i
 
 - work: the Gflop of the factorisations its evaluations need, from the symbolic
   factorisation (harness/linalg/multifrontal.py ``Symbolic.estimate``): EVALS_PER_ITER
-  evaluations per L-BFGS-B iteration, each factorising the training states' load sets
+  evaluations per L-BFGS-B iteration (the candidates of FEW_BASES: one evaluation per
+  iteration, harness/optimize/few.py, and one in all without a volume term's factor),
+  each factorising the training states' load sets
   (shared by the sets, harness/linalg/shared.py, where the validation fits and the cheaper
   levels' final fit do so);
 - budget: BUDGET x the rules' statics (every solved rule factorises each set once) or
@@ -29,6 +31,7 @@ from dataclasses import dataclass, replace
 from harness.optimize.problem import DENSE_FACTOR_MAX, FitProblem
 
 EVALS_PER_ITER = 1.2  # L-BFGS-B's evaluations per iteration on the fits (~1.1-1.3 measured)
+FEW_BASES = ("scale",)  # the candidates fitted by Gauss-Newton (harness/optimize/few.py)
 BUDGET = 2.0  # the fit's work at most this many times the rules' statics' ...
 FLOOR_GFLOP = 3000.0  # ... or this (~8 min of one core's factorisations), whichever is larger
 
@@ -131,12 +134,23 @@ def gbytes(problem: FitProblem, shared: bool) -> float:
     return most
 
 
+def evaluations(name: str, maxiter: int) -> float:
+    """One fit's predicted evaluations of candidate ``name`` stopped by ``maxiter``: L-BFGS-B's
+    EVALS_PER_ITER per iteration; a few-constants fit's one per iteration, and one in all
+    for a single factor (the common scale is closed form, harness/optimize/few.py)."""
+    if name.split("+", 1)[0] not in FEW_BASES:
+        return EVALS_PER_ITER * maxiter
+    return float(maxiter) if "+" in name else 1.0
+
+
 def work(counts: Counts, families, per_eval_shared: float, per_eval_sets: float) -> float:
-    """The level's predicted Gflop: its validation fits' and its final fit's evaluations."""
-    val = len(counts.candidates) * n_folds(counts, families) * counts.maxiter
-    final = counts.starts * counts.final_maxiter
+    """The level's predicted Gflop: its validation fits' and its final fit's evaluations
+    (the final fit's: its costliest candidate's)."""
+    folds = n_folds(counts, families)
+    val = sum(folds * evaluations(c, counts.maxiter) for c in counts.candidates)
+    final = counts.starts * max(evaluations(c, counts.final_maxiter) for c in counts.candidates)
     per_final = per_eval_shared if counts.shared_final else per_eval_sets
-    return EVALS_PER_ITER * (val * per_eval_shared + final * per_final)
+    return val * per_eval_shared + final * per_final
 
 
 def choose(

@@ -299,9 +299,15 @@ FITS = [  # spring/mass models and their fits (harness/stages/sms*.py)
     ),
     Column("fit_candidates", "", "the candidates the validation fitted at that level"),
     Column("fit_folds", "", "families: a fold per family; two: free-traction and clamped"),
-    Column("fit_maxiter", "count", "L-BFGS-B iterations of each validation fit"),
+    Column(
+        "fit_maxiter",
+        "count",
+        "iterations of each validation fit (L-BFGS-B; the scale candidates' Gauss-Newton)",
+    ),
     Column("fit_starts", "count", "starts of the final fit at that level"),
-    Column("fit_final_maxiter", "count", "L-BFGS-B iterations of each start of the final fit"),
+    Column(
+        "fit_final_maxiter", "count", "iterations of each start of the final fit (as fit_maxiter)"
+    ),
     Column(
         "fit_work_gflop",
         "Gflop",

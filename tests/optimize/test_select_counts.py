@@ -24,6 +24,10 @@ def test_the_work_is_the_fits_evaluations_times_their_factorisations():
     two = sc.resolved(sc.LADDER[2], SELECT_DEFAULT, 30, 3, 100)
     assert two.candidates == ("springs-prior1", "springs-prior1+node-volume")
     assert sc.work(two, SIX, 2.0, 5.0) == pytest.approx(1.2 * (2 * 2 * 5 * 2.0 + 1 * 20 * 2.0))
+    # the few-constants fits: one evaluation per iteration, one in all for the scale alone
+    three = sc.resolved(sc.LADDER[3], SELECT_DEFAULT, 30, 3, 100)
+    assert three.candidates == ("scale", "scale+node-volume")
+    assert sc.work(three, SIX, 2.0, 5.0) == pytest.approx(2 * (1 + 4) * 2.0 + 1 * 8 * 2.0)
 
 
 @pytest.mark.parametrize("shared,apart", [(1.0, 1.0), (2.0, 9.0), (30.0, 115.0)])
@@ -33,6 +37,13 @@ def test_each_level_costs_less_than_the_one_before(shared, apart):
         for level in sc.LADDER
     ]
     assert all(b < a for a, b in zip(works, works[1:])), works
+
+
+def test_the_few_constants_candidates_are_the_one_group_ones():
+    one = {c.name.split("+")[0] for c in sel.CANDIDATES if c.groups == "one"}
+    assert set(sc.FEW_BASES) == one
+    assert sc.evaluations("scale", 8) == 1 and sc.evaluations("scale+node-volume", 8) == 8
+    assert sc.evaluations("springs-prior1", 10) == pytest.approx(12.0)
 
 
 def test_an_engine_without_volume_terms_keeps_none_at_any_level():

@@ -18,19 +18,27 @@ from tests.optimize.test_select import CANDS, FAMILIES, problem
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
 
 
+class _LOGGED:
+    log, real = None, None
+
+
+def _logged(*args):
+    """evaluation.group_terms, its process id logged (module-level: a worker gets it by name;
+    the workers are forks: they see the log the test set)."""
+    with open(_LOGGED.log, "a") as f:
+        f.write(f"{os.getpid()}\n")
+    return _LOGGED.real(*args)
+
+
 def test_a_spread_evaluation_is_the_callers_bit_for_bit(monkeypatch, tmp_path):
     prob = dataclasses.replace(recoverable_problem((8, 8, 8), seed=5)[0], shared=True)
     assert len(prob.solve_parts()) >= 2 and max(len(g) for g, _ in prob.solve_parts()) >= 2
     k = prob.k0 * np.random.default_rng(0).uniform(0.5, 2.0, prob.n_springs)
     here = value_and_grad(prob, k)
-    log, real = tmp_path / "pids", evaluation.group_terms
-
-    def logged(*args):  # the workers are forks: they run this one too
-        with open(log, "a") as f:
-            f.write(f"{os.getpid()}\n")
-        return real(*args)
-
-    monkeypatch.setattr(evaluation, "group_terms", logged)
+    log = tmp_path / "pids"
+    monkeypatch.setattr(_LOGGED, "log", log)
+    monkeypatch.setattr(_LOGGED, "real", evaluation.group_terms)
+    monkeypatch.setattr(evaluation, "group_terms", _logged)
     with spread(prob, 2):
         there = value_and_grad(prob, k)
         again = value_and_grad(prob, k, grad=False)
