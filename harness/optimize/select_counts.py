@@ -61,6 +61,7 @@ LADDER = (
     Counts(1, None, "families", 10, 1, 40, True),
     Counts(2, ("springs-prior1",), "two", 5, 1, 20, True),
     Counts(3, ("scale",), "two", 4, 1, 8, True),
+    Counts(4, ("scale",), "two", 2, 1, 3, True),
 )
 VOLUMES = ("", "volume", "node-volume")  # a candidate's volume term: its name's suffix
 

@@ -42,11 +42,11 @@ def test_the_fit_runs_the_counts_its_mesh_affords(tmp_path, monkeypatch, capsys)
     monkeypatch.setattr(select_counts, "BUDGET", 0.0)
     cheap = _calibrate(mesh, tmp_path / "b.vtu")
     said = capsys.readouterr().out
-    assert "Validation at level 3 of the fit's counts for a mesh this size" in said
+    assert "Validation at level 4 of the fit's counts for a mesh this size" in said
     c = cheap["fit_counts"]
-    assert c["level"] == 3 and c["candidates"] == ["scale", "scale+node-volume"]
+    assert c["level"] == 4 and c["candidates"] == ["scale", "scale+node-volume"]
     assert cheap["candidates"] == c["candidates"] and data["candidates"] == list(SELECT_DEFAULT)
-    assert (c["folds"], c["maxiter"], c["starts"], c["final_maxiter"]) == ("two", 4, 1, 8)
+    assert (c["folds"], c["maxiter"], c["starts"], c["final_maxiter"]) == ("two", 2, 1, 3)
     assert c["budget_gflop"] == 0.0 and c["work_gflop"] > 0
     table = cheap["validation"]
     assert [r["model"] for r in table] == ["rule", "scale", "scale+node-volume"]
