@@ -1,5 +1,6 @@
 """Rewrites the generated parts of the front-door documents (harness/report/docs_gen.py):
-README.md's results table from results/bench/heldout.csv, docs/commands.md's reference
+README.md's results table from results/bench/heldout.csv, docs/calibrate.md's scale table
+from results/bench/calibrate.csv, docs/commands.md's reference
 of every command and flag from the command line's parser and docs/columns.md's table of
 every summary.csv column from harness/report/columns.py.
 
@@ -22,15 +23,19 @@ from harness.report.docs_gen import (  # noqa: E402
     COL_BEGIN,
     COL_END,
     END,
+    SCALE_BEGIN,
+    SCALE_END,
     columns_reference,
     commands_reference,
     heldout_table,
+    scale_table,
     update,
 )
 
 if __name__ == "__main__":
     for path, content, markers in (
         (ROOT / "README.md", heldout_table(ROOT / "results"), (BEGIN, END)),
+        (ROOT / "docs" / "calibrate.md", scale_table(ROOT / "results"), (SCALE_BEGIN, SCALE_END)),
         (ROOT / "docs" / "commands.md", commands_reference(build_parser()), (CMD_BEGIN, CMD_END)),
         (ROOT / "docs" / "columns.md", columns_reference(), (COL_BEGIN, COL_END)),
     ):

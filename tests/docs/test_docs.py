@@ -231,6 +231,33 @@ def test_the_results_table_reads_the_bench_csv(tmp_path):
     assert rows[4] == "| all (geometric mean) | | | | | | **0.707** | |"
 
 
+def test_the_scale_table_is_what_the_bench_gives(tmp_path):
+    """docs/calibrate.md's scale table is the generator's on results/bench/calibrate.csv; the
+    generator on a hand-made file: the ratio of the export's held-out error to the best
+    rule's, the fit's time over the rule alone's, a row without a level (a rule)."""
+    from harness.report.docs_gen import SCALE_BEGIN, SCALE_END, block, scale_table
+
+    page = (DOCS / "calibrate.md").read_text(encoding="utf-8")
+    assert block(page, SCALE_BEGIN, SCALE_END) == scale_table(ROOT / "results"), (
+        "docs/calibrate.md's scale table differs from results/bench/calibrate.csv: "
+        "run python docs/generate.py"
+    )
+    (tmp_path / "bench").mkdir()
+    (tmp_path / "bench" / "calibrate.csv").write_text(
+        "body,n_tets,seconds,rule_seconds,peak_gb,choice,fit_level,G_heldout_mean,best_rule,"
+        "G_heldout_mean_best_rule\n"
+        "cylinder,48880,150,100,2.5,scale+node-volume,3,0.02,learned,0.05\n"
+        "bracket,31389,300,200,5.0,rule,,0.06,learned,0.06\n"
+    )
+    rows = scale_table(tmp_path).splitlines()
+    assert rows[2] == (
+        "| cylinder (48,880) | scale+node-volume (3) | 2.00 % | 5.00 % (learned) | 0.40 "
+        "| 150 s | 100 s | 0.50 | 2.5 GB |"
+    )
+    assert rows[3].startswith("| bracket (31,389) | rule | 6.00 % | 6.00 % (learned) | 1.00 ")
+    assert len(rows) == 4
+
+
 def test_commands_page_is_what_the_command_line_gives():
     from harness.cli import build_parser
     from harness.report.docs_gen import CMD_BEGIN, CMD_END, block, commands_reference
