@@ -1,19 +1,20 @@
 """The fit of a few grouped constants (one factor for all springs, one for a volume term's kv):
 Gauss-Newton on the exact small Jacobian, with the common factor in closed form.
 
-A group g's factor x_g = log(k_g / k0_g) moves u by du/dx_g = -K^-1 B diag(k 1_g) B^T u: one
-more solve per group with the factorisation u was solved with, so each evaluation gives the
-residual, the (n_groups) Jacobian columns and their Gram matrices at once (a few numbers per
-load set: the same in the caller and in a spread's workers, harness/optimize/evaluation.py).
-Scaling every constant by 1 / c scales u by c, so the best common factor is closed form
-(c = <u_ref, u>_W / <u, u>_W) and is applied at every evaluation without a solve: a single
-group ('scale') is fitted exactly by one evaluation, two groups by a Levenberg-Marquardt
-step in the remaining direction per evaluation. A fit of L-BFGS-B needs several evaluations
-per iteration of the same problem and stops short of this one's optimum.
+A group g's factor x_g = log(k_g / k0_g) moves u by du/dx_g = -K^-1 B diag(k 1_g) B^T u =
+-y_g, and the groups' y sum to u (their dK/dx sum to K): one more solve per group beyond
+the first, with the factorisation u was solved with, gives the residual, the Jacobian's
+columns and their Gram matrix at once (a few numbers per load set: the same in the caller
+and in a spread's workers, harness/optimize/evaluation.py). Scaling every constant by 1 / c
+scales u by c, so the best common factor is closed form (c = <u_ref, u>_W / <u, u>_W) and
+is applied at every evaluation without a solve: a single group ('scale') is fitted exactly
+by one evaluation, two groups by a Levenberg-Marquardt step in the remaining direction per
+evaluation (L-BFGS-B on the same constants stopped short of this optimum within the same
+counts, docs/calibrate.md).
 
-It stops after ``maxiter`` evaluations, or when an accepted step lowers G^2 by less than
-FTOL of it: counts fixed before the run (harness/optimize/select_counts.py predicts the
-work from them)."""
+It stops after ``maxiter`` evaluations, or when an accepted step lowers G^2, or the next
+step's linear model promises to, by less than FTOL of it: counts fixed before the run
+(harness/optimize/select_counts.py predicts the work from them)."""
 
 from __future__ import annotations
 
@@ -42,19 +43,20 @@ def group_moments(group: list, solve, k: np.ndarray, masks: np.ndarray) -> tuple
     Us = solve([s.F for s in group])
     Ys = solve([_rhs(s, U, k, masks) for s, U in zip(group, Us)]) if n else [None] * len(group)
     for s, U, Y in zip(group, Us, Ys):
-        WU, WD = s.W * U, s.W * (s.Uref - U)
-        dd += float(np.sum((s.Uref - U) * WD)) + s.const
+        D = s.Uref - U
+        WU, WD = s.W * U, s.W * D
+        dd += float(np.sum(D * WD)) + s.const
         du += float(np.sum(U * WD))
         uu += float(np.sum(U * WU))
         if Y is None:
             continue
         L = U.shape[1]
-        Ys = [Y[:, g * L : (g + 1) * L] for g in range(n)]
+        cols = [Y[:, g * L : (g + 1) * L] for g in range(n)]
         for g in range(n):
-            yd[g] += float(np.sum(Ys[g] * WD))
-            yu[g] += float(np.sum(Ys[g] * WU))
+            yd[g] += float(np.sum(cols[g] * WD))
+            yu[g] += float(np.sum(cols[g] * WU))
             for h in range(g, n):
-                yy[g, h] += float(np.sum(Ys[g] * (s.W * Ys[h])))
+                yy[g, h] += float(np.sum(cols[g] * (s.W * cols[h])))
                 yy[h, g] = yy[g, h]
     return dd, du, uu, yd, yu, yy
 
