@@ -349,11 +349,7 @@ SECTIONS: dict[str, dict[str, Field] | str] = {
                     doc="the capacities validated (harness/optimize/select.py), besides the rule",
                 ),
                 "maxiter": Field(
-                    "int",
-                    30,
-                    min=1,
-                    doc="iterations of each validation fit (L-BFGS-B; the scale candidates' "
-                    "Gauss-Newton)",
+                    "int", 30, min=1, doc="iterations of each validation fit (or evaluations)"
                 ),
                 "starts": Field(
                     "int",
