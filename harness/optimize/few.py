@@ -24,6 +24,7 @@ import numpy as np
 
 from harness.optimize.deadline import deadline as limit
 from harness.optimize.evaluation import per_group
+from harness.optimize.options import static_only
 from harness.optimize.problem import FitProblem
 
 FTOL = 1e-6  # converged: an accepted step lowers G^2 by less than this fraction of it ...
@@ -91,21 +92,21 @@ def few_fit(problem: FitProblem, options: dict, x0=None, deadline=None) -> dict:
     the rule, 0) as the module doc says; ``options``: maxiter (evaluations, default 20);
     ``deadline`` (or the options' max_seconds) only aborts. Returns k and info (phi = G^2 /
     G^2 at k0, the stop, the evaluations), as the other fits of harness/optimize/select.py."""
-    if problem.groups is None or problem.modal is not None:
-        raise ValueError("few_fit fits grouped constants of a static problem")
+    if problem.groups is None:
+        raise ValueError("few_fit fits grouped constants (FitProblem.groups)")
+    static_only(problem, "the scale candidates' fit")
     cap = limit(options, "the few-constants fit", deadline)
     n = problem.n_params
     masks = np.array([problem.groups == g for g in range(n)], float)
     lo, hi = (math.log(b) for b in problem.bounds)
     x = np.zeros(n) if x0 is None else np.asarray(x0, float).copy()
-    G0sq = None if np.any(x) else math.nan  # at k0: the first evaluation's, else its own
-    best, mu, stop, evals = None, MU0, "maxiter", 0
+    at_rule = not np.any(x)  # then the first evaluation gives G^2 at k0
+    best, mu, stop, evals, G0sq = None, MU0, "maxiter", 0, math.nan
     while evals < int(options.get("maxiter") or 20):
         cap.check()
         evals += 1
         dd, du, uu, yd, yu, yy = moments(problem, problem.k_of(np.exp(x)), masks)
-        if G0sq is not None and math.isnan(G0sq):
-            G0sq = dd
+        G0sq = dd if evals == 1 and at_rule else G0sq
         tol = FLOOR * (dd + 2 * du + uu)  # |u_ref|^2 = |d + u|^2
         # the best common factor: u -> c u, every constant over c (as far as the bounds allow)
         a = -math.log1p(du / uu) if uu > 0 and du > -uu else 0.0
@@ -126,7 +127,7 @@ def few_fit(problem: FitProblem, options: dict, x0=None, deadline=None) -> dict:
         if pred <= FTOL * best[0] + tol:  # the model promises no more: no evaluation to find out
             stop = "converged"
             break
-    if G0sq is None:
+    if not at_rule:
         G0sq = moments(problem, problem.k0, masks[:1])[0]
     return {
         "k": problem.k_of(np.exp(best[1])),

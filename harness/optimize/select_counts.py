@@ -141,7 +141,7 @@ def evaluations(name: str, maxiter: int) -> float:
     for a single factor (the common scale is closed form, harness/optimize/few.py)."""
     if name.split("+", 1)[0] not in FEW_BASES:
         return EVALS_PER_ITER * maxiter
-    return float(maxiter) if "+" in name else 1.0
+    return float(maxiter) if _volume(name) else 1.0
 
 
 def work(counts: Counts, families, per_eval_shared: float, per_eval_sets: float) -> float:

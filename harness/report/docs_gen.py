@@ -91,13 +91,11 @@ def scale_table(results: Path) -> str:
         "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for _, r in d.iterrows():
-        body = r.get("body") if isinstance(r.get("body"), str) else "cylinder"
-        level = r.get("fit_level")
-        level = f" ({int(level)})" if level is not None and level == level else ""
+        level = "" if pd.isna(r["fit_level"]) else f" ({int(r['fit_level'])})"
         ratio = r["G_heldout_mean"] / r["G_heldout_mean_best_rule"]
         fit_ratio = (r["seconds"] - r["rule_seconds"]) / r["rule_seconds"]
         lines.append(
-            f"| {body} ({int(r['n_tets']):,}) | {r['choice']}{level} "
+            f"| {r['body']} ({int(r['n_tets']):,}) | {r['choice']}{level} "
             f"| {100 * r['G_heldout_mean']:.2f} % "
             f"| {100 * r['G_heldout_mean_best_rule']:.2f} % ({r['best_rule']}) | {ratio:.2f} "
             f"| {r['seconds']:,.0f} s | {r['rule_seconds']:,.0f} s | {fit_ratio:.2f} "
